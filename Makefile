@@ -1,0 +1,116 @@
+# matex — one entry point. `make` builds libmatex.a and ./matex; `make test` runs the suite.
+# Variables: CC (gcc or clang), BUILD (output folder), SAN=1 (sanitizers; see `make asan`).
+
+CC      ?= gcc
+CXX     ?= g++
+BUILD   ?= build
+OPT     ?= -O2
+SAN     ?=
+
+WARN     = -Wall -Wextra -Werror
+CFLAGS   = -std=c11 $(OPT) -g $(WARN) -pthread -D_GNU_SOURCE -ffp-contract=off -MMD -MP
+CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR -I/usr/include/Imath
+LDLIBS   = -lm -lpthread
+IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lstdc++
+
+ifeq ($(SAN),1)
+CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+CXXFLAGS += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDFLAGS  += -fsanitize=address,undefined
+endif
+
+AVX2_FLAGS   = -mavx2 -mfma -mf16c
+AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
+
+# Modules: a test links only the modules it needs, so one module's breakage stays local.
+CORE_SRC    = $(wildcard runtime/*.c ops/*.c ops/cpu/*.c)
+WEIGHTS_SRC = $(wildcard weights/*.c)
+NN_SRC      = $(wildcard pipeline/nn/*.c)
+GEOM_SRC    = $(wildcard pipeline/geom/*.c)
+TEX_SRC     = $(wildcard pipeline/texture/*.c)
+IO_SRC      = $(wildcard pipeline/io/*.cpp)
+TOOL_SRC    = $(wildcard tools/cmd_*.c tools/cli_*.c)
+
+obj = $(patsubst %.c,$(BUILD)/%.o,$(patsubst %.cpp,$(BUILD)/%.o,$(1)))
+
+LIB_CORE    = $(BUILD)/libmx_core.a
+LIB_WEIGHTS = $(BUILD)/libmx_weights.a
+LIB_NN      = $(BUILD)/libmx_nn.a
+LIB_GEOM    = $(BUILD)/libmx_geom.a
+LIB_TEX     = $(BUILD)/libmx_tex.a
+LIB_IO      = $(BUILD)/libmatex_io.a
+LIBMATEX    = $(BUILD)/libmatex.a
+
+ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
+
+.PHONY: all test asan bench clean cuda test-full demo install
+all: $(LIBMATEX) $(LIB_IO) matex
+
+matex: $(BUILD)/matex
+	cp $< $@
+
+$(BUILD)/matex: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+
+$(LIB_CORE):    $(call obj,$(CORE_SRC))
+$(LIB_WEIGHTS): $(call obj,$(WEIGHTS_SRC))
+$(LIB_NN):      $(call obj,$(NN_SRC))
+$(LIB_GEOM):    $(call obj,$(GEOM_SRC))
+$(LIB_TEX):     $(call obj,$(TEX_SRC))
+$(LIB_IO):      $(call obj,$(IO_SRC))
+$(LIBMATEX):    $(ALL_C_OBJ)
+$(BUILD)/%.a:
+	@mkdir -p $(dir $@)
+	rm -f $@
+	ar rcs $@ $^ $(if $^,,$(BUILD)/empty.o)
+
+$(BUILD)/empty.o:
+	@mkdir -p $(dir $@)
+	echo 'typedef int mx_empty_unit;' | $(CC) -x c -c -o $@ -
+
+$(BUILD)/%_avx2.o: %_avx2.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AVX2_FLAGS) -c -o $@ $<
+$(BUILD)/%_avx512.o: %_avx512.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AVX512_FLAGS) -c -o $@ $<
+$(BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -c -o $@ $<
+$(BUILD)/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	$(CXX) $(CXXFLAGS) -c -o $@ $<
+
+# ---- tests: tests/test_<module>_<name>.c, linked with that module and those below it ----
+TEST_SRC   = $(wildcard tests/test_*.c)
+TEST_BINS  = $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
+TEST_UTIL  = $(call obj,$(wildcard tests/util_*.c))
+
+$(BUILD)/tests/test_core_%: $(BUILD)/tests/test_core_%.o $(TEST_UTIL) $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+$(BUILD)/tests/test_nn_%: $(BUILD)/tests/test_nn_%.o $(TEST_UTIL) $(LIB_NN) $(LIB_WEIGHTS) $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+$(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/tests/test_tex_%: $(BUILD)/tests/test_tex_%.o $(TEST_UTIL) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+
+test: all $(TEST_BINS)
+	BUILD=$(BUILD) sh tests/run.sh $(TEST_BINS)
+
+asan:
+	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
+
+# ---- benchmarks: OpenBLAS is linked into the benchmark only ----
+BENCH_SRC  = $(wildcard tools/bench_*.c)
+BENCH_BINS = $(patsubst tools/%.c,$(BUILD)/tools/%,$(BENCH_SRC))
+$(BUILD)/tools/bench_%: $(BUILD)/tools/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ -lopenblas $(IOLIBS) $(LDLIBS)
+
+bench: all $(BENCH_BINS)
+	sh tools/bench.sh $(BUILD)
+
+clean:
+	rm -rf build build-asan matex
+
+-include $(shell find $(BUILD) -name '*.d' 2>/dev/null)

@@ -1,0 +1,39 @@
+/* Activation arena: one block, bump allocation, 64-byte alignment, mark/reset.
+ * A network is run once in "dry run" mode (measure only: no memory, pointers are NULL)
+ * to learn the peak, then for real in an arena of exactly that size.
+ * Running out is an error with a message, never an overrun. */
+#ifndef MX_ARENA_H
+#define MX_ARENA_H
+
+#include <stddef.h>
+
+#include "status.h"
+
+#define MX_ARENA_ALIGN 64
+
+typedef struct mx_arena {
+    unsigned char *base; /* NULL in a measuring arena */
+    size_t cap;          /* bytes usable; ignored while measuring */
+    size_t used;
+    size_t peak;
+    int measuring;       /* 1: count sizes only, hand out NULL */
+    int owns;            /* 1: base was allocated by mx_arena_create */
+} mx_arena;
+
+int mx_arena_create(mx_arena *a, size_t cap, mx_status *st);
+/* Arena over a caller's buffer (aligned to 64 inside). */
+void mx_arena_wrap(mx_arena *a, void *buf, size_t cap);
+/* An arena that only measures (dry run). */
+void mx_arena_measure(mx_arena *a);
+void mx_arena_destroy(mx_arena *a);
+
+/* Returns 64-byte aligned memory, or NULL with an error in st when the arena is full.
+ * In a measuring arena it returns NULL and no error: check a->measuring. */
+void *mx_arena_alloc(mx_arena *a, size_t bytes, mx_status *st);
+float *mx_arena_floats(mx_arena *a, size_t n, mx_status *st);
+
+/* Mark/reset: free everything allocated after the mark at once. */
+size_t mx_arena_mark(const mx_arena *a);
+void mx_arena_reset(mx_arena *a, size_t mark);
+
+#endif

@@ -1,0 +1,134 @@
+#include "threadpool.h"
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+struct mx_pool {
+    int nthreads;
+    pthread_t *workers;
+    pthread_mutex_t mu;
+    pthread_cond_t work_cv, done_cv;
+    /* the job being run; generation changes each time a new job is published */
+    mx_task_fn fn;
+    void *ctx;
+    int ntasks;
+    atomic_int next_task;
+    int active_workers;
+    unsigned long generation;
+    int quit;
+};
+
+typedef struct {
+    mx_pool *pool;
+    int index;
+} worker_arg;
+
+static void run_tasks(mx_pool *p, mx_task_fn fn, void *ctx, int ntasks, int thread) {
+    for (;;) {
+        int t = atomic_fetch_add(&p->next_task, 1);
+        if (t >= ntasks) break;
+        fn(ctx, t, thread);
+    }
+}
+
+static void *worker_main(void *arg) {
+    worker_arg *wa = arg;
+    mx_pool *p = wa->pool;
+    int index = wa->index;
+    free(wa);
+    unsigned long seen = 0;
+    pthread_mutex_lock(&p->mu);
+    for (;;) {
+        while (!p->quit && p->generation == seen) pthread_cond_wait(&p->work_cv, &p->mu);
+        if (p->quit) break;
+        seen = p->generation;
+        mx_task_fn fn = p->fn;
+        void *ctx = p->ctx;
+        int ntasks = p->ntasks;
+        p->active_workers++;
+        pthread_mutex_unlock(&p->mu);
+        run_tasks(p, fn, ctx, ntasks, index);
+        pthread_mutex_lock(&p->mu);
+        if (--p->active_workers == 0) pthread_cond_signal(&p->done_cv);
+    }
+    pthread_mutex_unlock(&p->mu);
+    return NULL;
+}
+
+mx_pool *mx_pool_create(int nthreads, mx_status *st) {
+    if (nthreads <= 0) {
+        long n = sysconf(_SC_NPROCESSORS_ONLN);
+        nthreads = n > 0 ? (int)n : 1;
+    }
+    if (nthreads > 256) nthreads = 256;
+    mx_pool *p = calloc(1, sizeof *p);
+    if (!p) {
+        mx_fail(st, MX_ENOMEM, "thread pool: out of memory");
+        return NULL;
+    }
+    p->nthreads = nthreads;
+    pthread_mutex_init(&p->mu, NULL);
+    pthread_cond_init(&p->work_cv, NULL);
+    pthread_cond_init(&p->done_cv, NULL);
+    atomic_init(&p->next_task, 0);
+    if (nthreads > 1) {
+        p->workers = calloc((size_t)nthreads - 1, sizeof *p->workers);
+        if (!p->workers) {
+            mx_pool_destroy(p);
+            mx_fail(st, MX_ENOMEM, "thread pool: out of memory");
+            return NULL;
+        }
+    }
+    for (int i = 1; i < nthreads; i++) {
+        worker_arg *wa = malloc(sizeof *wa);
+        if (!wa || pthread_create(&p->workers[i - 1], NULL, worker_main, wa) != 0) {
+            free(wa);
+            p->nthreads = i; /* only i-1 workers exist */
+            mx_pool_destroy(p);
+            mx_fail(st, MX_EINTERNAL, "thread pool: cannot start thread %d", i);
+            return NULL;
+        }
+        wa->pool = p;
+        wa->index = i;
+    }
+    return p;
+}
+
+void mx_pool_destroy(mx_pool *p) {
+    if (!p) return;
+    pthread_mutex_lock(&p->mu);
+    p->quit = 1;
+    pthread_cond_broadcast(&p->work_cv);
+    pthread_mutex_unlock(&p->mu);
+    for (int i = 1; i < p->nthreads; i++) pthread_join(p->workers[i - 1], NULL);
+    pthread_mutex_destroy(&p->mu);
+    pthread_cond_destroy(&p->work_cv);
+    pthread_cond_destroy(&p->done_cv);
+    free(p->workers);
+    free(p);
+}
+
+int mx_pool_threads(const mx_pool *p) { return p ? p->nthreads : 1; }
+
+void mx_pool_for(mx_pool *p, int ntasks, mx_task_fn fn, void *ctx) {
+    if (ntasks <= 0) return;
+    if (!p || p->nthreads == 1 || ntasks == 1) {
+        for (int t = 0; t < ntasks; t++) fn(ctx, t, 0);
+        return;
+    }
+    pthread_mutex_lock(&p->mu);
+    p->fn = fn;
+    p->ctx = ctx;
+    p->ntasks = ntasks;
+    atomic_store(&p->next_task, 0);
+    p->generation++;
+    pthread_cond_broadcast(&p->work_cv);
+    pthread_mutex_unlock(&p->mu);
+    run_tasks(p, fn, ctx, ntasks, 0);
+    /* wait until every worker that picked up this generation has finished */
+    pthread_mutex_lock(&p->mu);
+    while (p->active_workers > 0) pthread_cond_wait(&p->done_cv, &p->mu);
+    pthread_mutex_unlock(&p->mu);
+}

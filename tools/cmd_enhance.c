@@ -1,0 +1,11 @@
+/* PLACEHOLDER: replaced by the real verb; must not survive to a submission. */
+#include <stdio.h>
+
+#include "cli.h"
+
+int cmd_enhance(int argc, char **argv) {
+    (void)argc;
+    (void)argv;
+    fprintf(stderr, "matex: 'enhance' is not built yet\n");
+    return 2;
+}

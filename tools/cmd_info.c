@@ -1,0 +1,11 @@
+/* PLACEHOLDER: replaced by the real verb; must not survive to a submission. */
+#include <stdio.h>
+
+#include "cli.h"
+
+int cmd_info(int argc, char **argv) {
+    (void)argc;
+    (void)argv;
+    fprintf(stderr, "matex: 'info' is not built yet\n");
+    return 2;
+}
