@@ -114,3 +114,26 @@ clean:
 	rm -rf build build-asan matex
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
+
+# ---- CUDA backend: `make cuda` builds $(BUILD)/libmx_cuda.a and its test, `make test-cuda` runs the test
+# (it skips when no GPU is present). Not part of `make` / `make test`. Fat binary for sm_80 and sm_90.
+NVCC       ?= /usr/local/cuda/bin/nvcc
+CUDA_HOME  ?= /usr/local/cuda
+NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
+NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
+CUDA_SRC    = $(wildcard ops/cuda/*.cu)
+LIB_CUDA    = $(BUILD)/libmx_cuda.a
+CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
+CUDA_LDLIBS = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -lm -lpthread
+
+$(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
+$(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
+	@mkdir -p $(dir $@)
+	$(NVCC) $(NVCCFLAGS) -c -o $@ $<
+$(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB_CORE)
+	$(NVCC) $(NVCC_ARCH) -o $@ $^ $(CUDA_LDLIBS)
+
+.PHONY: test-cuda
+cuda: $(LIB_CUDA) $(CUDA_TEST)
+test-cuda: cuda
+	$(CUDA_TEST)

@@ -1,5 +1,5 @@
-/* The op interface of matex. Every op has a scalar reference (ops/cpu/*_ref.c, the test
- * oracle) and SIMD kernels (ops/cpu/*_avx2.c, *_avx512.c), all behind one table of function
+/* The op interface of matex. Every op has a scalar reference (ops/cpu/<op>_ref.c, the test
+ * oracle) and SIMD kernels (ops/cpu/<op>_avx2.c, <op>_avx512.c), all behind one table of function
  * pointers chosen once at run time by cpuid. Networks call the mx_* wrappers below.
  *
  * Conventions

@@ -22,7 +22,7 @@ int mx_fail_prefix(mx_status *st, const char *fmt, ...) {
     vsnprintf(prefix, sizeof prefix, fmt, ap);
     va_end(ap);
     memcpy(old, st->msg, sizeof old);
-    snprintf(st->msg, sizeof st->msg, "%s: %s", prefix, old);
+    snprintf(st->msg, sizeof st->msg, "%.500s: %.500s", prefix, old);
     if (st->code == MX_OK) st->code = MX_EINTERNAL;
     return -1;
 }

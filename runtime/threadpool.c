@@ -83,6 +83,7 @@ mx_pool *mx_pool_create(int nthreads, mx_status *st) {
     }
     for (int i = 1; i < nthreads; i++) {
         worker_arg *wa = malloc(sizeof *wa);
+        if (wa) *wa = (worker_arg){p, i}; /* filled before the thread can read it */
         if (!wa || pthread_create(&p->workers[i - 1], NULL, worker_main, wa) != 0) {
             free(wa);
             p->nthreads = i; /* only i-1 workers exist */
@@ -90,8 +91,6 @@ mx_pool *mx_pool_create(int nthreads, mx_status *st) {
             mx_fail(st, MX_EINTERNAL, "thread pool: cannot start thread %d", i);
             return NULL;
         }
-        wa->pool = p;
-        wa->index = i;
     }
     return p;
 }

@@ -1,11 +1,142 @@
-/* PLACEHOLDER: replaced by the real verb; must not survive to a submission. */
+/* matex convert: diffusers folders -> one matex weight file (weights/FORMAT.md). */
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
 
+#include "../runtime/log.h"
+#include "../weights/convert.h"
 #include "cli.h"
 
-int cmd_convert(int argc, char **argv) {
-    (void)argc;
-    (void)argv;
-    fprintf(stderr, "matex: 'convert' is not built yet\n");
+static void convert_usage(FILE *f) {
+    fprintf(f,
+            "usage: matex convert [INPUT] -o OUT.mxw [options]\n"
+            "\n"
+            "Converts diffusers folders into one matex weight file.\n"
+            "INPUT is a model-set folder (subfolders unet/, controlnet/, vae/, text_encoder/, tokenizer/,\n"
+            "scheduler/; each one present is converted) or a single network folder whose config.json\n"
+            "names a UNet2DConditionModel, ControlNetModel, AutoencoderKL or CLIPTextModel.\n"
+            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, text_encoder.*\n"
+            "\n"
+            "options:\n"
+            "  -o, --output FILE        weight file to write (written to a temporary name, then renamed)\n"
+            "  --dtype f16|bf16|f32     storage type of tensors with 2+ dims (default f16; 1-D stay f32)\n"
+            "  --variant fp16           read the *.fp16.safetensors files (used anyway when only they exist)\n"
+            "  --controlnet NAME=DIR    add a ControlNet as controlnet_NAME.* (repeatable; NAME in [a-z0-9_])\n"
+            "  --lora FILE              merge a LoRA (diffusers/PEFT or kohya keys) into UNet and text encoder\n"
+            "  --lora-scale S           scale of the preceding --lora (default 1.0)\n"
+            "  --json                   print a JSON summary on stdout\n"
+            "  --quiet                  no progress lines\n"
+            "  -h, --help               this help\n"
+            "\n"
+            "example: matex convert ../shared/golden/unet_tiny -o unet_tiny.mxw --dtype f32\n");
+}
+
+static int parse_dtype(const char *s, mx_dtype *dt) {
+    if (!strcmp(s, "f16") || !strcmp(s, "fp16")) *dt = MX_F16;
+    else if (!strcmp(s, "bf16")) *dt = MX_BF16;
+    else if (!strcmp(s, "f32") || !strcmp(s, "fp32")) *dt = MX_F32;
+    else return -1;
+    return 0;
+}
+
+static int usage_error(const char *msg, const char *arg) {
+    fprintf(stderr, "matex convert: %s%s%s\n(matex convert --help for usage)\n", msg, arg ? " " : "", arg ? arg : "");
     return 2;
+}
+
+typedef struct {
+    mx_convert_opts o;
+    int json;
+} convert_args;
+
+/* Returns -1 to go on, or an exit code (0 after --help, 2 on a usage error). */
+static int parse_args(int argc, char **argv, convert_args *a) {
+    for (int i = 1; i < argc; i++) {
+        const char *arg = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
+        int takes = !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--dtype") ||
+                    !strcmp(arg, "--variant") || !strcmp(arg, "--controlnet") || !strcmp(arg, "--lora") ||
+                    !strcmp(arg, "--lora-scale");
+        if (takes && !val) return usage_error("missing value after", arg);
+        if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
+            convert_usage(stdout);
+            return 0;
+        } else if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) {
+            a->o.output = val;
+        } else if (!strcmp(arg, "--dtype")) {
+            if (parse_dtype(val, &a->o.dtype)) return usage_error("--dtype must be f16, bf16 or f32, not", val);
+        } else if (!strcmp(arg, "--variant")) {
+            if (strcmp(val, "fp16")) return usage_error("--variant accepts only fp16, not", val);
+            a->o.prefer_fp16 = 1;
+        } else if (!strcmp(arg, "--controlnet")) {
+            const char *eq = strchr(val, '=');
+            if (!eq || eq == val || !eq[1]) return usage_error("--controlnet wants NAME=DIR, not", val);
+            if (a->o.n_controlnets == MX_CONVERT_MAX_EXTRA) return usage_error("too many --controlnet", NULL);
+            size_t k = a->o.n_controlnets++;
+            argv[i + 1][eq - val] = 0; /* split NAME=DIR in place */
+            a->o.controlnets[k].name = val;
+            a->o.controlnets[k].dir = eq + 1;
+        } else if (!strcmp(arg, "--lora")) {
+            if (a->o.n_loras == MX_CONVERT_MAX_EXTRA) return usage_error("too many --lora", NULL);
+            a->o.loras[a->o.n_loras].path = val;
+            a->o.loras[a->o.n_loras++].scale = 1.0f;
+        } else if (!strcmp(arg, "--lora-scale")) {
+            char *end;
+            double s = strtod(val, &end);
+            if (a->o.n_loras == 0) return usage_error("--lora-scale must follow a --lora", NULL);
+            if (end == val || *end || s != s) return usage_error("--lora-scale wants a number, not", val);
+            a->o.loras[a->o.n_loras - 1].scale = (float)s;
+        } else if (!strcmp(arg, "--json")) {
+            a->json = 1;
+        } else if (!strcmp(arg, "--quiet")) {
+            mx_log_set_level(MX_LOG_WARN);
+        } else if (arg[0] == '-' && arg[1]) {
+            return usage_error("unknown option", arg);
+        } else if (a->o.input) {
+            return usage_error("more than one INPUT folder:", arg);
+        } else {
+            a->o.input = arg;
+        }
+        if (takes) i++;
+    }
+    if (!a->o.output) return usage_error("no output file (-o OUT.mxw)", NULL);
+    if (!a->o.input && a->o.n_controlnets == 0) return usage_error("no INPUT folder", NULL);
+    return -1;
+}
+
+static void print_json_string(const char *s) {
+    putchar('"');
+    for (; *s; s++) {
+        if (*s == '"' || *s == '\\') putchar('\\');
+        if ((unsigned char)*s >= 0x20) putchar(*s);
+    }
+    putchar('"');
+}
+
+int cmd_convert(int argc, char **argv) {
+    convert_args a;
+    memset(&a, 0, sizeof a);
+    a.o.dtype = MX_F16;
+    int rc = parse_args(argc, argv, &a);
+    if (rc >= 0) return rc;
+    double t0 = mx_now();
+    mx_convert_result res;
+    mx_status st;
+    mx_status_clear(&st);
+    if (mx_convert(&a.o, &res, &st)) {
+        fprintf(stderr, "matex convert: %s\n", st.msg);
+        return st.code == MX_EUSAGE ? 2 : 1;
+    }
+    struct stat sb;
+    double mib = stat(a.o.output, &sb) == 0 ? (double)sb.st_size / 1048576.0 : 0;
+    mx_info("convert: wrote %s: %zu tensors from %zu network(s), %.1f MiB, %zu weight(s) changed by LoRA, %.1f s",
+            a.o.output, res.tensors, res.networks, mib, res.lora_merged, mx_now() - t0);
+    if (a.json)
+    {
+        printf("{\"output\": ");
+        print_json_string(a.o.output);
+        printf(", \"tensors\": %zu, \"networks\": %zu, \"mib\": %.3f, \"lora_merged\": %zu}\n", res.tensors,
+               res.networks, mib, res.lora_merged);
+    }
+    return 0;
 }

@@ -8,6 +8,8 @@
 
 #include "../../runtime/status.h"
 
+struct mx_image;
+
 typedef struct mx_material {
     char name[128];
     char texture_path[1024]; /* diffuse / base-colour texture, "" if none */
@@ -30,5 +32,53 @@ typedef struct mx_mesh {
 } mx_mesh;
 
 void mx_mesh_free(mx_mesh *m);
+
+/* ---- mesh utilities (pipeline/geom/mesh.c) ---- */
+
+/* Loads any supported mesh, chosen by extension: .obj .ply .off .stl (pipeline/io/io.h),
+ * .gltf .glb (pipeline/geom/gltf.h); then validates it (mx_mesh_validate). */
+int mx_mesh_load(const char *path, mx_mesh *m, mx_status *st);
+
+/* Decodes the base-colour texture of every material into tex[0..m->nmat) (an empty image,
+ * data NULL, where a material has none or its file is missing: a warning, not an error).
+ * texture_path is a file path, or "<file.gltf|glb>#image<N>" for an image stored inside a
+ * glTF (buffer view or data: URI). Free each with mx_image_free. */
+int mx_mesh_load_textures(const mx_mesh *m, struct mx_image *tex, mx_status *st);
+
+/* Empty mesh, NaN/Inf positions, vertex/UV/normal/material indices out of range -> error
+ * naming m->source_path. UV index -1 (a face without vt in an OBJ) is allowed. */
+int mx_mesh_validate(const mx_mesh *m, mx_status *st);
+
+/* Up axis of the input: y (glTF/OBJ default) or z (CAD, scans). Rendering works y-up. */
+typedef enum { MX_UP_Y = 0, MX_UP_Z = 1 } mx_up_axis;
+
+/* Axis-aligned bounding box of the positions as stored. */
+void mx_mesh_bbox(const mx_mesh *m, float lo[3], float hi[3]);
+
+/* A malloc'ed copy of the positions [nverts][3] for rendering: rotated z-up -> y-up when
+ * up == MX_UP_Z ((x, y, z) -> (x, z, -y)), bbox centred at the origin, scaled so that the
+ * farthest vertex lies on the unit sphere. center/scale (may be NULL) give the transform
+ * p' = (R p - center) * scale. The mesh itself is not changed. */
+int mx_mesh_normalized(const mx_mesh *m, mx_up_axis up, float **pos_out, float center[3],
+                       float *scale, mx_status *st);
+
+/* Unit face normals [nfaces][3] (counter-clockwise = front) of the given positions
+ * (m->pos or a normalised copy); zero vector for a degenerate face. */
+int mx_mesh_face_normals(const mx_mesh *m, const float *pos, float **nrm_out, mx_status *st);
+
+/* Edge connectivity. With weld = 1, vertices with bit-identical positions count as one
+ * (glTF duplicates vertices along UV seams); with weld = 0 the raw indices are used. */
+typedef struct mx_mesh_topology {
+    int edges;             /* distinct undirected edges */
+    int boundary_edges;    /* used by exactly one face */
+    int nonmanifold_edges; /* used by more than two faces */
+    int watertight;        /* no boundary and no non-manifold edge */
+    int components;        /* faces connected through shared vertices */
+    int degenerate_faces;  /* repeated vertex index or zero area */
+} mx_mesh_topology;
+
+/* face_comp (may be NULL): component id per face [nfaces], ids 0.. in order of first face. */
+int mx_mesh_topology_compute(const mx_mesh *m, int weld, mx_mesh_topology *t, int32_t *face_comp,
+                             mx_status *st);
 
 #endif

@@ -1,0 +1,6 @@
+/* Streaming attention, AVX-512F: 4 queries × 64 keys of scores in 16 zmm accumulators. */
+#include "kernels.h"
+#include "simd_avx512.h"
+#include "vmath_simd.inc"
+#define ATT_QG 4
+#include "attention_simd.inc"

@@ -1,0 +1,85 @@
+/* The dispatch tables: one per ISA level, each entry the best kernel written for that level
+ * (an AVX-512 table falls back to AVX2 or the reference where no wider kernel exists). */
+#include "kernels.h"
+
+#define MX_LAYOUT_REF                                                                                        \
+    .upsample_nearest2x = mx_upsample_nearest2x_ref, .concat_channels = mx_concat_channels_ref,              \
+    .transpose_chw_hwc = mx_transpose_chw_hwc_ref, .transpose_hwc_chw = mx_transpose_hwc_chw_ref,            \
+    .resize_bilinear = mx_resize_bilinear_ref
+
+static const mx_kernels scalar_table = {
+    .isa = MX_ISA_SCALAR,
+    .linear = mx_linear_ref,
+    .conv2d = mx_conv2d_ref,
+    .group_norm = mx_group_norm_ref,
+    .layer_norm = mx_layer_norm_ref,
+    .softmax = mx_softmax_ref,
+    .attention = mx_attention_ref,
+    .gelu = mx_gelu_ref,
+    .quick_gelu = mx_quick_gelu_ref,
+    .silu = mx_silu_ref,
+    .geglu = mx_geglu_ref,
+    .binary = mx_binary_ref,
+    .scale = mx_scale_ref,
+    MX_LAYOUT_REF,
+    .f16_to_f32 = mx_f16_to_f32_ref,
+    .f32_to_f16 = mx_f32_to_f16_ref,
+    .bf16_to_f32 = mx_bf16_to_f32_ref,
+    .f32_to_bf16 = mx_f32_to_bf16_ref,
+};
+
+static const mx_kernels avx2_table = {
+    .isa = MX_ISA_AVX2,
+    .linear = mx_linear_avx2,
+    .conv2d = mx_conv2d_avx2,
+    .group_norm = mx_group_norm_ref,
+    .layer_norm = mx_layer_norm_ref,
+    .softmax = mx_softmax_ref,
+    .attention = mx_attention_avx2,
+    .gelu = mx_gelu_ref,
+    .quick_gelu = mx_quick_gelu_ref,
+    .silu = mx_silu_ref,
+    .geglu = mx_geglu_ref,
+    .binary = mx_binary_ref,
+    .scale = mx_scale_ref,
+    MX_LAYOUT_REF,
+    .f16_to_f32 = mx_f16_to_f32_ref,
+    .f32_to_f16 = mx_f32_to_f16_ref,
+    .bf16_to_f32 = mx_bf16_to_f32_ref,
+    .f32_to_bf16 = mx_f32_to_bf16_ref,
+};
+
+static const mx_kernels avx512_table = {
+    .isa = MX_ISA_AVX512,
+    .linear = mx_linear_avx512,
+    .conv2d = mx_conv2d_avx512,
+    .group_norm = mx_group_norm_ref,
+    .layer_norm = mx_layer_norm_ref,
+    .softmax = mx_softmax_ref,
+    .attention = mx_attention_avx512,
+    .gelu = mx_gelu_ref,
+    .quick_gelu = mx_quick_gelu_ref,
+    .silu = mx_silu_ref,
+    .geglu = mx_geglu_ref,
+    .binary = mx_binary_ref,
+    .scale = mx_scale_ref,
+    MX_LAYOUT_REF,
+    .f16_to_f32 = mx_f16_to_f32_ref,
+    .f32_to_f16 = mx_f32_to_f16_ref,
+    .bf16_to_f32 = mx_bf16_to_f32_ref,
+    .f32_to_bf16 = mx_f32_to_bf16_ref,
+};
+
+const mx_kernels *mx_kernels_scalar(void) { return &scalar_table; }
+
+const mx_kernels *mx_kernels_for(mx_isa isa) {
+    mx_isa best = mx_cpu_best_isa();
+    if (isa > best) isa = best;
+    switch (isa) {
+    case MX_ISA_AVX512: return &avx512_table;
+    case MX_ISA_AVX2: return &avx2_table;
+    default: return &scalar_table;
+    }
+}
+
+const mx_kernels *mx_kernels_best(void) { return mx_kernels_for(mx_cpu_best_isa()); }

@@ -1,0 +1,224 @@
+/* The blocked GEMM engine (see gemm.h): packing, blocking and the threaded driver. The SIMD
+ * files supply the micro-kernel and the weight widening. */
+#include "gemm.h"
+
+#include <string.h>
+
+/* Largest block of K packed at once: an NR-column B panel of KC_MAX rows (32 KiB for NR=32)
+ * stays in L1 while the micro-kernel streams the MC×kc block of A from L2. */
+#define KC_MAX 256
+/* Rows of A per compute task (rounded down to whole MR panels). */
+#define MC_ROWS 96
+/* Compute tasks wanted, so that any thread count up to ~16 stays busy. */
+#define TASKS_WANTED 48
+
+static int min_int(int a, int b) { return a < b ? a : b; }
+static int max_int(int a, int b) { return a > b ? a : b; }
+static int ceil_div(int a, int b) { return (a + b - 1) / b; }
+
+/* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]. */
+static void pack_rows(const mx_gemm_kernel *g, float *dst, mx_wptr src, size_t ld, int first, int valid,
+                      int width, int k0, int kc) {
+    float tmp[KC_MAX];
+    for (int i = 0; i < valid; i++) {
+        size_t off = (size_t)(first + i) * ld + (size_t)k0;
+        const float *row = tmp;
+        if (src.dtype == MX_F32)
+            row = (const float *)src.data + off;
+        else
+            g->widen(tmp, src, off, (size_t)kc);
+        for (int k = 0; k < kc; k++) dst[(size_t)k * width + i] = row[k];
+    }
+    for (int k = 0; k < kc && valid < width; k++)
+        memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
+}
+
+void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+                         int k0, int kc) {
+    pack_rows(g, dst, p->a_mat, p->a_ld, first, min_int(rows, p->M - first), rows, k0, kc);
+}
+
+void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+                         int k0, int kc) {
+    pack_rows(g, dst, p->b_mat, p->b_ld, first, min_int(rows, p->N - first), rows, k0, kc);
+}
+
+/* One run of output pixels ox..ox+run-1 of one output row, for kernel tap (ky, kx) of channel ci. */
+static void im2col_run(const mx_gemm_problem *p, float *d, int ci, int ky, int kx, int oy, int ox, int run) {
+    int iy = oy * p->stride - p->pad + ky;
+    if (iy < 0 || iy >= p->H) {
+        memset(d, 0, (size_t)run * sizeof *d);
+        return;
+    }
+    const float *row = p->image + ((size_t)ci * p->H + iy) * p->W;
+    if (p->stride == 1) {
+        int ix0 = ox - p->pad + kx; /* input column of d[0] */
+        int lo = min_int(run, max_int(0, -ix0)), hi = max_int(lo, min_int(run, p->W - ix0));
+        memset(d, 0, (size_t)lo * sizeof *d);
+        memcpy(d + lo, row + ix0 + lo, (size_t)(hi - lo) * sizeof *d);
+        memset(d + hi, 0, (size_t)(run - hi) * sizeof *d);
+        return;
+    }
+    for (int t = 0; t < run; t++) {
+        int ix = (ox + t) * p->stride - p->pad + kx;
+        d[t] = ix >= 0 && ix < p->W ? row[ix] : 0.0f;
+    }
+}
+
+void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int cols,
+                           int k0, int kc) {
+    (void)g;
+    int taps = p->kh * p->kw;
+    for (int k = 0; k < kc; k++) {
+        int kk = k0 + k, ci = kk / taps, ky = kk % taps / p->kw, kx = kk % p->kw;
+        float *d = dst + (size_t)k * cols;
+        int j = 0;
+        while (j < cols) {
+            int pix = first + j;
+            if (pix >= p->N) {
+                memset(d + j, 0, (size_t)(cols - j) * sizeof *d);
+                break;
+            }
+            int oy = pix / p->Wo, ox = pix % p->Wo, run = min_int(cols - j, p->Wo - ox);
+            im2col_run(p, d + j, ci, ky, kx, oy, ox, run);
+            j += run;
+        }
+    }
+}
+
+typedef struct {
+    const mx_gemm_kernel *g;
+    const mx_gemm_problem *p;
+    float *apack, *bpack;
+    const float *bias; /* widened, or NULL */
+    int k0, kc, first_block, last_block;
+    int mpanels, npanels, mc_panels, nc_panels, nmb, nnb;
+} gemm_job;
+
+#define PACK_PANELS_PER_TASK 4
+
+static void pack_a_task(void *arg, int task, int thread) {
+    (void)thread;
+    const gemm_job *j = arg;
+    int mr = j->g->mr;
+    for (int mp = task * PACK_PANELS_PER_TASK; mp < min_int(j->mpanels, (task + 1) * PACK_PANELS_PER_TASK); mp++)
+        j->p->pack_a(j->p, j->g, j->apack + (size_t)mp * j->kc * mr, mp * mr, mr, j->k0, j->kc);
+}
+
+static void pack_b_task(void *arg, int task, int thread) {
+    (void)thread;
+    const gemm_job *j = arg;
+    int nr = j->g->nr;
+    for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
+        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * j->kc * nr, np * nr, nr, j->k0, j->kc);
+}
+
+static void add_bias(const gemm_job *j, int m0, int m1, int n0, int n1) {
+    const mx_gemm_problem *p = j->p;
+    for (int m = m0; m < m1; m++) {
+        float *row = p->C + (size_t)m * p->ldc;
+        if (p->bias_per_row)
+            for (int n = n0; n < n1; n++) row[n] += j->bias[m];
+        else
+            for (int n = n0; n < n1; n++) row[n] += j->bias[n];
+    }
+}
+
+/* One MC×NC tile of C: B panels outside (kept in L1), A panels inside (streamed from L2). */
+static void compute_task(void *arg, int task, int thread) {
+    (void)thread;
+    const gemm_job *j = arg;
+    const mx_gemm_problem *p = j->p;
+    int mr = j->g->mr, nr = j->g->nr;
+    int mb = task / j->nnb, nb = task % j->nnb;
+    int mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
+    int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
+    for (int np = np0; np < np1; np++) {
+        const float *b = j->bpack + (size_t)np * j->kc * nr;
+        int n0 = np * nr, n = min_int(nr, p->N - n0);
+        for (int mp = mp0; mp < mp1; mp++) {
+            int m0 = mp * mr, m = min_int(mr, p->M - m0);
+            j->g->micro(j->kc, j->apack + (size_t)mp * j->kc * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m, n,
+                        !j->first_block);
+        }
+    }
+    if (j->last_block && j->bias)
+        add_bias(j, mp0 * mr, min_int(p->M, mp1 * mr), np0 * nr, min_int(p->N, np1 * nr));
+}
+
+void mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
+    if (p->M <= 0 || p->N <= 0) return;
+    gemm_job j = {.g = g, .p = p};
+    j.mpanels = ceil_div(p->M, g->mr);
+    j.npanels = ceil_div(p->N, g->nr);
+    j.mc_panels = max_int(1, MC_ROWS / g->mr);
+    j.nmb = ceil_div(j.mpanels, j.mc_panels);
+    /* narrow the N blocks when there are few M blocks, so that there are enough tasks */
+    j.nc_panels = max_int(1, min_int(8, j.npanels * j.nmb / TASKS_WANTED));
+    j.nnb = ceil_div(j.npanels, j.nc_panels);
+    int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
+    size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
+    size_t apack_n = (size_t)j.mpanels * g->mr * kc_max, bpack_n = (size_t)j.npanels * g->nr * kc_max;
+    mx_scratch s;
+    float *mem = mx_scratch_take(c, (apack_n + bpack_n + bias_n) * sizeof(float), &s);
+    j.apack = mem;
+    j.bpack = mem + apack_n;
+    if (bias_n) {
+        float *bias = mem + apack_n + bpack_n;
+        for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
+        j.bias = bias;
+    }
+    if (p->K <= 0) { /* empty sum: C = bias or 0 */
+        for (int m = 0; m < p->M; m++) memset(p->C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
+        j.last_block = 1;
+        if (j.bias) add_bias(&j, 0, p->M, 0, p->N);
+    }
+    for (int kb = 0; kb < nkb && p->K > 0; kb++) {
+        j.k0 = kb * kc_max;
+        j.kc = min_int(kc_max, p->K - j.k0);
+        j.first_block = kb == 0;
+        j.last_block = kb == nkb - 1;
+        mx_par_for(c, ceil_div(j.mpanels, PACK_PANELS_PER_TASK), pack_a_task, &j);
+        mx_par_for(c, ceil_div(j.npanels, PACK_PANELS_PER_TASK), pack_b_task, &j);
+        mx_par_for(c, j.nmb * j.nnb, compute_task, &j);
+    }
+    mx_scratch_release(c, &s);
+}
+
+void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+                    int M, int N, int K) {
+    mx_gemm_problem p = {.M = M, .N = N, .K = K, .C = y, .ldc = (size_t)N};
+    p.pack_a = mx_gemm_pack_a_rows;
+    p.pack_b = mx_gemm_pack_b_rows;
+    p.a_mat = mx_w_f32(x);
+    p.a_ld = (size_t)K;
+    p.b_mat = w;
+    p.b_ld = (size_t)K;
+    p.bias = bias;
+    mx_gemm_run(c, g, &p);
+}
+
+void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                    int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
+    mx_gemm_problem p = {.M = Cout, .N = Ho * Wo, .K = Cin * kh * kw, .ldc = (size_t)Ho * Wo};
+    p.pack_a = mx_gemm_pack_a_rows;
+    p.pack_b = mx_gemm_pack_b_im2col;
+    p.a_mat = w;
+    p.a_ld = (size_t)p.K;
+    p.Cin = Cin;
+    p.H = H;
+    p.W = W;
+    p.kh = kh;
+    p.kw = kw;
+    p.stride = stride;
+    p.pad = pad;
+    p.Wo = Wo;
+    p.bias = bias;
+    p.bias_per_row = 1;
+    for (int b = 0; b < B; b++) {
+        p.image = x + (size_t)b * Cin * H * W;
+        p.C = y + (size_t)b * Cout * Ho * Wo;
+        mx_gemm_run(c, g, &p);
+    }
+}

@@ -1,0 +1,63 @@
+/* The blocked GEMM engine behind linear and conv2d on the SIMD levels (Goto/BLIS scheme):
+ * C[M,N] (row stride ldc) = A[M,K] · B[K,N] (+ bias). For each block of kc columns of K,
+ * A is packed into MR-row panels and B into NR-column panels (both k-major, zero-padded at
+ * the edges) in scratch memory, then tasks over MC×NC tiles of C run the register-blocked
+ * micro-kernel on every MR×NR sub-tile. Packing is pluggable, so conv2d packs its B panels
+ * straight from the image (tiled im2col, never a full copy). Every split depends on the
+ * problem size only, so results do not depend on the thread count. */
+#ifndef MX_OPS_CPU_GEMM_H
+#define MX_OPS_CPU_GEMM_H
+
+#include <stddef.h>
+
+#include "kernels.h"
+
+typedef struct mx_gemm_kernel {
+    int mr, nr;
+    /* c[m × n] (row stride ldc) = (accumulate ? c : 0) + a[kc][mr] · b[kc][nr]; only the
+     * first m rows and n columns are written (m <= mr, n <= nr). */
+    void (*micro)(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n, int accumulate);
+    /* y[i] = widened x[i] for a weight row (fp32, fp16 or bf16). */
+    void (*widen)(float *y, mx_wptr x, size_t offset, size_t n);
+} mx_gemm_kernel;
+
+typedef struct mx_gemm_problem mx_gemm_problem;
+/* dst[k][r] for k < kc, r < rows: a panel starting at row (A) or column (B) `first`, rows past
+ * the matrix edge zero. */
+typedef void (*mx_gemm_pack_fn)(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first,
+                                int rows, int k0, int kc);
+
+struct mx_gemm_problem {
+    int M, N, K;
+    float *C;
+    size_t ldc;
+    mx_gemm_pack_fn pack_a, pack_b;
+    /* operand sources used by the packers */
+    mx_wptr a_mat, b_mat; /* row-major matrices for mx_gemm_pack_rows */
+    size_t a_ld, b_ld;
+    const float *image;   /* conv: one batch item [Cin, H, W] */
+    int Cin, H, W, kh, kw, stride, pad, Wo;
+    mx_wptr bias;
+    int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
+};
+
+/* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
+ * r*ld + k), transposed into k-major panels. For A of linear (x) and conv (weights), and for
+ * B of linear (weights [N, K], i.e. B^T). */
+void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+                         int k0, int kc);
+void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+                         int k0, int kc);
+/* Packs B = im2col(image) columns [first, first+cols) for rows k0..k0+kc of (ci, ky, kx). */
+void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int cols,
+                           int k0, int kc);
+
+void mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);
+
+/* linear and conv2d on top of mx_gemm_run, for a given micro-kernel. */
+void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+                    int M, int N, int K);
+void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                    int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+
+#endif

@@ -1,0 +1,69 @@
+/* Internal to ops/: the kernel functions behind the dispatch table (ops/cpu/dispatch.c),
+ * the scratch-memory helper and the parallel-for helper they share.
+ * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512. */
+#ifndef MX_OPS_CPU_KERNELS_H
+#define MX_OPS_CPU_KERNELS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../ops.h"
+
+/* Runs fn over ntasks tasks on c->pool (serially when c or its pool is NULL). */
+static inline void mx_par_for(const mx_ctx *c, int ntasks, mx_task_fn fn, void *arg) {
+    mx_pool_for(c ? c->pool : NULL, ntasks, fn, arg);
+}
+static inline int mx_par_threads(const mx_ctx *c) { return mx_pool_threads(c ? c->pool : NULL); }
+
+/* Temporary memory for one kernel call: from c->scratch when it has room, else from the heap
+ * (so a small scratch arena costs speed, never correctness). Release in reverse order. */
+typedef struct mx_scratch {
+    void *p;
+    size_t mark;
+    int heap;
+} mx_scratch;
+void *mx_scratch_take(const mx_ctx *c, size_t bytes, mx_scratch *s);
+void mx_scratch_release(const mx_ctx *c, mx_scratch *s);
+
+#define MX_KERNEL_DECLS(sfx)                                                                                 \
+    void mx_linear_##sfx(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N,    \
+                         int K);                                                                             \
+    void mx_conv2d_##sfx(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,  \
+                         mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);                       \
+    void mx_group_norm_##sfx(const mx_ctx *, float *y, const float *x, int B, int C, int HW, int groups,     \
+                             mx_wptr gamma, mx_wptr beta, float eps, int fuse_silu);                         \
+    void mx_layer_norm_##sfx(const mx_ctx *, float *y, const float *x, int M, int C, mx_wptr gamma,          \
+                             mx_wptr beta, float eps);                                                       \
+    void mx_softmax_##sfx(const mx_ctx *, float *x, int M, int N);                                           \
+    void mx_attention_##sfx(const mx_ctx *, float *out, const float *q, const float *k, const float *v,      \
+                            int B, int H, int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, \
+                            int causal, float scale);                                                        \
+    void mx_gelu_##sfx(const mx_ctx *, float *x, size_t n);                                                  \
+    void mx_quick_gelu_##sfx(const mx_ctx *, float *x, size_t n);                                            \
+    void mx_silu_##sfx(const mx_ctx *, float *x, size_t n);                                                  \
+    void mx_geglu_##sfx(const mx_ctx *, float *y, const float *x, int M, int N);                             \
+    void mx_binary_##sfx(const mx_ctx *, mx_binop op, float *y, const float *a, const int64_t *ashape,       \
+                         const float *b, const int64_t *bshape, int ndim);                                   \
+    void mx_scale_##sfx(const mx_ctx *, float *y, const float *x, float s, size_t n);                        \
+    void mx_f16_to_f32_##sfx(float *y, const uint16_t *x, size_t n);                                         \
+    void mx_f32_to_f16_##sfx(uint16_t *y, const float *x, size_t n);                                         \
+    void mx_bf16_to_f32_##sfx(float *y, const uint16_t *x, size_t n);                                        \
+    void mx_f32_to_bf16_##sfx(uint16_t *y, const float *x, size_t n);
+
+MX_KERNEL_DECLS(ref)
+MX_KERNEL_DECLS(avx2)
+MX_KERNEL_DECLS(avx512)
+
+/* Layout ops have only a reference: they are memory-bound copies the compiler vectorises. */
+void mx_upsample_nearest2x_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W);
+void mx_concat_channels_ref(const mx_ctx *, float *y, const float *a, int Ca, const float *b, int Cb, int B,
+                            int HW);
+void mx_transpose_chw_hwc_ref(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
+void mx_transpose_hwc_chw_ref(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
+void mx_resize_bilinear_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
+                            int align_corners);
+
+/* Elements per task of the element-wise kernels: fixed, so the split never depends on threads. */
+#define MX_EW_CHUNK 16384
+
+#endif

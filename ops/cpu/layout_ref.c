@@ -1,0 +1,116 @@
+/* Layout ops (upsample, concat, transposes, bilinear resize): plain loops, one plane or
+ * batch item per task. They are shared by every ISA level. */
+#include <string.h>
+
+#include "kernels.h"
+
+typedef struct {
+    float *y;
+    const float *x;
+    int H, W;
+} upsample_args;
+
+static void upsample_plane(void *arg, int p, int thread) {
+    (void)thread;
+    const upsample_args *a = arg;
+    const float *xp = a->x + (size_t)p * a->H * a->W;
+    float *yp = a->y + (size_t)p * 4 * a->H * a->W;
+    for (int i = 0; i < a->H; i++) {
+        float *row = yp + (size_t)2 * i * 2 * a->W;
+        for (int j = 0; j < a->W; j++) row[2 * j] = row[2 * j + 1] = xp[(size_t)i * a->W + j];
+        memcpy(row + 2 * a->W, row, (size_t)2 * a->W * sizeof *row);
+    }
+}
+
+void mx_upsample_nearest2x_ref(const mx_ctx *c, float *y, const float *x, int BC, int H, int W) {
+    upsample_args a = {y, x, H, W};
+    mx_par_for(c, BC, upsample_plane, &a);
+}
+
+void mx_concat_channels_ref(const mx_ctx *c, float *y, const float *a, int Ca, const float *b, int Cb, int B,
+                            int HW) {
+    (void)c;
+    for (int i = 0; i < B; i++) {
+        float *yb = y + (size_t)i * (Ca + Cb) * HW;
+        memcpy(yb, a + (size_t)i * Ca * HW, (size_t)Ca * HW * sizeof *y);
+        memcpy(yb + (size_t)Ca * HW, b + (size_t)i * Cb * HW, (size_t)Cb * HW * sizeof *y);
+    }
+}
+
+typedef struct {
+    float *y;
+    const float *x;
+    int C, HW, to_hwc;
+} transpose_args;
+
+/* One task = one batch item; 32×32 tiles keep both sides in cache. */
+static void transpose_item(void *arg, int b, int thread) {
+    (void)thread;
+    const transpose_args *a = arg;
+    int rows = a->to_hwc ? a->C : a->HW, cols = a->to_hwc ? a->HW : a->C;
+    const float *x = a->x + (size_t)b * a->C * a->HW;
+    float *y = a->y + (size_t)b * a->C * a->HW;
+    for (int r0 = 0; r0 < rows; r0 += 32)
+        for (int c0 = 0; c0 < cols; c0 += 32)
+            for (int r = r0; r < rows && r < r0 + 32; r++)
+                for (int cc = c0; cc < cols && cc < c0 + 32; cc++)
+                    y[(size_t)cc * rows + r] = x[(size_t)r * cols + cc];
+}
+
+void mx_transpose_chw_hwc_ref(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
+    transpose_args a = {y, x, C, HW, 1};
+    mx_par_for(c, B, transpose_item, &a);
+}
+
+void mx_transpose_hwc_chw_ref(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
+    transpose_args a = {y, x, C, HW, 0};
+    mx_par_for(c, B, transpose_item, &a);
+}
+
+typedef struct {
+    float *y;
+    const float *x;
+    int H, W, Ho, Wo, align_corners;
+} resize_args;
+
+/* PyTorch's area_pixel_compute_source_index + the index/weight rule of upsample_bilinear2d. */
+static void source_index(int dst, int in, int out, int align_corners, int *i0, int *i1, float *lambda) {
+    float src;
+    if (align_corners)
+        src = out > 1 ? (float)(in - 1) / (float)(out - 1) * (float)dst : 0.0f;
+    else {
+        src = (float)in / (float)out * ((float)dst + 0.5f) - 0.5f;
+        if (src < 0) src = 0;
+    }
+    int i = (int)src;
+    if (i > in - 1) i = in - 1;
+    *i0 = i;
+    *i1 = i < in - 1 ? i + 1 : i;
+    *lambda = src - (float)i;
+}
+
+static void resize_plane(void *arg, int p, int thread) {
+    (void)thread;
+    const resize_args *a = arg;
+    const float *xp = a->x + (size_t)p * a->H * a->W;
+    float *yp = a->y + (size_t)p * a->Ho * a->Wo;
+    for (int oy = 0; oy < a->Ho; oy++) {
+        int y0, y1;
+        float ly;
+        source_index(oy, a->H, a->Ho, a->align_corners, &y0, &y1, &ly);
+        for (int ox = 0; ox < a->Wo; ox++) {
+            int x0, x1;
+            float lx;
+            source_index(ox, a->W, a->Wo, a->align_corners, &x0, &x1, &lx);
+            const float *r0 = xp + (size_t)y0 * a->W, *r1 = xp + (size_t)y1 * a->W;
+            yp[(size_t)oy * a->Wo + ox] = (1 - ly) * ((1 - lx) * r0[x0] + lx * r0[x1]) +
+                                          ly * ((1 - lx) * r1[x0] + lx * r1[x1]);
+        }
+    }
+}
+
+void mx_resize_bilinear_ref(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
+                            int align_corners) {
+    resize_args a = {y, x, H, W, Ho, Wo, align_corners};
+    mx_par_for(c, BC, resize_plane, &a);
+}

@@ -1,0 +1,131 @@
+/* Shared by the .cu files of the CUDA backend (not part of the C interface): the context
+ * layout, error checks that fill an mx_status, the device scratch buffer, launch sizes and
+ * the weight loader that widens fp16/bf16 to fp32. */
+#ifndef MX_CUDA_COMMON_CUH
+#define MX_CUDA_COMMON_CUH
+
+#include <math.h>
+#include <stdlib.h>
+
+#include <cublasLt.h>
+#include <cuda_bf16.h>
+#include <cuda_fp16.h>
+#include <cuda_runtime.h>
+
+#include "cuda_backend.h"
+
+struct mx_cuda_ctx {
+    cudaStream_t stream;
+    cublasLtHandle_t lt;
+    void *workspace; /* cuBLASLt workspace */
+    size_t workspace_bytes;
+    unsigned char *scratch; /* device bump buffer for temporaries of one op */
+    size_t scratch_cap;
+    size_t scratch_used;
+};
+
+/* 0 when e is cudaSuccess, else -1 with "what: CUDA error name: text". */
+static inline int mx_cuda_ok(cudaError_t e, const char *what, mx_status *st) {
+    if (e == cudaSuccess) return 0;
+    return mx_fail(st, MX_EINTERNAL, "%s: CUDA error %s: %s", what, cudaGetErrorName(e), cudaGetErrorString(e));
+}
+
+/* Call right after a kernel launch: reports a bad launch configuration at once. */
+static inline int mx_cuda_launched(const char *what, mx_status *st) {
+    return mx_cuda_ok(cudaGetLastError(), what, st);
+}
+
+/* Temporary device memory of one op, 256-byte aligned; the op resets scratch_used before returning.
+ * The next op may reuse those bytes at once: all kernels of a context run in the order of its one
+ * stream, so they cannot overwrite memory that an earlier queued kernel still reads. */
+static inline void *mx_cuda_scratch(mx_cuda_ctx *c, size_t bytes, const char *what, mx_status *st) {
+    size_t start = (c->scratch_used + 255) & ~(size_t)255;
+    if (start > c->scratch_cap || bytes > c->scratch_cap - start) {
+        mx_fail(st, MX_ENOMEM, "%s: needs %zu bytes of CUDA scratch, %zu of %zu left", what, bytes,
+                c->scratch_cap - (start < c->scratch_cap ? start : c->scratch_cap), c->scratch_cap);
+        return NULL;
+    }
+    c->scratch_used = start + bytes;
+    return c->scratch + start;
+}
+
+/* Blocks for an elementwise grid-stride loop over n items. */
+static inline unsigned mx_cuda_blocks(size_t n, unsigned threads) {
+    size_t b = (n + threads - 1) / threads;
+    if (b > 65535u * 8u) b = 65535u * 8u;
+    return b ? (unsigned)b : 1u;
+}
+
+/* Grid-stride loop over n items (grids from mx_cuda_blocks). */
+#define MX_CUDA_GRID_STRIDE(i, n) \
+    for (size_t i = blockIdx.x * (size_t)blockDim.x + threadIdx.x; i < (n); i += (size_t)gridDim.x * blockDim.x)
+
+/* Element i of a weight in device memory, widened to fp32. */
+__device__ __forceinline__ float mx_cuda_wload(const void *p, int dtype, size_t i) {
+    if (dtype == MX_F16) return __half2float(((const __half *)p)[i]);
+    if (dtype == MX_BF16) return __bfloat162float(((const __nv_bfloat16 *)p)[i]);
+    return ((const float *)p)[i];
+}
+
+/* Sums of a block: every thread passes its value, every thread gets the total. shm holds 32 floats;
+ * blockDim.x must be a multiple of 32. The order of additions is fixed by the launch shape. */
+__device__ __forceinline__ float mx_cuda_warp_sum(float v) {
+    for (int o = 16; o > 0; o >>= 1) v += __shfl_xor_sync(0xffffffffu, v, o);
+    return v;
+}
+__device__ __forceinline__ float mx_cuda_warp_max(float v) {
+    for (int o = 16; o > 0; o >>= 1) v = fmaxf(v, __shfl_xor_sync(0xffffffffu, v, o));
+    return v;
+}
+__device__ __forceinline__ float mx_cuda_block_sum(float v, float *shm) {
+    int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, nwarps = blockDim.x >> 5;
+    v = mx_cuda_warp_sum(v);
+    __syncthreads(); /* shm may still be read from a previous call */
+    if (lane == 0) shm[warp] = v;
+    __syncthreads();
+    v = lane < nwarps ? shm[lane] : 0.0f;
+    return mx_cuda_warp_sum(v);
+}
+__device__ __forceinline__ float mx_cuda_block_max(float v, float *shm) {
+    int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, nwarps = blockDim.x >> 5;
+    v = mx_cuda_warp_max(v);
+    __syncthreads();
+    if (lane == 0) shm[warp] = v;
+    __syncthreads();
+    v = lane < nwarps ? shm[lane] : -INFINITY;
+    return mx_cuda_warp_max(v);
+}
+
+/* A weight's dtype must be one of fp32/fp16/bf16. */
+static inline int mx_cuda_check_wdtype(mx_wptr w, const char *what, mx_status *st) {
+    if (w.dtype == MX_F32 || w.dtype == MX_F16 || w.dtype == MX_BF16) return 0;
+    return mx_fail(st, MX_EINPUT, "%s: weight dtype %d is not fp32, fp16 or bf16", what, (int)w.dtype);
+}
+
+/* Sizes must be positive and their product (the element count) must fit an index. */
+static inline int mx_cuda_check_dims(const char *what, mx_status *st, int ndim, const long long *dims) {
+    long long n = 1;
+    for (int i = 0; i < ndim; i++) {
+        if (dims[i] <= 0) return mx_fail(st, MX_EINPUT, "%s: size %d is %lld (must be positive)", what, i, dims[i]);
+        if (n > (1LL << 62) / dims[i]) return mx_fail(st, MX_EINPUT, "%s: element count overflows", what);
+        n *= dims[i];
+    }
+    return 0;
+}
+
+/* ---- helpers shared by the GEMM-based ops (cuda_gemm.cu) ---- */
+
+/* Column-major D[m x n] (fp32, leading dimension ldd) = op(A) · op(B), A and B of type ab
+ * (fp32: fp32 math; fp16/bf16: tensor cores, fp32 accumulation). op(A) is m x k: A is stored
+ * k x m when transa, else m x k; op(B) is k x n likewise. */
+int mx_cuda_gemm(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
+                 long long lda, const void *B, long long ldb, float *D, long long ldd, const char *what,
+                 mx_status *st);
+/* dst[i] = src[i] rounded (nearest even) to dt (MX_F32: a copy). */
+int mx_cuda_convert_from_f32(mx_cuda_ctx *c, void *dst, mx_dtype dt, const float *src, size_t n, const char *what,
+                             mx_status *st);
+/* y[o, ch, i] += bias[ch] for y viewed as [outer, channels, inner]. */
+int mx_cuda_add_bias(mx_cuda_ctx *c, float *y, mx_wptr bias, long long outer, int channels, long long inner,
+                     const char *what, mx_status *st);
+
+#endif

@@ -1,0 +1,211 @@
+/* The op wrappers (ops.h), weight access, scalar conversions, the timestep embedding and
+ * the ready-made context. */
+#include "ops.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cpu/kernels.h"
+
+static uint32_t f32_bits(float f) {
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return u;
+}
+
+static float bits_f32(uint32_t u) {
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+float mx_half_to_float(uint16_t h) {
+    uint32_t sign = (uint32_t)(h & 0x8000) << 16, e = (h >> 10) & 0x1f, m = h & 0x3ff;
+    if (e == 0) {
+        float v = (float)m * (1.0f / 16777216.0f); /* subnormal: m · 2^-24 */
+        return bits_f32(f32_bits(v) | sign);
+    }
+    if (e == 31) return bits_f32(sign | 0x7f800000u | (m << 13));
+    return bits_f32(sign | ((e + 112) << 23) | (m << 13));
+}
+
+uint16_t mx_float_to_half(float f) {
+    uint32_t x = f32_bits(f), sign = (x >> 16) & 0x8000;
+    x &= 0x7fffffffu;
+    if (x > 0x7f800000u) return (uint16_t)(sign | 0x7e00 | ((x >> 13) & 0x3ff)); /* NaN stays NaN */
+    if (x >= 0x477ff000u) return (uint16_t)(sign | 0x7c00); /* >= 65520 rounds to infinity */
+    if (x < 0x38800000u) {
+        /* half subnormal: adding 0.5 puts the 2^-24 grid in the low mantissa bits; the FPU rounds */
+        float t = bits_f32(x) + 0.5f;
+        return (uint16_t)(sign | (f32_bits(t) - 0x3f000000u));
+    }
+    uint32_t odd = (x >> 13) & 1;
+    x += 0xc8000fffu + odd; /* rebias exponent (127 -> 15) and round to nearest even */
+    return (uint16_t)(sign | (x >> 13));
+}
+
+float mx_bf16_to_float(uint16_t h) { return bits_f32((uint32_t)h << 16); }
+
+uint16_t mx_float_to_bf16(float f) {
+    uint32_t x = f32_bits(f);
+    if ((x & 0x7fffffffu) > 0x7f800000u) return (uint16_t)((x >> 16) | 0x40); /* quiet NaN */
+    return (uint16_t)((x + 0x7fffu + ((x >> 16) & 1)) >> 16);
+}
+
+float mx_w_get(mx_wptr w, size_t i) {
+    switch (w.dtype) {
+    case MX_F16: return mx_half_to_float(((const uint16_t *)w.data)[i]);
+    case MX_BF16: return mx_bf16_to_float(((const uint16_t *)w.data)[i]);
+    default: return ((const float *)w.data)[i];
+    }
+}
+
+void *mx_scratch_take(const mx_ctx *c, size_t bytes, mx_scratch *s) {
+    memset(s, 0, sizeof *s);
+    if (c && c->scratch && !c->scratch->measuring) {
+        s->mark = mx_arena_mark(c->scratch);
+        s->p = mx_arena_alloc(c->scratch, bytes, NULL);
+        if (s->p) return s->p;
+    }
+    s->heap = 1;
+    s->p = aligned_alloc(MX_ARENA_ALIGN, (bytes + MX_ARENA_ALIGN - 1) / MX_ARENA_ALIGN * MX_ARENA_ALIGN);
+    return s->p;
+}
+
+void mx_scratch_release(const mx_ctx *c, mx_scratch *s) {
+    if (s->heap)
+        free(s->p);
+    else if (s->p)
+        mx_arena_reset(c->scratch, s->mark);
+    s->p = NULL;
+}
+
+static const mx_kernels *kern(const mx_ctx *c) { return c && c->k ? c->k : mx_kernels_best(); }
+
+void mx_linear(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
+    if (M > 0 && N > 0) kern(c)->linear(c, y, x, w, bias, M, N, K);
+}
+
+void mx_conv2d(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+               mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    if (B > 0 && Cout > 0) kern(c)->conv2d(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+}
+
+void mx_group_norm(const mx_ctx *c, float *y, const float *x, int B, int C, int HW, int groups, mx_wptr gamma,
+                   mx_wptr beta, float eps, int fuse_silu) {
+    if (B > 0 && C > 0 && HW > 0) kern(c)->group_norm(c, y, x, B, C, HW, groups, gamma, beta, eps, fuse_silu);
+}
+
+void mx_layer_norm(const mx_ctx *c, float *y, const float *x, int M, int C, mx_wptr gamma, mx_wptr beta,
+                   float eps) {
+    if (M > 0 && C > 0) kern(c)->layer_norm(c, y, x, M, C, gamma, beta, eps);
+}
+
+void mx_softmax(const mx_ctx *c, float *x, int M, int N) {
+    if (M > 0 && N > 0) kern(c)->softmax(c, x, M, N);
+}
+
+void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, const float *v, int B, int H,
+                  int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal, float scale) {
+    if (B > 0 && H > 0 && Tq > 0 && Tk > 0 && D > 0)
+        kern(c)->attention(c, out, q, k, v, B, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal, scale);
+}
+
+void mx_gelu(const mx_ctx *c, float *x, size_t n) { kern(c)->gelu(c, x, n); }
+void mx_quick_gelu(const mx_ctx *c, float *x, size_t n) { kern(c)->quick_gelu(c, x, n); }
+void mx_silu(const mx_ctx *c, float *x, size_t n) { kern(c)->silu(c, x, n); }
+
+void mx_geglu(const mx_ctx *c, float *y, const float *x, int M, int N) {
+    if (M > 0 && N > 0) kern(c)->geglu(c, y, x, M, N);
+}
+
+void mx_binary(const mx_ctx *c, mx_binop op, float *y, const float *a, const int64_t *ashape, const float *b,
+               const int64_t *bshape, int ndim) {
+    kern(c)->binary(c, op, y, a, ashape, b, bshape, ndim);
+}
+
+void mx_add(const mx_ctx *c, float *y, const float *a, const float *b, size_t n) {
+    int64_t shape[1] = {(int64_t)n};
+    mx_binary(c, MX_BIN_ADD, y, a, shape, b, shape, 1);
+}
+
+void mx_mul(const mx_ctx *c, float *y, const float *a, const float *b, size_t n) {
+    int64_t shape[1] = {(int64_t)n};
+    mx_binary(c, MX_BIN_MUL, y, a, shape, b, shape, 1);
+}
+
+void mx_scale(const mx_ctx *c, float *y, const float *x, float s, size_t n) { kern(c)->scale(c, y, x, s, n); }
+
+void mx_upsample_nearest2x(const mx_ctx *c, float *y, const float *x, int BC, int H, int W) {
+    kern(c)->upsample_nearest2x(c, y, x, BC, H, W);
+}
+
+void mx_concat_channels(const mx_ctx *c, float *y, const float *a, int Ca, const float *b, int Cb, int B,
+                        int HW) {
+    kern(c)->concat_channels(c, y, a, Ca, b, Cb, B, HW);
+}
+
+void mx_transpose_chw_hwc(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
+    kern(c)->transpose_chw_hwc(c, y, x, B, C, HW);
+}
+
+void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
+    kern(c)->transpose_hwc_chw(c, y, x, B, C, HW);
+}
+
+void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
+                        int align_corners) {
+    kern(c)->resize_bilinear(c, y, x, BC, H, W, Ho, Wo, align_corners);
+}
+
+/* Float32 arithmetic step by step, as torch evaluates get_timestep_embedding. */
+void mx_timestep_embedding(float *y, const float *t, int B, int dim, int flip_sin_to_cos,
+                           float downscale_freq_shift, float max_period) {
+    int half = dim / 2;
+    float neg_log = (float)-log((double)max_period);
+    for (int b = 0; b < B; b++) {
+        float *yb = y + (size_t)b * dim;
+        for (int i = 0; i < half; i++) {
+            float exponent = neg_log * (float)i / ((float)half - downscale_freq_shift);
+            float arg = t[b] * expf(exponent);
+            float s = sinf(arg), co = cosf(arg);
+            yb[i] = flip_sin_to_cos ? co : s;
+            yb[half + i] = flip_sin_to_cos ? s : co;
+        }
+        if (dim % 2) yb[dim - 1] = 0;
+    }
+}
+
+void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { kern(c)->f16_to_f32(y, x, n); }
+void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { kern(c)->f32_to_f16(y, x, n); }
+void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { kern(c)->bf16_to_f32(y, x, n); }
+void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { kern(c)->f32_to_bf16(y, x, n); }
+
+int mx_ctx_create(mx_ctx *c, int nthreads, mx_isa isa, size_t scratch_bytes, mx_status *st) {
+    memset(c, 0, sizeof *c);
+    c->k = mx_kernels_for(isa);
+    c->pool = mx_pool_create(nthreads, st);
+    if (!c->pool) return -1;
+    c->scratch = malloc(sizeof *c->scratch);
+    if (!c->scratch) {
+        mx_ctx_destroy(c);
+        return mx_fail(st, MX_ENOMEM, "ops context: out of memory");
+    }
+    if (mx_arena_create(c->scratch, scratch_bytes, st) != 0) {
+        free(c->scratch);
+        c->scratch = NULL;
+        mx_ctx_destroy(c);
+        return mx_fail_prefix(st, "ops context scratch");
+    }
+    return 0;
+}
+
+void mx_ctx_destroy(mx_ctx *c) {
+    if (c->scratch) {
+        mx_arena_destroy(c->scratch);
+        free(c->scratch);
+    }
+    mx_pool_destroy(c->pool);
+    memset(c, 0, sizeof *c);
+}

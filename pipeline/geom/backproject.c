@@ -1,0 +1,305 @@
+#include "backproject.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define BAND_ROWS 16  /* texture rows per band task */
+#define CHUNK_ROWS 16 /* image rows per list-building task */
+
+typedef struct bp_scratch {
+    size_t count_cap, list_cap, q_cap;
+    int32_t *counts; /* [nchunks][nbins] then write offsets */
+    int32_t *bin_start; /* [nbins + 1] */
+    size_t bin_cap;
+    int32_t *list;   /* pixel indices grouped by bin, in pixel order */
+    float *view_q;   /* [nlayers][h][w] this view's best |n.v| per texel */
+} bp_scratch;
+
+int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
+    memset(b, 0, sizeof *b);
+    if (w <= 0 || h <= 0 || w > 16384 || h > 16384 || nlayers <= 0 || nlayers > 256)
+        return mx_fail(st, MX_EINPUT, "backprojection: bad texture size %dx%d x %d", w, h, nlayers);
+    size_t n = (size_t)w * h * nlayers;
+    b->w = w;
+    b->h = h;
+    b->nlayers = nlayers;
+    b->eps = 1e-3f;
+    b->overwrite_margin = 0.15f;
+    b->sum_wc = calloc(3 * n, sizeof *b->sum_wc);
+    b->sum_w = calloc(n, sizeof *b->sum_w);
+    b->known = calloc(n, 1);
+    b->quality = calloc(n, sizeof *b->quality);
+    b->scratch = calloc(1, sizeof(bp_scratch));
+    if (!b->sum_wc || !b->sum_w || !b->known || !b->quality || !b->scratch) {
+        mx_bake_free(b);
+        return mx_fail(st, MX_ENOMEM, "backprojection: out of memory for a %dx%d texture", w, h);
+    }
+    return 0;
+}
+
+void mx_bake_free(mx_bake *b) {
+    bp_scratch *s = b->scratch;
+    if (s) {
+        free(s->counts);
+        free(s->bin_start);
+        free(s->list);
+        free(s->view_q);
+        free(s);
+    }
+    free(b->sum_wc);
+    free(b->sum_w);
+    free(b->known);
+    free(b->quality);
+    memset(b, 0, sizeof *b);
+}
+
+void mx_bake_reset(mx_bake *b) {
+    size_t n = (size_t)b->w * b->h * b->nlayers;
+    memset(b->sum_wc, 0, 3 * n * sizeof *b->sum_wc);
+    memset(b->sum_w, 0, n * sizeof *b->sum_w);
+    memset(b->known, 0, n);
+    memset(b->quality, 0, n * sizeof *b->quality);
+}
+
+int mx_face_layer(const mx_mesh *m, int face, int nlayers) {
+    int mat = m->face_mat ? m->face_mat[face] : 0;
+    return mat >= 0 && mat < nlayers ? mat : 0;
+}
+
+typedef struct bp_job {
+    mx_bake *b;
+    const mx_gbuffer *gb;
+    const mx_mesh *m;
+    const mx_image *img;
+    const uint8_t *mask;
+    int flags;
+    int nbands, nbins, nchunks;
+    bp_scratch *s;
+} bp_job;
+
+/* Splat footprint of pixel i: top-left texel (x0, y0), wrapped, and the fractions. */
+typedef struct splat {
+    int x0, x1, y0, y1;
+    float fx, fy;
+} splat;
+
+static splat pixel_splat(const bp_job *j, size_t i) {
+    const mx_bake *b = j->b;
+    float tx = j->gb->uv[2 * i] * (float)b->w - 0.5f;
+    float ty = (1.0f - j->gb->uv[2 * i + 1]) * (float)b->h - 0.5f;
+    float flx = floorf(tx), fly = floorf(ty);
+    splat s;
+    s.fx = tx - flx;
+    s.fy = ty - fly;
+    s.x0 = (int)fmodf(flx, (float)b->w);
+    s.y0 = (int)fmodf(fly, (float)b->h);
+    if (s.x0 < 0) s.x0 += b->w;
+    if (s.y0 < 0) s.y0 += b->h;
+    s.x1 = s.x0 + 1 == b->w ? 0 : s.x0 + 1;
+    s.y1 = s.y0 + 1 == b->h ? 0 : s.y0 + 1;
+    return s;
+}
+
+static int pixel_used(const bp_job *j, size_t i) {
+    float u = j->gb->uv[2 * i], v = j->gb->uv[2 * i + 1];
+    return j->gb->face[i] >= 0 && (!j->mask || j->mask[i]) && isfinite(u) && isfinite(v);
+}
+
+static int pixel_bin(const bp_job *j, size_t i, int row) {
+    return mx_face_layer(j->m, j->gb->face[i], j->b->nlayers) * j->nbands + row / BAND_ROWS;
+}
+
+/* Calls visit(bin) for the one or two bands pixel i splats into. */
+#define FOR_PIXEL_BINS(j, i, bin_var, body)                                                      \
+    do {                                                                                         \
+        splat sp_ = pixel_splat(j, i);                                                           \
+        int b0_ = pixel_bin(j, i, sp_.y0), b1_ = pixel_bin(j, i, sp_.y1);                         \
+        { int bin_var = b0_; body; }                                                             \
+        if (b1_ != b0_) { int bin_var = b1_; body; }                                             \
+    } while (0)
+
+static void count_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    int32_t *cnt = j->s->counts + (size_t)task * j->nbins;
+    memset(cnt, 0, (size_t)j->nbins * sizeof *cnt);
+    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
+    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++)
+        if (pixel_used(j, i)) FOR_PIXEL_BINS(j, i, bin, cnt[bin]++);
+}
+
+static void fill_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    int32_t *off = j->s->counts + (size_t)task * j->nbins;
+    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
+    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++)
+        if (pixel_used(j, i)) FOR_PIXEL_BINS(j, i, bin, j->s->list[off[bin]++] = (int32_t)i);
+}
+
+static float pixel_quality(const bp_job *j, size_t i) {
+    const mx_gbuffer *gb = j->gb;
+    float n[3], p[3], v[3];
+    mx_gbuffer_normal(gb, (int64_t)i, n);
+    int x = (int)(i % (size_t)gb->w), y = (int)(i / (size_t)gb->w);
+    mx_camera_unproject(&gb->cam, (float)x + 0.5f, (float)y + 0.5f, gb->depth[i], gb->w, gb->h, p);
+    mx_camera_view_dir(&gb->cam, p, v);
+    return fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
+}
+
+/* The 4 texels and weights of a splat, restricted to rows [r0, r1). */
+static int splat_texels(const splat *sp, int w, int r0, int r1, size_t *tex, float *wt) {
+    int n = 0;
+    int ys[2] = {sp->y0, sp->y1}, xs[2] = {sp->x0, sp->x1};
+    float wy[2] = {1 - sp->fy, sp->fy}, wx[2] = {1 - sp->fx, sp->fx};
+    for (int a = 0; a < 2; a++) {
+        if (ys[a] < r0 || ys[a] >= r1) continue;
+        for (int c = 0; c < 2; c++) {
+            float wgt = wy[a] * wx[c];
+            if (wgt <= 0) continue;
+            tex[n] = (size_t)ys[a] * w + xs[c];
+            wt[n++] = wgt;
+        }
+    }
+    return n;
+}
+
+/* Better-angle overwrite: texels this view sees clearly better than their writers are
+ * restarted (sums cleared, out of T^B) before the splat. */
+static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32_t k0, int32_t k1) {
+    mx_bake *b = j->b;
+    float *vq = j->s->view_q;
+    for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++) vq[t] = 0;
+    for (int32_t k = k0; k < k1; k++) {
+        size_t i = (size_t)j->s->list[k];
+        splat sp = pixel_splat(j, i);
+        size_t tex[4];
+        float wt[4];
+        int n = splat_texels(&sp, b->w, r0, r1, tex, wt);
+        float q = pixel_quality(j, i);
+        for (int e = 0; e < n; e++)
+            if (q > vq[plane + tex[e]]) vq[plane + tex[e]] = q;
+    }
+    for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++)
+        if (b->known[t] && vq[t] > b->quality[t] + b->overwrite_margin) {
+            b->known[t] = 0;
+            b->sum_w[t] = 0;
+            b->sum_wc[3 * t] = b->sum_wc[3 * t + 1] = b->sum_wc[3 * t + 2] = 0;
+            b->quality[t] = 0;
+        }
+}
+
+static void splat_band_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    mx_bake *b = j->b;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    size_t plane = (size_t)layer * b->w * b->h;
+    int32_t k0 = j->s->bin_start[task], k1 = j->s->bin_start[task + 1];
+    if (k0 == k1) return;
+    if (j->flags & MX_BACKPROJECT_OVERWRITE) restart_better_texels(j, plane, r0, r1, k0, k1);
+    uint8_t *known = b->known + plane;
+    float *sw = b->sum_w + plane, *swc = b->sum_wc + 3 * plane, *qual = b->quality + plane;
+    int c = j->img->c;
+    for (int32_t k = k0; k < k1; k++) {
+        size_t i = (size_t)j->s->list[k];
+        splat sp = pixel_splat(j, i);
+        size_t tex[4];
+        float wt[4];
+        int n = splat_texels(&sp, b->w, r0, r1, tex, wt);
+        const float *col = j->img->data + i * c;
+        float q = -1;
+        for (int e = 0; e < n; e++) {
+            size_t t = tex[e];
+            if (known[t]) continue; /* T^B before this view: written by an earlier view */
+            sw[t] += wt[e];
+            swc[3 * t] += wt[e] * col[0];
+            swc[3 * t + 1] += wt[e] * col[1];
+            swc[3 * t + 2] += wt[e] * col[2];
+            if (q < 0) q = pixel_quality(j, i);
+            if (q > qual[t]) qual[t] = q;
+        }
+    }
+    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++)
+        if (sw[t] > b->eps) known[t] = 1;
+}
+
+static int reserve(bp_job *j, mx_status *st) {
+    bp_scratch *s = j->s;
+    size_t need_counts = (size_t)j->nchunks * j->nbins;
+    size_t need_list = 2 * (size_t)j->gb->w * j->gb->h;
+    size_t need_q = (size_t)j->b->w * j->b->h * j->b->nlayers;
+    if (need_counts > s->count_cap) {
+        free(s->counts);
+        s->counts = malloc(need_counts * sizeof *s->counts);
+        s->count_cap = s->counts ? need_counts : 0;
+    }
+    if ((size_t)j->nbins + 1 > s->bin_cap) {
+        free(s->bin_start);
+        s->bin_start = malloc(((size_t)j->nbins + 1) * sizeof *s->bin_start);
+        s->bin_cap = s->bin_start ? (size_t)j->nbins + 1 : 0;
+    }
+    if (need_list > s->list_cap) {
+        free(s->list);
+        s->list = malloc(need_list * sizeof *s->list);
+        s->list_cap = s->list ? need_list : 0;
+    }
+    if ((j->flags & MX_BACKPROJECT_OVERWRITE) && need_q > s->q_cap) {
+        free(s->view_q);
+        s->view_q = malloc(need_q * sizeof *s->view_q);
+        s->q_cap = s->view_q ? need_q : 0;
+    }
+    if (!s->counts || !s->bin_start || !s->list ||
+        ((j->flags & MX_BACKPROJECT_OVERWRITE) && !s->view_q))
+        return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
+    return 0;
+}
+
+int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_image *img,
+                   const uint8_t *mask, int flags, mx_pool *pool, mx_status *st) {
+    if (!gb->uv) return mx_fail(st, MX_EINPUT, "backprojection: the view has no UVs (mesh without UVs?)");
+    if (img->w != gb->w || img->h != gb->h || img->c < 3)
+        return mx_fail(st, MX_EINPUT, "backprojection: image %dx%dx%d does not match the %dx%d view",
+                       img->w, img->h, img->c, gb->w, gb->h);
+    bp_job j = {b, gb, m, img, mask, flags, 0, 0, 0, b->scratch};
+    j.nbands = (b->h + BAND_ROWS - 1) / BAND_ROWS;
+    j.nbins = j.nbands * b->nlayers;
+    j.nchunks = (gb->h + CHUNK_ROWS - 1) / CHUNK_ROWS;
+    if (reserve(&j, st)) return -1;
+    mx_pool_for(pool, j.nchunks, count_task, &j);
+    /* counts[chunk][bin] -> write offsets: bins in order, chunks in order inside a bin */
+    int64_t total = 0;
+    for (int bin = 0; bin < j.nbins; bin++) {
+        j.s->bin_start[bin] = (int32_t)total;
+        for (int c = 0; c < j.nchunks; c++) {
+            int32_t n = j.s->counts[(size_t)c * j.nbins + bin];
+            j.s->counts[(size_t)c * j.nbins + bin] = (int32_t)total;
+            total += n;
+        }
+    }
+    j.s->bin_start[j.nbins] = (int32_t)total;
+    mx_pool_for(pool, j.nchunks, fill_task, &j);
+    mx_pool_for(pool, j.nbins, splat_band_task, &j);
+    return 0;
+}
+
+int mx_bake_texture(const mx_bake *b, int layer, const float fill[3], mx_image *out, mx_status *st) {
+    if (layer < 0 || layer >= b->nlayers)
+        return mx_fail(st, MX_EINPUT, "backprojection: no texture layer %d", layer);
+    if (mx_image_alloc(out, b->w, b->h, 3, st)) return -1;
+    size_t plane = (size_t)layer * b->w * b->h;
+    for (size_t t = 0; t < (size_t)b->w * b->h; t++) {
+        float w = b->sum_w[plane + t];
+        for (int c = 0; c < 3; c++)
+            out->data[3 * t + c] = b->known[plane + t] ? b->sum_wc[3 * (plane + t) + c] / w : fill[c];
+    }
+    return 0;
+}
+
+int64_t mx_bake_known_count(const mx_bake *b) {
+    int64_t n = 0;
+    for (size_t t = 0; t < (size_t)b->w * b->h * b->nlayers; t++) n += b->known[t];
+    return n;
+}

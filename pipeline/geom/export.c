@@ -1,0 +1,471 @@
+/* Exporters (pipeline/geom/export.h): OBJ + MTL, GLB 2.0 with embedded PNGs, output folder. */
+#include "export.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "../io/io.h"
+
+/* ---- a growable byte buffer (JSON text and the GLB BIN chunk) ---- */
+
+typedef struct {
+    unsigned char *p;
+    size_t len, cap;
+    int oom;
+} bytes;
+
+static void put(bytes *b, const void *data, size_t n) {
+    if (b->oom) return;
+    if (b->len + n > b->cap) {
+        size_t c = b->cap ? b->cap : 4096;
+        while (c < b->len + n) c *= 2;
+        unsigned char *q = realloc(b->p, c);
+        if (!q) {
+            b->oom = 1;
+            return;
+        }
+        b->p = q;
+        b->cap = c;
+    }
+    memcpy(b->p + b->len, data, n);
+    b->len += n;
+}
+
+static void putf(bytes *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void putf(bytes *b, const char *fmt, ...) {
+    char tmp[512];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(tmp, sizeof tmp, fmt, ap);
+    va_end(ap);
+    if (n > 0) put(b, tmp, (size_t)n < sizeof tmp ? (size_t)n : sizeof tmp - 1);
+}
+
+/* A JSON string literal (names come from input files: quote and escape control characters). */
+static void put_json_str(bytes *b, const char *s) {
+    put(b, "\"", 1);
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\') putf(b, "\\%c", c);
+        else if (c < 0x20) putf(b, "\\u%04x", c);
+        else put(b, s, 1);
+    }
+    put(b, "\"", 1);
+}
+
+static void pad4(bytes *b, unsigned char fill) {
+    while (b->len % 4) put(b, &fill, 1);
+}
+
+/* ---- writing through a temporary file ---- */
+
+static int write_file_atomic(const char *path, const void *data, size_t len, mx_status *st) {
+    char tmp[1100];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE *f = fopen(tmp, "wb");
+    if (!f) return mx_fail(st, MX_EIO, "%s: cannot create: %s", tmp, strerror(errno));
+    int ok = fwrite(data, 1, len, f) == len;
+    ok &= fclose(f) == 0;
+    if (!ok || rename(tmp, path) != 0) {
+        remove(tmp);
+        return mx_fail(st, MX_EIO, "%s: write failed", path);
+    }
+    return 0;
+}
+
+/* ---- OBJ + MTL ---- */
+
+static int face_has_all(const int32_t *idx, int f) {
+    return idx && idx[3 * f] >= 0 && idx[3 * f + 1] >= 0 && idx[3 * f + 2] >= 0;
+}
+
+static void obj_corner(bytes *b, const mx_mesh *m, int f, int k) {
+    int v = m->faces[3 * f + k] + 1;
+    int has_uv = face_has_all(m->face_uv, f), has_n = face_has_all(m->face_nrm, f);
+    if (has_uv && has_n) putf(b, " %d/%d/%d", v, m->face_uv[3 * f + k] + 1, m->face_nrm[3 * f + k] + 1);
+    else if (has_uv) putf(b, " %d/%d", v, m->face_uv[3 * f + k] + 1);
+    else if (has_n) putf(b, " %d//%d", v, m->face_nrm[3 * f + k] + 1);
+    else putf(b, " %d", v);
+}
+
+static void mtl_text(bytes *b, const mx_mesh *m, const char *const *texture_files, int ntex) {
+    putf(b, "# matex\n");
+    for (int i = 0; i < m->nmat; i++) {
+        put(b, "newmtl ", 7);
+        put(b, m->mats[i].name, strlen(m->mats[i].name));
+        putf(b, "\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nillum 1\n");
+        const char *tex = i < ntex ? texture_files[i] : ntex > 0 ? texture_files[0] : NULL;
+        if (tex) putf(b, "map_Kd %s\n", tex);
+        put(b, "\n", 1);
+    }
+}
+
+/* "dir/name.obj" -> "dir/name.mtl" (and the bare file name for the mtllib line). */
+static void mtl_paths(const char *obj_path, char *mtl_path, size_t cap, const char **mtl_name) {
+    snprintf(mtl_path, cap, "%s", obj_path);
+    char *dot = strrchr(mtl_path, '.'), *slash = strrchr(mtl_path, '/');
+    if (dot && (!slash || dot > slash)) *dot = 0;
+    strncat(mtl_path, ".mtl", cap - strlen(mtl_path) - 1);
+    slash = strrchr(mtl_path, '/');
+    *mtl_name = slash ? slash + 1 : mtl_path;
+}
+
+int mx_export_obj(const char *path, const mx_mesh *m, const char *const *texture_files, int ntex, mx_status *st) {
+    char mtl_path[1100];
+    const char *mtl_name;
+    mtl_paths(path, mtl_path, sizeof mtl_path, &mtl_name);
+    bytes b = {0};
+    putf(&b, "# written by matex: %d vertices, %d triangles\n", m->nverts, m->nfaces);
+    if (texture_files) putf(&b, "mtllib %s\n", mtl_name);
+    for (int v = 0; v < m->nverts; v++)
+        putf(&b, "v %.9g %.9g %.9g\n", m->pos[3 * v], m->pos[3 * v + 1], m->pos[3 * v + 2]);
+    for (int t = 0; t < m->nuv; t++) putf(&b, "vt %.9g %.9g\n", m->uv[2 * t], m->uv[2 * t + 1]);
+    for (int n = 0; n < m->nnrm; n++)
+        putf(&b, "vn %.9g %.9g %.9g\n", m->nrm[3 * n], m->nrm[3 * n + 1], m->nrm[3 * n + 2]);
+    int cur = -1;
+    for (int f = 0; f < m->nfaces; f++) {
+        int mat = m->face_mat ? m->face_mat[f] : 0;
+        if (mat != cur && m->nmat > 0) {
+            putf(&b, "usemtl %s\n", m->mats[mat].name);
+            cur = mat;
+        }
+        put(&b, "f", 1);
+        for (int k = 0; k < 3; k++) obj_corner(&b, m, f, k);
+        put(&b, "\n", 1);
+    }
+    bytes mb = {0};
+    if (texture_files) mtl_text(&mb, m, texture_files, ntex);
+    int rc;
+    if (b.oom || mb.oom) rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    else rc = (texture_files ? write_file_atomic(mtl_path, mb.p, mb.len, st) : 0) || write_file_atomic(path, b.p, b.len, st) ? -1 : 0;
+    free(b.p);
+    free(mb.p);
+    return rc;
+}
+
+/* ---- GLB ---- */
+
+/* One glTF vertex per distinct (position, uv, normal) corner. */
+typedef struct {
+    int32_t key[3];
+    int32_t corner;
+} corner_rec;
+
+static int cmp_corner(const void *x, const void *y) {
+    const corner_rec *a = x, *b = y;
+    for (int k = 0; k < 3; k++)
+        if (a->key[k] != b->key[k]) return a->key[k] < b->key[k] ? -1 : 1;
+    return (a->corner > b->corner) - (a->corner < b->corner);
+}
+
+typedef struct {
+    size_t nv;
+    float *pos, *nrm, *uv;  /* [nv][3], [nv][3], [nv][2] */
+    uint32_t *corner_vert; /* [nfaces*3] glTF vertex of each corner */
+} glb_verts;
+
+/* Area-weighted vertex normals, used for corners without a normal of their own. */
+static float *vertex_normals(const mx_mesh *m) {
+    float *vn = calloc((size_t)m->nverts * 3 + 1, sizeof(float));
+    if (!vn) return NULL;
+    for (int f = 0; f < m->nfaces; f++) {
+        const int32_t *t = m->faces + 3 * f;
+        const float *a = m->pos + 3 * t[0], *b = m->pos + 3 * t[1], *c = m->pos + 3 * t[2];
+        float e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        float n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+        for (int k = 0; k < 3; k++)
+            for (int j = 0; j < 3; j++) vn[3 * t[k] + j] += n[j];
+    }
+    for (int v = 0; v < m->nverts; v++) {
+        float *n = vn + 3 * v, l = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (l > 0) n[0] /= l, n[1] /= l, n[2] /= l;
+        else n[0] = 0, n[1] = 1, n[2] = 0;
+    }
+    return vn;
+}
+
+static int split_vertices(const mx_mesh *m, glb_verts *g, mx_status *st) {
+    size_t nc = (size_t)m->nfaces * 3;
+    corner_rec *c = malloc(nc * sizeof *c + 1);
+    float *vn = vertex_normals(m);
+    memset(g, 0, sizeof *g);
+    g->corner_vert = malloc(nc * sizeof *g->corner_vert + 1);
+    g->pos = malloc(nc * 3 * sizeof(float) + 1);
+    g->nrm = malloc(nc * 3 * sizeof(float) + 1);
+    g->uv = malloc(nc * 2 * sizeof(float) + 1);
+    int rc = -1;
+    if (!c || !vn || !g->corner_vert || !g->pos || !g->nrm || !g->uv) {
+        mx_fail(st, MX_ENOMEM, "%s: out of memory building GLB vertices", m->source_path);
+        goto done;
+    }
+    for (size_t i = 0; i < nc; i++) {
+        c[i].key[0] = m->faces[i];
+        c[i].key[1] = m->face_uv ? m->face_uv[i] : -1;
+        c[i].key[2] = m->face_nrm ? m->face_nrm[i] : -1;
+        c[i].corner = (int32_t)i;
+    }
+    qsort(c, nc, sizeof *c, cmp_corner);
+    for (size_t i = 0; i < nc; i++) {
+        if (i == 0 || memcmp(c[i].key, c[i - 1].key, sizeof c[i].key)) {
+            size_t v = g->nv++;
+            int32_t p = c[i].key[0], t = c[i].key[1], n = c[i].key[2];
+            memcpy(g->pos + 3 * v, m->pos + 3 * (size_t)p, 3 * sizeof(float));
+            memcpy(g->nrm + 3 * v, n >= 0 ? m->nrm + 3 * (size_t)n : vn + 3 * (size_t)p, 3 * sizeof(float));
+            g->uv[2 * v] = t >= 0 ? m->uv[2 * (size_t)t] : 0.f;
+            g->uv[2 * v + 1] = t >= 0 ? 1.f - m->uv[2 * (size_t)t + 1] : 0.f; /* v up -> glTF v down */
+        }
+        g->corner_vert[c[i].corner] = (uint32_t)(g->nv - 1);
+    }
+    rc = 0;
+done:
+    free(c);
+    free(vn);
+    return rc;
+}
+
+static void glb_verts_free(glb_verts *g) {
+    free(g->pos);
+    free(g->nrm);
+    free(g->uv);
+    free(g->corner_vert);
+}
+
+typedef struct {
+    bytes bin, views, accs, prims, images;
+    int nview, nacc, nimg;
+} glb_build;
+
+/* A buffer view over bin[off, off + len); target 0 for image data. */
+static void add_view(glb_build *b, size_t off, size_t len, int target) {
+    putf(&b->views, "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu", b->nview ? "," : "", off, len);
+    if (target) putf(&b->views, ",\"target\":%d", target);
+    put(&b->views, "}", 1);
+    b->nview++;
+}
+
+static int add_accessor(glb_build *b, const void *data, size_t count, int ncomp, int ctype, const char *type,
+                        int target, const float *minmax) {
+    size_t esize = 4 * (size_t)ncomp, off = b->bin.len;
+    put(&b->bin, data, count * esize);
+    pad4(&b->bin, 0);
+    add_view(b, off, count * esize, target);
+    putf(&b->accs, "%s{\"bufferView\":%d,\"componentType\":%d,\"count\":%zu,\"type\":\"%s\"", b->nacc ? "," : "",
+         b->nview - 1, ctype, count, type);
+    if (minmax)
+        putf(&b->accs, ",\"min\":[%.9g,%.9g,%.9g],\"max\":[%.9g,%.9g,%.9g]", minmax[0], minmax[1], minmax[2], minmax[3],
+             minmax[4], minmax[5]);
+    put(&b->accs, "}", 1);
+    return b->nacc++;
+}
+
+static void position_bounds(const glb_verts *g, float mm[6]) {
+    for (int k = 0; k < 3; k++) mm[k] = mm[3 + k] = g->pos[k];
+    for (size_t v = 0; v < g->nv; v++)
+        for (int k = 0; k < 3; k++) {
+            float x = g->pos[3 * v + k];
+            if (x < mm[k]) mm[k] = x;
+            if (x > mm[3 + k]) mm[3 + k] = x;
+        }
+}
+
+/* One primitive per material that has faces; all share the vertex accessors. */
+static int add_primitives(glb_build *b, const mx_mesh *m, const glb_verts *g, int a_pos, int a_nrm, int a_uv,
+                          mx_status *st) {
+    uint32_t *idx = malloc((size_t)m->nfaces * 3 * sizeof *idx + 1);
+    if (!idx) return mx_fail(st, MX_ENOMEM, "%s: out of memory", m->source_path);
+    int nprim = 0;
+    for (int mat = 0; mat < m->nmat; mat++) {
+        size_t n = 0;
+        for (int f = 0; f < m->nfaces; f++)
+            if ((m->face_mat ? m->face_mat[f] : 0) == mat)
+                for (int k = 0; k < 3; k++) idx[n++] = g->corner_vert[3 * f + k];
+        if (!n) continue;
+        int a_idx = add_accessor(b, idx, n, 1, 5125, "SCALAR", 34963, NULL);
+        putf(&b->prims, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d", nprim ? "," : "", a_pos, a_nrm);
+        if (a_uv >= 0) putf(&b->prims, ",\"TEXCOORD_0\":%d", a_uv);
+        putf(&b->prims, "},\"indices\":%d,\"material\":%d,\"mode\":4}", a_idx, mat);
+        nprim++;
+    }
+    free(idx);
+    return 0;
+}
+
+/* Materials (+ textures, images embedded as PNG buffer views). */
+static int add_materials(glb_build *b, bytes *mats, bytes *texs, const mx_mesh *m, const mx_image *textures, int ntex,
+                         mx_status *st) {
+    for (int i = 0; i < m->nmat; i++) {
+        const mx_image *img = textures && i < ntex && textures[i].data ? &textures[i] : NULL;
+        putf(mats, "%s{\"name\":", i ? "," : "");
+        put_json_str(mats, m->mats[i].name);
+        putf(mats, ",\"doubleSided\":true,\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":1");
+        if (img) {
+            unsigned char *png;
+            size_t len;
+            if (mx_io_encode_png(img, &png, &len, st)) return mx_fail_prefix(st, "material %s", m->mats[i].name);
+            size_t off = b->bin.len;
+            put(&b->bin, png, len);
+            free(png);
+            pad4(&b->bin, 0);
+            add_view(b, off, len, 0);
+            putf(&b->images, "%s{\"bufferView\":%d,\"mimeType\":\"image/png\"}", b->nimg ? "," : "", b->nview - 1);
+            putf(texs, "%s{\"sampler\":0,\"source\":%d}", b->nimg ? "," : "", b->nimg);
+            putf(mats, ",\"baseColorTexture\":{\"index\":%d}", b->nimg);
+            b->nimg++;
+        }
+        put(mats, "}}", 2);
+    }
+    return 0;
+}
+
+static void glb_json(bytes *j, glb_build *b, bytes *mats, bytes *texs) {
+    putf(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"matex\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],");
+    putf(j, "\"nodes\":[{\"mesh\":0,\"name\":\"mesh\"}],\"meshes\":[{\"name\":\"mesh\",\"primitives\":[");
+    put(j, b->prims.p, b->prims.len);
+    putf(j, "]}],\"materials\":[");
+    put(j, mats->p, mats->len);
+    put(j, "]", 1);
+    if (b->nimg) {
+        putf(j, ",\"samplers\":[{\"magFilter\":9729,\"minFilter\":9987,\"wrapS\":10497,\"wrapT\":10497}]");
+        putf(j, ",\"textures\":[");
+        put(j, texs->p, texs->len);
+        putf(j, "],\"images\":[");
+        put(j, b->images.p, b->images.len);
+        put(j, "]", 1);
+    }
+    putf(j, ",\"accessors\":[");
+    put(j, b->accs.p, b->accs.len);
+    putf(j, "],\"bufferViews\":[");
+    put(j, b->views.p, b->views.len);
+    putf(j, "],\"buffers\":[{\"byteLength\":%zu}]}", b->bin.len);
+    pad4(j, ' ');
+}
+
+static void put_u32(bytes *b, uint32_t v) {
+    unsigned char p[4] = {(unsigned char)v, (unsigned char)(v >> 8), (unsigned char)(v >> 16), (unsigned char)(v >> 24)};
+    put(b, p, 4);
+}
+
+int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, int ntex, mx_status *st) {
+    glb_verts g;
+    glb_build b = {0};
+    bytes mats = {0}, texs = {0}, json = {0}, out = {0};
+    int rc = -1;
+    if (m->nfaces <= 0 || m->nmat <= 0) return mx_fail(st, MX_EINPUT, "%s: nothing to export (no faces or materials)", path);
+    if (split_vertices(m, &g, st)) return -1;
+    float mm[6];
+    position_bounds(&g, mm);
+    int a_pos = add_accessor(&b, g.pos, g.nv, 3, 5126, "VEC3", 34962, mm);
+    int a_nrm = add_accessor(&b, g.nrm, g.nv, 3, 5126, "VEC3", 34962, NULL);
+    int a_uv = m->face_uv ? add_accessor(&b, g.uv, g.nv, 2, 5126, "VEC2", 34962, NULL) : -1;
+    if (add_primitives(&b, m, &g, a_pos, a_nrm, a_uv, st) || add_materials(&b, &mats, &texs, m, textures, ntex, st))
+        goto done;
+    glb_json(&json, &b, &mats, &texs);
+    if (b.bin.oom || json.oom || b.accs.oom || b.views.oom || b.prims.oom || mats.oom) {
+        mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+        goto done;
+    }
+    if (12 + 8 + json.len + 8 + b.bin.len > UINT32_MAX) {
+        mx_fail(st, MX_EINPUT, "%s: GLB larger than 4 GiB", path);
+        goto done;
+    }
+    put_u32(&out, 0x46546C67u); /* "glTF" */
+    put_u32(&out, 2);
+    put_u32(&out, (uint32_t)(12 + 8 + json.len + 8 + b.bin.len));
+    put_u32(&out, (uint32_t)json.len);
+    put_u32(&out, 0x4E4F534Au); /* JSON */
+    put(&out, json.p, json.len);
+    put_u32(&out, (uint32_t)b.bin.len);
+    put_u32(&out, 0x004E4942u); /* BIN */
+    put(&out, b.bin.p, b.bin.len);
+    if (out.oom) mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    else rc = write_file_atomic(path, out.p, out.len, st);
+done:
+    glb_verts_free(&g);
+    bytes *all[] = {&b.bin, &b.views, &b.accs, &b.prims, &b.images, &mats, &texs, &json, &out};
+    for (size_t i = 0; i < sizeof all / sizeof all[0]; i++) free(all[i]->p);
+    return rc;
+}
+
+/* ---- the output folder ---- */
+
+/* "texture_<name>.png" with the name reduced to [A-Za-z0-9_-]; material i's index is added
+ * when an earlier material gave the same file name. */
+static void material_texture_name(const mx_mesh *m, int i, char *out, size_t cap) {
+    char clean[128];
+    size_t n = 0;
+    for (const char *s = m->mats[i].name; *s && n + 1 < sizeof clean; s++) {
+        char c = *s;
+        int ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
+        clean[n++] = ok ? c : '_';
+    }
+    clean[n] = 0;
+    snprintf(out, cap, "texture_%s.png", n ? clean : "material");
+    for (int k = 0; k < i; k++) {
+        char prev[160];
+        material_texture_name(m, k, prev, sizeof prev);
+        if (!strcmp(prev, out)) {
+            snprintf(out, cap, "texture_%s_%d.png", n ? clean : "material", i);
+            return;
+        }
+    }
+}
+
+static int join(char *out, size_t cap, const char *dir, const char *name, mx_status *st) {
+    if ((size_t)snprintf(out, cap, "%s/%s", dir, name) >= cap) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    return 0;
+}
+
+static int write_textures(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, char names[][160],
+                          mx_status *st) {
+    char path[1200];
+    if (join(path, sizeof path, dir, "texture.png", st) || mx_io_write_png(path, &textures[0], st)) return -1;
+    if (join(path, sizeof path, dir, "texture.exr", st) || mx_io_write_exr(path, &textures[0], st)) return -1;
+    for (int i = 0; i < ntex; i++) {
+        snprintf(names[i], 160, "texture.png");
+        if (ntex == 1 || !textures[i].data) continue;
+        material_texture_name(m, i, names[i], 160);
+        if (join(path, sizeof path, dir, names[i], st) || mx_io_write_png(path, &textures[i], st)) return -1;
+    }
+    return 0;
+}
+
+int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
+                     mx_status *st) {
+    if (ntex < 1 || !textures || !textures[0].data) return mx_fail(st, MX_EINPUT, "%s: no texture to write", dir);
+    if (ntex > 1 && ntex != m->nmat)
+        return mx_fail(st, MX_EINPUT, "%s: %d textures for %d materials (give 1 or one per material)", dir, ntex, m->nmat);
+    if (mkdir(dir, 0777) != 0 && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", dir, strerror(errno));
+    /* One shared texture: export a single material so that every face maps to texture.png. */
+    mx_mesh one = *m;
+    mx_material mat = {.name = "matex"};
+    if (ntex == 1) {
+        one.nmat = 1;
+        one.mats = &mat;
+        one.face_mat = NULL;
+    }
+    char(*names)[160] = calloc((size_t)ntex, sizeof *names);
+    const char **name_ptrs = calloc((size_t)ntex, sizeof *name_ptrs);
+    char path[1200];
+    int rc = -1;
+    if (!names || !name_ptrs) {
+        mx_fail(st, MX_ENOMEM, "%s: out of memory", dir);
+        goto done;
+    }
+    if (write_textures(dir, &one, textures, ntex, names, st)) goto done;
+    for (int i = 0; i < ntex; i++) name_ptrs[i] = textures[i].data ? names[i] : NULL;
+    if (join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
+    if (join(path, sizeof path, dir, "mesh.glb", st) || mx_export_glb(path, &one, textures, ntex, st)) goto done;
+    const char *report = report_json ? report_json : "{}";
+    if (join(path, sizeof path, dir, "report.json", st) || write_file_atomic(path, report, strlen(report), st)) goto done;
+    rc = 0;
+done:
+    free(names);
+    free(name_ptrs);
+    return rc;
+}

@@ -1,0 +1,24 @@
+/* glTF 2.0 import (.gltf with .bin/image files or data: URIs, and .glb), using runtime/json.h.
+ * Every mesh primitive (mode TRIANGLES, or TRIANGLE_STRIP/FAN expanded) reachable from the
+ * default scene's nodes (all root nodes when there is no scene) is transformed to world space
+ * by its node hierarchy (matrix, or translation * rotation * scale) and appended to one
+ * mx_mesh: positions, indices (or implicit 0..n-1), TEXCOORD_0 (v flipped to v up), NORMAL
+ * (rotated by the inverse transpose), one material per glTF material (+ a "default" one for
+ * primitives without), face_mat. Primitives without TEXCOORD_0 in a mesh where others have
+ * it get UV index -1 on their corners. Faces whose node transform has a negative determinant
+ * are flipped to stay counter-clockwise. A material's texture_path is its baseColorTexture:
+ * the image file (resolved relative to the .gltf) or "<path>#image<N>" for an embedded image.
+ * Every accessor, buffer view and buffer offset/count/stride is checked against the data. */
+#ifndef MX_GLTF_H
+#define MX_GLTF_H
+
+#include "image.h"
+#include "mesh.h"
+
+int mx_gltf_load(const char *path, mx_mesh *m, mx_status *st);
+
+/* Decodes image `index` of the glTF file at `path` (a file uri, a data: URI, or a buffer
+ * view of a .glb / .gltf buffer) through the image adapter. */
+int mx_gltf_read_image(const char *path, int index, mx_image *img, mx_status *st);
+
+#endif

@@ -1,0 +1,212 @@
+#include "views.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "masks.h"
+#include "raster.h"
+
+void mx_view_cache_free(mx_view_cache *vc) {
+    if (vc->texels)
+        for (int c = 0; c < vc->ncand; c++) free(vc->texels[c]);
+    free(vc->texels);
+    free(vc->ntexels);
+    free(vc->cams);
+    memset(vc, 0, sizeof *vc);
+}
+
+/* Texel ids of the usable pixels of one rendered candidate. */
+static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_gbuffer *culled,
+                          const uint8_t *usable, mx_status *st) {
+    size_t n = (size_t)culled->w * culled->h, plane = (size_t)vc->tex_w * vc->tex_h;
+    int64_t count = 0;
+    for (size_t i = 0; i < n; i++) count += usable[i];
+    vc->texels[c] = malloc(((size_t)count + 1) * sizeof **vc->texels);
+    if (!vc->texels[c]) return mx_fail(st, MX_ENOMEM, "view selection: out of memory");
+    int64_t k = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (!usable[i]) continue;
+        int layer = m->face_mat ? m->face_mat[culled->face[i]] : 0;
+        if (layer < 0 || layer >= vc->nlayers) layer = 0;
+        int64_t t = mx_uv_texel(culled->uv[2 * i], culled->uv[2 * i + 1], vc->tex_w, vc->tex_h);
+        vc->texels[c][k++] = (int32_t)((size_t)layer * plane + (size_t)t);
+    }
+    vc->ntexels[c] = k;
+    return 0;
+}
+
+/* usable = foreground, finite UV, not internal, frontal. */
+static void usable_pixels(const mx_gbuffer *culled, const mx_gbuffer *unculled, float thr,
+                          uint8_t *usable, uint8_t *tmp) {
+    size_t n = (size_t)culled->w * culled->h;
+    mx_mask_frontal(culled, MX_NORMAL_GEOMETRIC, thr, usable);
+    mx_mask_internal(culled, unculled, tmp);
+    for (size_t i = 0; i < n; i++)
+        usable[i] = usable[i] && !tmp[i] && culled->uv[2 * i] == culled->uv[2 * i] &&
+                    culled->uv[2 * i + 1] == culled->uv[2 * i + 1];
+}
+
+int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
+                        const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
+                        int nlayers, float frontal_threshold, mx_pool *pool, mx_status *st) {
+    memset(vc, 0, sizeof *vc);
+    if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: view selection needs UVs", m->source_path);
+    if (ncand <= 0 || (size_t)tex_w * tex_h * nlayers > INT32_MAX)
+        return mx_fail(st, MX_EINPUT, "view selection: bad candidate count or texture size");
+    vc->ncand = ncand;
+    vc->size = size;
+    vc->tex_w = tex_w;
+    vc->tex_h = tex_h;
+    vc->nlayers = nlayers;
+    vc->cams = malloc((size_t)ncand * sizeof *vc->cams);
+    vc->texels = calloc((size_t)ncand, sizeof *vc->texels);
+    vc->ntexels = calloc((size_t)ncand, sizeof *vc->ntexels);
+    uint8_t *usable = malloc((size_t)size * size), *tmp = malloc((size_t)size * size);
+    mx_gbuffer culled = {0}, unculled = {0};
+    int ok = vc->cams && vc->texels && vc->ntexels && usable && tmp;
+    if (!ok) mx_fail(st, MX_ENOMEM, "view selection: out of memory");
+    ok = ok && !mx_gbuffer_init(&culled, size, size, st) &&
+         !mx_gbuffer_init(&unculled, size, size, st);
+    for (int c = 0; ok && c < ncand; c++) {
+        vc->cams[c] = cams[c];
+        ok = !mx_rasterize(m, pos, &cams[c], MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &culled, st) &&
+             !mx_rasterize(m, pos, &cams[c], 0, pool, &unculled, st);
+        if (!ok) break;
+        usable_pixels(&culled, &unculled, frontal_threshold, usable, tmp);
+        ok = !collect_texels(vc, c, m, &culled, usable, st);
+    }
+    mx_gbuffer_free(&culled);
+    mx_gbuffer_free(&unculled);
+    free(usable);
+    free(tmp);
+    if (!ok) {
+        mx_view_cache_free(vc);
+        return -1;
+    }
+    return 0;
+}
+
+int64_t mx_view_untextured(const mx_view_cache *vc, int c, const uint8_t *known) {
+    int64_t n = 0;
+    for (int64_t k = 0; k < vc->ntexels[c]; k++) n += !known[vc->texels[c][k]];
+    return n;
+}
+
+void mx_view_cache_visible(const mx_view_cache *vc, uint8_t *visible) {
+    memset(visible, 0, (size_t)vc->tex_w * vc->tex_h * vc->nlayers);
+    for (int c = 0; c < vc->ncand; c++)
+        for (int64_t k = 0; k < vc->ntexels[c]; k++) visible[vc->texels[c][k]] = 1;
+}
+
+int mx_view_pick(const mx_view_cache *vc, const uint8_t *known, const uint8_t *used,
+                 int64_t min_pixels) {
+    int best = -1;
+    int64_t best_n = min_pixels - 1;
+    for (int c = 0; c < vc->ncand; c++) {
+        if (used && used[c]) continue;
+        int64_t n = mx_view_untextured(vc, c, known);
+        if (n > best_n) { /* ties: the lower index wins */
+            best_n = n;
+            best = c;
+        }
+    }
+    return best;
+}
+
+void mx_view_plan_free(mx_view_plan *plan) {
+    free(plan->cand);
+    free(plan->group);
+    memset(plan, 0, sizeof *plan);
+}
+
+static double simulated_coverage(const uint8_t *sim, const uint8_t *visible, size_t n) {
+    size_t vis = 0, got = 0;
+    for (size_t t = 0; t < n; t++) {
+        vis += visible[t];
+        got += visible[t] && sim[t];
+    }
+    return vis ? (double)got / (double)vis : 1.0;
+}
+
+int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
+                      double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st) {
+    memset(plan, 0, sizeof *plan);
+    size_t n = (size_t)vc->tex_w * vc->tex_h * vc->nlayers;
+    int cap = budget > 0 ? budget : 1;
+    plan->cand = malloc((size_t)cap * sizeof *plan->cand);
+    plan->group = malloc((size_t)cap * sizeof *plan->group);
+    uint8_t *sim = malloc(n), *visible = malloc(n), *claimed = calloc(n, 1);
+    uint8_t *used = calloc((size_t)vc->ncand, 1), *group_known = malloc(n);
+    if (!plan->cand || !plan->group || !sim || !visible || !claimed || !used || !group_known) {
+        free(sim), free(visible), free(claimed), free(used), free(group_known);
+        mx_view_plan_free(plan);
+        return mx_fail(st, MX_ENOMEM, "view selection: out of memory");
+    }
+    memcpy(sim, known, n);
+    memcpy(group_known, known, n);
+    mx_view_cache_visible(vc, visible);
+    int group = 0;
+    plan->coverage = simulated_coverage(sim, visible, n);
+    while (plan->n < budget && plan->coverage < coverage_stop) {
+        int c = mx_view_pick(vc, sim, used, min_pixels);
+        if (c < 0) break;
+        /* overlap with what the current group already claims (untextured at group start) */
+        int overlap = 0;
+        for (int64_t k = 0; k < vc->ntexels[c] && !overlap; k++) {
+            int32_t t = vc->texels[c][k];
+            overlap = !group_known[t] && claimed[t];
+        }
+        if (overlap && plan->n > 0) {
+            group++;
+            memcpy(group_known, sim, n);
+            memset(claimed, 0, n);
+        }
+        for (int64_t k = 0; k < vc->ntexels[c]; k++) {
+            int32_t t = vc->texels[c][k];
+            if (!sim[t]) claimed[t] = 1;
+            sim[t] = 1;
+        }
+        used[c] = 1;
+        plan->cand[plan->n] = c;
+        plan->group[plan->n] = group;
+        plan->n++;
+        plan->coverage = simulated_coverage(sim, visible, n);
+    }
+    free(sim), free(visible), free(claimed), free(used), free(group_known);
+    return 0;
+}
+
+int mx_view_buffers_init(mx_view_buffers *vb, int size, mx_status *st) {
+    memset(vb, 0, sizeof *vb);
+    vb->mask = malloc((size_t)size * size);
+    vb->tmp = malloc((size_t)size * size);
+    if (!vb->mask || !vb->tmp) {
+        mx_view_buffers_free(vb);
+        return mx_fail(st, MX_ENOMEM, "view buffers: out of memory");
+    }
+    if (mx_gbuffer_init(&vb->culled, size, size, st) || mx_gbuffer_init(&vb->unculled, size, size, st)) {
+        mx_view_buffers_free(vb);
+        return -1;
+    }
+    return 0;
+}
+
+void mx_view_buffers_free(mx_view_buffers *vb) {
+    mx_gbuffer_free(&vb->culled);
+    mx_gbuffer_free(&vb->unculled);
+    free(vb->mask);
+    free(vb->tmp);
+    memset(vb, 0, sizeof *vb);
+}
+
+int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, const mx_camera *cam,
+                    int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st) {
+    if (mx_rasterize(m, pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &vb->culled, st) ||
+        mx_rasterize(m, pos, cam, 0, pool, &vb->unculled, st))
+        return -1;
+    int64_t n = (int64_t)vb->culled.w * vb->culled.h;
+    mx_mask_frontal(&vb->culled, normal_source, frontal_threshold, vb->mask);
+    mx_mask_internal(&vb->culled, &vb->unculled, vb->tmp);
+    mx_mask_and_not(vb->mask, vb->tmp, vb->mask, n);
+    return 0;
+}

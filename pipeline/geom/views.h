@@ -1,0 +1,74 @@
+/* Automatic view selection (paper Alg. 1). Every candidate camera is rendered once
+ * (at a small size) into the list of texels its usable pixels look at (foreground, not an
+ * internal face, frontal enough); each step then counts, per candidate, the pixels whose
+ * texel is not in T^B, and picks the largest. Planning simulates the coverage of the picked
+ * views so that a whole sequence can be chosen ahead, and groups views whose untextured
+ * texels do not overlap, so that they can be generated in one batch. */
+#ifndef MX_VIEWS_H
+#define MX_VIEWS_H
+
+#include <stdint.h>
+
+#include "../../runtime/threadpool.h"
+#include "camera.h"
+#include "mesh.h"
+#include "raster.h"
+
+typedef struct mx_view_cache {
+    int ncand, size;
+    int tex_w, tex_h, nlayers;
+    mx_camera *cams;    /* [ncand] (owned copy) */
+    int32_t **texels;   /* [ncand][ntexels[c]] texel ids (layer * tex_w * tex_h + row * tex_w + col) */
+    int64_t *ntexels;
+} mx_view_cache;
+
+/* Renders every candidate at size x size (culled + unculled for the internal-face mask,
+ * geometric normals against frontal_threshold; 0 keeps every visible pixel). */
+int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
+                        const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
+                        int nlayers, float frontal_threshold, mx_pool *pool, mx_status *st);
+void mx_view_cache_free(mx_view_cache *vc);
+
+/* Pixels of candidate c whose texel is not in `known` ([nlayers][tex_h][tex_w]). */
+int64_t mx_view_untextured(const mx_view_cache *vc, int c, const uint8_t *known);
+/* visible[t] = 1 for texels seen by some candidate (array of nlayers * tex_w * tex_h). */
+void mx_view_cache_visible(const mx_view_cache *vc, uint8_t *visible);
+
+/* The candidate (not in `used`, may be NULL) with the most untextured pixels, at least
+ * min_pixels of them; -1 when none qualifies. */
+int mx_view_pick(const mx_view_cache *vc, const uint8_t *known, const uint8_t *used,
+                 int64_t min_pixels);
+
+typedef struct mx_view_plan {
+    int n;          /* views planned */
+    int *cand;      /* [n] candidate index, in generation order */
+    int *group;     /* [n] batch id: views with the same id can be generated together */
+    double coverage; /* simulated fraction of candidate-visible texels in T^B at the end */
+} mx_view_plan;
+
+/* Plans up to `budget` views from the current T^B: greedy Alg. 1 with simulated
+ * coverage (a picked view's texels count as textured), stopping early when the
+ * simulated coverage of candidate-visible texels reaches coverage_stop or no candidate
+ * has min_pixels untextured pixels left. A view joins the current group when none of its
+ * untextured texels is claimed by the group's earlier views. */
+int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
+                      double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st);
+void mx_view_plan_free(mx_view_plan *plan);
+
+/* One view ready for backprojection: its culled render with UVs (for depth, images and
+ * UVs), the unculled render (internal faces), and the backprojection mask
+ * (foreground & frontal & not internal). */
+typedef struct mx_view_buffers {
+    mx_gbuffer culled, unculled;
+    uint8_t *mask; /* [size][size] */
+    uint8_t *tmp;
+} mx_view_buffers;
+
+int mx_view_buffers_init(mx_view_buffers *vb, int size, mx_status *st);
+void mx_view_buffers_free(mx_view_buffers *vb);
+/* Rasterizes both renders of `cam` and computes the mask (normal_source and threshold as
+ * in mx_mask_frontal; threshold 0 keeps every foreground pixel that is not internal). */
+int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, const mx_camera *cam,
+                    int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st);
+
+#endif

@@ -1,0 +1,191 @@
+// Image adapter: OpenImageIO for reading (PNG/JPEG/TIFF/...) and PNG writing, OpenEXR for
+// float EXR output. No colour conversion anywhere: 8-bit code values map to [0,1] as is.
+#include "io.h"
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+namespace {
+
+// Larger images than this are refused: 16k x 16k covers every texture we produce or read.
+const long long kMaxPixels = 16384LL * 16384LL;
+
+// Converts an opened OIIO input into an mx_image (channels as described in io.h).
+int read_opened(OIIO::ImageInput &in, const char *what, mx_image *out, mx_status *st) {
+    const OIIO::ImageSpec &spec = in.spec();
+    int w = spec.width, h = spec.height, nch = spec.nchannels;
+    if (w <= 0 || h <= 0 || nch <= 0 || (long long)w * h > kMaxPixels)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %dx%d with %d channels", what, w, h, nch);
+    std::vector<float> buf((size_t)w * h * nch);
+    if (!in.read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buf.data()))
+        return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, in.geterror().c_str());
+    int c = nch == 1 ? 1 : nch == 3 ? 3 : 4; // gray+alpha -> RGBA, >4 channels -> first 4
+    float *data = (float *)malloc((size_t)w * h * c * sizeof(float));
+    if (!data) return mx_fail(st, MX_ENOMEM, "%s: out of memory for a %dx%d image", what, w, h);
+    for (size_t p = 0; p < (size_t)w * h; p++) {
+        const float *s = &buf[p * nch];
+        float *d = data + p * c;
+        if (nch == 2) {
+            d[0] = d[1] = d[2] = s[0];
+            d[3] = s[1];
+        } else {
+            for (int k = 0; k < c; k++) d[k] = s[k];
+        }
+    }
+    out->w = w;
+    out->h = h;
+    out->c = c;
+    out->data = data;
+    return 0;
+}
+
+// Guesses the format of an in-memory image from its magic bytes, as a file name for OIIO.
+const char *sniff_name(const unsigned char *p, size_t n) {
+    if (n >= 8 && !memcmp(p, "\x89PNG\r\n\x1a\n", 8)) return "embedded.png";
+    if (n >= 3 && p[0] == 0xFF && p[1] == 0xD8 && p[2] == 0xFF) return "embedded.jpg";
+    return nullptr;
+}
+
+int check_writable(const mx_image *img, const char *what, mx_status *st) {
+    if (!img || !img->data || img->w <= 0 || img->h <= 0 || (img->c != 1 && img->c != 3 && img->c != 4))
+        return mx_fail(st, MX_EINPUT, "%s: nothing to write (empty image or %d channels)", what,
+                       img ? img->c : 0);
+    return 0;
+}
+
+std::vector<unsigned char> to_8bit(const mx_image *img) {
+    size_t n = (size_t)img->w * img->h * img->c;
+    std::vector<unsigned char> px(n);
+    for (size_t i = 0; i < n; i++) {
+        float v = img->data[i];
+        v = v != v ? 0.f : v < 0.f ? 0.f : v > 1.f ? 1.f : v;
+        px[i] = (unsigned char)lrintf(v * 255.f);
+    }
+    return px;
+}
+
+// Writes PNG through an already created output (file or memory proxy).
+int write_png_to(OIIO::ImageOutput &out, const std::string &name, const mx_image *img, mx_status *st) {
+    OIIO::ImageSpec spec(img->w, img->h, img->c, OIIO::TypeDesc::UINT8);
+    std::vector<unsigned char> px = to_8bit(img);
+    if (!out.open(name, spec) || !out.write_image(OIIO::TypeDesc::UINT8, px.data()) || !out.close())
+        return mx_fail(st, MX_EIO, "%s: cannot write PNG: %s", name.c_str(), out.geterror().c_str());
+    return 0;
+}
+
+int rename_into_place(const std::string &tmp, const char *path, mx_status *st) {
+    if (std::rename(tmp.c_str(), path) != 0) {
+        std::remove(tmp.c_str());
+        return mx_fail(st, MX_EIO, "%s: cannot rename the temporary file into place", path);
+    }
+    return 0;
+}
+
+} // namespace
+
+extern "C" int mx_io_read_image(const char *path, mx_image *out, mx_status *st) {
+    *out = mx_image{};
+    try {
+        auto in = OIIO::ImageInput::open(path);
+        if (!in) {
+            std::string err = OIIO::geterror();
+            return mx_fail(st, MX_EINPUT, "%s: cannot open image: %s", path, err.c_str());
+        }
+        return read_opened(*in, path, out, st);
+    } catch (const std::exception &e) {
+        return mx_fail(st, MX_EINPUT, "%s: cannot read image: %s", path, e.what());
+    }
+}
+
+extern "C" int mx_io_decode_image(const void *data, size_t len, const char *what, mx_image *out,
+                                  mx_status *st) {
+    *out = mx_image{};
+    const char *name = sniff_name((const unsigned char *)data, len);
+    if (!name) return mx_fail(st, MX_EINPUT, "%s: not a PNG or JPEG image", what);
+    try {
+        OIIO::Filesystem::IOMemReader mem(data, len);
+        auto in = OIIO::ImageInput::open(name, nullptr, &mem);
+        if (!in) {
+            std::string err = OIIO::geterror();
+            return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, err.c_str());
+        }
+        return read_opened(*in, what, out, st);
+    } catch (const std::exception &e) {
+        return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, e.what());
+    }
+}
+
+extern "C" int mx_io_write_png(const char *path, const mx_image *img, mx_status *st) {
+    if (check_writable(img, path, st)) return -1;
+    std::string tmp = std::string(path) + ".tmp";
+    try {
+        auto out = OIIO::ImageOutput::create("png");
+        if (!out) return mx_fail(st, MX_EINTERNAL, "%s: OpenImageIO has no PNG writer", path);
+        if (write_png_to(*out, tmp, img, st)) {
+            std::remove(tmp.c_str());
+            return mx_fail_prefix(st, "%s", path);
+        }
+    } catch (const std::exception &e) {
+        std::remove(tmp.c_str());
+        return mx_fail(st, MX_EIO, "%s: cannot write PNG: %s", path, e.what());
+    }
+    return rename_into_place(tmp, path, st);
+}
+
+extern "C" int mx_io_encode_png(const mx_image *img, unsigned char **data, size_t *len, mx_status *st) {
+    *data = nullptr;
+    *len = 0;
+    if (check_writable(img, "PNG encoder", st)) return -1;
+    try {
+        std::vector<unsigned char> bytes;
+        OIIO::Filesystem::IOVecOutput vec(bytes);
+        auto out = OIIO::ImageOutput::create("png");
+        if (!out || !out->supports("ioproxy") || !out->set_ioproxy(&vec))
+            return mx_fail(st, MX_EINTERNAL, "PNG encoder: OpenImageIO cannot write PNG to memory");
+        if (write_png_to(*out, "memory.png", img, st)) return -1;
+        out.reset();
+        *data = (unsigned char *)malloc(bytes.size() ? bytes.size() : 1);
+        if (!*data) return mx_fail(st, MX_ENOMEM, "PNG encoder: out of memory");
+        memcpy(*data, bytes.data(), bytes.size());
+        *len = bytes.size();
+        return 0;
+    } catch (const std::exception &e) {
+        return mx_fail(st, MX_EIO, "PNG encoder: %s", e.what());
+    }
+}
+
+extern "C" int mx_io_write_exr(const char *path, const mx_image *img, mx_status *st) {
+    if (check_writable(img, path, st)) return -1;
+    static const char *const names[4][4] = {{"Y"}, {}, {"R", "G", "B"}, {"R", "G", "B", "A"}};
+    std::string tmp = std::string(path) + ".tmp";
+    try {
+        Imf::Header header(img->w, img->h);
+        header.compression() = Imf::ZIP_COMPRESSION;
+        Imf::FrameBuffer fb;
+        size_t xs = sizeof(float) * img->c, ys = xs * img->w;
+        for (int k = 0; k < img->c; k++) {
+            header.channels().insert(names[img->c - 1][k], Imf::Channel(Imf::FLOAT));
+            fb.insert(names[img->c - 1][k], Imf::Slice(Imf::FLOAT, (char *)(img->data + k), xs, ys));
+        }
+        {
+            Imf::OutputFile file(tmp.c_str(), header);
+            file.setFrameBuffer(fb);
+            file.writePixels(img->h);
+        }
+    } catch (const std::exception &e) {
+        std::remove(tmp.c_str());
+        return mx_fail(st, MX_EIO, "%s: cannot write EXR: %s", path, e.what());
+    }
+    return rename_into_place(tmp, path, st);
+}

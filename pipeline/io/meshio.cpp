@@ -1,0 +1,429 @@
+// Mesh adapter: OBJ (+ MTL) by a small parser of our own, PLY/OFF/STL through OpenMesh.
+//
+// Why OBJ is parsed here and not by OpenMesh: OpenMesh's OBJ reader builds a halfedge mesh, so it
+// drops or duplicates non-manifold faces, re-indexes texcoords per halfedge (the file's vt index
+// lists, and with them exact seams, are lost) and gives no per-face material names. The input's
+// vertices, faces and corner UVs must stay exactly as stored (pipeline/geom/mesh.h).
+#include "io.h"
+
+// GCC 12 reports a false maybe-uninitialized inside OpenMesh's property templates.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+#include <cerrno>
+#include <climits>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+extern "C" {
+#include "../../runtime/log.h"
+}
+
+namespace {
+
+// Counts beyond this are refused (keeps every index and byte size far from int overflow).
+const size_t kMaxElements = 1u << 28;
+
+std::string lower_ext(const char *path) {
+    const char *dot = strrchr(path, '.');
+    const char *slash = strrchr(path, '/');
+    if (!dot || (slash && dot < slash)) return "";
+    std::string e(dot + 1);
+    for (char &c : e) c = (char)tolower((unsigned char)c);
+    return e;
+}
+
+std::string dir_of(const char *path) {
+    const char *slash = strrchr(path, '/');
+    return slash ? std::string(path, (size_t)(slash - path) + 1) : std::string();
+}
+
+bool file_exists(const std::string &p) {
+    FILE *f = fopen(p.c_str(), "rb");
+    if (f) fclose(f);
+    return f != nullptr;
+}
+
+int read_text_file(const char *path, std::string &text, mx_status *st) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
+    char buf[1 << 16];
+    size_t n;
+    while ((n = fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+    int bad = ferror(f);
+    fclose(f);
+    if (bad) return mx_fail(st, MX_EINPUT, "%s: read error", path);
+    return 0;
+}
+
+void copy_name(char *dst, size_t cap, const std::string &s) { snprintf(dst, cap, "%s", s.c_str()); }
+
+// Everything parsed from an OBJ, before conversion to mx_mesh.
+struct ObjData {
+    std::vector<float> pos, uv, nrm;
+    std::vector<int32_t> tri, tri_uv, tri_nrm, tri_mat;
+    std::vector<std::string> mat_names;
+    std::vector<std::string> mtllibs;
+    bool any_uv = false, any_nrm = false, used_default = false;
+};
+
+// One text line split into whitespace-separated tokens (views into the line buffer).
+struct Tokens {
+    std::vector<std::pair<const char *, size_t>> t;
+    std::string str(size_t i) const { return std::string(t[i].first, t[i].second); }
+};
+
+void tokenize(const char *s, const char *end, Tokens &out) {
+    out.t.clear();
+    while (s < end) {
+        while (s < end && (*s == ' ' || *s == '\t' || *s == '\r')) s++;
+        const char *b = s;
+        while (s < end && *s != ' ' && *s != '\t' && *s != '\r') s++;
+        if (s > b) out.t.emplace_back(b, (size_t)(s - b));
+    }
+}
+
+// The rest of a line after its keyword, trimmed (names and paths may contain spaces).
+std::string rest_of_line(const char *s, const char *end, size_t keyword_len) {
+    s += keyword_len;
+    while (s < end && (*s == ' ' || *s == '\t')) s++;
+    while (end > s && (end[-1] == ' ' || end[-1] == '\t' || end[-1] == '\r')) end--;
+    return std::string(s, (size_t)(end - s));
+}
+
+bool parse_float(const std::pair<const char *, size_t> &tok, float *out) {
+    char buf[64];
+    if (tok.second >= sizeof buf) return false;
+    memcpy(buf, tok.first, tok.second);
+    buf[tok.second] = 0;
+    char *e;
+    *out = strtof(buf, &e);
+    return e == buf + tok.second;
+}
+
+// Parses one OBJ index ("12", "-3") into a 0-based index given the current element count.
+// Range checks against the final counts happen after parsing (forward references are legal).
+bool parse_index(const char *s, size_t n, size_t count, long *out) {
+    if (n == 0 || n > 12) return false;
+    char buf[16];
+    memcpy(buf, s, n);
+    buf[n] = 0;
+    char *e;
+    long v = strtol(buf, &e, 10);
+    if (e != buf + n || v == 0) return false;
+    *out = v > 0 ? v - 1 : (long)count + v;
+    return *out >= 0 && *out < INT_MAX;
+}
+
+// One face corner "v", "v/vt", "v//vn" or "v/vt/vn".
+bool parse_corner(const std::pair<const char *, size_t> &tok, const ObjData &d, long c[3]) {
+    const char *s = tok.first, *end = tok.first + tok.second;
+    c[0] = c[1] = c[2] = -1;
+    size_t counts[3] = {d.pos.size() / 3, d.uv.size() / 2, d.nrm.size() / 3};
+    for (int k = 0; k < 3 && s <= end; k++) {
+        const char *slash = (const char *)memchr(s, '/', (size_t)(end - s));
+        const char *stop = slash ? slash : end;
+        if (stop > s) {
+            if (!parse_index(s, (size_t)(stop - s), counts[k], &c[k])) return false;
+        } else if (k == 0) {
+            return false;
+        }
+        if (!slash) break;
+        s = slash + 1;
+    }
+    return true;
+}
+
+int current_material(ObjData &d, const std::string &name) {
+    for (size_t i = 0; i < d.mat_names.size(); i++)
+        if (d.mat_names[i] == name) return (int)i;
+    d.mat_names.push_back(name);
+    return (int)d.mat_names.size() - 1;
+}
+
+int add_face(ObjData &d, const Tokens &tk, int mat, const char *path, long line, mx_status *st) {
+    size_t n = tk.t.size() - 1;
+    if (n < 3) return mx_fail(st, MX_EINPUT, "%s:%ld: face with %zu corners", path, line, n);
+    std::vector<long> c(3 * n);
+    for (size_t i = 0; i < n; i++)
+        if (!parse_corner(tk.t[i + 1], d, &c[3 * i]))
+            return mx_fail(st, MX_EINPUT, "%s:%ld: bad face corner '%s'", path, line, tk.str(i + 1).c_str());
+    for (size_t i = 0; i < n; i++) {
+        if (c[3 * i + 1] >= 0) d.any_uv = true;
+        if (c[3 * i + 2] >= 0) d.any_nrm = true;
+    }
+    if (d.tri.size() / 3 + n > kMaxElements)
+        return mx_fail(st, MX_EINPUT, "%s:%ld: too many faces", path, line);
+    // Fan triangulation (0, i, i+1): keeps the polygon's winding and the file's corner order.
+    for (size_t i = 1; i + 1 < n; i++) {
+        size_t corner[3] = {0, i, i + 1};
+        for (size_t k : corner) {
+            d.tri.push_back((int32_t)c[3 * k]);
+            d.tri_uv.push_back((int32_t)c[3 * k + 1]);
+            d.tri_nrm.push_back((int32_t)c[3 * k + 2]);
+        }
+        d.tri_mat.push_back(mat);
+    }
+    return 0;
+}
+
+int add_floats(std::vector<float> &v, const Tokens &tk, int need, int max, const char *path, long line,
+               mx_status *st) {
+    int n = (int)tk.t.size() - 1;
+    if (n < need) return mx_fail(st, MX_EINPUT, "%s:%ld: '%s' needs %d numbers", path, line, tk.str(0).c_str(), need);
+    if (v.size() / (size_t)max > kMaxElements) return mx_fail(st, MX_EINPUT, "%s:%ld: too many elements", path, line);
+    for (int k = 0; k < max; k++) {
+        float x = 0.f;
+        if (k < n && !parse_float(tk.t[k + 1], &x))
+            return mx_fail(st, MX_EINPUT, "%s:%ld: bad number '%s'", path, line, tk.str(k + 1).c_str());
+        if (!std::isfinite(x))
+            return mx_fail(st, MX_EINPUT, "%s:%ld: non-finite value '%s'", path, line, tk.str(k + 1).c_str());
+        v.push_back(x);
+    }
+    return 0;
+}
+
+int parse_obj_text(const std::string &text, const char *path, ObjData &d, mx_status *st) {
+    const char *p = text.data(), *end = p + text.size();
+    Tokens tk;
+    int mat = -1; // -1: faces before any usemtl (material "default", created when used)
+    long line = 0;
+    while (p < end) {
+        const char *eol = (const char *)memchr(p, '\n', (size_t)(end - p));
+        if (!eol) eol = end;
+        line++;
+        const char *hash = (const char *)memchr(p, '#', (size_t)(eol - p));
+        const char *stop = hash ? hash : eol;
+        tokenize(p, stop, tk);
+        if (!tk.t.empty()) {
+            std::string kw = tk.str(0);
+            int rc = 0;
+            if (kw == "v") rc = add_floats(d.pos, tk, 3, 3, path, line, st);
+            else if (kw == "vt") rc = add_floats(d.uv, tk, 1, 2, path, line, st);
+            else if (kw == "vn") rc = add_floats(d.nrm, tk, 3, 3, path, line, st);
+            else if (kw == "f") {
+                if (mat < 0) {
+                    mat = current_material(d, "default");
+                    d.used_default = true;
+                }
+                rc = add_face(d, tk, mat, path, line, st);
+            } else if (kw == "usemtl") mat = current_material(d, rest_of_line(p, stop, 6));
+            else if (kw == "mtllib") d.mtllibs.push_back(rest_of_line(p, stop, 6));
+            if (rc) return -1;
+        }
+        p = eol + 1;
+    }
+    return 0;
+}
+
+// Reads the OBJ's mtllib files: (material name, map_Kd path) in file order. A missing .mtl
+// is a warning.
+void read_mtl_libraries(const char *obj_path, const ObjData &d,
+                        std::vector<std::pair<std::string, std::string>> &mtls) {
+    std::string dir = dir_of(obj_path);
+    for (const std::string &lib : d.mtllibs) {
+        std::string mtl_path = dir + lib, text;
+        mx_status ignore;
+        if (read_text_file(mtl_path.c_str(), text, &ignore)) {
+            mx_warn("%s: material library %s not found; no textures", obj_path, mtl_path.c_str());
+            continue;
+        }
+        std::string mtl_dir = dir_of(mtl_path.c_str());
+        const char *p = text.data(), *end = p + text.size();
+        Tokens tk;
+        while (p < end) {
+            const char *eol = (const char *)memchr(p, '\n', (size_t)(end - p));
+            if (!eol) eol = end;
+            tokenize(p, eol, tk);
+            if (tk.t.size() >= 2 && tk.str(0) == "newmtl") {
+                mtls.emplace_back(rest_of_line(p, eol, 6), "");
+            } else if (tk.t.size() >= 2 && tk.str(0) == "map_Kd" && !mtls.empty()) {
+                // Options (-s u v w, -bm x, ...) come first: the file name is the last token.
+                mtls.back().second = mtl_dir + tk.str(tk.t.size() - 1);
+            }
+            p = eol + 1;
+        }
+    }
+}
+
+// Texture path of each used material; a file without usemtl takes the MTL's first material.
+void resolve_materials(const char *obj_path, ObjData &d, std::vector<std::string> &tex) {
+    std::vector<std::pair<std::string, std::string>> mtls;
+    read_mtl_libraries(obj_path, d, mtls);
+    if (d.mat_names.size() == 1 && d.used_default && !mtls.empty()) d.mat_names[0] = mtls[0].first;
+    tex.assign(d.mat_names.size(), "");
+    for (size_t i = 0; i < d.mat_names.size(); i++)
+        for (const auto &mt : mtls)
+            if (mt.first == d.mat_names[i]) tex[i] = mt.second;
+    for (size_t i = 0; i < tex.size(); i++)
+        if (!tex[i].empty() && !file_exists(tex[i])) {
+            mx_warn("%s: texture %s of material '%s' not found; ignored", obj_path, tex[i].c_str(),
+                    d.mat_names[i].c_str());
+            tex[i].clear();
+        }
+}
+
+template <class T> T *copy_array(const std::vector<T> &v) {
+    T *p = (T *)malloc(v.size() ? v.size() * sizeof(T) : sizeof(T));
+    if (p && !v.empty()) memcpy(p, v.data(), v.size() * sizeof(T));
+    return p;
+}
+
+void free_arrays(mx_mesh *m) {
+    free(m->pos);
+    free(m->faces);
+    free(m->uv);
+    free(m->face_uv);
+    free(m->nrm);
+    free(m->face_nrm);
+    free(m->mats);
+    free(m->face_mat);
+    *m = mx_mesh{};
+}
+
+int check_indices(const std::vector<int32_t> &idx, size_t count, bool allow_missing, const char *what,
+                  const char *path, mx_status *st) {
+    for (size_t i = 0; i < idx.size(); i++) {
+        int32_t v = idx[i];
+        if (v < 0 && allow_missing) continue;
+        if (v < 0 || (size_t)v >= count)
+            return mx_fail(st, MX_EINPUT, "%s: face %zu: %s index %d out of range (the file has %zu)", path, i / 3,
+                           what, v < 0 ? v : v + 1, count);
+    }
+    return 0;
+}
+
+int obj_to_mesh(const char *path, ObjData &d, mx_mesh *m, mx_status *st) {
+    size_t nv = d.pos.size() / 3, nt = d.uv.size() / 2, nn = d.nrm.size() / 3, nf = d.tri.size() / 3;
+    if (nf == 0) return mx_fail(st, MX_EINPUT, "%s: no faces", path);
+    if (check_indices(d.tri, nv, false, "vertex", path, st)) return -1;
+    if (d.any_uv && check_indices(d.tri_uv, nt, true, "texcoord", path, st)) return -1;
+    if (d.any_nrm && check_indices(d.tri_nrm, nn, true, "normal", path, st)) return -1;
+    std::vector<std::string> tex;
+    resolve_materials(path, d, tex);
+    m->nverts = (int)nv;
+    m->nfaces = (int)nf;
+    m->pos = copy_array(d.pos);
+    m->faces = copy_array(d.tri);
+    if (d.any_uv) {
+        m->nuv = (int)nt;
+        m->uv = copy_array(d.uv);
+        m->face_uv = copy_array(d.tri_uv);
+    }
+    if (d.any_nrm) {
+        m->nnrm = (int)nn;
+        m->nrm = copy_array(d.nrm);
+        m->face_nrm = copy_array(d.tri_nrm);
+    }
+    m->nmat = (int)d.mat_names.size();
+    m->mats = (mx_material *)calloc((size_t)m->nmat, sizeof(mx_material));
+    if (m->nmat > 1) m->face_mat = copy_array(d.tri_mat);
+    if (!m->pos || !m->faces || (d.any_uv && (!m->uv || !m->face_uv)) ||
+        (d.any_nrm && (!m->nrm || !m->face_nrm)) || !m->mats || (m->nmat > 1 && !m->face_mat))
+        return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    for (int i = 0; i < m->nmat; i++) {
+        copy_name(m->mats[i].name, sizeof m->mats[i].name, d.mat_names[(size_t)i]);
+        copy_name(m->mats[i].texture_path, sizeof m->mats[i].texture_path, tex[(size_t)i]);
+    }
+    return 0;
+}
+
+int read_obj(const char *path, mx_mesh *m, mx_status *st) {
+    std::string text;
+    if (read_text_file(path, text, st)) return -1;
+    ObjData d;
+    if (parse_obj_text(text, path, d, st)) return -1;
+    return obj_to_mesh(path, d, m, st);
+}
+
+// PLY / OFF / STL through OpenMesh. Vertex order is the file's (OpenMesh appends vertices it
+// must duplicate to represent non-manifold faces at the end).
+int read_openmesh(const char *path, mx_mesh *m, mx_status *st) {
+    typedef OpenMesh::PolyMesh_ArrayKernelT<> Mesh;
+    Mesh mesh;
+    mesh.request_vertex_texcoords2D();
+    OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexTexCoord;
+    omerr().disable(); // failures are reported through st, not OpenMesh's own stream
+    omlog().disable();
+    bool ok = OpenMesh::IO::read_mesh(mesh, path, opt);
+    if (!ok) return mx_fail(st, MX_EINPUT, "%s: cannot read mesh (missing, malformed or unsupported)", path);
+    size_t nv = mesh.n_vertices();
+    if (nv > kMaxElements) return mx_fail(st, MX_EINPUT, "%s: too many vertices", path);
+    std::vector<float> pos(3 * nv), uv;
+    bool has_uv = opt.check(OpenMesh::IO::Options::VertexTexCoord);
+    if (has_uv) uv.resize(2 * nv);
+    for (auto vh : mesh.vertices()) {
+        auto p = mesh.point(vh);
+        size_t i = (size_t)vh.idx();
+        for (int k = 0; k < 3; k++) pos[3 * i + (size_t)k] = p[k];
+        if (has_uv) {
+            auto t = mesh.texcoord2D(vh);
+            uv[2 * i] = t[0];
+            uv[2 * i + 1] = t[1];
+        }
+    }
+    for (size_t i = 0; i < pos.size(); i++)
+        if (!std::isfinite(pos[i]))
+            return mx_fail(st, MX_EINPUT, "%s: vertex %zu has a non-finite coordinate", path, i / 3);
+    std::vector<int32_t> tri;
+    std::vector<int32_t> poly;
+    for (auto fh : mesh.faces()) {
+        poly.clear();
+        for (auto vh : mesh.fv_range(fh)) poly.push_back(vh.idx());
+        for (size_t i = 1; i + 1 < poly.size(); i++) {
+            tri.push_back(poly[0]);
+            tri.push_back(poly[i]);
+            tri.push_back(poly[i + 1]);
+        }
+    }
+    if (tri.empty()) return mx_fail(st, MX_EINPUT, "%s: no faces", path);
+    m->nverts = (int)nv;
+    m->nfaces = (int)(tri.size() / 3);
+    m->pos = copy_array(pos);
+    m->faces = copy_array(tri);
+    m->nmat = 1;
+    m->mats = (mx_material *)calloc(1, sizeof(mx_material));
+    if (has_uv) {
+        m->nuv = (int)nv;
+        m->uv = copy_array(uv);
+        m->face_uv = copy_array(tri);
+    }
+    if (!m->pos || !m->faces || !m->mats || (has_uv && (!m->uv || !m->face_uv)))
+        return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    copy_name(m->mats[0].name, sizeof m->mats[0].name, "default");
+    return 0;
+}
+
+} // namespace
+
+extern "C" int mx_io_read_mesh(const char *path, mx_mesh *out, mx_status *st) {
+    *out = mx_mesh{};
+    std::string ext = lower_ext(path);
+    int rc;
+    try {
+        if (ext == "obj") rc = read_obj(path, out, st);
+        else if (ext == "ply" || ext == "off" || ext == "stl") rc = read_openmesh(path, out, st);
+        else rc = mx_fail(st, MX_EINPUT, "%s: unknown mesh format '.%s' (expected .obj .ply .off .stl)", path, ext.c_str());
+    } catch (const std::bad_alloc &) {
+        rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    } catch (const std::exception &e) {
+        rc = mx_fail(st, MX_EINPUT, "%s: cannot read mesh: %s", path, e.what());
+    }
+    if (rc) {
+        free_arrays(out);
+        return -1;
+    }
+    copy_name(out->source_path, sizeof out->source_path, path);
+    return 0;
+}

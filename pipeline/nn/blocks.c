@@ -1,0 +1,538 @@
+/* Building blocks shared by UNet, ControlNet and VAE; semantics of diffusers v0.35.2
+ * (resnet.py, attention.py, attention_processor.py, transformer_2d.py, embeddings.py). */
+#include "blocks.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "unet.h"
+
+void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st) {
+    memset(r, 0, sizeof *r);
+    r->c = c;
+    r->a = a;
+    r->st = st;
+    r->dry = a->measuring;
+}
+
+/* In a dry run nothing is computed, so any non-NULL pointer serves as the "allocation". */
+float *mx_run_alloc(mx_run *r, size_t n) {
+    float *p = mx_arena_floats(r->a, n, r->st);
+    if (r->dry) return (float *)&r->flops;
+    return p;
+}
+
+/* ---- parameter groups ---- */
+
+static int path_join(char *buf, size_t cap, const char *path, const char *leaf, mx_status *st) {
+    int n = snprintf(buf, cap, "%s.%s", path, leaf);
+    if (n < 0 || (size_t)n >= cap) return mx_fail(st, MX_EINTERNAL, "parameter path too long: %s.%s", path, leaf);
+    return 0;
+}
+
+static int bind_param(mx_binder *b, mx_wptr *out, const char *path, const char *leaf, int ndim, const int64_t *shape,
+                      mx_status *st) {
+    char name[256];
+    if (path_join(name, sizeof name, path, leaf, st)) return -1;
+    return b->bind(b, name, ndim, shape, out, st);
+}
+
+static int bind_vec(mx_binder *b, mx_wptr *out, const char *path, const char *leaf, int n, mx_status *st) {
+    int64_t shape[1] = {n};
+    return bind_param(b, out, path, leaf, 1, shape, st);
+}
+
+int mx_conv_load(mx_conv *p, mx_binder *b, const char *path, int cin, int cout, int k, int stride, int pad, int bias,
+                 mx_status *st) {
+    int64_t shape[4] = {cout, cin, k, k};
+    p->cin = cin;
+    p->cout = cout;
+    p->k = k;
+    p->stride = stride;
+    p->pad = pad;
+    p->b = mx_w_none();
+    if (bind_param(b, &p->w, path, "weight", 4, shape, st)) return -1;
+    return bias ? bind_vec(b, &p->b, path, "bias", cout, st) : 0;
+}
+
+int mx_lin_load(mx_lin *p, mx_binder *b, const char *path, int in, int out, int bias, mx_status *st) {
+    int64_t shape[2] = {out, in};
+    p->in = in;
+    p->out = out;
+    p->b = mx_w_none();
+    if (bind_param(b, &p->w, path, "weight", 2, shape, st)) return -1;
+    return bias ? bind_vec(b, &p->b, path, "bias", out, st) : 0;
+}
+
+int mx_gn_load(mx_gn *p, mx_binder *b, const char *path, int c, int groups, float eps, mx_status *st) {
+    if (groups <= 0 || c % groups)
+        return mx_fail(st, MX_EINPUT, "%s: %d channels are not divisible into %d groups", path, c, groups);
+    p->c = c;
+    p->groups = groups;
+    p->eps = eps;
+    if (bind_vec(b, &p->g, path, "weight", c, st)) return -1;
+    return bind_vec(b, &p->b, path, "bias", c, st);
+}
+
+int mx_ln_load(mx_ln *p, mx_binder *b, const char *path, int c, float eps, mx_status *st) {
+    p->c = c;
+    p->eps = eps;
+    if (bind_vec(b, &p->g, path, "weight", c, st)) return -1;
+    return bind_vec(b, &p->b, path, "bias", c, st);
+}
+
+int mx_conv_out_size(const mx_conv *p, int n) { return (n + 2 * p->pad - p->k) / p->stride + 1; }
+
+void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
+    int Ho = mx_conv_out_size(p, H), Wo = mx_conv_out_size(p, W);
+    r->flops += 2.0 * B * p->cout * Ho * Wo * (double)p->cin * p->k * p->k;
+    if (!r->dry) mx_conv2d(r->c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
+}
+
+void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M) {
+    r->flops += 2.0 * M * p->out * (double)p->in;
+    if (!r->dry) mx_linear(r->c, y, x, p->w, p->b, M, p->out, p->in);
+}
+
+void mx_gn_run(mx_run *r, const mx_gn *p, float *y, const float *x, int B, int HW, int silu) {
+    if (!r->dry) mx_group_norm(r->c, y, x, B, p->c, HW, p->groups, p->g, p->b, p->eps, silu);
+}
+
+void mx_ln_run(mx_run *r, const mx_ln *p, float *y, const float *x, int M) {
+    if (!r->dry) mx_layer_norm(r->c, y, x, M, p->c, p->g, p->b, p->eps);
+}
+
+static void run_add(mx_run *r, float *y, const float *a, const float *b, size_t n) {
+    if (!r->dry) mx_add(r->c, y, a, b, n);
+}
+
+static void run_attention(mx_run *r, float *out, const float *q, const float *k, const float *v, int B, int heads,
+                          int Tq, int Tk, int D, int qs, int kvs, int os) {
+    r->flops += 4.0 * B * heads * (double)Tq * Tk * D;
+    if (!r->dry)
+        mx_attention(r->c, out, q, k, v, B, heads, Tq, Tk, D, qs, kvs, os, 0, (float)(1.0 / sqrt((double)D)));
+}
+
+/* ---- ResnetBlock2D ---- */
+
+int mx_resnet_load(mx_resnet *p, mx_binder *b, const char *path, int cin, int cout, int temb_ch, int groups, float eps,
+                   float out_scale, mx_status *st) {
+    char sub[256];
+    memset(p, 0, sizeof *p);
+    p->cin = cin;
+    p->cout = cout;
+    p->out_scale = out_scale;
+    p->has_temb = temb_ch > 0;
+    p->has_shortcut = cin != cout;
+    if (path_join(sub, sizeof sub, path, "norm1", st) || mx_gn_load(&p->norm1, b, sub, cin, groups, eps, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "conv1", st) || mx_conv_load(&p->conv1, b, sub, cin, cout, 3, 1, 1, 1, st))
+        return -1;
+    if (p->has_temb && (path_join(sub, sizeof sub, path, "time_emb_proj", st) ||
+                        mx_lin_load(&p->temb_proj, b, sub, temb_ch, cout, 1, st)))
+        return -1;
+    if (path_join(sub, sizeof sub, path, "norm2", st) || mx_gn_load(&p->norm2, b, sub, cout, groups, eps, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "conv2", st) || mx_conv_load(&p->conv2, b, sub, cout, cout, 3, 1, 1, 1, st))
+        return -1;
+    if (p->has_shortcut && (path_join(sub, sizeof sub, path, "conv_shortcut", st) ||
+                            mx_conv_load(&p->shortcut, b, sub, cin, cout, 1, 1, 0, 1, st)))
+        return -1;
+    return 0;
+}
+
+int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B, int H, int W,
+                  const float *temb_silu) {
+    size_t mark = mx_arena_mark(r->a);
+    size_t HW = (size_t)H * W, cmax = (size_t)(p->cin > p->cout ? p->cin : p->cout);
+    float *t = mx_run_alloc(r, (size_t)B * cmax * HW);
+    float *h = mx_run_alloc(r, (size_t)B * p->cout * HW);
+    if (!t || !h) return -1;
+    mx_gn_run(r, &p->norm1, t, x, B, (int)HW, 1);
+    mx_conv_run(r, &p->conv1, h, t, B, H, W);
+    if (p->has_temb) {
+        float *tp = mx_run_alloc(r, (size_t)B * p->cout);
+        if (!tp) return -1;
+        mx_lin_run(r, &p->temb_proj, tp, temb_silu, B);
+        int64_t hs[3] = {B, p->cout, (int64_t)HW}, ts[3] = {B, p->cout, 1};
+        if (!r->dry) mx_binary(r->c, MX_BIN_ADD, h, h, hs, tp, ts, 3);
+    }
+    mx_gn_run(r, &p->norm2, t, h, B, (int)HW, 1);
+    mx_conv_run(r, &p->conv2, y, t, B, H, W);
+    const float *skip = x;
+    if (p->has_shortcut) {
+        mx_conv_run(r, &p->shortcut, h, x, B, H, W);
+        skip = h;
+    }
+    size_t n = (size_t)B * p->cout * HW;
+    run_add(r, y, skip, y, n);
+    if (p->out_scale != 1.0f && !r->dry)
+        for (size_t i = 0; i < n; i++) y[i] /= p->out_scale;
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+/* ---- Transformer2DModel / BasicTransformerBlock ---- */
+
+static int attn_load(mx_lin *q, mx_lin *k, mx_lin *v, mx_lin *o, mx_binder *b, const char *path, int dim, int kv_dim,
+                     int qkv_bias, mx_status *st) {
+    char sub[256];
+    if (path_join(sub, sizeof sub, path, "to_q", st) || mx_lin_load(q, b, sub, dim, dim, qkv_bias, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "to_k", st) || mx_lin_load(k, b, sub, kv_dim, dim, qkv_bias, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "to_v", st) || mx_lin_load(v, b, sub, kv_dim, dim, qkv_bias, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "to_out.0", st) || mx_lin_load(o, b, sub, dim, dim, 1, st)) return -1;
+    return 0;
+}
+
+static int tblock_load(mx_tblock *p, mx_binder *b, const char *path, int dim, int heads, int ctx_dim, mx_status *st) {
+    char sub[256];
+    p->dim = dim;
+    p->heads = heads;
+    p->ctx_dim = ctx_dim;
+    p->ff_dim = 4 * dim;
+    if (path_join(sub, sizeof sub, path, "norm1", st) || mx_ln_load(&p->norm1, b, sub, dim, 1e-5f, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "attn1", st) ||
+        attn_load(&p->q1, &p->k1, &p->v1, &p->o1, b, sub, dim, dim, 0, st))
+        return -1;
+    if (path_join(sub, sizeof sub, path, "norm2", st) || mx_ln_load(&p->norm2, b, sub, dim, 1e-5f, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "attn2", st) ||
+        attn_load(&p->q2, &p->k2, &p->v2, &p->o2, b, sub, dim, ctx_dim, 0, st))
+        return -1;
+    if (path_join(sub, sizeof sub, path, "norm3", st) || mx_ln_load(&p->norm3, b, sub, dim, 1e-5f, st)) return -1;
+    if (path_join(sub, sizeof sub, path, "ff.net.0.proj", st) ||
+        mx_lin_load(&p->ff_in, b, sub, dim, 2 * p->ff_dim, 1, st))
+        return -1;
+    if (path_join(sub, sizeof sub, path, "ff.net.2", st) || mx_lin_load(&p->ff_out, b, sub, p->ff_dim, dim, 1, st))
+        return -1;
+    return 0;
+}
+
+/* hs[B*HW, dim] is updated in place: self-attention, cross-attention, feed-forward, each
+ * pre-normed and added back (diffusers BasicTransformerBlock, norm_type "layer_norm"). */
+static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, const float *context, int T) {
+    size_t mark = mx_arena_mark(r->a);
+    int dim = p->dim, D = dim / p->heads, N = B * HW;
+    size_t nd = (size_t)N * dim, td = (size_t)B * T * dim;
+    float *n = mx_run_alloc(r, nd), *q = mx_run_alloc(r, nd), *a = mx_run_alloc(r, nd);
+    float *k = mx_run_alloc(r, nd > td ? nd : td), *v = mx_run_alloc(r, nd > td ? nd : td);
+    if (!n || !q || !a || !k || !v) return -1;
+
+    mx_ln_run(r, &p->norm1, n, hs, N);
+    mx_lin_run(r, &p->q1, q, n, N);
+    mx_lin_run(r, &p->k1, k, n, N);
+    mx_lin_run(r, &p->v1, v, n, N);
+    run_attention(r, a, q, k, v, B, p->heads, HW, HW, D, dim, dim, dim);
+    mx_lin_run(r, &p->o1, n, a, N);
+    run_add(r, hs, hs, n, nd);
+
+    mx_ln_run(r, &p->norm2, n, hs, N);
+    mx_lin_run(r, &p->q2, q, n, N);
+    mx_lin_run(r, &p->k2, k, context, B * T);
+    mx_lin_run(r, &p->v2, v, context, B * T);
+    run_attention(r, a, q, k, v, B, p->heads, HW, T, D, dim, dim, dim);
+    mx_lin_run(r, &p->o2, n, a, N);
+    run_add(r, hs, hs, n, nd);
+
+    mx_arena_reset(r->a, mark); /* q, k, v, a are dead; the feed-forward buffers reuse them */
+    n = mx_run_alloc(r, nd);
+    float *f = mx_run_alloc(r, (size_t)N * 2 * p->ff_dim), *g = mx_run_alloc(r, (size_t)N * p->ff_dim);
+    if (!n || !f || !g) return -1;
+    mx_ln_run(r, &p->norm3, n, hs, N);
+    mx_lin_run(r, &p->ff_in, f, n, N);
+    if (!r->dry) mx_geglu(r->c, g, f, N, p->ff_dim);
+    mx_lin_run(r, &p->ff_out, n, g, N);
+    run_add(r, hs, hs, n, nd);
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+int mx_transformer_load(mx_transformer *p, mx_binder *b, const char *path, int channels, int heads, int layers,
+                        int ctx_dim, int groups, int linear_proj, mx_status *st) {
+    char sub[256];
+    memset(p, 0, sizeof *p);
+    if (heads <= 0 || channels % heads)
+        return mx_fail(st, MX_EINPUT, "%s: %d channels are not divisible into %d attention heads", path, channels,
+                       heads);
+    p->channels = channels;
+    p->inner = channels; /* heads * (channels / heads) */
+    p->heads = heads;
+    p->linear_proj = linear_proj;
+    if (path_join(sub, sizeof sub, path, "norm", st) || mx_gn_load(&p->norm, b, sub, channels, groups, 1e-6f, st))
+        return -1;
+    if (path_join(sub, sizeof sub, path, "proj_in", st)) return -1;
+    if (linear_proj ? mx_lin_load(&p->proj_in_lin, b, sub, channels, p->inner, 1, st)
+                    : mx_conv_load(&p->proj_in_conv, b, sub, channels, p->inner, 1, 1, 0, 1, st))
+        return -1;
+    p->blocks = calloc((size_t)layers, sizeof *p->blocks);
+    if (!p->blocks) return mx_fail(st, MX_ENOMEM, "out of memory loading %s", path);
+    p->nblocks = layers;
+    for (int i = 0; i < layers; i++) {
+        char tb[256];
+        snprintf(tb, sizeof tb, "transformer_blocks.%d", i);
+        if (path_join(sub, sizeof sub, path, tb, st) || tblock_load(&p->blocks[i], b, sub, p->inner, heads, ctx_dim, st))
+            return -1;
+    }
+    if (path_join(sub, sizeof sub, path, "proj_out", st)) return -1;
+    return linear_proj ? mx_lin_load(&p->proj_out_lin, b, sub, p->inner, channels, 1, st)
+                       : mx_conv_load(&p->proj_out_conv, b, sub, p->inner, channels, 1, 1, 0, 1, st);
+}
+
+void mx_transformer_free(mx_transformer *p) {
+    free(p->blocks);
+    p->blocks = NULL;
+}
+
+int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float *x, int B, int H, int W,
+                       const float *context, int T) {
+    size_t mark = mx_arena_mark(r->a);
+    int HW = H * W, C = p->channels, inner = p->inner;
+    size_t n = (size_t)B * HW * (C > inner ? C : inner);
+    float *t = mx_run_alloc(r, n), *hs = mx_run_alloc(r, n);
+    if (!t || !hs) return -1;
+    mx_gn_run(r, &p->norm, t, x, B, HW, 0);
+    /* proj_in: 1×1 conv in NCHW then to tokens, or tokens then linear (use_linear_projection). */
+    if (p->linear_proj) {
+        if (!r->dry) mx_transpose_chw_hwc(r->c, y, t, B, C, HW);
+        mx_lin_run(r, &p->proj_in_lin, hs, y, B * HW);
+    } else {
+        mx_conv_run(r, &p->proj_in_conv, y, t, B, H, W);
+        if (!r->dry) mx_transpose_chw_hwc(r->c, hs, y, B, inner, HW);
+    }
+    for (int i = 0; i < p->nblocks; i++)
+        if (tblock_run(r, &p->blocks[i], hs, B, HW, context, T)) return -1;
+    if (p->linear_proj) {
+        mx_lin_run(r, &p->proj_out_lin, t, hs, B * HW);
+        if (!r->dry) mx_transpose_hwc_chw(r->c, y, t, B, C, HW);
+    } else {
+        if (!r->dry) mx_transpose_hwc_chw(r->c, t, hs, B, inner, HW);
+        mx_conv_run(r, &p->proj_out_conv, y, t, B, H, W);
+    }
+    run_add(r, y, y, x, (size_t)B * C * HW);
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+/* ---- VAE attention (Attention with residual_connection, group norm, one head) ---- */
+
+int mx_vae_attn_load(mx_vae_attn *p, mx_binder *b, const char *path, int c, int groups, float eps, mx_status *st) {
+    char sub[256];
+    p->c = c;
+    if (path_join(sub, sizeof sub, path, "group_norm", st) || mx_gn_load(&p->norm, b, sub, c, groups, eps, st))
+        return -1;
+    return attn_load(&p->q, &p->k, &p->v, &p->o, b, path, c, c, 1, st);
+}
+
+int mx_vae_attn_run(mx_run *r, const mx_vae_attn *p, float *y, const float *x, int B, int H, int W) {
+    size_t mark = mx_arena_mark(r->a);
+    int HW = H * W, C = p->c, N = B * HW;
+    size_t n = (size_t)N * C;
+    float *t = mx_run_alloc(r, n), *s = mx_run_alloc(r, n), *q = mx_run_alloc(r, n), *k = mx_run_alloc(r, n),
+          *v = mx_run_alloc(r, n);
+    if (!t || !s || !q || !k || !v) return -1;
+    mx_gn_run(r, &p->norm, t, x, B, HW, 0);
+    if (!r->dry) mx_transpose_chw_hwc(r->c, s, t, B, C, HW);
+    mx_lin_run(r, &p->q, q, s, N);
+    mx_lin_run(r, &p->k, k, s, N);
+    mx_lin_run(r, &p->v, v, s, N);
+    run_attention(r, t, q, k, v, B, 1, HW, HW, C, C, C, C);
+    mx_lin_run(r, &p->o, s, t, N);
+    if (!r->dry) mx_transpose_hwc_chw(r->c, y, s, B, C, HW);
+    run_add(r, y, y, x, n);
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+/* ---- Downsample2D / Upsample2D ---- */
+
+int mx_down_load(mx_down *p, mx_binder *b, const char *path, int c, int pad, mx_status *st) {
+    char sub[256];
+    p->asym_pad = pad == 0;
+    if (path_join(sub, sizeof sub, path, "conv", st)) return -1;
+    return mx_conv_load(&p->conv, b, sub, c, c, 3, 2, pad, 1, st);
+}
+
+int mx_down_run(mx_run *r, const mx_down *p, float *y, const float *x, int B, int H, int W) {
+    if (!p->asym_pad) {
+        mx_conv_run(r, &p->conv, y, x, B, H, W);
+        return 0;
+    }
+    /* diffusers pads (left 0, right 1, top 0, bottom 1) with zeros, then convolves unpadded. */
+    size_t mark = mx_arena_mark(r->a);
+    int C = p->conv.cin, Hp = H + 1, Wp = W + 1;
+    float *xp = mx_run_alloc(r, (size_t)B * C * Hp * Wp);
+    if (!xp) return -1;
+    if (!r->dry) {
+        for (size_t bc = 0; bc < (size_t)B * C; bc++) {
+            float *dst = xp + bc * Hp * Wp;
+            const float *src = x + bc * H * W;
+            for (int i = 0; i < H; i++) {
+                memcpy(dst + (size_t)i * Wp, src + (size_t)i * W, (size_t)W * sizeof *src);
+                dst[(size_t)i * Wp + W] = 0.0f;
+            }
+            memset(dst + (size_t)H * Wp, 0, (size_t)Wp * sizeof *dst);
+        }
+    }
+    mx_conv_run(r, &p->conv, y, xp, B, Hp, Wp);
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+int mx_up_load(mx_up *p, mx_binder *b, const char *path, int c, mx_status *st) {
+    char sub[256];
+    if (path_join(sub, sizeof sub, path, "conv", st)) return -1;
+    return mx_conv_load(&p->conv, b, sub, c, c, 3, 1, 1, 1, st);
+}
+
+int mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H, int W) {
+    size_t mark = mx_arena_mark(r->a);
+    int C = p->conv.cin;
+    float *u = mx_run_alloc(r, (size_t)B * C * 4 * H * W);
+    if (!u) return -1;
+    if (!r->dry) mx_upsample_nearest2x(r->c, u, x, B * C, H, W);
+    mx_conv_run(r, &p->conv, y, u, B, 2 * H, 2 * W);
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+/* ---- timestep embedding ---- */
+
+int mx_time_embed_load(mx_time_embed *p, mx_binder *b, int proj_dim, int dim, int flip, float shift, mx_status *st) {
+    p->proj_dim = proj_dim;
+    p->dim = dim;
+    p->flip = flip;
+    p->shift = shift;
+    if (mx_lin_load(&p->l1, b, "time_embedding.linear_1", proj_dim, dim, 1, st)) return -1;
+    return mx_lin_load(&p->l2, b, "time_embedding.linear_2", dim, dim, 1, st);
+}
+
+int mx_time_embed_run(mx_run *r, const mx_time_embed *p, float *temb_silu, const float *t, int B) {
+    size_t mark = mx_arena_mark(r->a);
+    float *tp = mx_run_alloc(r, (size_t)B * p->proj_dim), *h = mx_run_alloc(r, (size_t)B * p->dim);
+    if (!tp || !h) return -1;
+    if (!r->dry) mx_timestep_embedding(tp, t, B, p->proj_dim, p->flip, p->shift, 10000.0f);
+    mx_lin_run(r, &p->l1, h, tp, B);
+    if (!r->dry) mx_silu(r->c, h, (size_t)B * p->dim);
+    mx_lin_run(r, &p->l2, temb_silu, h, B);
+    if (!r->dry) mx_silu(r->c, temb_silu, (size_t)B * p->dim);
+    mx_arena_reset(r->a, mark);
+    return 0;
+}
+
+/* ---- UNet / ControlNet encoder half (unet_2d_condition.py, controlnet.py) ---- */
+
+static int down_level_load(mx_down_level *lv, mx_binder *b, const mx_unet_config *c, int i, int cin, mx_status *st) {
+    char path[128];
+    lv->cross = c->down_cross[i];
+    lv->cout = c->block_out_channels[i];
+    lv->has_down = i < c->nlevels - 1;
+    for (int j = 0; j < c->layers_per_block; j++) {
+        snprintf(path, sizeof path, "down_blocks.%d.resnets.%d", i, j);
+        if (mx_resnet_load(&lv->res[j], b, path, j == 0 ? cin : lv->cout, lv->cout, c->time_embed_dim,
+                           c->norm_num_groups, c->norm_eps, 1.0f, st))
+            return -1;
+        snprintf(path, sizeof path, "down_blocks.%d.attentions.%d", i, j);
+        if (lv->cross && mx_transformer_load(&lv->attn[j], b, path, lv->cout, c->heads[i], c->transformer_layers[i],
+                                             c->cross_attention_dim, c->norm_num_groups, c->use_linear_projection, st))
+            return -1;
+    }
+    snprintf(path, sizeof path, "down_blocks.%d.downsamplers.0", i);
+    return lv->has_down ? mx_down_load(&lv->down, b, path, lv->cout, c->downsample_padding, st) : 0;
+}
+
+static int mid_load(mx_mid_block *m, mx_binder *b, const mx_unet_config *c, mx_status *st) {
+    int n = c->nlevels - 1, ch = c->block_out_channels[n];
+    if (mx_resnet_load(&m->res0, b, "mid_block.resnets.0", ch, ch, c->time_embed_dim, c->norm_num_groups, c->norm_eps,
+                       c->mid_block_scale_factor, st))
+        return -1;
+    if (mx_transformer_load(&m->attn, b, "mid_block.attentions.0", ch, c->heads[n], c->transformer_layers[n],
+                            c->cross_attention_dim, c->norm_num_groups, c->use_linear_projection, st))
+        return -1;
+    return mx_resnet_load(&m->res1, b, "mid_block.resnets.1", ch, ch, c->time_embed_dim, c->norm_num_groups,
+                          c->norm_eps, c->mid_block_scale_factor, st);
+}
+
+int mx_unet_encoder_load(mx_unet_encoder *e, const mx_unet_config *cfg, mx_binder *b, mx_status *st) {
+    memset(e, 0, sizeof *e);
+    e->cfg = *cfg;
+    const mx_unet_config *c = &e->cfg;
+    if (c->layers_per_block > MX_ENC_MAX_LAYERS)
+        return mx_fail(st, MX_EINPUT, "layers_per_block %d exceeds %d", c->layers_per_block, MX_ENC_MAX_LAYERS);
+    if (mx_time_embed_load(&e->time, b, c->block_out_channels[0], c->time_embed_dim, c->flip_sin_to_cos,
+                           c->freq_shift, st))
+        return -1;
+    if (mx_conv_load(&e->conv_in, b, "conv_in", c->in_channels, c->block_out_channels[0], c->conv_in_kernel, 1,
+                     (c->conv_in_kernel - 1) / 2, 1, st))
+        return -1;
+    e->levels = calloc((size_t)c->nlevels, sizeof *e->levels);
+    if (!e->levels) return mx_fail(st, MX_ENOMEM, "out of memory loading the UNet encoder");
+    int cin = c->block_out_channels[0];
+    for (int i = 0; i < c->nlevels; i++) {
+        if (down_level_load(&e->levels[i], b, c, i, cin, st)) return -1;
+        cin = c->block_out_channels[i];
+    }
+    return mid_load(&e->mid, b, c, st);
+}
+
+void mx_unet_encoder_free(mx_unet_encoder *e) {
+    if (e->levels) {
+        for (int i = 0; i < e->cfg.nlevels; i++)
+            for (int j = 0; j < MX_ENC_MAX_LAYERS; j++) mx_transformer_free(&e->levels[i].attn[j]);
+        free(e->levels);
+        e->levels = NULL;
+    }
+    mx_transformer_free(&e->mid.attn);
+}
+
+int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, mx_status *st) {
+    int f = 1 << (cfg->nlevels - 1), cmax = 0;
+    for (int i = 0; i < cfg->nlevels; i++)
+        if (cfg->block_out_channels[i] > cmax) cmax = cfg->block_out_channels[i];
+    if (B < 1 || H < 1 || W < 1 || T < 1)
+        return mx_fail(st, MX_EINPUT, "bad sizes: batch %d, latent %d×%d, %d context tokens", B, H, W, T);
+    if (H % f || W % f)
+        return mx_fail(st, MX_EINPUT, "latent size %d×%d is not a multiple of %d (2^(levels-1))", H, W, f);
+    /* Largest activation: the GEGLU buffer, B·H·W·8·C floats; keep every index in int range. */
+    if ((double)B * H * W * 8.0 * cmax > 2147483647.0 || (double)B * T * cfg->cross_attention_dim > 2147483647.0)
+        return mx_fail(st, MX_EINPUT, "sizes too large: batch %d, latent %d×%d", B, H, W);
+    return 0;
+}
+
+int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample, const float *add, int B, int H,
+                        int W, const float *temb_silu, const float *context, int T, float *const *res, float *mid) {
+    const mx_unet_config *c = &e->cfg;
+    mx_conv_run(r, &e->conv_in, res[0], sample, B, H, W);
+    if (add && !r->dry) mx_add(r->c, res[0], res[0], add, (size_t)B * c->block_out_channels[0] * H * W);
+    int k = 0, h = H, w = W;
+    for (int i = 0; i < c->nlevels; i++) {
+        const mx_down_level *lv = &e->levels[i];
+        for (int j = 0; j < c->layers_per_block; j++) {
+            float *dst = res[k + 1];
+            if (mx_resnet_run(r, &lv->res[j], dst, res[k], B, h, w, temb_silu)) return -1;
+            if (lv->cross) {
+                size_t mark = mx_arena_mark(r->a);
+                float *t = mx_run_alloc(r, (size_t)B * lv->cout * h * w);
+                if (!t || mx_transformer_run(r, &lv->attn[j], t, dst, B, h, w, context, T)) return -1;
+                if (!r->dry) memcpy(dst, t, (size_t)B * lv->cout * h * w * sizeof *t);
+                mx_arena_reset(r->a, mark);
+            }
+            k++;
+        }
+        if (lv->has_down) {
+            if (mx_down_run(r, &lv->down, res[k + 1], res[k], B, h, w)) return -1;
+            k++;
+            h /= 2;
+            w /= 2;
+        }
+    }
+    /* mid block: resnet -> transformer -> resnet, ping-ponging through one temporary */
+    size_t mark = mx_arena_mark(r->a);
+    int ch = c->block_out_channels[c->nlevels - 1];
+    float *t = mx_run_alloc(r, (size_t)B * ch * h * w);
+    if (!t) return -1;
+    if (mx_resnet_run(r, &e->mid.res0, mid, res[k], B, h, w, temb_silu) ||
+        mx_transformer_run(r, &e->mid.attn, t, mid, B, h, w, context, T) ||
+        mx_resnet_run(r, &e->mid.res1, mid, t, B, h, w, temb_silu))
+        return -1;
+    mx_arena_reset(r->a, mark);
+    return 0;
+}

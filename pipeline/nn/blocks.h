@@ -1,0 +1,153 @@
+/* Building blocks shared by the UNet, the ControlNet and the VAE (diffusers v0.35.2):
+ * convolution / linear / norm parameter groups, ResnetBlock2D, Transformer2DModel with
+ * BasicTransformerBlock, Downsample2D / Upsample2D and the VAE's single-head attention.
+ *
+ * Every block has a load function (binds its parameters under a dotted path such as
+ * "down_blocks.0.resnets.1") and a forward function that writes into a caller buffer and
+ * takes its temporaries from the run's arena (restoring the mark). In a dry run (measuring
+ * arena) the forward functions allocate exactly as for real but compute nothing. */
+#ifndef MX_BLOCKS_H
+#define MX_BLOCKS_H
+
+#include "../../ops/ops.h"
+#include "params.h"
+
+/* One forward pass: ops context, activation arena, error sink, dry-run flag, FLOP counter. */
+typedef struct mx_run {
+    const mx_ctx *c;
+    mx_arena *a;
+    mx_status *st;
+    int dry;
+    double flops;
+} mx_run;
+
+void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
+/* Arena floats; in a dry run returns a non-NULL dummy so that callers need no special case.
+ * Returns NULL only on failure (st filled). */
+float *mx_run_alloc(mx_run *r, size_t n);
+
+typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad; } mx_conv;
+typedef struct { mx_wptr w, b; int in, out; } mx_lin;
+typedef struct { mx_wptr g, b; int c, groups; float eps; } mx_gn;
+typedef struct { mx_wptr g, b; int c; float eps; } mx_ln;
+
+/* Binders for a parameter group at "<path>.weight" / "<path>.bias". */
+int mx_conv_load(mx_conv *p, mx_binder *b, const char *path, int cin, int cout, int k, int stride, int pad,
+                 int bias, mx_status *st);
+int mx_lin_load(mx_lin *p, mx_binder *b, const char *path, int in, int out, int bias, mx_status *st);
+int mx_gn_load(mx_gn *p, mx_binder *b, const char *path, int c, int groups, float eps, mx_status *st);
+int mx_ln_load(mx_ln *p, mx_binder *b, const char *path, int c, float eps, mx_status *st);
+
+/* Forward of the groups (no allocation). conv output size: the usual formula. */
+void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W);
+void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M);
+void mx_gn_run(mx_run *r, const mx_gn *p, float *y, const float *x, int B, int HW, int silu);
+void mx_ln_run(mx_run *r, const mx_ln *p, float *y, const float *x, int M);
+int mx_conv_out_size(const mx_conv *p, int n);
+
+/* ResnetBlock2D, time_embedding_norm "default". temb_ch 0: no time embedding (VAE). */
+typedef struct mx_resnet {
+    mx_gn norm1, norm2;
+    mx_conv conv1, conv2, shortcut;
+    mx_lin temb_proj;
+    int cin, cout, has_shortcut, has_temb;
+    float out_scale; /* output_scale_factor */
+} mx_resnet;
+int mx_resnet_load(mx_resnet *p, mx_binder *b, const char *path, int cin, int cout, int temb_ch, int groups,
+                   float eps, float out_scale, mx_status *st);
+/* y[B, cout, H, W] = block(x[B, cin, H, W], temb_silu[B, temb_ch] = silu(time embedding) or NULL). */
+int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B, int H, int W,
+                  const float *temb_silu);
+
+/* BasicTransformerBlock: self-attention, cross-attention, GEGLU feed-forward, pre-LayerNorm. */
+typedef struct mx_tblock {
+    mx_ln norm1, norm2, norm3;
+    mx_lin q1, k1, v1, o1, q2, k2, v2, o2, ff_in, ff_out;
+    int dim, heads, ctx_dim, ff_dim;
+} mx_tblock;
+
+/* Transformer2DModel (continuous input): GroupNorm (eps 1e-6), proj_in (1×1 conv or linear),
+ * transformer blocks, proj_out, residual. */
+typedef struct mx_transformer {
+    mx_gn norm;
+    mx_conv proj_in_conv, proj_out_conv;
+    mx_lin proj_in_lin, proj_out_lin;
+    mx_tblock *blocks;
+    int nblocks, channels, inner, heads, linear_proj;
+} mx_transformer;
+int mx_transformer_load(mx_transformer *p, mx_binder *b, const char *path, int channels, int heads, int layers,
+                        int ctx_dim, int groups, int linear_proj, mx_status *st);
+void mx_transformer_free(mx_transformer *p);
+/* y[B, C, H, W] = transformer(x, context[B, T, ctx_dim]); y may not alias x. */
+int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float *x, int B, int H, int W,
+                       const float *context, int T);
+
+/* VAE mid-block attention (one head over channels, GroupNorm, q/k/v/out with bias, residual). */
+typedef struct mx_vae_attn {
+    mx_gn norm;
+    mx_lin q, k, v, o;
+    int c;
+} mx_vae_attn;
+int mx_vae_attn_load(mx_vae_attn *p, mx_binder *b, const char *path, int c, int groups, float eps,
+                     mx_status *st);
+int mx_vae_attn_run(mx_run *r, const mx_vae_attn *p, float *y, const float *x, int B, int H, int W);
+
+/* Downsample2D: 3×3 stride-2 conv; pad 0 means diffusers' asymmetric (0,1,0,1) zero pad. */
+typedef struct { mx_conv conv; int asym_pad; } mx_down;
+int mx_down_load(mx_down *p, mx_binder *b, const char *path, int c, int pad, mx_status *st);
+int mx_down_run(mx_run *r, const mx_down *p, float *y, const float *x, int B, int H, int W);
+/* Upsample2D: nearest 2× then 3×3 conv. */
+typedef struct { mx_conv conv; } mx_up;
+int mx_up_load(mx_up *p, mx_binder *b, const char *path, int c, mx_status *st);
+int mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H, int W);
+
+/* diffusers timestep path: time_proj (sinusoidal) -> linear_1 -> SiLU -> linear_2, then the
+ * SiLU that every resnet's time_emb_proj applies (shared). */
+typedef struct mx_time_embed {
+    mx_lin l1, l2;
+    int proj_dim, dim, flip;
+    float shift;
+} mx_time_embed;
+int mx_time_embed_load(mx_time_embed *p, mx_binder *b, int proj_dim, int dim, int flip, float shift,
+                       mx_status *st);
+/* temb_silu[B, dim] = silu(time_embedding(time_proj(t))). */
+int mx_time_embed_run(mx_run *r, const mx_time_embed *p, float *temb_silu, const float *t, int B);
+
+/* ---- the encoder half shared by UNet2DConditionModel and ControlNetModel ---- */
+#include "netcfg.h"
+
+#define MX_ENC_MAX_LAYERS 16
+
+/* One down level: layers_per_block resnets (+ transformers for CrossAttnDownBlock2D), then
+ * a Downsample2D unless it is the last level. */
+typedef struct mx_down_level {
+    mx_resnet res[MX_ENC_MAX_LAYERS];
+    mx_transformer attn[MX_ENC_MAX_LAYERS];
+    mx_down down;
+    int cross, has_down, cout;
+} mx_down_level;
+
+/* UNetMidBlock2DCrossAttn: resnet, transformer, resnet. */
+typedef struct mx_mid_block {
+    mx_resnet res0, res1;
+    mx_transformer attn;
+} mx_mid_block;
+
+typedef struct mx_unet_encoder {
+    mx_unet_config cfg;
+    mx_time_embed time;
+    mx_conv conv_in;
+    mx_down_level *levels; /* cfg.nlevels */
+    mx_mid_block mid;
+} mx_unet_encoder;
+
+int mx_unet_encoder_load(mx_unet_encoder *e, const mx_unet_config *cfg, mx_binder *b, mx_status *st);
+void mx_unet_encoder_free(mx_unet_encoder *e);
+/* Checks B, H, W, T against the config (latent divisibility, size bounds). */
+int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, mx_status *st);
+/* conv_in(sample) [+ add, when not NULL] -> res[0]; down levels -> res[1..]; mid block -> mid.
+ * res[i] are caller buffers shaped by mx_unet_residual_shape. */
+int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample, const float *add, int B, int H,
+                        int W, const float *temb_silu, const float *context, int T, float *const *res, float *mid);
+
+#endif

@@ -1,0 +1,69 @@
+/* CLIP text encoder (transformers 4.39 CLIPTextModel): token + position embeddings, pre-LN
+ * transformer layers with a causal mask, quick-GELU (or GELU) MLP, final layer norm, and the
+ * pooled output at the end-of-text token. SD1.5 uses last_hidden_state [B, 77, 768].
+ *
+ * Parameters are bound by their transformers names ("text_model.embeddings.token_embedding.weight",
+ * "text_model.encoder.layers.{i}.self_attn.q_proj.weight", ...) through an mx_binder; in a
+ * matex weight file the binder's prefix is "text_encoder." and the config is the metadata
+ * "text_encoder.config". */
+#ifndef MX_CLIP_H
+#define MX_CLIP_H
+
+#include <stdint.h>
+
+#include "../../ops/ops.h"
+#include "../../runtime/status.h"
+#include "params.h"
+
+typedef enum { MX_CLIP_ACT_QUICK_GELU = 0, MX_CLIP_ACT_GELU = 1 } mx_clip_act;
+
+typedef struct mx_clip_config {
+    int hidden_size;             /* 768 for SD1.5 */
+    int intermediate_size;       /* 3072 */
+    int num_attention_heads;     /* 12 */
+    int num_hidden_layers;       /* 12 */
+    int max_position_embeddings; /* 77 */
+    int vocab_size;              /* 49408 */
+    int eos_token_id;            /* 2 in the SD1.5 config: pooling then uses argmax(ids), as transformers */
+    float layer_norm_eps;        /* 1e-5 */
+    mx_clip_act hidden_act;      /* "quick_gelu" or "gelu" */
+} mx_clip_config;
+
+/* The SD1.5 text encoder (CLIP ViT-L/14) configuration. */
+void mx_clip_config_sd15(mx_clip_config *cfg);
+/* Parses a transformers config.json text; missing keys take the SD1.5 values; sizes are
+ * validated (positive, hidden divisible by heads). `what` names the source in errors. */
+int mx_clip_config_parse(mx_clip_config *cfg, const char *json_text, size_t len, const char *what,
+                         mx_status *st);
+
+typedef struct mx_clip_layer {
+    mx_wptr ln1_w, ln1_b;
+    mx_wptr q_w, q_b, k_w, k_b, v_w, v_b, out_w, out_b;
+    mx_wptr ln2_w, ln2_b;
+    mx_wptr fc1_w, fc1_b, fc2_w, fc2_b;
+} mx_clip_layer;
+
+typedef struct mx_clip {
+    mx_clip_config cfg;
+    mx_wptr token_embedding;    /* [vocab, C] */
+    mx_wptr position_embedding; /* [max_pos, C] */
+    mx_wptr final_ln_w, final_ln_b;
+    mx_clip_layer *layers; /* num_hidden_layers, malloc'ed */
+} mx_clip;
+
+/* Binds every parameter through b (or only enumerates them when b->enumerating). */
+int mx_clip_load(mx_clip *m, const mx_clip_config *cfg, mx_binder *b, mx_status *st);
+void mx_clip_free(mx_clip *m);
+
+/* Runs the encoder on ids [B, T] (T <= max_position_embeddings; ids are checked against
+ * vocab_size). Outputs (caller-owned, any may be NULL except last_hidden):
+ *   last_hidden   [B, T, C]  final layer norm of the last layer
+ *   pooled        [B, C]     last_hidden at the end-of-text token (transformers 4.39 rule)
+ *   hidden_states num_hidden_layers + 1 pointers, each [B, T, C] (0 = embeddings, i = after
+ *                 layer i, before the final layer norm); a NULL entry is skipped.
+ * Temporaries come from `arena`; when the arena is measuring, only allocations are made and
+ * nothing is computed (the dry run that sizes the arena). */
+int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const int32_t *ids, int B, int T,
+                    float *last_hidden, float *pooled, float **hidden_states, mx_status *st);
+
+#endif

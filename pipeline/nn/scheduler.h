@@ -1,0 +1,107 @@
+/* Samplers over the SD1.5 noise schedule, as diffusers 0.35.2: DPMSolverMultistepScheduler
+ * (algorithm "dpmsolver++", orders 1-3, midpoint/heun, lower_order_final, euler_at_final,
+ * Karras sigmas, final sigma zero/sigma_min, linspace/leading/trailing spacing, epsilon and
+ * v-prediction) and DDIMScheduler (eta 0). The training schedule is computed in float32 as
+ * torch does (betas = linspace(sqrt(b0), sqrt(b1))^2, cumulative product in float32), so
+ * the integer timesteps equal the reference exactly.
+ *
+ * Use: mx_sched_init(&s, &cfg, steps, numel); for i in 0..mx_sched_steps(&s): run the model at
+ * timestep mx_sched_timestep(&s, i), then mx_sched_step(&s, eps, latents). */
+#ifndef MX_SCHEDULER_H
+#define MX_SCHEDULER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../../runtime/status.h"
+
+#define MX_SCHED_MAX_TRAIN 4000
+#define MX_SCHED_MAX_STEPS 1000
+
+typedef enum { MX_SCHED_DPMPP = 0, MX_SCHED_DDIM = 1 } mx_sched_kind;
+typedef enum { MX_BETA_SCALED_LINEAR = 0, MX_BETA_LINEAR = 1 } mx_beta_schedule;
+typedef enum { MX_PRED_EPSILON = 0, MX_PRED_V = 1, MX_PRED_SAMPLE = 2 } mx_prediction;
+typedef enum { MX_SOLVER_MIDPOINT = 0, MX_SOLVER_HEUN = 1 } mx_solver_type;
+typedef enum { MX_SPACING_LINSPACE = 0, MX_SPACING_LEADING = 1, MX_SPACING_TRAILING = 2 } mx_spacing;
+typedef enum { MX_FINAL_SIGMA_ZERO = 0, MX_FINAL_SIGMA_MIN = 1 } mx_final_sigma;
+
+typedef struct mx_sched_config {
+    mx_sched_kind kind;
+    int num_train_timesteps;  /* 1000 */
+    double beta_start;        /* 0.00085 */
+    double beta_end;          /* 0.012 */
+    mx_beta_schedule beta_schedule;
+    mx_prediction prediction_type;
+    mx_spacing timestep_spacing;
+    int steps_offset;         /* 1 for SD1.5 */
+    /* DPM-Solver++ */
+    int solver_order;         /* 1..3, default 2 */
+    mx_solver_type solver_type;
+    int lower_order_final;    /* 1 */
+    int euler_at_final;       /* 0 */
+    int use_karras_sigmas;    /* 0 */
+    mx_final_sigma final_sigmas_type;
+    /* DDIM */
+    int set_alpha_to_one;     /* SD1.5 scheduler_config: 0 */
+    int clip_sample;          /* SD1.5: 0 */
+    double clip_sample_range; /* 1.0 */
+} mx_sched_config;
+
+/* DPM-Solver++ (2M) with the SD1.5 schedule: the matex default. */
+void mx_sched_config_sd15(mx_sched_config *cfg);
+/* DDIM (eta 0) with the SD1.5 schedule. */
+void mx_sched_config_sd15_ddim(mx_sched_config *cfg);
+/* Parses a diffusers scheduler_config.json text over the SD1.5 defaults; "_class_name"
+ * DDIMScheduler selects DDIM, anything else DPM-Solver++. Unsupported options (another
+ * algorithm_type, thresholding, other sigma kinds) are errors naming `what` and the key. */
+int mx_sched_config_parse(mx_sched_config *cfg, const char *json_text, size_t len, const char *what,
+                          mx_status *st);
+/* The same from an already parsed JSON object (e.g. a member of a manifest). */
+struct mx_json;
+int mx_sched_config_from_json(mx_sched_config *cfg, const struct mx_json *obj, const char *what, mx_status *st);
+
+typedef struct mx_sched {
+    mx_sched_config cfg;
+    int num_inference_steps;
+    int n_steps;                          /* timesteps to run (fewer after mx_sched_set_strength) */
+    int begin;                            /* index of the first timestep run (strength) */
+    int step_index;                       /* next step, 0-based over the full list */
+    int lower_order_nums;
+    float alphas_cumprod[MX_SCHED_MAX_TRAIN];
+    int64_t timesteps[MX_SCHED_MAX_STEPS];
+    float sigmas[MX_SCHED_MAX_STEPS + 1]; /* DPM: VE sigmas, last = final sigma */
+    size_t numel;                         /* elements of one latent batch */
+    float *model_outputs[3];              /* DPM history of converted outputs (x0), newest last */
+    float *buf;                           /* owns model_outputs and a work buffer */
+    float *work;
+} mx_sched;
+
+/* Computes the schedule for num_inference_steps and allocates history for latents of numel
+ * floats. Free with mx_sched_free. */
+int mx_sched_init(mx_sched *s, const mx_sched_config *cfg, int num_inference_steps, size_t numel,
+                  mx_status *st);
+void mx_sched_free(mx_sched *s);
+
+/* img2img / SDEdit start: keeps the last min(floor(steps*strength), steps) timesteps, as the
+ * diffusers img2img pipelines (strength 1 = all steps, 0 = none). Call before the first step. */
+int mx_sched_set_strength(mx_sched *s, float strength, mx_status *st);
+
+/* Timesteps left to run and the i-th of them (0 <= i < mx_sched_steps). */
+int mx_sched_steps(const mx_sched *s);
+int64_t mx_sched_timestep(const mx_sched *s, int i);
+/* Scale of the initial noise (1.0 for both samplers here). */
+float mx_sched_init_noise_sigma(const mx_sched *s);
+
+/* One step: sample (numel floats) is replaced by the previous sample given the model output
+ * (epsilon, v or x0 per prediction_type) at the current timestep. */
+int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st);
+
+/* Noising for the first timestep still to run (SDEdit): y = a·x0 + b·noise with
+ * a = sqrt(acp[t]), b = sqrt(1-acp[t]) for DDIM and a = 1/sqrt(sigma^2+1), b = sigma·a
+ * for DPM-Solver++ (sigma of the current step), as diffusers' add_noise. y may equal x0. */
+void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n);
+
+/* Classifier-free guidance: out = u + g·(c - u) over n floats (out may equal u or c). */
+void mx_cfg_combine(float *out, const float *uncond, const float *cond, float guidance, size_t n);
+
+#endif

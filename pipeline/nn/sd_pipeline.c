@@ -1,0 +1,228 @@
+/* The denoising loop of diffusers' StableDiffusionControlNetPipeline (guess_mode off,
+ * control_guidance 0..1) on matex's UNet, ControlNets and schedulers. */
+#include "sd_pipeline.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* Sizes of one loop, B = batch of the network calls (2n with CFG). */
+typedef struct sd_dims {
+    int n, B, C, h, w, T, Ct;
+    size_t lat;      /* n*C*h*w */
+    size_t text;     /* T*Ct per item */
+    int n_res;       /* down residuals (mid one extra) */
+    size_t res_numel[MX_UNET_MAX_RES + 1];
+} sd_dims;
+
+/* Working memory, one malloc. */
+typedef struct sd_work {
+    float *block;
+    float *x_in, *text, *timesteps, *eps, *guided;
+    float *res[MX_UNET_MAX_RES + 1];
+    float *cond[MX_SD_MAX_CONTROLNETS];
+    mx_arena arena;
+} sd_work;
+
+static size_t control_numel(const mx_controlnet *net, int h, int w) {
+    const mx_unet_config *cc = mx_controlnet_cfg(net);
+    int f = 1 << (cc->n_cond_emb > 0 ? cc->n_cond_emb - 1 : 0);
+    return (size_t)cc->conditioning_channels * (size_t)(f * h) * (size_t)(f * w);
+}
+
+static int check_request(const mx_sd_request *rq, int n, int h, int w, sd_dims *d, mx_status *st) {
+    if (!rq->unet || !rq->sched || !rq->cond_text || n < 1 || h < 1 || w < 1 || rq->T < 1)
+        return mx_fail(st, MX_EUSAGE, "sd pipeline: missing UNet, scheduler or prompt, or bad sizes");
+    if (rq->n_controls < 0 || rq->n_controls > MX_SD_MAX_CONTROLNETS)
+        return mx_fail(st, MX_EUSAGE, "sd pipeline: %d ControlNets (at most %d)", rq->n_controls,
+                       MX_SD_MAX_CONTROLNETS);
+    const mx_unet_config *uc = mx_unet_cfg(rq->unet);
+    if (uc->out_channels != uc->in_channels)
+        return mx_fail(st, MX_EUSAGE, "sd pipeline: UNet in/out channels differ (%d, %d)", uc->in_channels,
+                       uc->out_channels);
+    int cfg_on = rq->guidance > 1.0f;
+    if (cfg_on && !rq->uncond_text) return mx_fail(st, MX_EUSAGE, "sd pipeline: guidance needs negative embeddings");
+    d->n = n;
+    d->B = cfg_on ? 2 * n : n;
+    d->C = uc->in_channels;
+    d->h = h;
+    d->w = w;
+    d->T = rq->T;
+    d->Ct = uc->cross_attention_dim;
+    d->lat = (size_t)n * (size_t)d->C * (size_t)h * (size_t)w;
+    d->text = (size_t)d->T * (size_t)d->Ct;
+    if (rq->sched->numel != d->lat)
+        return mx_fail(st, MX_EUSAGE, "sd pipeline: scheduler made for %zu latent values, latents have %zu",
+                       rq->sched->numel, d->lat);
+    d->n_res = mx_unet_num_residuals(uc);
+    if (d->n_res > MX_UNET_MAX_RES) return mx_fail(st, MX_EUSAGE, "sd pipeline: too many UNet residuals");
+    for (int i = 0; i <= d->n_res; i++) {
+        int rc, rh, rw;
+        mx_unet_residual_shape(uc, i, h, w, &rc, &rh, &rw);
+        d->res_numel[i] = (size_t)d->B * (size_t)rc * (size_t)rh * (size_t)rw;
+    }
+    for (int k = 0; k < rq->n_controls; k++)
+        if (!rq->controls[k].net || !rq->controls[k].image)
+            return mx_fail(st, MX_EUSAGE, "sd pipeline: ControlNet %d has no network or image", k);
+    return 0;
+}
+
+/* The largest arena any network call of the loop needs. */
+static int loop_arena_bytes(const mx_sd_request *rq, const sd_dims *d, size_t *bytes, mx_status *st) {
+    if (mx_unet_arena_bytes(rq->unet, d->B, d->h, d->w, d->T, bytes, st)) return -1;
+    for (int k = 0; k < rq->n_controls; k++) {
+        size_t b;
+        if (mx_controlnet_arena_bytes(rq->controls[k].net, d->B, d->h, d->w, d->T, &b, st)) return -1;
+        if (b > *bytes) *bytes = b;
+    }
+    return 0;
+}
+
+static void work_free(sd_work *wk) {
+    free(wk->block);
+    mx_arena_destroy(&wk->arena);
+}
+
+static int work_alloc(const mx_sd_request *rq, const sd_dims *d, sd_work *wk, mx_status *st) {
+    memset(wk, 0, sizeof *wk);
+    size_t sizes[4 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    float **ptrs[4 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    size_t per_b = d->lat / (size_t)d->n, np = 0, total = 0;
+    sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->x_in;
+    sizes[np] = (size_t)d->B * d->text, ptrs[np++] = &wk->text;
+    sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->eps;
+    sizes[np] = d->lat, ptrs[np++] = &wk->guided;
+    for (int i = 0; i <= d->n_res; i++) sizes[np] = d->res_numel[i], ptrs[np++] = &wk->res[i];
+    for (int k = 0; k < rq->n_controls; k++)
+        sizes[np] = (size_t)d->B * control_numel(rq->controls[k].net, d->h, d->w), ptrs[np++] = &wk->cond[k];
+    for (size_t i = 0; i < np; i++) total += (sizes[i] + 15) & ~(size_t)15; /* keep 64-byte alignment */
+    total += ((size_t)d->B + 15) & ~(size_t)15; /* timesteps */
+    wk->block = aligned_alloc(64, total * sizeof(float)); /* total is a multiple of 16 floats */
+    if (!wk->block) return mx_fail(st, MX_ENOMEM, "sd pipeline: out of memory (%zu floats)", total);
+    float *p = wk->block;
+    for (size_t i = 0; i < np; i++) {
+        *ptrs[i] = p;
+        p += (sizes[i] + 15) & ~(size_t)15;
+    }
+    wk->timesteps = p;
+    size_t bytes;
+    if (loop_arena_bytes(rq, d, &bytes, st) || mx_arena_create(&wk->arena, bytes, st)) {
+        free(wk->block);
+        wk->block = NULL;
+        return -1;
+    }
+    return 0;
+}
+
+/* Fills the per-call inputs that do not change between steps: text [uncond; cond] and the
+ * control images repeated for both halves. */
+static void fill_constant_inputs(const mx_sd_request *rq, const sd_dims *d, sd_work *wk) {
+    size_t half = (size_t)d->n * d->text;
+    if (d->B == 2 * d->n) {
+        memcpy(wk->text, rq->uncond_text, half * sizeof(float));
+        memcpy(wk->text + half, rq->cond_text, half * sizeof(float));
+    } else {
+        memcpy(wk->text, rq->cond_text, half * sizeof(float));
+    }
+    for (int k = 0; k < rq->n_controls; k++) {
+        size_t one = (size_t)d->n * control_numel(rq->controls[k].net, d->h, d->w);
+        for (int r = 0; r < d->B / d->n; r++)
+            memcpy(wk->cond[k] + (size_t)r * one, rq->controls[k].image, one * sizeof(float));
+    }
+}
+
+/* Sum over the ControlNets of their scaled residuals into wk->res; returns 1 when any ran. */
+static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk,
+                           mx_status *st) {
+    int ran = 0;
+    for (int k = 0; k < rq->n_controls; k++) {
+        const mx_sd_control *ctl = &rq->controls[k];
+        if (ctl->weight == 0.0f) continue;
+        mx_controlnet_input in = {wk->x_in, wk->timesteps, wk->text, wk->cond[k], d->B, d->h, d->w, d->T,
+                                  ctl->weight};
+        if (mx_controlnet_forward(c, ctl->net, &in, wk->res, wk->res[d->n_res], ran, &wk->arena, st))
+            return mx_fail_prefix(st, "ControlNet %d: ", k), -1;
+        ran = 1;
+    }
+    return ran;
+}
+
+/* One step: networks on the batch, CFG, scheduler update of latents. */
+static int denoise_step(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int64_t t,
+                        float *latents, mx_status *st) {
+    for (int r = 0; r < d->B / d->n; r++) memcpy(wk->x_in + (size_t)r * d->lat, latents, d->lat * sizeof(float));
+    for (int b = 0; b < d->B; b++) wk->timesteps[b] = (float)t;
+    int with_res = run_controlnets(rq, c, d, wk, st);
+    if (with_res < 0) return -1;
+    mx_unet_input in = {wk->x_in, wk->timesteps, wk->text, d->B, d->h, d->w, d->T,
+                        with_res ? (const float *const *)wk->res : NULL, with_res ? wk->res[d->n_res] : NULL};
+    if (mx_unet_forward(c, rq->unet, &in, wk->eps, &wk->arena, st)) return mx_fail_prefix(st, "UNet: ");
+    const float *eps = wk->eps;
+    if (d->B == 2 * d->n) {
+        mx_cfg_combine(wk->guided, wk->eps, wk->eps + d->lat, rq->guidance, d->lat);
+        eps = wk->guided;
+    }
+    return mx_sched_step(rq->sched, eps, latents, st);
+}
+
+int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int n, int h, int w,
+                  mx_status *st) {
+    sd_dims d = {0};
+    sd_work wk;
+    if (check_request(rq, n, h, w, &d, st) || work_alloc(rq, &d, &wk, st)) return -1;
+    fill_constant_inputs(rq, &d, &wk);
+    int steps = mx_sched_steps(rq->sched), rc = 0;
+    for (int i = 0; i < steps && rc == 0; i++) {
+        int64_t t = mx_sched_timestep(rq->sched, i);
+        rc = denoise_step(rq, c, &d, &wk, t, latents, st);
+        if (rc == 0 && rq->progress && rq->progress(rq->progress_user, i, steps, t, latents, d.lat))
+            rc = mx_fail(st, MX_EUSAGE, "sd pipeline: cancelled at step %d of %d", i + 1, steps);
+    }
+    work_free(&wk);
+    return rc;
+}
+
+int mx_sd_decode_latents(const mx_ctx *c, const mx_vae *vae, const float *latents, int n, int h, int w,
+                         float *image, mx_status *st) {
+    const mx_vae_config *vc = mx_vae_cfg(vae);
+    size_t lat = (size_t)n * (size_t)vc->latent_channels * (size_t)h * (size_t)w;
+    size_t f = (size_t)mx_vae_factor(vae), img = (size_t)n * (size_t)vc->out_channels * (h * f) * (w * f);
+    float *scaled = malloc(lat * sizeof(float));
+    size_t bytes = 0;
+    mx_arena a = {0};
+    int rc = -1;
+    if (!scaled) return mx_fail(st, MX_ENOMEM, "VAE decode: out of memory");
+    for (size_t i = 0; i < lat; i++) scaled[i] = latents[i] / MX_SD_VAE_SCALE;
+    if (mx_vae_decode_arena_bytes(vae, n, h, w, &bytes, st) == 0 && mx_arena_create(&a, bytes, st) == 0 &&
+        mx_vae_decode(c, vae, scaled, n, h, w, image, &a, st) == 0) {
+        for (size_t i = 0; i < img; i++) {
+            float v = image[i] / 2.0f + 0.5f;
+            image[i] = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+        }
+        rc = 0;
+    }
+    mx_arena_destroy(&a);
+    free(scaled);
+    return rc;
+}
+
+int mx_sd_encode_image(const mx_ctx *c, const mx_vae *vae, const float *image, int n, int H, int W,
+                       float *latents, mx_status *st) {
+    const mx_vae_config *vc = mx_vae_cfg(vae);
+    int f = mx_vae_factor(vae);
+    size_t img = (size_t)n * (size_t)vc->in_channels * (size_t)H * (size_t)W;
+    size_t lat = (size_t)n * (size_t)vc->latent_channels * (size_t)(H / f) * (size_t)(W / f);
+    float *signed_img = malloc(img * sizeof(float));
+    size_t bytes = 0;
+    mx_arena a = {0};
+    int rc = -1;
+    if (!signed_img) return mx_fail(st, MX_ENOMEM, "VAE encode: out of memory");
+    for (size_t i = 0; i < img; i++) signed_img[i] = 2.0f * image[i] - 1.0f;
+    if (mx_vae_encode_arena_bytes(vae, n, H, W, &bytes, st) == 0 && mx_arena_create(&a, bytes, st) == 0 &&
+        mx_vae_encode(c, vae, signed_img, n, H, W, latents, NULL, &a, st) == 0) {
+        for (size_t i = 0; i < lat; i++) latents[i] *= MX_SD_VAE_SCALE;
+        rc = 0;
+    }
+    mx_arena_destroy(&a);
+    free(signed_img);
+    return rc;
+}

@@ -1,0 +1,225 @@
+/* UNet2DConditionModel (diffusers v0.35.2 unet_2d_condition.py, unet_2d_blocks.py). */
+#include "unet.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "blocks.h"
+
+/* One up level: layers_per_block + 1 resnets over [h | skip] (+ transformers for
+ * CrossAttnUpBlock2D), then an Upsample2D unless it is the last level. */
+typedef struct up_level {
+    mx_resnet res[MX_ENC_MAX_LAYERS + 1];
+    mx_transformer attn[MX_ENC_MAX_LAYERS + 1];
+    mx_up up;
+    int nres, cross, has_up, cout;
+    int cin[MX_ENC_MAX_LAYERS + 1]; /* channels of h before the concat */
+    int cskip[MX_ENC_MAX_LAYERS + 1];
+} up_level;
+
+struct mx_unet {
+    mx_unet_encoder enc;
+    up_level *up; /* cfg.nlevels */
+    mx_gn norm_out;
+    mx_conv conv_out;
+};
+
+const mx_unet_config *mx_unet_cfg(const mx_unet *u) { return &u->enc.cfg; }
+
+int mx_unet_num_residuals(const mx_unet_config *cfg) {
+    return 1 + cfg->nlevels * cfg->layers_per_block + (cfg->nlevels - 1);
+}
+
+void mx_unet_residual_shape(const mx_unet_config *cfg, int i, int H, int W, int *C, int *h, int *w) {
+    int k = 0; /* residual 0: conv_in output */
+    *C = cfg->block_out_channels[0];
+    *h = H;
+    *w = W;
+    for (int lv = 0; lv < cfg->nlevels && k < i; lv++) {
+        for (int j = 0; j < cfg->layers_per_block && k < i; j++, k++) *C = cfg->block_out_channels[lv];
+        if (lv < cfg->nlevels - 1 && k < i) {
+            *h /= 2;
+            *w /= 2;
+            k++;
+        }
+    }
+    if (i >= mx_unet_num_residuals(cfg)) *C = cfg->block_out_channels[cfg->nlevels - 1]; /* mid */
+}
+
+static int up_level_load(up_level *lv, mx_binder *b, const mx_unet_config *c, int i, mx_status *st) {
+    int n = c->nlevels, L = c->layers_per_block;
+    int out = c->block_out_channels[n - 1 - i];
+    int prev = c->block_out_channels[n - 1 - (i > 0 ? i - 1 : 0)];
+    int in = c->block_out_channels[n - 1 - (i + 1 < n ? i + 1 : n - 1)];
+    int heads = c->heads[n - 1 - i], layers = c->transformer_layers[n - 1 - i];
+    char path[128];
+    lv->cross = c->up_cross[i];
+    lv->cout = out;
+    lv->has_up = i < n - 1;
+    lv->nres = L + 1;
+    for (int j = 0; j <= L; j++) {
+        lv->cin[j] = j == 0 ? prev : out;
+        lv->cskip[j] = j == L ? in : out;
+        snprintf(path, sizeof path, "up_blocks.%d.resnets.%d", i, j);
+        if (mx_resnet_load(&lv->res[j], b, path, lv->cin[j] + lv->cskip[j], out, c->time_embed_dim,
+                           c->norm_num_groups, c->norm_eps, 1.0f, st))
+            return -1;
+        snprintf(path, sizeof path, "up_blocks.%d.attentions.%d", i, j);
+        if (lv->cross && mx_transformer_load(&lv->attn[j], b, path, out, heads, layers, c->cross_attention_dim,
+                                             c->norm_num_groups, c->use_linear_projection, st))
+            return -1;
+    }
+    snprintf(path, sizeof path, "up_blocks.%d.upsamplers.0", i);
+    return lv->has_up ? mx_up_load(&lv->up, b, path, out, st) : 0;
+}
+
+int mx_unet_load(mx_unet **out, const mx_unet_config *cfg, mx_binder *b, mx_status *st) {
+    *out = NULL;
+    if (cfg->is_controlnet) return mx_fail(st, MX_EINPUT, "mx_unet_load: the config is a ControlNetModel config");
+    mx_unet *u = calloc(1, sizeof *u);
+    if (!u) return mx_fail(st, MX_ENOMEM, "out of memory loading the UNet");
+    const mx_unet_config *c = cfg;
+    int rc = mx_unet_encoder_load(&u->enc, cfg, b, st);
+    if (!rc) {
+        u->up = calloc((size_t)c->nlevels, sizeof *u->up);
+        if (!u->up) rc = mx_fail(st, MX_ENOMEM, "out of memory loading the UNet");
+    }
+    for (int i = 0; !rc && i < c->nlevels; i++) rc = up_level_load(&u->up[i], b, c, i, st);
+    if (!rc) rc = mx_gn_load(&u->norm_out, b, "conv_norm_out", c->block_out_channels[0], c->norm_num_groups, c->norm_eps, st);
+    if (!rc)
+        rc = mx_conv_load(&u->conv_out, b, "conv_out", c->block_out_channels[0], c->out_channels, c->conv_out_kernel, 1,
+                          (c->conv_out_kernel - 1) / 2, 1, st);
+    if (rc) {
+        mx_fail_prefix(st, "loading the UNet");
+        mx_unet_free(u);
+        return -1;
+    }
+    *out = u;
+    return 0;
+}
+
+void mx_unet_free(mx_unet *u) {
+    if (!u) return;
+    if (u->up)
+        for (int i = 0; i < u->enc.cfg.nlevels; i++)
+            for (int j = 0; j <= MX_ENC_MAX_LAYERS; j++) mx_transformer_free(&u->up[i].attn[j]);
+    free(u->up);
+    mx_unet_encoder_free(&u->enc);
+    free(u);
+}
+
+/* Largest hidden state of the up path (floats): the ping-pong buffer size. */
+static size_t up_path_max(const mx_unet_config *c, int B, int H, int W) {
+    size_t m = 0;
+    int f = 1 << (c->nlevels - 1), h = H / f, w = W / f;
+    for (int i = 0; i < c->nlevels; i++) {
+        size_t n = (size_t)B * c->block_out_channels[c->nlevels - 1 - i] * h * w;
+        if (i < c->nlevels - 1) {
+            n *= 4;
+            h *= 2;
+            w *= 2;
+        }
+        if (n > m) m = n;
+    }
+    return m;
+}
+
+/* Up level i: each resnet on concat(h, skip) (skips popped from the end), optional
+ * transformer, then the upsampler. h moves between the ping-pong buffers p[0], p[1]. */
+static int up_level_run(mx_run *r, const up_level *lv, float **h, float *p[2], float *const *res, int *k, int B,
+                        int *H, int *W, const float *temb, const float *context, int T) {
+    for (int j = 0; j < lv->nres; j++) {
+        size_t mark = mx_arena_mark(r->a), hw = (size_t)*H * *W;
+        float *cat = mx_run_alloc(r, (size_t)B * (lv->cin[j] + lv->cskip[j]) * hw);
+        if (!cat) return -1;
+        const float *skip = res[--*k];
+        if (!r->dry) mx_concat_channels(r->c, cat, *h, lv->cin[j], skip, lv->cskip[j], B, (int)hw);
+        float *dst = *h == p[0] ? p[1] : p[0];
+        if (mx_resnet_run(r, &lv->res[j], dst, cat, B, *H, *W, temb)) return -1;
+        mx_arena_reset(r->a, mark);
+        *h = dst;
+        if (lv->cross) {
+            dst = *h == p[0] ? p[1] : p[0];
+            if (mx_transformer_run(r, &lv->attn[j], dst, *h, B, *H, *W, context, T)) return -1;
+            *h = dst;
+        }
+    }
+    if (lv->has_up) {
+        float *dst = *h == p[0] ? p[1] : p[0];
+        if (mx_up_run(r, &lv->up, dst, *h, B, *H, *W)) return -1;
+        *h = dst;
+        *H *= 2;
+        *W *= 2;
+    }
+    return 0;
+}
+
+static void add_residuals(mx_run *r, const mx_unet_config *c, const mx_unet_input *in, float *const *res, float *mid) {
+    int n = mx_unet_num_residuals(c), C, h, w;
+    for (int i = 0; i <= n && !r->dry; i++) {
+        const float *add = i < n ? (in->down_residuals ? in->down_residuals[i] : NULL) : in->mid_residual;
+        if (!add) continue;
+        mx_unet_residual_shape(c, i, in->H, in->W, &C, &h, &w);
+        mx_add(r->c, i < n ? res[i] : mid, i < n ? res[i] : mid, add, (size_t)in->B * C * h * w);
+    }
+}
+
+static int unet_run(mx_run *r, const mx_unet *u, const mx_unet_input *in, float *out) {
+    const mx_unet_config *c = &u->enc.cfg;
+    int B = in->B, n = mx_unet_num_residuals(c), C, h, w;
+    float *res[MX_UNET_MAX_RES];
+    float *temb = mx_run_alloc(r, (size_t)B * c->time_embed_dim);
+    if (!temb || mx_time_embed_run(r, &u->enc.time, temb, in->timesteps, B)) return -1;
+    for (int i = 0; i <= n; i++) {
+        mx_unet_residual_shape(c, i, in->H, in->W, &C, &h, &w);
+        if (!(res[i] = mx_run_alloc(r, (size_t)B * C * h * w))) return -1;
+    }
+    float *mid = res[n];
+    if (mx_unet_encoder_run(r, &u->enc, in->sample, NULL, B, in->H, in->W, temb, in->encoder_hidden_states, in->T, res,
+                            mid))
+        return -1;
+    add_residuals(r, c, in, res, mid);
+    size_t pmax = up_path_max(c, B, in->H, in->W);
+    float *p[2] = {mx_run_alloc(r, pmax), mx_run_alloc(r, pmax)};
+    if (!p[0] || !p[1]) return -1;
+    float *hcur = mid;
+    int k = n, H = h, W = w;
+    for (int i = 0; i < c->nlevels; i++)
+        if (up_level_run(r, &u->up[i], &hcur, p, res, &k, B, &H, &W, temb, in->encoder_hidden_states, in->T)) return -1;
+    float *t = hcur == p[0] ? p[1] : p[0];
+    mx_gn_run(r, &u->norm_out, t, hcur, B, H * W, 1);
+    mx_conv_run(r, &u->conv_out, out, t, B, H, W);
+    return 0;
+}
+
+int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,
+                    mx_status *st) {
+    if (mx_unet_check_sizes(&u->enc.cfg, in->B, in->H, in->W, in->T, st)) return -1;
+    mx_run r;
+    mx_run_init(&r, c, a, st);
+    size_t mark = mx_arena_mark(a);
+    int rc = unet_run(&r, u, in, out);
+    mx_arena_reset(a, mark);
+    return rc ? mx_fail_prefix(st, "UNet forward") : 0;
+}
+
+int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+    mx_arena a;
+    mx_arena_measure(&a);
+    mx_unet_input in = {NULL, NULL, NULL, B, H, W, T, NULL, NULL};
+    if (mx_unet_forward(NULL, u, &in, NULL, &a, st)) return -1;
+    *bytes = a.peak + 4 * MX_ARENA_ALIGN;
+    return 0;
+}
+
+double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T) {
+    mx_arena a;
+    mx_status st;
+    mx_arena_measure(&a);
+    mx_unet_input in = {NULL, NULL, NULL, B, H, W, T, NULL, NULL};
+    mx_run r;
+    mx_run_init(&r, NULL, &a, &st);
+    if (mx_unet_check_sizes(&u->enc.cfg, B, H, W, T, &st) || unet_run(&r, u, &in, NULL)) return 0.0;
+    return r.flops;
+}

@@ -1,0 +1,59 @@
+/* UNet2DConditionModel (diffusers v0.35.2 semantics) for the Stable Diffusion 1.5 family.
+ *
+ * Use:
+ *   mx_unet_config cfg;  mx_unet_config_parse(&cfg, json, len, "unet.config", st);
+ *   mx_binder b;         mx_binder_wf(&b, wf, "unet.", st);   (or mx_binder_st for safetensors)
+ *   mx_unet *u;          mx_unet_load(&u, &cfg, &b, st);
+ *   size_t bytes;        mx_unet_arena_bytes(u, B, H, W, T, &bytes, st);
+ *   mx_arena a;          mx_arena_create(&a, bytes, st);
+ *   mx_unet_forward(ctx, u, &in, out, &a, st);
+ *   mx_unet_free(u); mx_binder_free(&b);
+ * The binder must outlive the model (weights are not copied). Activations come from the
+ * arena only; the forward restores the arena's mark before returning. */
+#ifndef MX_UNET_H
+#define MX_UNET_H
+
+#include "../../ops/ops.h"
+#include "netcfg.h"
+#include "params.h"
+
+/* Enough for layers_per_block <= 7 over 8 levels. */
+#define MX_UNET_MAX_RES 64
+
+typedef struct mx_unet mx_unet;
+
+/* The inputs of one call. Batch B items; each item has its own timestep and its own encoder
+ * hidden states (CFG runs [uncond, cond] as B = 2). H and W are the latent size and must be
+ * multiples of 2^(nlevels-1) (8 for SD1.5). */
+typedef struct mx_unet_input {
+    const float *sample;                /* [B, in_channels, H, W] */
+    const float *timesteps;             /* [B] (float; integer timesteps as floats) */
+    const float *encoder_hidden_states; /* [B, T, cross_attention_dim] */
+    int B, H, W, T;
+    /* Optional ControlNet residuals (already scaled and summed over ControlNets by the
+     * caller): down[i] has the shape of mx_unet_residual_shape(i); NULL arrays = none. */
+    const float *const *down_residuals; /* mx_unet_num_residuals() pointers, or NULL */
+    const float *mid_residual;          /* [B, C_last, H/2^(L-1), W/2^(L-1)] or NULL */
+} mx_unet_input;
+
+/* Binds every parameter (names as diffusers' state dict). With an enumerating binder it only
+ * records the parameter list (the model is still returned; do not run it). */
+int mx_unet_load(mx_unet **out, const mx_unet_config *cfg, mx_binder *b, mx_status *st);
+void mx_unet_free(mx_unet *u);
+const mx_unet_config *mx_unet_cfg(const mx_unet *u);
+
+/* Down-block residual count (12 for SD1.5) and the shape [C, h, w] of residual i (i == count:
+ * the mid-block residual) for a latent of H×W. Shared by UNet and ControlNet. */
+int mx_unet_num_residuals(const mx_unet_config *cfg);
+void mx_unet_residual_shape(const mx_unet_config *cfg, int i, int H, int W, int *C, int *h, int *w);
+
+/* Arena bytes a forward with these sizes needs (dry run). */
+int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st);
+/* out: [B, out_channels, H, W] (caller's buffer). Fails with a message on bad sizes or when
+ * the arena is too small. With a measuring arena (mx_arena_measure) nothing is computed. */
+int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,
+                    mx_status *st);
+/* Multiply-add count ×2 of one forward (for benchmarks). */
+double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T);
+
+#endif

@@ -1,0 +1,63 @@
+/* mx_cpu_best_isa: cpuid for the instruction sets, xgetbv for the OS saving their registers.
+ * MATEX_ISA=scalar|avx2|avx512 can only lower the level (asking for more than the CPU has
+ * would crash with an illegal instruction). */
+#include <stdlib.h>
+#include <string.h>
+
+#include "backend.h"
+#include "log.h"
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <cpuid.h>
+
+static unsigned long long read_xcr0(void) {
+    unsigned int lo, hi;
+    __asm__ volatile("xgetbv" : "=a"(lo), "=d"(hi) : "c"(0));
+    return ((unsigned long long)hi << 32) | lo;
+}
+
+static mx_isa detect_isa(void) {
+    unsigned int a, b, c, d;
+    if (!__get_cpuid(1, &a, &b, &c, &d)) return MX_ISA_SCALAR;
+    int fma = (c >> 12) & 1, osxsave = (c >> 27) & 1, avx = (c >> 28) & 1, f16c = (c >> 29) & 1;
+    if (!osxsave || !avx) return MX_ISA_SCALAR;
+    unsigned long long xcr0 = read_xcr0();
+    if ((xcr0 & 0x6) != 0x6) return MX_ISA_SCALAR; /* SSE and AVX state */
+    if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return MX_ISA_SCALAR;
+    int avx2 = (b >> 5) & 1;
+    if (!avx2 || !fma || !f16c) return MX_ISA_SCALAR;
+    int avx512 = ((b >> 16) & 1) && ((b >> 17) & 1) && ((b >> 30) & 1) && ((b >> 31) & 1); /* F DQ BW VL */
+    if (avx512 && (xcr0 & 0xE0) == 0xE0) return MX_ISA_AVX512; /* opmask, ZMM0-15 high, ZMM16-31 */
+    return MX_ISA_AVX2;
+}
+#else
+static mx_isa detect_isa(void) { return MX_ISA_SCALAR; }
+#endif
+
+static mx_isa isa_from_env(mx_isa best) {
+    const char *e = getenv("MATEX_ISA");
+    if (!e || !*e) return best;
+    mx_isa want;
+    if (!strcmp(e, "scalar"))
+        want = MX_ISA_SCALAR;
+    else if (!strcmp(e, "avx2"))
+        want = MX_ISA_AVX2;
+    else if (!strcmp(e, "avx512"))
+        want = MX_ISA_AVX512;
+    else {
+        mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2 or avx512); using %s", e, mx_isa_name(best));
+        return best;
+    }
+    return want < best ? want : best;
+}
+
+mx_isa mx_cpu_best_isa(void) { return isa_from_env(detect_isa()); }
+
+const char *mx_isa_name(mx_isa isa) {
+    switch (isa) {
+    case MX_ISA_SCALAR: return "scalar";
+    case MX_ISA_AVX2: return "avx2";
+    case MX_ISA_AVX512: return "avx512";
+    }
+    return "?";
+}

@@ -1,0 +1,503 @@
+/* CUDA ops against the scalar CPU references (the ops/cpu _ref.c files, through mx_kernels_scalar) on random
+ * inputs of awkward sizes: relative L2 error <= 1e-5 for fp32 math, <= 1e-2 for fp16/bf16 math;
+ * conversions and Philox normals equal bit for bit. Without a CUDA device it prints a skip line
+ * and exits 0 (built by `make cuda`, run by `make test-cuda`). */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../ops/cuda/cuda_backend.h"
+#include "../../runtime/rng.h"
+#include "../util_test.h"
+
+#define FP32_BOUND 1e-5
+#define HALF_BOUND 1e-2
+
+typedef struct env {
+    mx_cuda_ctx *gpu;
+    mx_ctx cpu; /* scalar references */
+    mx_arena cpu_scratch;
+    mx_status st;
+} env;
+
+/* Counts a failure and prints the message when a CUDA call failed; returns rc. */
+static int gpu_ok(env *e, int rc, const char *what) {
+    if (rc != 0) {
+        mx_test_failures++;
+        fprintf(stderr, "%s: %s\n", what, e->st.msg);
+    }
+    return rc;
+}
+
+static float *rnd(size_t n, uint64_t seed, float lo, float hi) {
+    float *x = malloc((n ? n : 1) * sizeof *x);
+    if (!x) abort();
+    mx_fill_random(x, n, seed, lo, hi);
+    return x;
+}
+
+/* Device copy of a host buffer (NULL after a counted failure). */
+static void *dev_copy(env *e, const void *host, size_t bytes) {
+    void *d = NULL;
+    if (gpu_ok(e, mx_cuda_alloc(&d, bytes, "test buffer", &e->st), "alloc")) return NULL;
+    if (gpu_ok(e, mx_cuda_upload(e->gpu, d, host, bytes, "test upload", &e->st), "upload")) {
+        mx_cuda_free(d);
+        return NULL;
+    }
+    return d;
+}
+
+static void *dev_zero(env *e, size_t bytes) {
+    void *d = NULL;
+    if (gpu_ok(e, mx_cuda_alloc(&d, bytes, "test output", &e->st), "alloc")) return NULL;
+    if (gpu_ok(e, mx_cuda_memset_zero(e->gpu, d, bytes, "test output", &e->st), "memset")) {
+        mx_cuda_free(d);
+        return NULL;
+    }
+    return d;
+}
+
+/* Waits for the queued work, downloads n floats of dev and compares them with want. */
+static void compare_dev(env *e, const char *name, const float *dev, const float *want, size_t n, double bound) {
+    float *got = malloc(n * sizeof *got);
+    if (!got) abort();
+    if (!gpu_ok(e, mx_cuda_sync(e->gpu, &e->st), name) &&
+        !gpu_ok(e, mx_cuda_download(e->gpu, got, dev, n * sizeof *got, name, &e->st), name))
+        mx_check_close(name, got, want, n, bound);
+    free(got);
+}
+
+/* A weight of dtype dt from n random floats: host view (for the reference) and device copy. */
+typedef struct test_weight {
+    mx_wptr host, dev;
+    void *store;
+} test_weight;
+
+static test_weight make_weight(env *e, size_t n, uint64_t seed, mx_dtype dt) {
+    test_weight w = {{NULL, dt}, {NULL, dt}, NULL};
+    float *f = rnd(n, seed, -0.5f, 0.5f);
+    if (dt == MX_F32) {
+        w.store = f;
+    } else {
+        uint16_t *h = malloc(n * sizeof *h);
+        if (!h) abort();
+        for (size_t i = 0; i < n; i++) h[i] = dt == MX_F16 ? mx_float_to_half(f[i]) : mx_float_to_bf16(f[i]);
+        free(f);
+        w.store = h;
+    }
+    w.host.data = w.store;
+    w.dev.data = dev_copy(e, w.store, n * mx_dtype_size(dt));
+    return w;
+}
+
+static void free_weight(test_weight *w) {
+    mx_cuda_free((void *)w->dev.data);
+    free(w->store);
+}
+
+static double bound_for(mx_dtype dt) { return dt == MX_F32 ? FP32_BOUND : HALF_BOUND; }
+
+/* ---- the tests ---- */
+
+static void test_linear(env *e, mx_dtype dt, int M, int N, int K) {
+    char name[96];
+    snprintf(name, sizeof name, "linear %s M=%d N=%d K=%d", mx_dtype_name(dt), M, N, K);
+    float *x = rnd((size_t)M * K, 11, -1, 1), *want = malloc((size_t)M * N * sizeof *want);
+    test_weight w = make_weight(e, (size_t)N * K, 12, dt), b = make_weight(e, N, 13, dt);
+    e->cpu.k->linear(&e->cpu, want, x, w.host, b.host, M, N, K);
+    float *dx = dev_copy(e, x, (size_t)M * K * sizeof *x), *dy = dev_zero(e, (size_t)M * N * sizeof *dy);
+    if (dx && dy && w.dev.data && b.dev.data &&
+        !gpu_ok(e, mx_cuda_linear(e->gpu, dy, dx, w.dev, b.dev, M, N, K, &e->st), name))
+        compare_dev(e, name, dy, want, (size_t)M * N, bound_for(dt));
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free_weight(&w);
+    free_weight(&b);
+    free(x);
+    free(want);
+}
+
+static void test_conv2d(env *e, mx_dtype dt, int B, int Cin, int H, int W, int Cout, int ks, int stride, int pad) {
+    char name[96];
+    snprintf(name, sizeof name, "conv2d %s %dx%d s%d p%d %dx%dx%dx%d->%d", mx_dtype_name(dt), ks, ks, stride, pad,
+             B, Cin, H, W, Cout);
+    int Ho = (H + 2 * pad - ks) / stride + 1, Wo = (W + 2 * pad - ks) / stride + 1;
+    size_t nx = (size_t)B * Cin * H * W, ny = (size_t)B * Cout * Ho * Wo;
+    float *x = rnd(nx, 21, -1, 1), *want = malloc(ny * sizeof *want);
+    test_weight w = make_weight(e, (size_t)Cout * Cin * ks * ks, 22, dt), b = make_weight(e, Cout, 23, dt);
+    e->cpu.k->conv2d(&e->cpu, want, x, B, Cin, H, W, w.host, b.host, Cout, ks, ks, stride, pad);
+    float *dx = dev_copy(e, x, nx * sizeof *x), *dy = dev_zero(e, ny * sizeof *dy);
+    if (dx && dy && w.dev.data && b.dev.data &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx, B, Cin, H, W, w.dev, b.dev, Cout, ks, ks, stride, pad, &e->st),
+                name))
+        compare_dev(e, name, dy, want, ny, bound_for(dt));
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free_weight(&w);
+    free_weight(&b);
+    free(x);
+    free(want);
+}
+
+static void test_group_norm(env *e, int fuse_silu) {
+    const int B = 2, C = 12, HW = 37, G = 4;
+    size_t n = (size_t)B * C * HW;
+    const char *name = fuse_silu ? "group_norm+silu fp16 affine" : "group_norm fp32 affine";
+    mx_dtype dt = fuse_silu ? MX_F16 : MX_F32;
+    float *x = rnd(n, 31, -2, 3), *want = malloc(n * sizeof *want);
+    test_weight g = make_weight(e, C, 32, dt), b = make_weight(e, C, 33, dt);
+    e->cpu.k->group_norm(&e->cpu, want, x, B, C, HW, G, g.host, b.host, 1e-5f, fuse_silu);
+    float *dx = dev_copy(e, x, n * sizeof *x), *dy = dev_zero(e, n * sizeof *dy);
+    if (dx && dy && g.dev.data && b.dev.data &&
+        !gpu_ok(e, mx_cuda_group_norm(e->gpu, dy, dx, B, C, HW, G, g.dev, b.dev, 1e-5f, fuse_silu, &e->st), name))
+        compare_dev(e, name, dy, want, n, FP32_BOUND); /* fp16 affine weights, fp32 math */
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free_weight(&g);
+    free_weight(&b);
+    free(x);
+    free(want);
+}
+
+static void test_layer_norm(env *e) {
+    const int M = 19, C = 771;
+    size_t n = (size_t)M * C;
+    float *x = rnd(n, 41, -1, 2), *want = malloc(n * sizeof *want);
+    test_weight g = make_weight(e, C, 42, MX_F32), b = make_weight(e, C, 43, MX_F32);
+    e->cpu.k->layer_norm(&e->cpu, want, x, M, C, g.host, b.host, 1e-5f);
+    float *dx = dev_copy(e, x, n * sizeof *x);
+    /* in place, as the networks call it */
+    if (dx && g.dev.data && b.dev.data &&
+        !gpu_ok(e, mx_cuda_layer_norm(e->gpu, dx, dx, M, C, g.dev, b.dev, 1e-5f, &e->st), "layer_norm"))
+        compare_dev(e, "layer_norm 19x771 in place", dx, want, n, FP32_BOUND);
+    mx_cuda_free(dx);
+    free_weight(&g);
+    free_weight(&b);
+    free(x);
+    free(want);
+}
+
+static void test_softmax(env *e) {
+    const int M = 13, N = 1001;
+    size_t n = (size_t)M * N;
+    float *x = rnd(n, 51, -8, 8), *want = malloc(n * sizeof *want);
+    memcpy(want, x, n * sizeof *x);
+    e->cpu.k->softmax(&e->cpu, want, M, N);
+    float *dx = dev_copy(e, x, n * sizeof *x);
+    if (dx && !gpu_ok(e, mx_cuda_softmax(e->gpu, dx, M, N, &e->st), "softmax"))
+        compare_dev(e, "softmax 13x1001", dx, want, n, FP32_BOUND);
+    mx_cuda_free(dx);
+    free(x);
+    free(want);
+}
+
+/* q, k, v are read with row strides wider than H*D (as from a fused qkv projection). */
+static void test_attention(env *e, int B, int H, int Tq, int Tk, int D, int causal) {
+    char name[96];
+    snprintf(name, sizeof name, "attention B=%d H=%d Tq=%d Tk=%d D=%d%s", B, H, Tq, Tk, D, causal ? " causal" : "");
+    int qs = H * D + 3, kvs = H * D + 5, os = H * D + 1;
+    size_t nq = (size_t)B * Tq * qs, nkv = (size_t)B * Tk * kvs, no = (size_t)B * Tq * os;
+    float *q = rnd(nq, 61, -1, 1), *k = rnd(nkv, 62, -1, 1), *v = rnd(nkv, 63, -1, 1);
+    float *want = calloc(no, sizeof *want);
+    float scale = 1.0f / sqrtf((float)D) * 2.0f; /* sharper than usual: exercises the running max */
+    e->cpu.k->attention(&e->cpu, want, q, k, v, B, H, Tq, Tk, D, qs, kvs, os, causal, scale);
+    float *dq = dev_copy(e, q, nq * sizeof *q), *dk = dev_copy(e, k, nkv * sizeof *k);
+    float *dv = dev_copy(e, v, nkv * sizeof *v), *dout = dev_zero(e, no * sizeof *dout);
+    if (dq && dk && dv && dout &&
+        !gpu_ok(e, mx_cuda_attention(e->gpu, dout, dq, dk, dv, B, H, Tq, Tk, D, qs, kvs, os, causal, scale, &e->st),
+                name))
+        compare_dev(e, name, dout, want, no, FP32_BOUND); /* the padding columns stay 0 on both sides */
+    mx_cuda_free(dq);
+    mx_cuda_free(dk);
+    mx_cuda_free(dv);
+    mx_cuda_free(dout);
+    free(q);
+    free(k);
+    free(v);
+    free(want);
+}
+
+typedef int (*gpu_unary)(mx_cuda_ctx *, float *, size_t, mx_status *);
+
+static void test_unary(env *e, const char *name, void (*ref)(const mx_ctx *, float *, size_t), gpu_unary gpu) {
+    const size_t n = 100003;
+    float *x = rnd(n, 71, -6, 6), *want = malloc(n * sizeof *want);
+    memcpy(want, x, n * sizeof *x);
+    ref(&e->cpu, want, n);
+    float *dx = dev_copy(e, x, n * sizeof *x);
+    if (dx && !gpu_ok(e, gpu(e->gpu, dx, n, &e->st), name)) compare_dev(e, name, dx, want, n, FP32_BOUND);
+    mx_cuda_free(dx);
+    free(x);
+    free(want);
+}
+
+static void test_activations(env *e) {
+    test_unary(e, "gelu n=100003", e->cpu.k->gelu, mx_cuda_gelu);
+    test_unary(e, "quick_gelu n=100003", e->cpu.k->quick_gelu, mx_cuda_quick_gelu);
+    test_unary(e, "silu n=100003", e->cpu.k->silu, mx_cuda_silu);
+}
+
+static void test_geglu(env *e) {
+    const int M = 37, N = 321;
+    float *x = rnd((size_t)M * 2 * N, 81, -3, 3), *want = malloc((size_t)M * N * sizeof *want);
+    e->cpu.k->geglu(&e->cpu, want, x, M, N);
+    float *dx = dev_copy(e, x, (size_t)M * 2 * N * sizeof *x), *dy = dev_zero(e, (size_t)M * N * sizeof *dy);
+    if (dx && dy && !gpu_ok(e, mx_cuda_geglu(e->gpu, dy, dx, M, N, &e->st), "geglu"))
+        compare_dev(e, "geglu 37x321", dy, want, (size_t)M * N, FP32_BOUND);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free(x);
+    free(want);
+}
+
+static void test_binary(env *e, mx_binop op) {
+    static const char *names[] = {"binary add broadcast", "binary sub broadcast", "binary mul broadcast"};
+    const int64_t as[4] = {2, 3, 1, 5}, bs[4] = {1, 3, 7, 1};
+    size_t na = 30, nb = 21, ny = 2 * 3 * 7 * 5;
+    float *a = rnd(na, 91, -1, 1), *b = rnd(nb, 92, -1, 1), *want = malloc(ny * sizeof *want);
+    e->cpu.k->binary(&e->cpu, op, want, a, as, b, bs, 4);
+    float *da = dev_copy(e, a, na * sizeof *a), *db = dev_copy(e, b, nb * sizeof *b);
+    float *dy = dev_zero(e, ny * sizeof *dy);
+    if (da && db && dy && !gpu_ok(e, mx_cuda_binary(e->gpu, op, dy, da, as, db, bs, 4, &e->st), names[op]))
+        compare_dev(e, names[op], dy, want, ny, FP32_BOUND);
+    mx_cuda_free(da);
+    mx_cuda_free(db);
+    mx_cuda_free(dy);
+    free(a);
+    free(b);
+    free(want);
+}
+
+static void test_scale(env *e) {
+    const size_t n = 4099;
+    float *x = rnd(n, 101, -1, 1), *want = malloc(n * sizeof *want);
+    e->cpu.k->scale(&e->cpu, want, x, 0.18215f, n);
+    float *dx = dev_copy(e, x, n * sizeof *x), *dy = dev_zero(e, n * sizeof *dy);
+    if (dx && dy && !gpu_ok(e, mx_cuda_scale(e->gpu, dy, dx, 0.18215f, n, &e->st), "scale"))
+        compare_dev(e, "scale n=4099", dy, want, n, FP32_BOUND);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free(x);
+    free(want);
+}
+
+static void test_upsample(env *e) {
+    const int BC = 5, H = 7, W = 9;
+    size_t nx = (size_t)BC * H * W, ny = nx * 4;
+    float *x = rnd(nx, 111, -1, 1), *want = malloc(ny * sizeof *want);
+    e->cpu.k->upsample_nearest2x(&e->cpu, want, x, BC, H, W);
+    float *dx = dev_copy(e, x, nx * sizeof *x), *dy = dev_zero(e, ny * sizeof *dy);
+    if (dx && dy && !gpu_ok(e, mx_cuda_upsample_nearest2x(e->gpu, dy, dx, BC, H, W, &e->st), "upsample"))
+        compare_dev(e, "upsample_nearest2x 5x7x9", dy, want, ny, 0.0);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free(x);
+    free(want);
+}
+
+static void test_concat(env *e) {
+    const int B = 2, Ca = 3, Cb = 5, HW = 37;
+    size_t na = (size_t)B * Ca * HW, nb = (size_t)B * Cb * HW, ny = na + nb;
+    float *a = rnd(na, 121, -1, 1), *b = rnd(nb, 122, -1, 1), *want = malloc(ny * sizeof *want);
+    e->cpu.k->concat_channels(&e->cpu, want, a, Ca, b, Cb, B, HW);
+    float *da = dev_copy(e, a, na * sizeof *a), *db = dev_copy(e, b, nb * sizeof *b);
+    float *dy = dev_zero(e, ny * sizeof *dy);
+    if (da && db && dy && !gpu_ok(e, mx_cuda_concat_channels(e->gpu, dy, da, Ca, db, Cb, B, HW, &e->st), "concat"))
+        compare_dev(e, "concat_channels 3+5 x37", dy, want, ny, 0.0);
+    mx_cuda_free(da);
+    mx_cuda_free(db);
+    mx_cuda_free(dy);
+    free(a);
+    free(b);
+    free(want);
+}
+
+static void test_transpose(env *e, int to_hwc) {
+    const int B = 3, C = 45, HW = 67;
+    size_t n = (size_t)B * C * HW;
+    const char *name = to_hwc ? "transpose_chw_hwc 3x45x67" : "transpose_hwc_chw 3x45x67";
+    float *x = rnd(n, 131, -1, 1), *want = malloc(n * sizeof *want);
+    if (to_hwc)
+        e->cpu.k->transpose_chw_hwc(&e->cpu, want, x, B, C, HW);
+    else
+        e->cpu.k->transpose_hwc_chw(&e->cpu, want, x, B, C, HW);
+    float *dx = dev_copy(e, x, n * sizeof *x), *dy = dev_zero(e, n * sizeof *dy);
+    if (dx && dy) {
+        int rc = to_hwc ? mx_cuda_transpose_chw_hwc(e->gpu, dy, dx, B, C, HW, &e->st)
+                        : mx_cuda_transpose_hwc_chw(e->gpu, dy, dx, B, C, HW, &e->st);
+        if (!gpu_ok(e, rc, name)) compare_dev(e, name, dy, want, n, 0.0);
+    }
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free(x);
+    free(want);
+}
+
+static void test_resize(env *e, int H, int W, int Ho, int Wo, int align_corners) {
+    char name[96];
+    snprintf(name, sizeof name, "resize_bilinear %dx%d->%dx%d ac=%d", H, W, Ho, Wo, align_corners);
+    const int BC = 3;
+    size_t nx = (size_t)BC * H * W, ny = (size_t)BC * Ho * Wo;
+    float *x = rnd(nx, 141, -1, 1), *want = malloc(ny * sizeof *want);
+    e->cpu.k->resize_bilinear(&e->cpu, want, x, BC, H, W, Ho, Wo, align_corners);
+    float *dx = dev_copy(e, x, nx * sizeof *x), *dy = dev_zero(e, ny * sizeof *dy);
+    if (dx && dy &&
+        !gpu_ok(e, mx_cuda_resize_bilinear(e->gpu, dy, dx, BC, H, W, Ho, Wo, align_corners, &e->st), name))
+        compare_dev(e, name, dy, want, ny, FP32_BOUND);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free(x);
+    free(want);
+}
+
+/* f32 -> half type -> f32 on the GPU, both results equal to the CPU conversions bit for bit. */
+static void test_conversion(env *e, mx_dtype dt) {
+    const size_t n = 70001;
+    const char *name = dt == MX_F16 ? "f32<->f16 bit-exact" : "f32<->bf16 bit-exact";
+    float *x = rnd(n, 151, -70000, 70000); /* beyond the fp16 range too: overflow to inf */
+    for (size_t i = 0; i < n; i += 7) x[i] *= 1e-9f; /* and into the fp16 subnormals (< 6.1e-5) */
+    uint16_t *want_h = malloc(n * sizeof *want_h), *got_h = malloc(n * sizeof *got_h);
+    float *want_f = malloc(n * sizeof *want_f), *got_f = malloc(n * sizeof *got_f);
+    const mx_kernels *k = e->cpu.k;
+    (dt == MX_F16 ? k->f32_to_f16 : k->f32_to_bf16)(want_h, x, n);
+    (dt == MX_F16 ? k->f16_to_f32 : k->bf16_to_f32)(want_f, want_h, n);
+    float *dx = dev_copy(e, x, n * sizeof *x), *df = dev_zero(e, n * sizeof *df);
+    uint16_t *dh = dev_zero(e, n * sizeof *dh);
+    int ok = dx && df && dh;
+    if (ok) {
+        int rc = dt == MX_F16 ? mx_cuda_f32_to_f16(e->gpu, dh, dx, n, &e->st)
+                              : mx_cuda_f32_to_bf16(e->gpu, dh, dx, n, &e->st);
+        if (!rc)
+            rc = dt == MX_F16 ? mx_cuda_f16_to_f32(e->gpu, df, dh, n, &e->st)
+                              : mx_cuda_bf16_to_f32(e->gpu, df, dh, n, &e->st);
+        if (!rc) rc = mx_cuda_sync(e->gpu, &e->st);
+        if (!rc) rc = mx_cuda_download(e->gpu, got_h, dh, n * sizeof *got_h, name, &e->st);
+        if (!rc) rc = mx_cuda_download(e->gpu, got_f, df, n * sizeof *got_f, name, &e->st);
+        ok = !gpu_ok(e, rc, name);
+    }
+    if (ok) {
+        size_t bad = 0;
+        for (size_t i = 0; i < n; i++) bad += got_h[i] != want_h[i] || memcmp(&got_f[i], &want_f[i], 4) != 0;
+        printf("%-48s %zu of %zu differ %s\n", name, bad, n, bad ? "FAIL" : "ok");
+        CHECK(bad == 0);
+    }
+    mx_cuda_free(dx);
+    mx_cuda_free(df);
+    mx_cuda_free(dh);
+    free(x);
+    free(want_h);
+    free(got_h);
+    free(want_f);
+    free(got_f);
+}
+
+/* Philox normals: same seed/stream/index -> same float as runtime/rng.c, bit for bit. A first index
+ * above 2^32 exercises the high word of the counter; an odd one starts on a sin value. */
+static void test_rng(env *e) {
+    const size_t n = (size_t)1 << 20;
+    const uint64_t seed = 0x123456789abcdefull, stream = 0x100000003ull, first = ((uint64_t)1 << 33) + 1;
+    float *want = malloc(n * sizeof *want), *got = malloc(n * sizeof *got);
+    mx_rng_fill_normal(want, n, seed, stream, first);
+    float *d = dev_zero(e, n * sizeof *d);
+    if (d && !gpu_ok(e, mx_cuda_rng_fill_normal(e->gpu, d, n, seed, stream, first, &e->st), "rng") &&
+        !gpu_ok(e, mx_cuda_sync(e->gpu, &e->st), "rng") &&
+        !gpu_ok(e, mx_cuda_download(e->gpu, got, d, n * sizeof *got, "rng", &e->st), "rng")) {
+        size_t bad = 0;
+        for (size_t i = 0; i < n; i++) bad += memcmp(&got[i], &want[i], sizeof *got) != 0;
+        printf("%-48s %zu of %zu differ %s\n", "philox normals bit-exact", bad, n, bad ? "FAIL" : "ok");
+        CHECK(bad == 0);
+    }
+    mx_cuda_free(d);
+    free(want);
+    free(got);
+}
+
+/* ---- driver ---- */
+
+static void test_gemm_ops(env *e) {
+    test_linear(e, MX_F32, 37, 53, 71);
+    test_linear(e, MX_F16, 33, 70, 130);
+    test_linear(e, MX_BF16, 77, 96, 64);
+    test_conv2d(e, MX_F32, 2, 5, 11, 13, 7, 3, 1, 1);
+    test_conv2d(e, MX_F16, 2, 6, 12, 9, 8, 3, 2, 1);
+    test_conv2d(e, MX_BF16, 1, 4, 10, 10, 3, 3, 1, 0);
+    test_conv2d(e, MX_F32, 2, 9, 7, 5, 6, 1, 1, 0);
+    test_conv2d(e, MX_F16, 2, 9, 7, 5, 6, 1, 1, 0);
+}
+
+/* A context with a 32 KiB scratch: linear and conv2d must split their work into several chunks/tiles. */
+static void test_small_scratch(env *e) {
+    mx_cuda_ctx *big = e->gpu, *small = NULL;
+    if (gpu_ok(e, mx_cuda_ctx_create(&small, 0, (size_t)32 << 10, &e->st), "small scratch context")) return;
+    e->gpu = small;
+    test_linear(e, MX_F16, 300, 40, 130);         /* 78 KB of converted rows: 3 chunks */
+    test_conv2d(e, MX_F16, 1, 8, 33, 33, 5, 3, 1, 1); /* 1089 pixels x 144 bytes: 6 tiles */
+    e->gpu = big;
+    mx_cuda_ctx_destroy(small);
+}
+
+static void test_norm_ops(env *e) {
+    test_group_norm(e, 0);
+    test_group_norm(e, 1);
+    test_layer_norm(e);
+    test_softmax(e);
+}
+
+static void test_attention_ops(env *e) {
+    test_attention(e, 2, 3, 37, 45, 40, 0);
+    test_attention(e, 1, 2, 29, 29, 64, 1);
+    test_attention(e, 1, 2, 33, 77, 80, 0);
+    test_attention(e, 2, 1, 19, 50, 160, 0);
+    test_attention(e, 1, 1, 21, 35, 512, 0);
+}
+
+static void test_other_ops(env *e) {
+    test_activations(e);
+    test_geglu(e);
+    test_binary(e, MX_BIN_ADD);
+    test_binary(e, MX_BIN_SUB);
+    test_binary(e, MX_BIN_MUL);
+    test_scale(e);
+    test_upsample(e);
+    test_concat(e);
+    test_transpose(e, 1);
+    test_transpose(e, 0);
+    test_resize(e, 13, 17, 29, 9, 0);
+    test_resize(e, 13, 17, 29, 9, 1);
+    test_resize(e, 64, 64, 512, 512, 0);
+    test_conversion(e, MX_F16);
+    test_conversion(e, MX_BF16);
+    test_rng(e);
+}
+
+/* The number of checks above, for the skip line. */
+#define N_TESTS (8 + 2 + 4 + 5 + 3 + 1 + 3 + 1 + 1 + 1 + 2 + 3 + 2 + 1)
+
+int main(void) {
+    env e;
+    memset(&e, 0, sizeof e);
+    int ndev = 0;
+    mx_cuda_device_count(&ndev, &e.st);
+    if (ndev == 0) {
+        printf("test-cuda: no CUDA device: skipped (%d tests not run)\n", N_TESTS);
+        return 0;
+    }
+    if (mx_cuda_ctx_create(&e.gpu, 0, (size_t)64 << 20, &e.st) ||
+        mx_arena_create(&e.cpu_scratch, (size_t)16 << 20, &e.st)) {
+        fprintf(stderr, "test-cuda: setup: %s\n", e.st.msg);
+        mx_cuda_ctx_destroy(e.gpu);
+        return 1;
+    }
+    e.cpu.pool = NULL;
+    e.cpu.k = mx_kernels_scalar();
+    e.cpu.scratch = &e.cpu_scratch;
+    test_gemm_ops(&e);
+    test_small_scratch(&e);
+    test_norm_ops(&e);
+    test_attention_ops(&e);
+    test_other_ops(&e);
+    mx_arena_destroy(&e.cpu_scratch);
+    mx_cuda_ctx_destroy(e.gpu);
+    return mx_test_finish("test-cuda");
+}

@@ -1,0 +1,74 @@
+/* Helpers for the network parity tests (test_nn_unet/controlnet/vae): golden folder paths,
+ * config text, fp32 copies of golden tensors, a ready ops context. Header-only (static). */
+#ifndef MX_NN_GOLDEN_H
+#define MX_NN_GOLDEN_H
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../ops/ops.h"
+#include "../weights/safetensors.h"
+#include "util_test.h"
+
+static void golden_path(char *buf, size_t cap, const char *net, const char *file) {
+    snprintf(buf, cap, "%s/golden/%s/%s", mx_shared_dir(), net, file);
+}
+
+/* Whole file as a NUL-terminated string (caller frees), or NULL. */
+static char *golden_text(const char *net, const char *file, size_t *len) {
+    char path[1024];
+    golden_path(path, sizeof path, net, file);
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *s = n >= 0 ? malloc((size_t)n + 1) : NULL;
+    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
+        free(s);
+        s = NULL;
+    }
+    fclose(f);
+    if (s) {
+        s[n] = 0;
+        *len = (size_t)n;
+    }
+    return s;
+}
+
+static int golden_open(mx_safetensors *f, const char *net, const char *file) {
+    char path[1024];
+    mx_status st;
+    golden_path(path, sizeof path, net, file);
+    if (mx_st_open(f, path, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    return 0;
+}
+
+/* fp32 copy of a tensor (malloc'ed), with its element count; NULL when absent. */
+static float *golden_f32(const mx_safetensors *f, const char *name, size_t *n) {
+    mx_status st;
+    const mx_st_tensor *t = mx_st_find(f, name);
+    if (!t) {
+        fprintf(stderr, "%s: missing %s\n", f->path, name);
+        return NULL;
+    }
+    float *x = mx_st_to_f32(f, t, &st);
+    if (!x) fprintf(stderr, "%s\n", st.msg);
+    if (n) *n = (size_t)mx_shape_numel(t->ndim, t->shape);
+    return x;
+}
+
+static int golden_ctx(mx_ctx *c) {
+    mx_status st;
+    if (mx_ctx_create(c, 0, mx_cpu_best_isa(), (size_t)64 << 20, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    return 0;
+}
+
+#endif

@@ -1,0 +1,275 @@
+/* Mesh and image I/O: every shared asset loads with the counts of assets/MANIFEST.md; OBJ
+ * details (quads, negative indices, usemtl groups, MTL textures); hostile files end in a
+ * clear error; mesh utilities (normalisation, up axis, topology); image read/write. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "../pipeline/geom/image.h"
+#include "../pipeline/geom/mesh.h"
+#include "../pipeline/io/io.h"
+#include "../runtime/log.h"
+#include "util_test.h"
+
+/* One row of MANIFEST.md: topology after welding bit-identical positions. */
+typedef struct {
+    const char *file;
+    int nverts, nfaces, has_uv, watertight, boundary, components, nmat;
+    float bbox[3];
+    int textures; /* materials whose texture decodes */
+} asset;
+
+static const asset assets[] = {
+    {"spot/spot_triangulated.obj", 2930, 5856, 1, 1, 0, 1, 1, {0.9431f, 1.69f, 1.718f}, 0},
+    {"bob/bob_tri.obj", 5344, 10688, 1, 1, 0, 1, 1, {1.856f, 0.9725f, 1.463f}, 1},
+    {"blub/blub_triangulated.obj", 7106, 14208, 1, 1, 0, 1, 1, {1.423f, 1.747f, 2.908f}, 0},
+    {"spot_ply/spot.ply", 2930, 5856, 0, 1, 0, 1, 1, {0.9431f, 1.69f, 1.718f}, 0},
+    {"garment_female_casual/female_casualsuit01.obj", 2197, 4236, 1, 0, 164, 2, 1, {5.41f, 12.85f, 2.531f}, 0},
+    {"garment_female_elegant/female_elegantsuit01.obj", 2205, 4192, 1, 0, 220, 2, 1, {8.919f, 8.613f, 2.869f}, 0},
+    {"shoes_pair/shoes03.obj", 2222, 4128, 1, 0, 296, 12, 1, {5.134f, 2.414f, 2.761f}, 0},
+    {"fedora_hat/fedora.obj", 634, 1244, 1, 0, 22, 1, 1, {2.022f, 1.089f, 2.616f}, 0},
+    {"boot/boot.obj", 19931, 39906, 0, 1, 0, 1, 1, {0.307f, 0.2023f, 0.1103f}, 0},
+    {"koala/koala.obj", 49999, 99994, 0, 1, 0, 1, 1, {3.781f, 5.366f, 9.27f}, 0},
+    {"mountain/mountain.obj", 25600, 50562, 0, 0, 636, 1, 1, {32.99f, 17.86f, 32.98f}, 0},
+    {"hammer/hammer.obj", 30082, 60160, 0, 1, 0, 1, 1, {2.951f, 0.6889f, 8.246f}, 0},
+    {"wooden_stool/painted_wooden_stool_1k.gltf", 604, 676, 1, 0, 80, 13, 1, {0.3848f, 0.5789f, 0.4061f}, 1},
+    {"flight_helmet/FlightHelmet.gltf", 55392, 94722, 1, 0, 296, 82, 6, {0.3666f, 0.716f, 0.3716f}, 6},
+    {"cesium_milk_truck/CesiumMilkTruck.glb", 3564, 3624, 1, 0, 8, 13, 4, {4.869f, 2.583f, 2.792f}, 2},
+};
+
+static char tmpdir[256];
+
+static void tmp_path(char *out, size_t cap, const char *name) { snprintf(out, cap, "%s/%s", tmpdir, name); }
+
+static void write_text(const char *name, const char *text) {
+    char p[512];
+    tmp_path(p, sizeof p, name);
+    FILE *f = fopen(p, "wb");
+    if (!f) {
+        perror(p);
+        exit(2);
+    }
+    fputs(text, f);
+    fclose(f);
+}
+
+static int close_to(float got, float want) { return fabsf(got - want) <= 0.001f * fmaxf(1.f, fabsf(want)); }
+
+static void check_asset(const asset *a) {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/assets/%s", mx_shared_dir(), a->file);
+    mx_mesh m;
+    mx_status st;
+    double t0 = mx_now();
+    if (mx_mesh_load(path, &m, &st)) {
+        printf("FAIL load %s: %s\n", a->file, st.msg);
+        mx_test_failures++;
+        return;
+    }
+    double t1 = mx_now();
+    mx_mesh_topology t;
+    CHECK(mx_mesh_topology_compute(&m, 1, &t, NULL, &st) == 0);
+    float lo[3], hi[3];
+    mx_mesh_bbox(&m, lo, hi);
+    mx_image tex[8];
+    int ntex = 0;
+    CHECK(m.nmat <= 8 && mx_mesh_load_textures(&m, tex, &st) == 0);
+    for (int i = 0; i < m.nmat && i < 8; i++) {
+        ntex += tex[i].data != NULL && tex[i].w > 0;
+        mx_image_free(&tex[i]);
+    }
+    int ok = m.nverts == a->nverts && m.nfaces == a->nfaces && (m.face_uv != NULL) == a->has_uv &&
+             t.watertight == a->watertight && t.boundary_edges == a->boundary && t.components == a->components &&
+             t.nonmanifold_edges == 0 && t.degenerate_faces == 0 && m.nmat == a->nmat && ntex == a->textures;
+    for (int k = 0; k < 3; k++) ok &= close_to(hi[k] - lo[k], a->bbox[k]);
+    printf("%-48s v=%d f=%d uv=%d wt=%d b=%d comp=%d mat=%d tex=%d load %.0f ms %s\n", a->file, m.nverts, m.nfaces,
+           m.face_uv != NULL, t.watertight, t.boundary_edges, t.components, m.nmat, ntex, 1000 * (t1 - t0),
+           ok ? "ok" : "FAIL");
+    if (!ok) mx_test_failures++;
+    mx_mesh_free(&m);
+}
+
+/* Quads, a pentagon, negative indices, usemtl groups, an MTL with map_Kd and a texture. */
+static void test_obj_features(void) {
+    write_text("tex_a.png", ""); /* existence is all the loader checks; decoding happens later */
+    write_text("feat.mtl", "newmtl red\nKd 1 0 0\nmap_Kd -s 1 1 1 tex_a.png\nnewmtl blue\nmap_Kd missing.png\n");
+    write_text("feat.obj", "mtllib feat.mtl\n"
+                           "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 1.5 0\n"
+                           "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.5 1\n"
+                           "vn 0 0 1\n"
+                           "usemtl red\nf 1/1/1 2/2/1 3/3/1 4/4/1\n"
+                           "usemtl blue\nf -5/-5/-1 -4/-4/-1 -3/-3/-1 -1/-1/-1 -2/-2/-1  # pentagon\n"
+                           "usemtl red\nf 1//1 2//1 3//1\n");
+    char p[512];
+    tmp_path(p, sizeof p, "feat.obj");
+    mx_mesh m;
+    mx_status st;
+    int rc = mx_mesh_load(p, &m, &st);
+    CHECK(rc == 0);
+    if (rc) {
+        printf("feat.obj: %s\n", st.msg);
+        return;
+    }
+    CHECK(m.nverts == 5 && m.nfaces == 2 + 3 + 1 && m.nuv == 5 && m.nnrm == 1);
+    CHECK(m.nmat == 2 && !strcmp(m.mats[0].name, "red") && !strcmp(m.mats[1].name, "blue"));
+    CHECK(strstr(m.mats[0].texture_path, "tex_a.png") != NULL);
+    CHECK(m.mats[1].texture_path[0] == 0); /* missing texture: warning, no path */
+    const int32_t want_faces[] = {0, 1, 2, 0, 2, 3, 0, 1, 2, 0, 2, 4, 0, 4, 3, 0, 1, 2};
+    const int32_t want_mat[] = {0, 0, 1, 1, 1, 0};
+    CHECK(!memcmp(m.faces, want_faces, sizeof want_faces));
+    CHECK(m.face_mat && !memcmp(m.face_mat, want_mat, sizeof want_mat));
+    CHECK(m.face_uv && m.face_uv[3] == 0 && m.face_uv[11] == 4 && m.face_uv[15] == -1); /* last face has no vt */
+    CHECK(m.face_nrm && m.face_nrm[17] == 0);
+    mx_mesh_free(&m);
+}
+
+/* A file that must fail with a message that names it and `expect`. */
+static void expect_fail(const char *name, const char *text, const char *expect) {
+    if (text) write_text(name, text);
+    char p[512];
+    tmp_path(p, sizeof p, name);
+    mx_mesh m;
+    mx_status st = {0};
+    int rc = mx_mesh_load(p, &m, &st);
+    int ok = rc == -1 && st.code != 0 && strstr(st.msg, name) && strstr(st.msg, expect) && m.pos == NULL;
+    printf("hostile %-22s -> %s %s\n", name, st.msg, ok ? "ok" : "FAIL");
+    if (!ok) mx_test_failures++;
+    if (rc == 0) mx_mesh_free(&m);
+}
+
+static void test_hostile(void) {
+    expect_fail("empty.obj", "", "no faces");
+    expect_fail("verts_only.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no faces");
+    expect_fail("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite");
+    expect_fail("inf.obj", "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite");
+    expect_fail("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "out of range");
+    expect_fail("neg_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", "bad face corner");
+    expect_fail("zero_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "bad face corner");
+    expect_fail("uv_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n", "texcoord index");
+    expect_fail("line_face.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n", "corners");
+    expect_fail("garbage.obj", "v 0 zero 0\n", "bad number");
+    expect_fail("huge_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n", "bad face corner");
+    expect_fail("bad.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n", "cannot read");
+    expect_fail("missing.obj", NULL, "cannot open");
+    expect_fail("mesh.xyz", "1 2 3\n", "unknown mesh format");
+    /* A missing MTL is a warning; degenerate faces load and are counted. */
+    write_text("degen.obj", "mtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\nf 1 2 4\n");
+    char p[512];
+    tmp_path(p, sizeof p, "degen.obj");
+    mx_mesh m;
+    mx_status st;
+    int rc = mx_mesh_load(p, &m, &st);
+    CHECK(rc == 0);
+    if (rc == 0) {
+        mx_mesh_topology t;
+        CHECK(mx_mesh_topology_compute(&m, 0, &t, NULL, &st) == 0);
+        CHECK(t.degenerate_faces == 2 && m.nmat == 1 && m.mats[0].texture_path[0] == 0);
+        mx_mesh_free(&m);
+    }
+    /* In-memory validation: NaN and out-of-range indices in a hand-built mesh. */
+    float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    int32_t faces[3] = {0, 1, 2};
+    mx_material mat = {.name = "m"};
+    mx_mesh h = {.nverts = 3, .nfaces = 1, .pos = pos, .faces = faces, .nmat = 1, .mats = &mat};
+    CHECK(mx_mesh_validate(&h, &st) == 0);
+    faces[2] = 3;
+    CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "out of range"));
+    faces[2] = 2;
+    pos[4] = NAN;
+    CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "NaN"));
+    h.nfaces = 0;
+    CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "empty"));
+}
+
+static void test_normalize(void) {
+    float pos[12] = {1, 2, 10, 3, 2, 10, 1, 6, 10, 1, 2, 14};
+    int32_t faces[6] = {0, 1, 2, 0, 2, 3};
+    mx_material mat = {.name = "m"};
+    mx_mesh m = {.nverts = 4, .nfaces = 2, .pos = pos, .faces = faces, .nmat = 1, .mats = &mat};
+    mx_status st;
+    float *p, c[3], s;
+    CHECK(mx_mesh_normalized(&m, MX_UP_Y, &p, c, &s, &st) == 0);
+    double rmax = 0, lo[3] = {1e9, 1e9, 1e9}, hi[3] = {-1e9, -1e9, -1e9};
+    for (int v = 0; v < 4; v++) {
+        double r = 0;
+        for (int k = 0; k < 3; k++) {
+            r += (double)p[3 * v + k] * p[3 * v + k];
+            lo[k] = fmin(lo[k], p[3 * v + k]);
+            hi[k] = fmax(hi[k], p[3 * v + k]);
+        }
+        rmax = fmax(rmax, sqrt(r));
+    }
+    CHECK(fabs(rmax - 1) < 1e-6);
+    for (int k = 0; k < 3; k++) CHECK(fabs(lo[k] + hi[k]) < 1e-6);
+    CHECK(c[0] == 2 && c[1] == 4 && c[2] == 12);
+    CHECK(pos[0] == 1 && pos[11] == 14); /* the mesh is untouched */
+    free(p);
+    /* z-up: the vertex highest in z ends highest in y. */
+    CHECK(mx_mesh_normalized(&m, MX_UP_Z, &p, NULL, NULL, &st) == 0);
+    CHECK(p[3 * 3 + 1] > p[1] && p[3 * 3 + 1] > p[3 * 2 + 1] && fabsf(p[3 * 2 + 2] - p[2]) > 0.5f);
+    free(p);
+    float *n;
+    CHECK(mx_mesh_face_normals(&m, pos, &n, &st) == 0);
+    CHECK(n[0] == 0 && n[1] == 0 && n[2] == 1); /* triangle in z = 10, counter-clockwise from +z */
+    free(n);
+}
+
+static void test_images(void) {
+    mx_image img, back;
+    mx_status st;
+    CHECK(mx_image_alloc(&img, 7, 5, 3, &st) == 0);
+    for (int i = 0; i < 7 * 5 * 3; i++) img.data[i] = (float)(i % 11) / 10.f;
+    img.data[0] = -0.5f; /* clamped */
+    char p[512];
+    tmp_path(p, sizeof p, "img.png");
+    CHECK(mx_io_write_png(p, &img, &st) == 0);
+    CHECK(mx_io_read_image(p, &back, &st) == 0);
+    CHECK(back.w == 7 && back.h == 5 && back.c == 3);
+    float maxerr = 0;
+    for (int i = 0; back.data && i < 7 * 5 * 3; i++) {
+        float want = fminf(fmaxf(img.data[i], 0.f), 1.f);
+        maxerr = fmaxf(maxerr, fabsf(back.data[i] - want));
+    }
+    CHECK(maxerr <= 0.5f / 255.f + 1e-6f);
+    mx_image_free(&back);
+    unsigned char *bytes;
+    size_t len;
+    CHECK(mx_io_encode_png(&img, &bytes, &len, &st) == 0 && len > 8 && !memcmp(bytes, "\x89PNG", 4));
+    CHECK(mx_io_decode_image(bytes, len, "memory", &back, &st) == 0 && back.w == 7 && back.h == 5);
+    mx_image_free(&back);
+    CHECK(mx_io_decode_image(bytes, len / 2, "half png", &back, &st) == -1 && strstr(st.msg, "half png"));
+    free(bytes);
+    CHECK(mx_io_decode_image("GIF89a", 6, "gif bytes", &back, &st) == -1 && strstr(st.msg, "not a PNG"));
+    tmp_path(p, sizeof p, "img.exr");
+    img.data[0] = 3.25f; /* float EXR keeps values outside [0,1] */
+    CHECK(mx_io_write_exr(p, &img, &st) == 0);
+    CHECK(mx_io_read_image(p, &back, &st) == 0 && back.w == 7 && back.c == 3);
+    CHECK(back.data && !memcmp(back.data, img.data, sizeof(float) * 7 * 5 * 3));
+    mx_image_free(&back);
+    tmp_path(p, sizeof p, "not_an_image.png");
+    write_text("not_an_image.png", "hello");
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "not_an_image.png") && back.data == NULL);
+    tmp_path(p, sizeof p, "no_such_dir/x.png");
+    CHECK(mx_io_write_png(p, &img, &st) == -1 && st.code == MX_EIO);
+    mx_image_free(&img);
+}
+
+int main(void) {
+    mx_log_set_level(MX_LOG_ERROR); /* the hostile files warn on purpose */
+    snprintf(tmpdir, sizeof tmpdir, "/tmp/matex_meshio_XXXXXX");
+    if (!mkdtemp(tmpdir)) {
+        perror("mkdtemp");
+        return 2;
+    }
+    for (size_t i = 0; i < sizeof assets / sizeof assets[0]; i++) check_asset(&assets[i]);
+    test_obj_features();
+    test_hostile();
+    test_normalize();
+    test_images();
+    char cmd[300];
+    snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
+    if (system(cmd) != 0) printf("warning: could not remove %s\n", tmpdir);
+    return mx_test_finish("test_geom_meshio");
+}

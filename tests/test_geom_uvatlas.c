@@ -1,0 +1,410 @@
+/* UV atlas: on hand-made meshes (cube, sphere, capped cylinder, open height field, a helicoid
+ * whose projection folds over itself, two disjoint parts with a degenerate face) and on the
+ * shared assets without UVs, checks that every UV is in [0,1], that no texel centre lies inside
+ * two triangles (no chart overlaps itself or another), that charts rasterised conservatively
+ * are at least `gutter` empty texels apart, that the reported utilisation matches the UVs, and
+ * that the result is deterministic. Prints charts / utilisation / stretch / time per mesh. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/geom/uvatlas.h"
+#include "../pipeline/io/io.h"
+#include "util_test.h"
+
+#define SIZE 1024
+#define GUTTER 2
+
+/* ---------- hand-made meshes ---------- */
+
+typedef struct builder {
+    mx_mesh m;
+    int cap_v, cap_f;
+} builder;
+
+static int add_vertex(builder *b, double x, double y, double z) {
+    if (b->m.nverts == b->cap_v) {
+        b->cap_v = b->cap_v ? 2 * b->cap_v : 64;
+        b->m.pos = realloc(b->m.pos, 3 * (size_t)b->cap_v * sizeof *b->m.pos);
+    }
+    float *p = b->m.pos + 3 * (size_t)b->m.nverts;
+    p[0] = (float)x, p[1] = (float)y, p[2] = (float)z;
+    return b->m.nverts++;
+}
+
+static void add_face(builder *b, int a, int c, int d) {
+    if (b->m.nfaces == b->cap_f) {
+        b->cap_f = b->cap_f ? 2 * b->cap_f : 64;
+        b->m.faces = realloc(b->m.faces, 3 * (size_t)b->cap_f * sizeof *b->m.faces);
+    }
+    int32_t *f = b->m.faces + 3 * (size_t)b->m.nfaces++;
+    f[0] = a, f[1] = c, f[2] = d;
+}
+
+/* Quad a-b-c-d (counter-clockwise) as two triangles. */
+static void add_quad(builder *b, int a, int c, int d, int e) {
+    add_face(b, a, c, d);
+    add_face(b, a, d, e);
+}
+
+static void free_mesh(mx_mesh *m) {
+    free(m->pos), free(m->faces), free(m->uv), free(m->face_uv), free(m->nrm), free(m->face_nrm);
+    free(m->mats), free(m->face_mat);
+    memset(m, 0, sizeof *m);
+}
+
+static mx_mesh make_cube(void) {
+    builder b = {0};
+    for (int i = 0; i < 8; i++) add_vertex(&b, i & 1, (i >> 1) & 1, (i >> 2) & 1);
+    add_quad(&b, 0, 2, 3, 1); /* z = 0, facing -z */
+    add_quad(&b, 4, 5, 7, 6); /* z = 1 */
+    add_quad(&b, 0, 1, 5, 4); /* y = 0 */
+    add_quad(&b, 2, 6, 7, 3); /* y = 1 */
+    add_quad(&b, 0, 4, 6, 2); /* x = 0 */
+    add_quad(&b, 1, 3, 7, 5); /* x = 1 */
+    return b.m;
+}
+
+/* Latitude-longitude sphere with a single vertex at each pole. */
+static mx_mesh make_sphere(int nlat, int nlon) {
+    builder b = {0};
+    int south = add_vertex(&b, 0, 0, -1);
+    for (int i = 1; i < nlat; i++)
+        for (int j = 0; j < nlon; j++) {
+            double th = M_PI * i / nlat, ph = 2 * M_PI * j / nlon;
+            add_vertex(&b, sin(th) * cos(ph), sin(th) * sin(ph), -cos(th));
+        }
+    int north = add_vertex(&b, 0, 0, 1);
+#define RING(i, j) (1 + ((i) - 1) * nlon + ((j) % nlon))
+    for (int j = 0; j < nlon; j++) add_face(&b, south, RING(1, j + 1), RING(1, j));
+    for (int i = 1; i < nlat - 1; i++)
+        for (int j = 0; j < nlon; j++) add_quad(&b, RING(i, j), RING(i, j + 1), RING(i + 1, j + 1), RING(i + 1, j));
+    for (int j = 0; j < nlon; j++) add_face(&b, RING(nlat - 1, j), RING(nlat - 1, j + 1), north);
+#undef RING
+    return b.m;
+}
+
+/* Closed cylinder of radius 0.3 and height 2 (a long thin shape), caps fanned from a centre. */
+static mx_mesh make_cylinder(int nseg, int nrings) {
+    builder b = {0};
+    for (int i = 0; i <= nrings; i++)
+        for (int j = 0; j < nseg; j++) {
+            double ph = 2 * M_PI * j / nseg;
+            add_vertex(&b, 0.3 * cos(ph), 0.3 * sin(ph), 2.0 * i / nrings - 1);
+        }
+    int bottom = add_vertex(&b, 0, 0, -1), top = add_vertex(&b, 0, 0, 1);
+    for (int i = 0; i < nrings; i++)
+        for (int j = 0; j < nseg; j++) {
+            int a = i * nseg + j, c = i * nseg + (j + 1) % nseg;
+            add_quad(&b, a, c, c + nseg, a + nseg);
+        }
+    for (int j = 0; j < nseg; j++) {
+        add_face(&b, bottom, (j + 1) % nseg, j);
+        add_face(&b, top, nrings * nseg + j, nrings * nseg + (j + 1) % nseg);
+    }
+    return b.m;
+}
+
+/* Open height field z = bumps(x, y) over a square grid. */
+static mx_mesh make_terrain(int n) {
+    builder b = {0};
+    for (int i = 0; i <= n; i++)
+        for (int j = 0; j <= n; j++) {
+            double x = (double)j / n, y = (double)i / n;
+            add_vertex(&b, x, y, 0.15 * sin(9 * x) * cos(7 * y) + 0.05 * sin(31 * x + 17 * y));
+        }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            int a = i * (n + 1) + j;
+            add_quad(&b, a, a + 1, a + n + 2, a + n + 1);
+        }
+    return b.m;
+}
+
+/* A flat-ish spiral ramp of three turns: every normal is within 10 degrees of +z, so normal
+ * growing makes one chart, but its planar projection covers the same ring three times. */
+static mx_mesh make_helicoid(int nseg_per_turn, int turns) {
+    builder b = {0};
+    int n = nseg_per_turn * turns;
+    for (int j = 0; j <= n; j++) {
+        double ph = 2 * M_PI * j / nseg_per_turn, z = 0.05 * ph;
+        add_vertex(&b, 0.5 * cos(ph), 0.5 * sin(ph), z);
+        add_vertex(&b, 1.0 * cos(ph), 1.0 * sin(ph), z);
+    }
+    for (int j = 0; j < n; j++) add_quad(&b, 2 * j, 2 * j + 1, 2 * j + 3, 2 * j + 2);
+    return b.m;
+}
+
+/* Two separate open squares, one with a degenerate (zero-area) face, and an unused vertex. */
+static mx_mesh make_two_parts(void) {
+    builder b = {0};
+    for (int part = 0; part < 2; part++) {
+        double z = part * 3.0;
+        int a = add_vertex(&b, 0, 0, z), c = add_vertex(&b, 1, 0, z), d = add_vertex(&b, 1, 1, z),
+            e = add_vertex(&b, 0, 1, z);
+        add_quad(&b, a, c, d, e);
+        if (part == 1) add_face(&b, a, c, c);
+    }
+    add_vertex(&b, 9, 9, 9);
+    return b.m;
+}
+
+/* ---------- checks on the UVs ---------- */
+
+/* Charts as the UVs show them: faces sharing a UV index belong together (union-find). */
+static int find_root(int *parent, int x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+}
+
+static int *uv_components(const mx_mesh *m, int *count) {
+    int *parent = malloc((size_t)m->nuv * sizeof *parent), *comp = malloc((size_t)m->nfaces * sizeof *comp);
+    for (int i = 0; i < m->nuv; i++) parent[i] = i;
+    for (int f = 0; f < m->nfaces; f++)
+        for (int k = 1; k < 3; k++) {
+            int a = find_root(parent, m->face_uv[3 * f]), b = find_root(parent, m->face_uv[3 * f + k]);
+            if (a != b) parent[a < b ? b : a] = a < b ? a : b;
+        }
+    int *label = malloc((size_t)m->nuv * sizeof *label);
+    for (int i = 0; i < m->nuv; i++) label[i] = -1;
+    *count = 0;
+    for (int f = 0; f < m->nfaces; f++) {
+        int r = find_root(parent, m->face_uv[3 * f]);
+        if (label[r] < 0) label[r] = (*count)++;
+        comp[f] = label[r];
+    }
+    free(parent), free(label);
+    return comp;
+}
+
+static void face_texels(const mx_mesh *m, int f, double t[6]) {
+    for (int k = 0; k < 3; k++) {
+        const float *uv = m->uv + 2 * (size_t)m->face_uv[3 * f + k];
+        t[2 * k] = uv[0] * (double)SIZE;
+        t[2 * k + 1] = uv[1] * (double)SIZE;
+    }
+}
+
+/* Edge function of edge k at (x, y), sign-normalised so that the interior is positive. */
+static double edge_fn(const double t[6], int k, double orient, double x, double y) {
+    const double *p = t + 2 * k, *q = t + 2 * ((k + 1) % 3);
+    return orient * ((q[0] - p[0]) * (y - p[1]) - (q[1] - p[1]) * (x - p[0]));
+}
+
+static int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
+
+/* Conservative: marks every texel whose closed square meets the triangle; returns the number of
+ * texels already marked by another chart. */
+static long raster_conservative(const double t[6], int comp, int *owner) {
+    double orient = (t[2] - t[0]) * (t[5] - t[1]) - (t[4] - t[0]) * (t[3] - t[1]) >= 0 ? 1 : -1;
+    int x0 = clampi((int)floor(fmin(t[0], fmin(t[2], t[4]))), 0, SIZE - 1);
+    int x1 = clampi((int)floor(fmax(t[0], fmax(t[2], t[4]))), 0, SIZE - 1);
+    int y0 = clampi((int)floor(fmin(t[1], fmin(t[3], t[5]))), 0, SIZE - 1);
+    int y1 = clampi((int)floor(fmax(t[1], fmax(t[3], t[5]))), 0, SIZE - 1);
+    long clashes = 0;
+    for (int y = y0; y <= y1; y++)
+        for (int x = x0; x <= x1; x++) {
+            int inside = 1;
+            for (int k = 0; k < 3 && inside; k++) {
+                double best = -INFINITY;
+                for (int c = 0; c < 4; c++) best = fmax(best, edge_fn(t, k, orient, x + (c & 1), y + (c >> 1)));
+                inside = best >= 0;
+            }
+            if (!inside) continue;
+            int *o = &owner[(size_t)y * SIZE + x];
+            if (*o >= 0 && *o != comp) clashes++;
+            else *o = comp;
+        }
+    return clashes;
+}
+
+/* Counts texel centres strictly inside the triangle into `hits`. */
+static void raster_centres(const double t[6], unsigned char *hits) {
+    double orient = (t[2] - t[0]) * (t[5] - t[1]) - (t[4] - t[0]) * (t[3] - t[1]) >= 0 ? 1 : -1;
+    int x0 = clampi((int)floor(fmin(t[0], fmin(t[2], t[4]))), 0, SIZE - 1);
+    int x1 = clampi((int)floor(fmax(t[0], fmax(t[2], t[4]))), 0, SIZE - 1);
+    int y0 = clampi((int)floor(fmin(t[1], fmin(t[3], t[5]))), 0, SIZE - 1);
+    int y1 = clampi((int)floor(fmax(t[1], fmax(t[3], t[5]))), 0, SIZE - 1);
+    for (int y = y0; y <= y1; y++)
+        for (int x = x0; x <= x1; x++) {
+            int inside = 1;
+            for (int k = 0; k < 3 && inside; k++) inside = edge_fn(t, k, orient, x + 0.5, y + 0.5) > 0;
+            if (inside && hits[(size_t)y * SIZE + x] < 255) hits[(size_t)y * SIZE + x]++;
+        }
+}
+
+/* Texels owned by one chart that have a texel of another chart within `gutter` (Chebyshev). */
+static long gutter_violations(const int *owner) {
+    long bad = 0;
+    for (int y = 0; y < SIZE; y++)
+        for (int x = 0; x < SIZE; x++) {
+            int o = owner[(size_t)y * SIZE + x];
+            if (o < 0) continue;
+            for (int dy = -GUTTER; dy <= GUTTER; dy++)
+                for (int dx = -GUTTER; dx <= GUTTER; dx++) {
+                    int yy = y + dy, xx = x + dx;
+                    if (yy < 0 || yy >= SIZE || xx < 0 || xx >= SIZE) continue;
+                    int q = owner[(size_t)yy * SIZE + xx];
+                    if (q >= 0 && q != o) bad++;
+                }
+        }
+    return bad;
+}
+
+static void check_atlas(const char *name, const mx_mesh *m, const mx_uvatlas_report *r) {
+    CHECK(m->nuv > 0 && m->uv && m->face_uv);
+    if (!(m->nuv > 0 && m->uv && m->face_uv)) return;
+    int range_ok = 1;
+    for (size_t i = 0; i < 3 * (size_t)m->nfaces; i++) range_ok &= m->face_uv[i] >= 0 && m->face_uv[i] < m->nuv;
+    CHECK(range_ok);
+    if (!range_ok) return;
+    int in_unit = 1;
+    for (size_t i = 0; i < 2 * (size_t)m->nuv; i++) in_unit &= m->uv[i] >= 0.0f && m->uv[i] <= 1.0f;
+    CHECK(in_unit);
+
+    int ncomp = 0;
+    int *comp = uv_components(m, &ncomp);
+    int *owner = malloc((size_t)SIZE * SIZE * sizeof *owner);
+    unsigned char *hits = calloc((size_t)SIZE * SIZE, 1);
+    for (size_t i = 0; i < (size_t)SIZE * SIZE; i++) owner[i] = -1;
+    long clashes = 0, doubles = 0;
+    double covered = 0;
+    for (int f = 0; f < m->nfaces; f++) {
+        double t[6];
+        face_texels(m, f, t);
+        covered += 0.5 * fabs((t[2] - t[0]) * (t[5] - t[1]) - (t[4] - t[0]) * (t[3] - t[1]));
+        clashes += raster_conservative(t, comp[f], owner);
+        raster_centres(t, hits);
+    }
+    for (size_t i = 0; i < (size_t)SIZE * SIZE; i++) doubles += hits[i] > 1;
+    long near = gutter_violations(owner);
+    double util = covered / ((double)SIZE * SIZE);
+    printf("%-10s %7d faces %5d charts (%5d pieces)  utilisation %.3f  stretch mean %.3f max %.2f  %.3f s\n",
+           name, m->nfaces, r->charts, ncomp, r->utilisation, r->stretch_mean, r->stretch_max, r->seconds);
+    if (clashes || doubles || near)
+        printf("  %s: %ld texels shared by two charts, %ld texel centres in two triangles, %ld gutter violations\n",
+               name, clashes, doubles, near);
+    CHECK(clashes == 0);
+    CHECK(doubles == 0);
+    CHECK(near == 0);
+    CHECK(ncomp <= r->charts); /* every chart is one piece; pieces touching at a vertex merge */
+    CHECK(fabs(util - r->utilisation) < 1e-3);
+    CHECK(r->stretch_mean >= 1 - 1e-3 && r->stretch_mean <= r->stretch_max + 1e-9);
+    free(comp), free(owner), free(hits);
+}
+
+/* Builds the atlas twice (the second on a copy) and checks both runs agree bit for bit. */
+static void run_case(const char *name, mx_mesh *m, double min_util) {
+    mx_mesh copy = *m;
+    copy.pos = malloc(3 * (size_t)m->nverts * sizeof *copy.pos);
+    copy.faces = malloc(3 * (size_t)m->nfaces * sizeof *copy.faces);
+    memcpy(copy.pos, m->pos, 3 * (size_t)m->nverts * sizeof *copy.pos);
+    memcpy(copy.faces, m->faces, 3 * (size_t)m->nfaces * sizeof *copy.faces);
+    copy.nrm = NULL, copy.face_nrm = NULL, copy.mats = NULL, copy.face_mat = NULL;
+    copy.nnrm = 0, copy.nmat = 0;
+    mx_status st = {0};
+    mx_uvatlas_report r = {0}, r2 = {0};
+    int rc = mx_uvatlas_build(m, NULL, &r, &st);
+    if (rc) fprintf(stderr, "%s: %s\n", name, st.msg);
+    CHECK(rc == 0);
+    if (rc == 0) {
+        check_atlas(name, m, &r);
+        CHECK(r.utilisation >= min_util);
+        CHECK(mx_uvatlas_build(&copy, NULL, &r2, &st) == 0);
+        CHECK(copy.nuv == m->nuv && r2.charts == r.charts);
+        if (copy.nuv == m->nuv && copy.uv) {
+            CHECK(memcmp(copy.uv, m->uv, 2 * (size_t)m->nuv * sizeof *m->uv) == 0);
+            CHECK(memcmp(copy.face_uv, m->face_uv, 3 * (size_t)m->nfaces * sizeof *m->face_uv) == 0);
+        }
+    }
+    free_mesh(&copy);
+}
+
+static void test_hand_made(void) {
+    struct {
+        const char *name;
+        mx_mesh m;
+        double min_util;
+    } cases[] = {
+        {"cube", make_cube(), 0.5},           {"sphere", make_sphere(24, 48), 0.5},
+        {"cylinder", make_cylinder(48, 20), 0.5}, {"terrain", make_terrain(80), 0.5},
+        {"helicoid", make_helicoid(64, 3), 0.3}, {"two parts", make_two_parts(), 0.3},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        run_case(cases[i].name, &cases[i].m, cases[i].min_util);
+        free_mesh(&cases[i].m);
+    }
+}
+
+/* The helicoid has to be split: a single chart would cover its ring three times. */
+static void test_fold_is_split(void) {
+    mx_mesh m = make_helicoid(64, 3);
+    mx_uvatlas_report r = {0};
+    mx_status st = {0};
+    CHECK(mx_uvatlas_build(&m, NULL, &r, &st) == 0);
+    CHECK(r.charts >= 3);
+    free_mesh(&m);
+}
+
+static void test_bad_input(void) {
+    mx_status st = {0};
+    mx_mesh m = make_cube();
+    m.faces[5] = 8; /* out of range */
+    CHECK(mx_uvatlas_build(&m, NULL, NULL, &st) == -1 && st.code == MX_EINPUT && strstr(st.msg, "face 1"));
+    CHECK(m.uv == NULL && m.face_uv == NULL && m.nuv == 0);
+    m.faces[5] = 3;
+    m.pos[4] = NAN;
+    CHECK(mx_uvatlas_build(&m, NULL, NULL, &st) == -1 && strstr(st.msg, "vertex 1"));
+    m.pos[4] = 0;
+    CHECK(mx_uvatlas_build(&m, NULL, NULL, &st) == 0);
+    CHECK(mx_uvatlas_build(&m, NULL, NULL, &st) == -1 && strstr(st.msg, "already has UVs"));
+    free_mesh(&m);
+
+    mx_mesh sphere = make_sphere(8, 16);
+    mx_uvatlas_opts o = mx_uvatlas_defaults();
+    o.gutter = -1;
+    CHECK(mx_uvatlas_build(&sphere, &o, NULL, &st) == -1 && st.code == MX_EUSAGE);
+    o = mx_uvatlas_defaults();
+    o.max_chart_angle = 95;
+    CHECK(mx_uvatlas_build(&sphere, &o, NULL, &st) == -1 && st.code == MX_EUSAGE);
+    free_mesh(&sphere);
+    /* Too many charts for the texture: 32x32 texels with a 2-texel gutter hold at most 64
+     * charts (each takes at least 4x4), the terrain makes more than 64. */
+    mx_mesh terrain = make_terrain(80);
+    o = mx_uvatlas_defaults();
+    o.texture_size = 32;
+    CHECK(mx_uvatlas_build(&terrain, &o, NULL, &st) == -1 && st.code == MX_EINPUT && strstr(st.msg, "do not fit"));
+    CHECK(terrain.uv == NULL && terrain.face_uv == NULL);
+    free_mesh(&terrain);
+
+    mx_mesh empty = {0};
+    CHECK(mx_uvatlas_build(&empty, NULL, NULL, &st) == -1 && st.code == MX_EINPUT);
+}
+
+/* The shared meshes that come without UVs (assets/MANIFEST.md). */
+static void test_assets(void) {
+    static const char *const files[][2] = {
+        {"spot_ply", "spot_ply/spot.ply"}, {"boot", "boot/boot.obj"},       {"koala", "koala/koala.obj"},
+        {"mountain", "mountain/mountain.obj"}, {"hammer", "hammer/hammer.obj"},
+    };
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        char path[2048];
+        snprintf(path, sizeof path, "%s/assets/%s", mx_shared_dir(), files[i][1]);
+        mx_mesh m = {0};
+        mx_status st = {0};
+        int rc = mx_io_read_mesh(path, &m, &st);
+        if (rc) fprintf(stderr, "%s\n", st.msg);
+        CHECK(rc == 0);
+        if (rc == 0) run_case(files[i][0], &m, 0.5);
+        free_mesh(&m);
+    }
+}
+
+int main(void) {
+    test_hand_made();
+    test_fold_is_split();
+    test_bad_input();
+    test_assets();
+    return mx_test_finish("geom_uvatlas");
+}

@@ -1,0 +1,225 @@
+/* CLIP text encoder against transformers 4.39: golden/clip_tiny with fp32 weights (vs outputs)
+ * and fp16 weights (vs outputs_fp16w), every hidden state, the pooled output and the last
+ * hidden state ≤ 1e-4 rel L2; the scalar and the best kernels; a dry run sizes the arena.
+ * With MATEX_FULL=1 also golden/sd15_clip (real CLIP ViT-L/14 size, golden-v1 weights). */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/clip.h"
+#include "../weights/golden_rule.h"
+#include "../weights/safetensors.h"
+#include "util_test.h"
+
+static char *read_text(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *buf = n >= 0 ? malloc((size_t)n + 1) : NULL;
+    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+        free(buf);
+        buf = NULL;
+    }
+    fclose(f);
+    if (buf) {
+        buf[n] = 0;
+        *len = (size_t)n;
+    }
+    return buf;
+}
+
+static int load_config(const char *dir, mx_clip_config *cfg) {
+    char path[1024];
+    size_t len;
+    snprintf(path, sizeof path, "%s/config.json", dir);
+    char *text = read_text(path, &len);
+    mx_status st = {0};
+    int ok = text && mx_clip_config_parse(cfg, text, len, path, &st) == 0;
+    if (!ok) fprintf(stderr, "%s: %s\n", path, text ? st.msg : "cannot read");
+    free(text);
+    return ok ? 0 : -1;
+}
+
+/* input_ids [B, T] of dir/inputs.safetensors as int32. */
+static int32_t *load_ids(const char *dir, int *B, int *T) {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/inputs.safetensors", dir);
+    mx_safetensors sf;
+    mx_status st = {0};
+    if (mx_st_open(&sf, path, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return NULL;
+    }
+    const mx_st_tensor *t = mx_st_find(&sf, "input_ids");
+    float *f = t && t->ndim == 2 ? mx_st_to_f32(&sf, t, &st) : NULL;
+    int32_t *ids = NULL;
+    if (f) {
+        *B = (int)t->shape[0];
+        *T = (int)t->shape[1];
+        ids = malloc(sizeof(int32_t) * (size_t)(*B) * (size_t)(*T));
+        for (int i = 0; ids && i < *B * *T; i++) ids[i] = (int32_t)f[i];
+    }
+    free(f);
+    mx_st_close(&sf);
+    return ids;
+}
+
+/* Runs the model on the golden inputs and compares every output of dir/outputs_file. */
+static void run_and_compare(const mx_clip *m, const mx_ctx *c, const char *dir, const char *outputs_file,
+                            const char *label) {
+    int B, T;
+    int32_t *ids = load_ids(dir, &B, &T);
+    CHECK(ids != NULL);
+    if (!ids) return;
+    int L = m->cfg.num_hidden_layers, C = m->cfg.hidden_size;
+    size_t MC = (size_t)B * T * C;
+    float *last = malloc(MC * sizeof(float)), *pooled = malloc((size_t)B * C * sizeof(float));
+    float **hs = calloc((size_t)L + 1, sizeof *hs);
+    for (int i = 0; i <= L; i++) hs[i] = malloc(MC * sizeof(float));
+    mx_status st = {0};
+    mx_arena measure, arena;
+    mx_arena_measure(&measure);
+    CHECK(mx_clip_forward(m, c, &measure, ids, B, T, last, pooled, hs, &st) == 0);
+    CHECK(measure.peak > 0);
+    int ok = mx_arena_create(&arena, measure.peak, &st) == 0 &&
+             mx_clip_forward(m, c, &arena, ids, B, T, last, pooled, hs, &st) == 0;
+    if (!ok) fprintf(stderr, "%s: %s\n", label, st.msg);
+    CHECK(ok);
+    char path[1024], name[64], msg[160];
+    snprintf(path, sizeof path, "%s/%s", dir, outputs_file);
+    mx_safetensors sf;
+    if (ok && mx_st_open(&sf, path, &st) == 0) {
+        for (int i = -2; i <= L; i++) {
+            const float *got = i == -2 ? last : i == -1 ? pooled : hs[i];
+            size_t n = i == -1 ? (size_t)B * C : MC;
+            if (i < 0)
+                snprintf(name, sizeof name, "%s", i == -2 ? "last_hidden_state" : "pooler_output");
+            else
+                snprintf(name, sizeof name, "hidden_states.%d", i);
+            const mx_st_tensor *t = mx_st_find(&sf, name);
+            float *want = t ? mx_st_to_f32(&sf, t, &st) : NULL;
+            CHECK(want != NULL && t->nbytes / 4 == n);
+            snprintf(msg, sizeof msg, "%s %s", label, name);
+            if (want && t->nbytes / 4 == n) mx_check_close(msg, got, want, n, 1e-4);
+            free(want);
+        }
+        mx_st_close(&sf);
+    } else {
+        CHECK(0);
+    }
+    mx_arena_destroy(&arena);
+    for (int i = 0; i <= L; i++) free(hs[i]);
+    free(hs);
+    free(last);
+    free(pooled);
+    free(ids);
+}
+
+static void test_tiny(const char *weights_file, const char *outputs_file, const mx_ctx *c, const char *label) {
+    char dir[1024], path[1100];
+    snprintf(dir, sizeof dir, "%s/golden/clip_tiny", mx_shared_dir());
+    snprintf(path, sizeof path, "%s/%s", dir, weights_file);
+    mx_clip_config cfg;
+    CHECK(load_config(dir, &cfg) == 0);
+    CHECK(cfg.eos_token_id == 999 && cfg.num_hidden_layers == 2);
+    mx_safetensors sf;
+    mx_status st = {0};
+    mx_binder b;
+    mx_clip m;
+    if (mx_st_open(&sf, path, &st) || mx_binder_st(&b, &sf, "", &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        CHECK(0);
+        return;
+    }
+    int ok = mx_clip_load(&m, &cfg, &b, &st) == 0;
+    if (!ok) fprintf(stderr, "%s\n", st.msg);
+    CHECK(ok);
+    mx_st_close(&sf); /* the safetensors binder keeps its own copies */
+    if (ok) run_and_compare(&m, c, dir, outputs_file, label);
+    mx_clip_free(&m);
+    mx_binder_free(&b);
+}
+
+/* Loading errors name the tensor; an enumerating binder lists every parameter. */
+static void test_enumerate_and_errors(void) {
+    mx_clip_config cfg;
+    mx_clip_config_sd15(&cfg);
+    mx_binder b;
+    mx_status st = {0};
+    mx_clip m;
+    CHECK(mx_binder_enum(&b, &st) == 0);
+    CHECK(mx_clip_load(&m, &cfg, &b, &st) == 0);
+    CHECK(mx_binder_enum_count(&b) == 196); /* golden sd15_clip: 196 float tensors */
+    CHECK(mx_binder_enum_bytes(&b) == (size_t)123060480 * 4);
+    mx_clip_free(&m);
+    mx_binder_free(&b);
+    const char *bad = "{\"hidden_size\": 30, \"num_attention_heads\": 4}";
+    CHECK(mx_clip_config_parse(&cfg, bad, strlen(bad), "bad.json", &st) != 0);
+    CHECK(strstr(st.msg, "bad.json") != NULL);
+    const char *act = "{\"hidden_act\": \"relu\"}";
+    CHECK(mx_clip_config_parse(&cfg, act, strlen(act), "act.json", &st) != 0);
+}
+
+/* A binder that makes each parameter by the golden-v1 rule when it is asked for. */
+typedef struct golden_binder {
+    void **bufs;
+    size_t n;
+} golden_binder;
+
+static int bind_golden(mx_binder *b, const char *name, int ndim, const int64_t *shape, mx_wptr *out,
+                       mx_status *st) {
+    golden_binder *g = b->impl;
+    size_t numel = 1;
+    for (int i = 0; i < ndim; i++) numel *= (size_t)shape[i];
+    float *p = malloc(numel * sizeof(float));
+    void **bufs = realloc(g->bufs, (g->n + 1) * sizeof *bufs);
+    if (!p || !bufs) {
+        free(p);
+        return mx_fail(st, MX_ENOMEM, "out of memory for %s", name);
+    }
+    g->bufs = bufs;
+    g->bufs[g->n++] = p;
+    mx_golden_v1_fill(name, ndim, shape, 1, p);
+    *out = mx_w_f32(p);
+    return 0;
+}
+
+static void test_sd15(const mx_ctx *c) {
+    char dir[1024];
+    snprintf(dir, sizeof dir, "%s/golden/sd15_clip", mx_shared_dir());
+    mx_clip_config cfg;
+    CHECK(load_config(dir, &cfg) == 0);
+    golden_binder g = {0};
+    mx_binder b = {0};
+    b.bind = bind_golden;
+    b.impl = &g;
+    mx_clip m;
+    mx_status st = {0};
+    int ok = mx_clip_load(&m, &cfg, &b, &st) == 0;
+    if (!ok) fprintf(stderr, "%s\n", st.msg);
+    CHECK(ok);
+    if (ok) run_and_compare(&m, c, dir, "outputs.safetensors", "sd15");
+    mx_clip_free(&m);
+    for (size_t i = 0; i < g.n; i++) free(g.bufs[i]);
+    free(g.bufs);
+}
+
+int main(void) {
+    mx_ctx scalar, best;
+    mx_status st = {0};
+    if (mx_ctx_create(&scalar, 1, MX_ISA_SCALAR, 16 << 20, &st) || mx_ctx_create(&best, 1, mx_cpu_best_isa(), 16 << 20, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return 1;
+    }
+    test_tiny("model.safetensors", "outputs.safetensors", &scalar, "fp32 scalar");
+    test_tiny("model.safetensors", "outputs.safetensors", &best, "fp32 best");
+    test_tiny("model.fp16.safetensors", "outputs_fp16w.safetensors", &best, "fp16w best");
+    test_enumerate_and_errors();
+    const char *full = getenv("MATEX_FULL");
+    if (full && !strcmp(full, "1")) test_sd15(&best);
+    mx_ctx_destroy(&scalar);
+    mx_ctx_destroy(&best);
+    return mx_test_finish("test_nn_clip");
+}

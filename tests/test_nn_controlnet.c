@@ -1,0 +1,212 @@
+/* ControlNetModel against the golden vectors of controlnet_tiny and controlnet_mini (fp32 and
+ * fp16 weights, conditioning scales 1.0 and 0.5), the accumulate mode, and the fp16 UNet fed
+ * with residuals of the fp16 ControlNet (how outputs_fp16w of unet_* were made). */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/unet.h"
+#include "nn_golden.h"
+
+typedef struct cn_case {
+    mx_controlnet *m;
+    mx_binder b;
+    mx_safetensors wf;
+    mx_unet_config cfg;
+} cn_case;
+
+static int load_cn(cn_case *k, const char *net, const char *wfile) {
+    mx_status st;
+    size_t len;
+    memset(k, 0, sizeof *k);
+    char *cfg = golden_text(net, "config.json", &len);
+    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
+    int rc = mx_unet_config_parse(&k->cfg, cfg, len, net, &st);
+    free(cfg);
+    if (rc || golden_open(&k->wf, net, wfile) || mx_binder_st(&k->b, &k->wf, "", &st) ||
+        mx_controlnet_load(&k->m, &k->cfg, &k->b, &st)) {
+        fprintf(stderr, "%s: %s\n", net, st.msg);
+        return -1;
+    }
+    return 0;
+}
+
+static void free_cn(cn_case *k) {
+    mx_controlnet_free(k->m);
+    mx_binder_free(&k->b);
+    mx_st_close(&k->wf);
+}
+
+static int run_cn(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in, float **down, float *mid,
+                  int accumulate) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_controlnet_arena_bytes(m, in->B, in->H, in->W, in->T, &bytes, &st) || mx_arena_create(&a, bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    int rc = mx_controlnet_forward(c, m, in, down, mid, accumulate, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+typedef struct cn_inputs {
+    float *sample, *ehs, *ts, *cond;
+    mx_controlnet_input in;
+} cn_inputs;
+
+static int read_inputs(cn_inputs *x, const char *net) {
+    mx_safetensors f;
+    memset(x, 0, sizeof *x);
+    if (golden_open(&f, net, "inputs.safetensors")) return -1;
+    x->sample = golden_f32(&f, "sample", NULL);
+    x->ehs = golden_f32(&f, "encoder_hidden_states", NULL);
+    x->ts = golden_f32(&f, "timestep", NULL);
+    x->cond = golden_f32(&f, "controlnet_cond", NULL);
+    const mx_st_tensor *s = mx_st_find(&f, "sample"), *e = mx_st_find(&f, "encoder_hidden_states");
+    int ok = x->sample && x->ehs && x->ts && x->cond && s && e;
+    if (ok) {
+        mx_controlnet_input in = {x->sample, x->ts, x->ehs, x->cond, (int)s->shape[0], (int)s->shape[2],
+                                  (int)s->shape[3], (int)e->shape[1], 1.0f};
+        x->in = in;
+    }
+    mx_st_close(&f);
+    return ok ? 0 : -1;
+}
+
+static void free_inputs(cn_inputs *x) {
+    free(x->sample);
+    free(x->ehs);
+    free(x->ts);
+    free(x->cond);
+}
+
+/* Residual buffers for one call (n + 1: the last is the mid block's). */
+static float **alloc_residuals(const mx_unet_config *cfg, int B, int H, int W) {
+    int n = mx_unet_num_residuals(cfg), C, h, w;
+    float **r = calloc((size_t)n + 1, sizeof *r);
+    for (int i = 0; r && i <= n; i++) {
+        mx_unet_residual_shape(cfg, i, H, W, &C, &h, &w);
+        r[i] = calloc((size_t)B * C * h * w, sizeof(float));
+    }
+    return r;
+}
+
+static void free_residuals(float **r, const mx_unet_config *cfg) {
+    for (int i = 0; r && i <= mx_unet_num_residuals(cfg); i++) free(r[i]);
+    free(r);
+}
+
+static void check_golden(const mx_ctx *c, const char *net, const char *wfile, const char *outfile) {
+    cn_case k;
+    cn_inputs x;
+    mx_safetensors out;
+    CHECK(load_cn(&k, net, wfile) == 0);
+    CHECK(read_inputs(&x, net) == 0);
+    CHECK(golden_open(&out, net, outfile) == 0);
+    if (!k.m || !x.sample) return;
+    int n = mx_unet_num_residuals(&k.cfg);
+    float **res = alloc_residuals(&k.cfg, x.in.B, x.in.H, x.in.W);
+    const float scales[2] = {1.0f, 0.5f};
+    for (int s = 0; s < 2; s++) {
+        x.in.scale = scales[s];
+        CHECK(run_cn(c, k.m, &x.in, res, res[n], 0) == 0);
+        for (int i = 0; i <= n; i++) {
+            char name[96], label[192];
+            if (i < n)
+                snprintf(name, sizeof name, "scale%d.down_block_res_sample.%d", s, i);
+            else
+                snprintf(name, sizeof name, "scale%d.mid_block_res_sample", s);
+            size_t nw;
+            float *want = golden_f32(&out, name, &nw);
+            CHECK(want != NULL);
+            snprintf(label, sizeof label, "%s %s %s", net, outfile, name);
+            if (want) mx_check_close(label, res[i], want, nw, 1e-4);
+            free(want);
+        }
+    }
+    /* accumulate: adding the scale-0.5 residuals twice onto zero gives the scale-1 ones */
+    float **acc = alloc_residuals(&k.cfg, x.in.B, x.in.H, x.in.W);
+    CHECK(run_cn(c, k.m, &x.in, acc, acc[n], 1) == 0);
+    CHECK(run_cn(c, k.m, &x.in, acc, acc[n], 1) == 0);
+    x.in.scale = 1.0f;
+    CHECK(run_cn(c, k.m, &x.in, res, res[n], 0) == 0);
+    int C, h, w;
+    mx_unet_residual_shape(&k.cfg, n, x.in.H, x.in.W, &C, &h, &w);
+    char label[128];
+    snprintf(label, sizeof label, "%s accumulate 2 x 0.5 vs 1.0 (mid)", net);
+    mx_check_close(label, acc[n], res[n], (size_t)x.in.B * C * h * w, 1e-6);
+    free_residuals(acc, &k.cfg);
+    free_residuals(res, &k.cfg);
+    free_inputs(&x);
+    mx_st_close(&out);
+    free_cn(&k);
+}
+
+/* unet_*'s outputs_fp16w with residuals were made from the fp16 ControlNet: chain both. */
+static void check_unet_fp16w_chain(const mx_ctx *c, const char *cn_net, const char *unet_net) {
+    mx_status st;
+    cn_case k;
+    cn_inputs x;
+    size_t len;
+    CHECK(load_cn(&k, cn_net, "diffusion_pytorch_model.fp16.safetensors") == 0);
+    CHECK(read_inputs(&x, cn_net) == 0);
+    if (!k.m || !x.sample) return;
+    char *cfgtext = golden_text(unet_net, "config.json", &len);
+    mx_unet_config ucfg;
+    mx_safetensors uwf, uout;
+    mx_binder ub;
+    mx_unet *u = NULL;
+    CHECK(cfgtext && mx_unet_config_parse(&ucfg, cfgtext, len, unet_net, &st) == 0);
+    free(cfgtext);
+    CHECK(golden_open(&uwf, unet_net, "diffusion_pytorch_model.fp16.safetensors") == 0);
+    CHECK(golden_open(&uout, unet_net, "outputs_fp16w.safetensors") == 0);
+    CHECK(mx_binder_st(&ub, &uwf, "", &st) == 0 && mx_unet_load(&u, &ucfg, &ub, &st) == 0);
+    if (!u) return;
+    int n = mx_unet_num_residuals(&k.cfg);
+    float **res = alloc_residuals(&k.cfg, x.in.B, x.in.H, x.in.W);
+    float *got = calloc((size_t)x.in.B * ucfg.out_channels * x.in.H * x.in.W, sizeof *got);
+    const float scales[2] = {1.0f, 0.5f};
+    for (int s = 0; s < 2; s++) {
+        x.in.scale = scales[s];
+        CHECK(run_cn(c, k.m, &x.in, res, res[n], 0) == 0);
+        mx_unet_input ui = {x.sample, x.ts, x.ehs, x.in.B, x.in.H, x.in.W, x.in.T, (const float *const *)res, res[n]};
+        size_t bytes, nw;
+        mx_arena a;
+        CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0 && mx_arena_create(&a, bytes, &st) == 0);
+        CHECK(mx_unet_forward(c, u, &ui, got, &a, &st) == 0);
+        mx_arena_destroy(&a);
+        char name[64], label[160];
+        snprintf(name, sizeof name, "out_controlnet_scale%d", s);
+        float *want = golden_f32(&uout, name, &nw);
+        CHECK(want != NULL);
+        snprintf(label, sizeof label, "%s fp16w %s (fp16 ControlNet chain)", unet_net, name);
+        if (want) mx_check_close(label, got, want, nw, 1e-4);
+        free(want);
+    }
+    free(got);
+    free_residuals(res, &k.cfg);
+    mx_unet_free(u);
+    mx_binder_free(&ub);
+    mx_st_close(&uwf);
+    mx_st_close(&uout);
+    free_inputs(&x);
+    free_cn(&k);
+}
+
+int main(void) {
+    mx_ctx c;
+    if (golden_ctx(&c)) return 1;
+    check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+    check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
+    check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+    check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
+    check_unet_fp16w_chain(&c, "controlnet_tiny", "unet_tiny");
+    check_unet_fp16w_chain(&c, "controlnet_mini", "unet_mini");
+    mx_ctx_destroy(&c);
+    return mx_test_finish("test_nn_controlnet");
+}

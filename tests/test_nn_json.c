@@ -1,0 +1,160 @@
+/* JSON reader: values, escapes (incl. surrogate pairs), numbers, errors with byte offsets,
+ * depth limit, and every truncation of a document failing cleanly. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../runtime/json.h"
+#include "util_test.h"
+
+static mx_json *parse(const char *s, mx_status *st) { return mx_json_parse(s, strlen(s), "test.json", st); }
+
+static void expect_error(const char *text, const char *fragment) {
+    mx_status st;
+    mx_status_clear(&st);
+    mx_json *j = parse(text, &st);
+    CHECK(j == NULL);
+    CHECK(st.code == MX_EINPUT);
+    CHECK(strstr(st.msg, "test.json") != NULL);
+    if (fragment && !strstr(st.msg, fragment)) {
+        fprintf(stderr, "error for %s: '%s' lacks '%s'\n", text, st.msg, fragment);
+        mx_test_failures++;
+    }
+    mx_json_free(j);
+}
+
+static void test_values(void) {
+    mx_status st;
+    const char *doc = " {\"a\": 1.5e2, \"b\": [true, false, null, -0.25, 0, 12345678901234],"
+                      " \"s\": \"x\\\"\\\\\\/\\b\\f\\n\\r\\t\", \"o\": {}, \"e\": [], \"n\": -3E-2} ";
+    mx_json *j = parse(doc, &st);
+    CHECK(j != NULL);
+    if (!j) return;
+    CHECK(mx_json_kind(j) == MX_JSON_OBJ);
+    CHECK(mx_json_len(j) == 6);
+    CHECK(mx_json_get_num(j, "a", 0) == 150.0);
+    CHECK(mx_json_get_num(j, "n", 0) == -0.03);
+    CHECK(mx_json_get_num(j, "missing", 7) == 7);
+    CHECK(mx_json_get_num(j, "s", 7) == 7); /* wrong type gives the default */
+    const mx_json *b = mx_json_get(j, "b");
+    CHECK(mx_json_kind(b) == MX_JSON_ARR && mx_json_len(b) == 6);
+    CHECK(mx_json_bool(mx_json_at(b, 0)) == 1 && mx_json_bool(mx_json_at(b, 1)) == 0);
+    CHECK(mx_json_kind(mx_json_at(b, 2)) == MX_JSON_NULL);
+    CHECK(mx_json_num(mx_json_at(b, 3)) == -0.25);
+    CHECK(mx_json_num(mx_json_at(b, 5)) == 12345678901234.0);
+    CHECK(mx_json_at(b, 6) == NULL);
+    CHECK(!strcmp(mx_json_get_str(j, "s", ""), "x\"\\/\b\f\n\r\t"));
+    CHECK(mx_json_str_len(mx_json_get(j, "s")) == 9);
+    CHECK(mx_json_len(mx_json_get(j, "o")) == 0 && mx_json_kind(mx_json_get(j, "o")) == MX_JSON_OBJ);
+    CHECK(mx_json_len(mx_json_get(j, "e")) == 0 && mx_json_kind(mx_json_get(j, "e")) == MX_JSON_ARR);
+    CHECK(!strcmp(mx_json_key(j, 2), "s"));
+    CHECK(mx_json_get_bool(j, "a", 5) == 5);
+    mx_json_free(j);
+
+    j = parse("\"\\u00e9\\u20ac\\ud83d\\ude00\\u0041\"", &st);
+    CHECK(j != NULL);
+    if (j) {
+        CHECK(!strcmp(mx_json_str(j), "\xC3\xA9\xE2\x82\xAC\xF0\x9F\x98\x80" "A"));
+        CHECK(mx_json_str_len(j) == 10);
+    }
+    mx_json_free(j);
+
+    j = parse("\"\\u0000x\"", &st); /* embedded NUL keeps its length */
+    CHECK(j && mx_json_str_len(j) == 2);
+    mx_json_free(j);
+
+    j = parse("\"gr\xC3\xBC\xC3\x9F\"", &st); /* raw UTF-8 passes through */
+    CHECK(j && !strcmp(mx_json_str(j), "gr\xC3\xBC\xC3\x9F"));
+    mx_json_free(j);
+
+    j = parse("\xEF\xBB\xBF[1]", &st); /* byte order mark */
+    CHECK(j && mx_json_len(j) == 1);
+    mx_json_free(j);
+}
+
+static void test_errors(void) {
+    expect_error("", "byte 0");
+    expect_error("{\"a\":1,}", "byte 7");
+    expect_error("[1,2", "byte 4");
+    expect_error("[1 2]", "byte 3");
+    expect_error("{\"a\" 1}", "':'");
+    expect_error("{1:2}", "key");
+    expect_error("01", "trailing");
+    expect_error("1.", "'.'");
+    expect_error("1e", "exponent");
+    expect_error("-", NULL);
+    expect_error("+1", NULL);
+    expect_error("NaN", NULL);
+    expect_error("1e999", "range");
+    expect_error("tru", NULL);
+    expect_error("\"abc", "unterminated");
+    expect_error("\"a\nb\"", "control");
+    expect_error("\"\\x\"", "escape");
+    expect_error("\"\\u12G4\"", "hex");
+    expect_error("\"\\ud83d\"", "surrogate");
+    expect_error("\"\\ud83d\\u0041\"", "surrogate");
+    expect_error("\"\\ude00\"", "surrogate");
+    expect_error("\"\xC3\"", "UTF-8");
+    expect_error("\"\xC0\xAF\"", "UTF-8");     /* overlong */
+    expect_error("\"\xED\xA0\x80\"", "UTF-8"); /* encoded surrogate */
+    expect_error("[1] x", "trailing");
+    expect_error("// c\n1", NULL);
+}
+
+static void test_depth(void) {
+    size_t n = 300;
+    char *s = malloc(2 * n + 1);
+    for (size_t i = 0; i < n; i++) s[i] = '[', s[2 * n - 1 - i] = ']';
+    s[2 * n] = 0;
+    expect_error(s, "deep");
+    /* 200 levels are fine */
+    mx_status st;
+    mx_json *j = mx_json_parse(s + 100, 400, "test.json", &st);
+    CHECK(j != NULL);
+    mx_json_free(j);
+    free(s);
+}
+
+/* Every proper prefix of a valid document is an error, never a crash. */
+static void test_truncations(void) {
+    const char *doc = "{\"k\": [1, -2.5e3, \"\\u00e9\\ud83d\\ude00\", {\"x\": null}], \"t\": true}";
+    size_t n = strlen(doc);
+    for (size_t cut = 0; cut < n; cut++) {
+        mx_status st;
+        char *copy = malloc(cut ? cut : 1); /* exact size: ASan catches reads past the end */
+        memcpy(copy, doc, cut);
+        mx_json *j = mx_json_parse(copy, cut, "test.json", &st);
+        CHECK(j == NULL);
+        mx_json_free(j);
+        free(copy);
+    }
+}
+
+static void test_large_object(void) {
+    /* a vocab.json-like object: many keys, parsed and looked up */
+    size_t n = 20000, cap = n * 24 + 16, off = 0;
+    char *s = malloc(cap);
+    off += (size_t)snprintf(s + off, cap - off, "{");
+    for (size_t i = 0; i < n; i++) off += (size_t)snprintf(s + off, cap - off, "%s\"w%zu\":%zu", i ? "," : "", i, i);
+    off += (size_t)snprintf(s + off, cap - off, "}");
+    mx_status st;
+    mx_json *j = mx_json_parse(s, off, "vocab.json", &st);
+    CHECK(j != NULL);
+    if (j) {
+        CHECK(mx_json_len(j) == n);
+        CHECK(mx_json_get_num(j, "w12345", -1) == 12345);
+        CHECK(mx_json_num(mx_json_at(j, n - 1)) == (double)(n - 1));
+    }
+    mx_json_free(j);
+    free(s);
+}
+
+int main(void) {
+    test_values();
+    test_errors();
+    test_depth();
+    test_truncations();
+    test_large_object();
+    return mx_test_finish("test_nn_json");
+}

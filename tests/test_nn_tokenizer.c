@@ -1,0 +1,108 @@
+/* CLIP tokenizer against transformers' CLIPTokenizer without ftfy: the 77 ids of every prompt
+ * of golden/tokenizer/tokenizer_golden.json must be exactly equal; truncation is reported. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/tokenizer.h"
+#include "../runtime/json.h"
+#include "util_test.h"
+
+static char *read_text(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *buf = n >= 0 ? malloc((size_t)n + 1) : NULL;
+    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+        free(buf);
+        buf = NULL;
+    }
+    fclose(f);
+    if (buf) {
+        buf[n] = 0;
+        *len = (size_t)n;
+    }
+    return buf;
+}
+
+/* Compares the ids of one record; prints the first difference. */
+static void check_record(const mx_tokenizer *tok, const mx_json *rec) {
+    const char *prompt = mx_json_get_str(rec, "prompt", NULL);
+    const mx_json *want = mx_json_get(mx_json_get(rec, "hf_slow_noftfy"), "ids_sd_pipeline");
+    const mx_json *full = mx_json_get(mx_json_get(rec, "hf_slow_noftfy"), "ids_full");
+    CHECK(prompt != NULL && mx_json_len(want) == MX_CLIP_CONTEXT);
+    if (!prompt || mx_json_len(want) != MX_CLIP_CONTEXT) return;
+    mx_tok_result r;
+    mx_status st = {0};
+    CHECK(mx_tok_encode(tok, prompt, &r, &st) == 0);
+    int first_diff = -1;
+    for (int i = 0; i < MX_CLIP_CONTEXT && first_diff < 0; i++)
+        if (r.ids[i] != (int32_t)mx_json_num(mx_json_at(want, (size_t)i))) first_diff = i;
+    /* ids_full has BOS + every token + EOS: what was dropped is its excess over 77 */
+    int dropped = (int)mx_json_len(full) > MX_CLIP_CONTEXT ? (int)mx_json_len(full) - MX_CLIP_CONTEXT : 0;
+    printf("%-60.60s %s\n", prompt, first_diff < 0 ? "ids equal" : "ids DIFFER");
+    if (first_diff >= 0)
+        printf("    first difference at %d: got %d want %d\n", first_diff, r.ids[first_diff],
+               (int)mx_json_num(mx_json_at(want, (size_t)first_diff)));
+    CHECK(first_diff < 0);
+    CHECK(r.n_dropped == dropped);
+    CHECK(dropped > 0 || r.n_tokens == (int)mx_json_len(full));
+}
+
+static void test_golden(const mx_tokenizer *tok) {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/golden/tokenizer/tokenizer_golden.json", mx_shared_dir());
+    size_t len;
+    char *text = read_text(path, &len);
+    CHECK(text != NULL);
+    if (!text) return;
+    mx_status st = {0};
+    mx_json *root = mx_json_parse(text, len, path, &st);
+    CHECK(root != NULL);
+    const mx_json *records = mx_json_get(root, "records");
+    CHECK(mx_json_len(records) == 24);
+    for (size_t i = 0; i < mx_json_len(records); i++) check_record(tok, mx_json_at(records, i));
+    mx_json_free(root);
+    free(text);
+}
+
+/* A hostile byte string never fails and yields a well-framed result. */
+static void test_bad_utf8(const mx_tokenizer *tok) {
+    const char bad[] = {'a', (char)0xff, (char)0xc3, 'b', (char)0xe2, (char)0x82, ' ', (char)0xf0, 'c', 0};
+    mx_tok_result r;
+    mx_status st = {0};
+    CHECK(mx_tok_encode(tok, bad, &r, &st) == 0);
+    CHECK(r.ids[0] == MX_CLIP_BOS_ID && r.ids[r.n_tokens - 1] == MX_CLIP_EOS_ID && r.n_dropped == 0);
+}
+
+static void test_bad_files(void) {
+    mx_tokenizer *t;
+    mx_status st = {0};
+    const char *vocab = "{\"a\": 0, \"b\": 1}";
+    CHECK(mx_tok_create(&t, vocab, strlen(vocab), "#version\na b\n", 13, "tiny", &st) != 0);
+    CHECK(t == NULL && strstr(st.msg, "tiny") != NULL);
+    CHECK(mx_tok_load_files(&t, "/nonexistent/vocab.json", "/nonexistent/merges.txt", &st) != 0);
+    CHECK(strstr(st.msg, "/nonexistent/vocab.json") != NULL);
+}
+
+int main(void) {
+    char v[1024], m[1024];
+    snprintf(v, sizeof v, "%s/golden/tokenizer/vocab.json", mx_shared_dir());
+    snprintf(m, sizeof m, "%s/golden/tokenizer/merges.txt", mx_shared_dir());
+    mx_tokenizer *tok = NULL;
+    mx_status st = {0};
+    int ok = mx_tok_load_files(&tok, v, m, &st) == 0;
+    if (!ok) fprintf(stderr, "%s\n", st.msg);
+    CHECK(ok);
+    if (ok) {
+        CHECK(mx_tok_vocab_size(tok) == 49408);
+        CHECK(mx_tok_id(tok, "a</w>") == 320);
+        test_golden(tok);
+        test_bad_utf8(tok);
+    }
+    test_bad_files();
+    mx_tok_free(tok);
+    return mx_test_finish("test_nn_tokenizer");
+}

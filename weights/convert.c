@@ -1,0 +1,505 @@
+/* The converter behind `matex convert` (convert.h). Source files stay mmapped until the
+ * weight file is written, so tensors are copied once, converted on the way out; only
+ * tensors that change (LoRA merges, F64/integer sources) get their own buffer. */
+#include "convert.h"
+
+#include <limits.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "../runtime/json.h"
+#include "../runtime/log.h"
+#include "lora.h"
+#include "safetensors.h"
+#include "weights.h"
+
+#define CONVERTER_VERSION "matex-convert 1"
+#define MAX_TEXT_FILE ((size_t)64 << 20)
+#define MAX_SHARDS 64
+
+typedef struct {
+    char *s;
+    size_t len, cap;
+    int oom;
+} text_buf;
+
+typedef struct {
+    const mx_convert_opts *o;
+    mx_wf_writer *w;
+    mx_safetensors *files[256]; /* open sources, kept mapped until the file is written */
+    size_t n_files;
+    void **bufs; /* converted tensor data owned by the converter */
+    size_t n_bufs, cap_bufs;
+    mx_lora *loras[MX_CONVERT_MAX_EXTRA];
+    text_buf sources; /* provenance: JSON array items */
+    mx_convert_result res;
+} converter;
+
+/* ---- small helpers ---- */
+
+static void tb_add(text_buf *b, const char *s, size_t n) {
+    if (b->oom) return;
+    if (b->len + n + 1 > b->cap) {
+        size_t cap = b->cap ? b->cap * 2 : 256;
+        while (cap < b->len + n + 1) cap *= 2;
+        char *ns = realloc(b->s, cap);
+        if (!ns) {
+            b->oom = 1;
+            return;
+        }
+        b->s = ns;
+        b->cap = cap;
+    }
+    memcpy(b->s + b->len, s, n);
+    b->len += n;
+    b->s[b->len] = 0;
+}
+
+static void tb_printf(text_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void tb_printf(text_buf *b, const char *fmt, ...) {
+    char tmp[512];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(tmp, sizeof tmp, fmt, ap);
+    va_end(ap);
+    if (n > 0) tb_add(b, tmp, (size_t)n < sizeof tmp ? (size_t)n : sizeof tmp - 1);
+}
+
+static void tb_json_str(text_buf *b, const char *s) {
+    tb_add(b, "\"", 1);
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\') {
+            char e[2] = {'\\', (char)c};
+            tb_add(b, e, 2);
+        } else if (c < 0x20) {
+            tb_printf(b, "\\u%04x", c);
+        } else {
+            tb_add(b, (const char *)&c, 1);
+        }
+    }
+    tb_add(b, "\"", 1);
+}
+
+static int join(char *out, size_t cap, const char *dir, const char *name) {
+    return snprintf(out, cap, "%s/%s", dir, name) < (int)cap ? 0 : -1;
+}
+
+static int is_file(const char *path) {
+    struct stat sb;
+    return stat(path, &sb) == 0 && S_ISREG(sb.st_mode);
+}
+
+static int is_dir(const char *path) {
+    struct stat sb;
+    return stat(path, &sb) == 0 && S_ISDIR(sb.st_mode);
+}
+
+/* Whole file as NUL-terminated text (at most MAX_TEXT_FILE bytes, no NUL inside). */
+static char *read_text(const char *path, mx_status *st) {
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        mx_fail(st, MX_EINPUT, "%s: cannot open", path);
+        return NULL;
+    }
+    char *buf = malloc(MAX_TEXT_FILE + 1);
+    size_t n = buf ? fread(buf, 1, MAX_TEXT_FILE + 1, f) : 0;
+    int err = ferror(f);
+    fclose(f);
+    if (!buf || err || n > MAX_TEXT_FILE || memchr(buf, 0, n)) {
+        mx_fail(st, MX_EINPUT, "%s: %s", path,
+                !buf ? "out of memory" : err ? "read error" : n > MAX_TEXT_FILE ? "larger than 64 MiB" : "contains NUL bytes");
+        free(buf);
+        return NULL;
+    }
+    buf[n] = 0;
+    char *shrunk = realloc(buf, n + 1);
+    return shrunk ? shrunk : buf;
+}
+
+/* Hands p to the converter, which frees it after the file is written (or frees it now on
+ * failure). */
+static int own_buffer(converter *cv, void *p, mx_status *st) {
+    if (cv->n_bufs == cv->cap_bufs) {
+        size_t cap = cv->cap_bufs ? cv->cap_bufs * 2 : 64;
+        void **nb = realloc(cv->bufs, cap * sizeof *nb);
+        if (!nb) {
+            free(p);
+            return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+        }
+        cv->bufs = nb;
+        cv->cap_bufs = cap;
+    }
+    cv->bufs[cv->n_bufs++] = p;
+    return 0;
+}
+
+/* ---- network type from config.json ---- */
+
+static const char *json_array_has(const mx_json *arr, const char *s) {
+    for (size_t i = 0; i < mx_json_len(arr); i++) {
+        const char *v = mx_json_str(mx_json_at(arr, i));
+        if (v && !strcmp(v, s)) return v;
+    }
+    return NULL;
+}
+
+/* "unet", "controlnet", "vae", "text_encoder", or NULL. */
+static const char *network_kind(const mx_json *cfg) {
+    const char *cls = mx_json_get_str(cfg, "_class_name", "");
+    if (!strcmp(cls, "UNet2DConditionModel")) return "unet";
+    if (!strcmp(cls, "ControlNetModel")) return "controlnet";
+    if (!strcmp(cls, "AutoencoderKL")) return "vae";
+    if (json_array_has(mx_json_get(cfg, "architectures"), "CLIPTextModel") ||
+        !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model"))
+        return "text_encoder";
+    return NULL;
+}
+
+/* ---- locating weight files ---- */
+
+typedef struct {
+    char paths[MAX_SHARDS][PATH_MAX];
+    size_t n;
+} weight_files;
+
+/* Reads a sharded index ({"weight_map": {tensor: shard file}}) into the list of shard paths. */
+static int read_shard_index(const char *dir, const char *index_path, weight_files *wfs, mx_status *st) {
+    char *text = read_text(index_path, st);
+    if (!text) return -1;
+    mx_json *j = mx_json_parse(text, strlen(text), index_path, st);
+    free(text);
+    if (!j) return -1;
+    const mx_json *map = mx_json_get(j, "weight_map");
+    int rc = 0;
+    if (mx_json_kind(map) != MX_JSON_OBJ || mx_json_len(map) == 0)
+        rc = mx_fail(st, MX_EINPUT, "%s: no weight_map object", index_path);
+    for (size_t i = 0; !rc && i < mx_json_len(map); i++) {
+        const char *shard = mx_json_str(mx_json_at(map, i));
+        if (!shard || !*shard || strchr(shard, '/') || !strcmp(shard, "..")) {
+            rc = mx_fail(st, MX_EINPUT, "%s: tensor '%s': bad shard file name", index_path, mx_json_key(map, i));
+            break;
+        }
+        char path[PATH_MAX];
+        if (join(path, sizeof path, dir, shard)) rc = mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+        size_t k = 0;
+        while (!rc && k < wfs->n && strcmp(wfs->paths[k], path)) k++;
+        if (!rc && k == wfs->n) {
+            if (wfs->n == MAX_SHARDS) rc = mx_fail(st, MX_EINPUT, "%s: more than %d shards", index_path, MAX_SHARDS);
+            else snprintf(wfs->paths[wfs->n++], PATH_MAX, "%s", path);
+        }
+    }
+    mx_json_free(j);
+    return rc;
+}
+
+/* The weights of a network folder: single files first, then sharded indexes; the fp16
+ * variants first when asked for, and as a fallback when only they exist. */
+static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs, mx_status *st) {
+    static const char *bases[2] = {"diffusion_pytorch_model", "model"};
+    wfs->n = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        int fp16 = pass == 0 ? prefer_fp16 : !prefer_fp16;
+        for (int b = 0; b < 2; b++) {
+            char name[128], path[PATH_MAX];
+            snprintf(name, sizeof name, "%s%s.safetensors", bases[b], fp16 ? ".fp16" : "");
+            if (join(path, sizeof path, dir, name)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+            if (is_file(path)) {
+                snprintf(wfs->paths[0], PATH_MAX, "%s", path);
+                wfs->n = 1;
+                return 0;
+            }
+            snprintf(name, sizeof name, "%s.safetensors.index%s.json", bases[b], fp16 ? ".fp16" : "");
+            if (join(path, sizeof path, dir, name)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+            if (is_file(path)) return read_shard_index(dir, path, wfs, st);
+        }
+    }
+    return mx_fail(st, MX_EINPUT,
+                   "%s: no weights found: expected diffusion_pytorch_model.safetensors or model.safetensors "
+                   "(or their .fp16 variants, or a sharded .safetensors.index.json); .bin files are not read",
+                   dir);
+}
+
+/* ---- adding tensors ---- */
+
+static int lora_targets(const converter *cv, const char *kind) {
+    return cv->o->n_loras > 0 && (!strcmp(kind, "unet") || !strcmp(kind, "text_encoder"));
+}
+
+static int add_integer_tensor(converter *cv, const char *name, const mx_safetensors *f, const mx_st_tensor *t,
+                              int ndim, const int64_t *shape, mx_status *st) {
+    size_t n = t->nbytes / (t->dtype == MX_ST_I64 ? 8 : 4);
+    int32_t *out = malloc((n ? n : 1) * sizeof *out);
+    if (!out) return mx_fail(st, MX_ENOMEM, "%s: tensor '%s': out of memory", f->path, t->name);
+    if (own_buffer(cv, out, st)) return -1;
+    const uint8_t *p = t->data;
+    for (size_t i = 0; i < n; i++) {
+        int64_t v;
+        if (t->dtype == MX_ST_I64) {
+            memcpy(&v, p + 8 * i, 8);
+        } else {
+            int32_t v32;
+            memcpy(&v32, p + 4 * i, 4);
+            v = v32;
+        }
+        if (v < INT32_MIN || v > INT32_MAX)
+            return mx_fail(st, MX_EINPUT, "%s: tensor '%s': integer value %lld does not fit in i32", f->path, t->name,
+                           (long long)v);
+        out[i] = (int32_t)v;
+    }
+    return mx_wf_writer_add(cv->w, name, MX_I32, ndim, shape, out, MX_I32, st);
+}
+
+static int merge_loras(converter *cv, const char *kind, const mx_st_tensor *t, int ndim, const int64_t *shape,
+                       float *w, mx_status *st) {
+    for (size_t k = 0; k < cv->o->n_loras; k++) {
+        int r = mx_lora_merge(cv->loras[k], kind, t->name, ndim, shape, w, cv->o->loras[k].scale, st);
+        if (r < 0) return -1;
+        cv->res.lora_merged += (size_t)r;
+    }
+    return 0;
+}
+
+static int needs_lora(const converter *cv, const char *kind, const char *name) {
+    if (!lora_targets(cv, kind)) return 0;
+    for (size_t k = 0; k < cv->o->n_loras; k++)
+        if (mx_lora_has(cv->loras[k], kind, name)) return 1;
+    return 0;
+}
+
+static int add_tensor(converter *cv, const char *prefix, const char *kind, const mx_safetensors *f,
+                      const mx_st_tensor *t, mx_status *st) {
+    char name[1024];
+    if (snprintf(name, sizeof name, "%s.%s", prefix, t->name) >= (int)sizeof name)
+        return mx_fail(st, MX_EINPUT, "%s: tensor name too long: '%s'", f->path, t->name);
+    /* a 0-d tensor (scalar) is stored as shape [1] */
+    int64_t one = 1;
+    int ndim = t->ndim ? t->ndim : 1;
+    const int64_t *shape = t->ndim ? t->shape : &one;
+    if (ndim > MX_MAX_DIMS)
+        return mx_fail(st, MX_EINPUT, "%s: tensor '%s': %d dimensions (at most %d)", f->path, t->name, ndim, MX_MAX_DIMS);
+    if (t->dtype == MX_ST_I64 || t->dtype == MX_ST_I32) return add_integer_tensor(cv, name, f, t, ndim, shape, st);
+    mx_dtype out = ndim >= 2 ? cv->o->dtype : MX_F32;
+    if (t->dtype == MX_ST_F64 || needs_lora(cv, kind, t->name)) {
+        float *w = mx_st_to_f32(f, t, st);
+        if (!w || own_buffer(cv, w, st)) return -1;
+        if (merge_loras(cv, kind, t, ndim, shape, w, st)) return -1;
+        return mx_wf_writer_add(cv->w, name, out, ndim, shape, w, MX_F32, st);
+    }
+    mx_dtype src = t->dtype == MX_ST_F16 ? MX_F16 : t->dtype == MX_ST_BF16 ? MX_BF16 : MX_F32;
+    return mx_wf_writer_add(cv->w, name, out, ndim, shape, t->data, src, st);
+}
+
+static int add_weight_file(converter *cv, const char *prefix, const char *kind, const char *path, mx_status *st) {
+    if (cv->n_files == sizeof cv->files / sizeof cv->files[0])
+        return mx_fail(st, MX_EINPUT, "%s: too many weight files", path);
+    mx_safetensors *f = calloc(1, sizeof *f);
+    if (!f) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    if (mx_st_open(f, path, st)) {
+        free(f);
+        return -1;
+    }
+    cv->files[cv->n_files++] = f;
+    for (size_t i = 0; i < f->count; i++) {
+        if (add_tensor(cv, prefix, kind, f, &f->tensors[i], st)) return -1;
+        cv->res.tensors++;
+    }
+    return 0;
+}
+
+/* Converts one network folder under the name prefix ("unet", "controlnet_depth", ...).
+ * want_kind: the type the folder must hold, or NULL to accept any. */
+static int add_network(converter *cv, const char *dir, const char *prefix, const char *want_kind, mx_status *st) {
+    char cfg_path[PATH_MAX];
+    if (!is_dir(dir)) return mx_fail(st, MX_EINPUT, "%s: not a folder", dir);
+    if (join(cfg_path, sizeof cfg_path, dir, "config.json")) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    char *cfg_text = read_text(cfg_path, st);
+    if (!cfg_text) return -1;
+    mx_json *cfg = mx_json_parse(cfg_text, strlen(cfg_text), cfg_path, st);
+    const char *kind = cfg ? network_kind(cfg) : NULL;
+    int rc = 0;
+    if (!cfg) rc = -1;
+    else if (!kind)
+        rc = mx_fail(st, MX_EINPUT,
+                     "%s: unknown network type (need _class_name UNet2DConditionModel, ControlNetModel, "
+                     "AutoencoderKL or architectures CLIPTextModel)",
+                     cfg_path);
+    else if (want_kind && strcmp(kind, want_kind))
+        rc = mx_fail(st, MX_EINPUT, "%s: holds a %s, expected a %s", cfg_path, kind, want_kind);
+    char resolved_prefix[96];
+    snprintf(resolved_prefix, sizeof resolved_prefix, "%s", prefix ? prefix : kind ? kind : "");
+    weight_files *wfs = rc ? NULL : malloc(sizeof *wfs);
+    if (!rc && !wfs) rc = mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    if (!rc) rc = find_weight_files(dir, cv->o->prefer_fp16, wfs, st);
+    if (!rc) {
+        char key[128];
+        snprintf(key, sizeof key, "%s.config", resolved_prefix);
+        rc = mx_wf_writer_meta(cv->w, key, cfg_text, st);
+    }
+    size_t before = cv->res.tensors;
+    if (!rc) {
+        tb_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
+        tb_json_str(&cv->sources, resolved_prefix);
+        tb_add(&cv->sources, ", \"files\": [", 12);
+    }
+    for (size_t i = 0; !rc && i < wfs->n; i++) {
+        rc = add_weight_file(cv, resolved_prefix, kind, wfs->paths[i], st);
+        if (i) tb_add(&cv->sources, ", ", 2);
+        tb_json_str(&cv->sources, wfs->paths[i]);
+    }
+    if (!rc) {
+        tb_add(&cv->sources, "]}", 2);
+        cv->res.networks++;
+        mx_info("convert: %s <- %s (%zu tensors, %zu file%s)", resolved_prefix, dir, cv->res.tensors - before, wfs->n,
+                wfs->n == 1 ? "" : "s");
+    }
+    free(wfs);
+    mx_json_free(cfg);
+    free(cfg_text);
+    return rc;
+}
+
+/* ---- tokenizer and scheduler ---- */
+
+static int add_text_meta(converter *cv, const char *dir, const char *file, const char *key, int must_be_json,
+                         mx_status *st) {
+    char path[PATH_MAX];
+    if (join(path, sizeof path, dir, file)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    char *text = read_text(path, st);
+    if (!text) return -1;
+    int rc = 0;
+    if (must_be_json) {
+        mx_json *j = mx_json_parse(text, strlen(text), path, st);
+        if (!j || mx_json_kind(j) != MX_JSON_OBJ) rc = j ? mx_fail(st, MX_EINPUT, "%s: not a JSON object", path) : -1;
+        mx_json_free(j);
+    }
+    if (!rc && mx_wf_writer_meta(cv->w, key, text, st)) rc = mx_fail_prefix(st, "%s", path);
+    free(text);
+    return rc;
+}
+
+static int add_tokenizer(converter *cv, const char *dir, mx_status *st) {
+    if (add_text_meta(cv, dir, "vocab.json", "tokenizer.vocab", 1, st) ||
+        add_text_meta(cv, dir, "merges.txt", "tokenizer.merges", 0, st))
+        return -1;
+    mx_info("convert: tokenizer <- %s", dir);
+    return 0;
+}
+
+/* ---- the whole conversion ---- */
+
+static int convert_model_set(converter *cv, const char *root, mx_status *st) {
+    static const char *subs[4] = {"unet", "controlnet", "vae", "text_encoder"};
+    char dir[PATH_MAX];
+    size_t found = 0;
+    for (int i = 0; i < 4; i++) {
+        if (join(dir, sizeof dir, root, subs[i])) return mx_fail(st, MX_EINPUT, "%s: path too long", root);
+        if (!is_dir(dir)) continue;
+        if (add_network(cv, dir, subs[i], subs[i], st)) return -1;
+        found++;
+    }
+    if (join(dir, sizeof dir, root, "tokenizer") == 0 && is_dir(dir)) {
+        if (add_tokenizer(cv, dir, st)) return -1;
+    } else if (found) {
+        mx_warn("convert: %s has no tokenizer/ folder: prompts cannot be tokenized with this file", root);
+    }
+    if (join(dir, sizeof dir, root, "scheduler") == 0 && is_dir(dir)) {
+        if (add_text_meta(cv, dir, "scheduler_config.json", "scheduler.config", 1, st)) return -1;
+    }
+    if (!found)
+        return mx_fail(st, MX_EINPUT,
+                       "%s: no config.json and none of unet/, controlnet/, vae/, text_encoder/: not a diffusers folder",
+                       root);
+    return 0;
+}
+
+static int valid_controlnet_name(const char *s) {
+    if (!*s || strlen(s) > 32) return 0;
+    for (; *s; s++)
+        if (!((*s >= 'a' && *s <= 'z') || (*s >= '0' && *s <= '9') || *s == '_')) return 0;
+    return 1;
+}
+
+static int convert_inputs(converter *cv, mx_status *st) {
+    const mx_convert_opts *o = cv->o;
+    if (o->input) {
+        char cfg[PATH_MAX];
+        if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder", o->input);
+        if (join(cfg, sizeof cfg, o->input, "config.json")) return mx_fail(st, MX_EINPUT, "%s: path too long", o->input);
+        if (is_file(cfg) ? add_network(cv, o->input, NULL, NULL, st) : convert_model_set(cv, o->input, st)) return -1;
+    }
+    for (size_t i = 0; i < o->n_controlnets; i++) {
+        char prefix[64];
+        if (!valid_controlnet_name(o->controlnets[i].name))
+            return mx_fail(st, MX_EUSAGE, "--controlnet %s: the name must be 1-32 of [a-z0-9_]", o->controlnets[i].name);
+        snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
+        if (add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st)) return -1;
+    }
+    if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
+    return 0;
+}
+
+static int open_loras(converter *cv, mx_status *st) {
+    for (size_t k = 0; k < cv->o->n_loras; k++)
+        if (mx_lora_open(&cv->loras[k], cv->o->loras[k].path, st)) return -1;
+    return 0;
+}
+
+static int check_loras_used(converter *cv, mx_status *st) {
+    for (size_t k = 0; k < cv->o->n_loras; k++)
+        if (mx_lora_check_all_used(cv->loras[k], st)) return -1;
+    return 0;
+}
+
+static int add_provenance(converter *cv, mx_status *st) {
+    text_buf p = {0};
+    tb_printf(&p, "{\"converter\": \"%s\", \"dtype\": \"%s\", \"variant\": \"%s\", \"sources\": [", CONVERTER_VERSION,
+              mx_dtype_name(cv->o->dtype), cv->o->prefer_fp16 ? "fp16" : "default");
+    tb_add(&p, cv->sources.s ? cv->sources.s : "", cv->sources.len);
+    tb_add(&p, "], \"lora\": [", 12);
+    for (size_t k = 0; k < cv->o->n_loras; k++) {
+        tb_printf(&p, "%s{\"file\": ", k ? ", " : "");
+        tb_json_str(&p, cv->o->loras[k].path);
+        tb_printf(&p, ", \"scale\": %.9g, \"modules\": %zu}", (double)cv->o->loras[k].scale,
+                  mx_lora_module_count(cv->loras[k]));
+    }
+    tb_add(&p, "]}", 2);
+    int rc = p.oom || cv->sources.oom ? mx_fail(st, MX_ENOMEM, "convert: out of memory")
+                                      : mx_wf_writer_meta(cv->w, "provenance", p.s, st);
+    free(p.s);
+    return rc;
+}
+
+static void converter_free(converter *cv) {
+    mx_wf_writer_free(cv->w);
+    for (size_t i = 0; i < cv->n_files; i++) {
+        mx_st_close(cv->files[i]);
+        free(cv->files[i]);
+    }
+    for (size_t i = 0; i < cv->n_bufs; i++) free(cv->bufs[i]);
+    free(cv->bufs);
+    for (size_t k = 0; k < MX_CONVERT_MAX_EXTRA; k++) mx_lora_close(cv->loras[k]);
+    free(cv->sources.s);
+}
+
+int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) {
+    if (!o->output) return mx_fail(st, MX_EUSAGE, "convert: no output file");
+    if (o->dtype != MX_F32 && o->dtype != MX_F16 && o->dtype != MX_BF16)
+        return mx_fail(st, MX_EUSAGE, "convert: output dtype must be f32, f16 or bf16");
+    if (o->n_controlnets > MX_CONVERT_MAX_EXTRA || o->n_loras > MX_CONVERT_MAX_EXTRA)
+        return mx_fail(st, MX_EUSAGE, "convert: at most %d ControlNets and %d LoRAs", MX_CONVERT_MAX_EXTRA,
+                       MX_CONVERT_MAX_EXTRA);
+    converter cv = {.o = o};
+    int rc = (cv.w = mx_wf_writer_create(st)) ? 0 : -1;
+    if (!rc) rc = open_loras(&cv, st);
+    if (!rc) rc = convert_inputs(&cv, st);
+    if (!rc) rc = check_loras_used(&cv, st);
+    if (!rc) rc = add_provenance(&cv, st);
+    if (!rc) rc = mx_wf_writer_finish(cv.w, o->output, st);
+    if (!rc && res) *res = cv.res;
+    converter_free(&cv);
+    return rc;
+}

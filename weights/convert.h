@@ -1,0 +1,40 @@
+/* `matex convert`: diffusers / transformers folders -> one matex weight file (FORMAT.md).
+ * Input is either a model-set folder (subfolders unet/, controlnet/, vae/, text_encoder/,
+ * tokenizer/, scheduler/; each present one is converted) or a single network folder whose
+ * config.json names its type. Extra ControlNets come as NAME=DIR. LoRA files are merged into
+ * the UNet and text-encoder weights. */
+#ifndef MX_CONVERT_H
+#define MX_CONVERT_H
+
+#include <stddef.h>
+
+#include "../runtime/status.h"
+#include "../runtime/tensor.h"
+
+#define MX_CONVERT_MAX_EXTRA 8
+
+typedef struct mx_convert_opts {
+    const char *input;  /* model-set or network folder; may be NULL when controlnets are given */
+    const char *output; /* the .mxw file, written atomically */
+    mx_dtype dtype;     /* for floating tensors with >= 2 dims: MX_F32, MX_F16 or MX_BF16 */
+    int prefer_fp16;    /* --variant fp16: read the *.fp16.safetensors files */
+    size_t n_controlnets;
+    struct {
+        const char *name; /* [a-z0-9_]+, gives the prefix "controlnet_<name>." */
+        const char *dir;
+    } controlnets[MX_CONVERT_MAX_EXTRA];
+    size_t n_loras;
+    struct {
+        const char *path;
+        float scale;
+    } loras[MX_CONVERT_MAX_EXTRA];
+} mx_convert_opts;
+
+/* Summary of a finished conversion, for the command line's report. */
+typedef struct mx_convert_result {
+    size_t tensors, networks, lora_merged; /* lora_merged: weights changed by LoRA merges */
+} mx_convert_result;
+
+int mx_convert(const mx_convert_opts *opts, mx_convert_result *res, mx_status *st);
+
+#endif
