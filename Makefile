@@ -59,7 +59,7 @@ $(LIB_GEOM):    $(call obj,$(GEOM_SRC))
 $(LIB_TEX):     $(call obj,$(TEX_SRC))
 $(LIB_IO):      $(call obj,$(IO_SRC))
 $(LIBMATEX):    $(ALL_C_OBJ)
-$(BUILD)/%.a:
+$(BUILD)/%.a: | $(BUILD)/empty.o
 	@mkdir -p $(dir $@)
 	rm -f $@
 	ar rcs $@ $^ $(if $^,,$(BUILD)/empty.o)
@@ -95,8 +95,26 @@ $(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_GEOM
 $(BUILD)/tests/test_tex_%: $(BUILD)/tests/test_tex_%.o $(TEST_UTIL) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 
-test: all $(TEST_BINS)
-	BUILD=$(BUILD) sh tests/run.sh $(TEST_BINS)
+# Tiny random networks of the SD1.5 family for the pipeline tests and `make demo`.
+DEMO_WEIGHTS = $(BUILD)/demo/demo.mxw
+$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*)
+	@mkdir -p $(dir $@)
+	sh tools/make_demo_weights.sh $(BUILD)/matex $@
+
+TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
+           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw
+test: all $(TEST_BINS) $(DEMO_WEIGHTS)
+	$(TEST_ENV) sh tests/run.sh $(TEST_BINS)
+
+# The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
+test-full: all $(TEST_BINS) $(DEMO_WEIGHTS)
+	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS)
+
+# End to end in seconds with tiny random weights (they paint noise: see README).
+demo: all $(DEMO_WEIGHTS)
+	$(BUILD)/matex texture ../shared/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
+	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 -o demo/spot
+	@echo "demo: textured mesh in demo/spot (mesh.glb, mesh.obj, texture.png, report.json)"
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
@@ -109,6 +127,12 @@ $(BUILD)/tools/bench_%: $(BUILD)/tools/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM
 
 bench: all $(BENCH_BINS)
 	sh tools/bench.sh $(BUILD)
+
+PREFIX ?= /usr/local
+install: all
+	install -D -m 755 $(BUILD)/matex $(DESTDIR)$(PREFIX)/bin/matex
+	install -D -m 644 $(LIBMATEX) $(DESTDIR)$(PREFIX)/lib/libmatex.a
+	install -D -m 644 $(LIB_IO) $(DESTDIR)$(PREFIX)/lib/libmatex_io.a
 
 clean:
 	rm -rf build build-asan matex

@@ -26,7 +26,7 @@ float mx_half_to_float(uint16_t h) {
         float v = (float)m * (1.0f / 16777216.0f); /* subnormal: m · 2^-24 */
         return bits_f32(f32_bits(v) | sign);
     }
-    if (e == 31) return bits_f32(sign | 0x7f800000u | (m << 13));
+    if (e == 31) return bits_f32(sign | 0x7f800000u | (m ? 0x400000u | (m << 13) : 0)); /* NaN comes out quiet */
     return bits_f32(sign | ((e + 112) << 23) | (m << 13));
 }
 

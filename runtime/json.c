@@ -1,7 +1,8 @@
 /* JSON reader (RFC 8259): a recursive-descent parser bounded by a depth limit, building a
  * tree whose nodes, strings and child arrays live in a chain of memory blocks owned by the
  * root, so mx_json_free releases everything at once. Errors carry the source name and byte
- * offset. Strict: no comments, no trailing commas, no NaN/Infinity, UTF-8 validated. */
+ * offset. Strict (no comments, no trailing commas, UTF-8 validated) except that NaN, Infinity
+ * and -Infinity are read, as Python's json module writes them. */
 #include "json.h"
 
 #include <errno.h>
@@ -371,7 +372,17 @@ static int parse_value(parser *p, mx_json *v, int depth) {
     case 't': v->type = MX_JSON_BOOL; v->u.b = 1; return parse_literal(p, "true");
     case 'f': v->type = MX_JSON_BOOL; v->u.b = 0; return parse_literal(p, "false");
     case 'n': v->type = MX_JSON_NULL; return parse_literal(p, "null");
+    /* NaN, Infinity, -Infinity: not RFC 8259, but Python's json module writes them and
+     * diffusers configs contain them (scheduler "lambda_min_clipped": -Infinity). */
+    case 'N': v->type = MX_JSON_NUM; v->u.num = NAN; return parse_literal(p, "NaN");
+    case 'I': v->type = MX_JSON_NUM; v->u.num = INFINITY; return parse_literal(p, "Infinity");
     default:
+        if (c == '-' && p->len - p->pos > 1 && p->s[p->pos + 1] == 'I') {
+            v->type = MX_JSON_NUM;
+            v->u.num = -INFINITY;
+            p->pos++;
+            return parse_literal(p, "Infinity");
+        }
         if (c == '-' || is_digit(c)) {
             v->type = MX_JSON_NUM;
             return parse_number(p, &v->u.num);

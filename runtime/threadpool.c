@@ -14,7 +14,9 @@ struct mx_pool {
     mx_task_fn fn;
     void *ctx;
     int ntasks;
-    atomic_int next_task;
+    /* (generation << 32) | next task: a worker still holding an older job can never claim
+     * a task of the current one (it would run it with the old job's fn and ctx) */
+    atomic_ullong next_task;
     int active_workers;
     unsigned long generation;
     int quit;
@@ -25,11 +27,14 @@ typedef struct {
     int index;
 } worker_arg;
 
-static void run_tasks(mx_pool *p, mx_task_fn fn, void *ctx, int ntasks, int thread) {
+static void run_tasks(mx_pool *p, mx_task_fn fn, void *ctx, int ntasks, unsigned long gen, int thread) {
+    unsigned long long v = atomic_load(&p->next_task);
     for (;;) {
-        int t = atomic_fetch_add(&p->next_task, 1);
-        if (t >= ntasks) break;
-        fn(ctx, t, thread);
+        if ((v >> 32) != (gen & 0xffffffffu) || (int)(v & 0xffffffffu) >= ntasks) break;
+        if (atomic_compare_exchange_weak(&p->next_task, &v, v + 1)) {
+            fn(ctx, (int)(v & 0xffffffffu), thread);
+            v = atomic_load(&p->next_task);
+        }
     }
 }
 
@@ -49,7 +54,7 @@ static void *worker_main(void *arg) {
         int ntasks = p->ntasks;
         p->active_workers++;
         pthread_mutex_unlock(&p->mu);
-        run_tasks(p, fn, ctx, ntasks, index);
+        run_tasks(p, fn, ctx, ntasks, seen, index);
         pthread_mutex_lock(&p->mu);
         if (--p->active_workers == 0) pthread_cond_signal(&p->done_cv);
     }
@@ -121,11 +126,11 @@ void mx_pool_for(mx_pool *p, int ntasks, mx_task_fn fn, void *ctx) {
     p->fn = fn;
     p->ctx = ctx;
     p->ntasks = ntasks;
-    atomic_store(&p->next_task, 0);
-    p->generation++;
+    unsigned long gen = ++p->generation;
+    atomic_store(&p->next_task, (unsigned long long)(gen & 0xffffffffu) << 32);
     pthread_cond_broadcast(&p->work_cv);
     pthread_mutex_unlock(&p->mu);
-    run_tasks(p, fn, ctx, ntasks, 0);
+    run_tasks(p, fn, ctx, ntasks, gen, 0);
     /* wait until every worker that picked up this generation has finished */
     pthread_mutex_lock(&p->mu);
     while (p->active_workers > 0) pthread_cond_wait(&p->done_cv, &p->mu);

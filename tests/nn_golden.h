@@ -64,7 +64,8 @@ static float *golden_f32(const mx_safetensors *f, const char *name, size_t *n) {
 
 static int golden_ctx(mx_ctx *c) {
     mx_status st;
-    if (mx_ctx_create(c, 0, mx_cpu_best_isa(), (size_t)64 << 20, &st)) {
+    int threads = getenv("MX_TEST_THREADS") ? atoi(getenv("MX_TEST_THREADS")) : 0;
+    if (mx_ctx_create(c, threads, mx_cpu_best_isa(), (size_t)64 << 20, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return -1;
     }

@@ -156,6 +156,154 @@ static void test_attention_ops(const levels *lv) {
     test_attention_case(lv, 1, 1, 3, 2, 300, 0);
 }
 
+static void test_group_norm_case(const levels *lv, int B, int C, int HW, int groups, mx_dtype dt, int silu) {
+    size_t n = (size_t)B * C * HW;
+    void *gs, *bs;
+    float *x = rnd(n, 21), *y = rnd(n, 22), *want = rnd(n, 23);
+    for (size_t i = 0; i < n; i++) x[i] = 3 * x[i] + 1.5f; /* non-zero mean */
+    mx_wptr g = rnd_weight((size_t)C, 24, dt, &gs), b = rnd_weight((size_t)C, 25, dt, &bs);
+    mx_group_norm(lv->ref, want, x, B, C, HW, groups, g, b, 1e-5f, silu);
+    mx_group_norm(lv->simd, y, x, B, C, HW, groups, g, b, 1e-5f, silu);
+    char name[96];
+    snprintf(name, sizeof name, "%s group_norm B=%d C=%d HW=%d G=%d %s%s", lv->isa, B, C, HW, groups,
+             mx_dtype_name(dt), silu ? " +silu" : "");
+    mx_check_close(name, y, want, n, 1e-5);
+    mx_group_norm(lv->simd, x, x, B, C, HW, groups, g, b, 1e-5f, silu); /* in place */
+    CHECK(memcmp(x, y, n * sizeof *x) == 0);
+    free(x), free(y), free(want), free(gs), free(bs);
+}
+
+static void test_layer_norm_case(const levels *lv, int M, int C, mx_dtype dt) {
+    size_t n = (size_t)M * C;
+    void *gs, *bs;
+    float *x = rnd(n, 31), *y = rnd(n, 32), *want = rnd(n, 33);
+    mx_wptr g = rnd_weight((size_t)C, 34, dt, &gs), b = rnd_weight((size_t)C, 35, dt, &bs);
+    mx_layer_norm(lv->ref, want, x, M, C, g, b, 1e-5f);
+    mx_layer_norm(lv->simd, y, x, M, C, g, b, 1e-5f);
+    char name[96];
+    snprintf(name, sizeof name, "%s layer_norm M=%d C=%d %s", lv->isa, M, C, mx_dtype_name(dt));
+    mx_check_close(name, y, want, n, 1e-5);
+    free(x), free(y), free(want), free(gs), free(bs);
+}
+
+static void test_softmax_case(const levels *lv, int M, int N) {
+    size_t n = (size_t)M * N;
+    float *x = rnd(n, 41), *want = malloc(n * sizeof *want);
+    for (size_t i = 0; i < n; i++) x[i] = i % 7 == 3 ? -INFINITY : 8 * x[i]; /* masked entries too */
+    x[0] = 0;
+    memcpy(want, x, n * sizeof *x);
+    mx_softmax(lv->ref, want, M, N);
+    mx_softmax(lv->simd, x, M, N);
+    char name[96];
+    snprintf(name, sizeof name, "%s softmax M=%d N=%d", lv->isa, M, N);
+    mx_check_close(name, x, want, n, 1e-5);
+    free(x), free(want);
+}
+
+typedef void (*unary_op)(const mx_ctx *, float *, size_t);
+
+static void test_unary_case(const levels *lv, const char *op, unary_op fn, size_t n, float range) {
+    float *x = malloc(n * sizeof *x), *want = malloc(n * sizeof *want);
+    mx_fill_random(x, n, 51, -range, range);
+    memcpy(want, x, n * sizeof *x);
+    fn(lv->ref, want, n);
+    fn(lv->simd, x, n);
+    char name[96];
+    snprintf(name, sizeof name, "%s %s n=%zu range %g", lv->isa, op, n, range);
+    mx_check_close(name, x, want, n, 1e-5);
+    free(x), free(want);
+}
+
+static void test_geglu_case(const levels *lv, int M, int N) {
+    size_t n = (size_t)M * N;
+    float *x = rnd(2 * n, 61), *y = rnd(n, 62), *want = rnd(n, 63);
+    for (size_t i = 0; i < 2 * n; i++) x[i] *= 4;
+    mx_geglu(lv->ref, want, x, M, N);
+    mx_geglu(lv->simd, y, x, M, N);
+    char name[96];
+    snprintf(name, sizeof name, "%s geglu M=%d N=%d", lv->isa, M, N);
+    mx_check_close(name, y, want, n, 1e-5);
+    free(x), free(y), free(want);
+}
+
+static void test_binary_case(const levels *lv, mx_binop op, int ndim, const int64_t *as, const int64_t *bs) {
+    size_t na = 1, nb = 1, ny = 1;
+    for (int d = 0; d < ndim; d++) {
+        na *= (size_t)as[d];
+        nb *= (size_t)bs[d];
+        ny *= (size_t)(as[d] > bs[d] ? as[d] : bs[d]);
+    }
+    float *a = rnd(na, 71), *b = rnd(nb, 72), *y = rnd(ny, 73), *want = rnd(ny, 74);
+    mx_binary(lv->ref, op, want, a, as, b, bs, ndim);
+    mx_binary(lv->simd, op, y, a, as, b, bs, ndim);
+    char name[128], sa[64], sb[64];
+    snprintf(name, sizeof name, "%s binary op%d %s %s", lv->isa, (int)op, mx_shape_str(ndim, as, sa, sizeof sa),
+             mx_shape_str(ndim, bs, sb, sizeof sb));
+    mx_check_close(name, y, want, ny, 0); /* one rounding either way: exact */
+    free(a), free(b), free(y), free(want);
+}
+
+static void test_elementwise_ops(const levels *lv) {
+    test_group_norm_case(lv, 2, 12, 37, 3, MX_F32, 0);
+    test_group_norm_case(lv, 1, 64, 1, 32, MX_F16, 1);
+    test_group_norm_case(lv, 2, 320, 1024, 32, MX_BF16, 1);
+    test_group_norm_case(lv, 1, 5, 1001, 5, MX_F32, 1);
+    test_layer_norm_case(lv, 7, 77, MX_F32);
+    test_layer_norm_case(lv, 3, 768, MX_BF16);
+    test_layer_norm_case(lv, 4, 5, MX_F16);
+    test_softmax_case(lv, 5, 77);
+    test_softmax_case(lv, 3, 1);
+    test_softmax_case(lv, 2, 4099);
+    test_unary_case(lv, "gelu", mx_gelu, 100003, 8);
+    test_unary_case(lv, "gelu", mx_gelu, 37, 0.5f);
+    test_unary_case(lv, "quick_gelu", mx_quick_gelu, 50001, 12);
+    test_unary_case(lv, "silu", mx_silu, 70001, 100);
+    test_geglu_case(lv, 7, 37);
+    test_geglu_case(lv, 3, 1280);
+    const int64_t s1[1] = {1001}, s4a[4] = {2, 5, 7, 9}, s4b[4] = {2, 5, 1, 1}, s4c[4] = {2, 1, 7, 9},
+                  s4d[4] = {1, 5, 7, 1}, s2a[2] = {3, 1}, s2b[2] = {1, 4}, s3a[3] = {2, 3, 19}, s3b[3] = {1, 1, 19};
+    test_binary_case(lv, MX_BIN_ADD, 1, s1, s1);
+    test_binary_case(lv, MX_BIN_ADD, 4, s4a, s4b);
+    test_binary_case(lv, MX_BIN_SUB, 4, s4b, s4a);
+    test_binary_case(lv, MX_BIN_MUL, 4, s4c, s4d);
+    test_binary_case(lv, MX_BIN_SUB, 2, s2a, s2b);
+    test_binary_case(lv, MX_BIN_MUL, 3, s3a, s3b);
+    float *x = rnd(1037, 81), *y = rnd(1037, 82), *want = rnd(1037, 83);
+    mx_scale(lv->ref, want, x, 0.37f, 1037);
+    mx_scale(lv->simd, y, x, 0.37f, 1037);
+    char name[64];
+    snprintf(name, sizeof name, "%s scale n=1037", lv->isa);
+    mx_check_close(name, y, want, 1037, 0);
+    free(x), free(y), free(want);
+}
+
+/* Conversions must be bit-exact, specials included. */
+static void test_conversion_ops(const levels *lv) {
+    enum { N = 1000 };
+    float *f = rnd(N, 91), back_ref[N], back[N];
+    uint16_t h_ref[N], h[N];
+    const float specials[] = {0.0f, -0.0f, INFINITY, -INFINITY, NAN, 65504.0f, 65520.0f, 1e-8f, 5.9604645e-8f,
+                              3e-5f, -7e-6f, 1e30f, 1.00390625f, 3.4e38f};
+    for (size_t i = 0; i < sizeof specials / sizeof *specials; i++) f[i * 37 % N] = specials[i];
+    for (int i = 0; i < N; i += 13) f[i] *= 1e5f;
+    int exact = 1;
+    mx_f32_to_f16(lv->ref, h_ref, f, N);
+    mx_f32_to_f16(lv->simd, h, f, N);
+    exact &= memcmp(h, h_ref, sizeof h) == 0;
+    mx_f16_to_f32(lv->ref, back_ref, h_ref, N);
+    mx_f16_to_f32(lv->simd, back, h_ref, N);
+    exact &= memcmp(back, back_ref, sizeof back) == 0;
+    mx_f32_to_bf16(lv->ref, h_ref, f, N);
+    mx_f32_to_bf16(lv->simd, h, f, N);
+    exact &= memcmp(h, h_ref, sizeof h) == 0;
+    mx_bf16_to_f32(lv->ref, back_ref, h_ref, N);
+    mx_bf16_to_f32(lv->simd, back, h_ref, N);
+    exact &= memcmp(back, back_ref, sizeof back) == 0;
+    printf("%s conversions f16/bf16 (specials included): %s\n", lv->isa, exact ? "exact" : "MISMATCH");
+    CHECK(exact);
+    free(f);
+}
+
 static void test_simd_levels(void) {
     mx_status st;
     mx_pool *pool = mx_pool_create(2, &st);
@@ -173,6 +321,8 @@ static void test_simd_levels(void) {
         levels lv = {&ref, &simd, mx_isa_name(isa)};
         test_gemm_ops(&lv);
         test_attention_ops(&lv);
+        test_elementwise_ops(&lv);
+        test_conversion_ops(&lv);
         CHECK(scratch.used == 0);
     }
     mx_arena_destroy(&scratch);

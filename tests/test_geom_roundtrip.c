@@ -47,8 +47,8 @@ static int bake_view(mx_bake *bake, mx_view_buffers *vb, const mx_mesh *m, const
     const float bg[3] = {1, 1, 1};
     mx_image img = {0};
     int rc = mx_view_prepare(vb, m, pos, cam, MX_NORMAL_GEOMETRIC, 0.1f, pool, st);
-    rc = rc || mx_render_textured(&vb->culled, m, tex, nlayers, bg, pool, &img, st);
-    rc = rc || mx_backproject(bake, &vb->culled, m, &img, vb->mask, 0, pool, st);
+    rc = rc || mx_render_textured(&vb->gb, m, tex, nlayers, bg, pool, &img, st);
+    rc = rc || mx_backproject(bake, &vb->gb, m, &img, vb->mask, 0, pool, st);
     mx_image_free(&img);
     return rc;
 }

@@ -13,9 +13,6 @@
 #include "../pipeline/io/io.h"
 #include "util_test.h"
 
-#define SIZE 1024
-#define GUTTER 2
-
 /* ---------- hand-made meshes ---------- */
 
 typedef struct builder {
@@ -150,6 +147,20 @@ static mx_mesh make_two_parts(void) {
     return b.m;
 }
 
+/* The same mesh with every corner its own vertex (a triangle soup, as some files store it). */
+static mx_mesh unwelded(const mx_mesh *src) {
+    builder b = {0};
+    for (int f = 0; f < src->nfaces; f++) {
+        int v[3];
+        for (int k = 0; k < 3; k++) {
+            const float *p = src->pos + 3 * (size_t)src->faces[3 * f + k];
+            v[k] = add_vertex(&b, p[0], p[1], p[2]);
+        }
+        add_face(&b, v[0], v[1], v[2]);
+    }
+    return b.m;
+}
+
 /* ---------- checks on the UVs ---------- */
 
 /* Charts as the UVs show them: faces sharing a UV index belong together (union-find). */
@@ -178,11 +189,11 @@ static int *uv_components(const mx_mesh *m, int *count) {
     return comp;
 }
 
-static void face_texels(const mx_mesh *m, int f, double t[6]) {
+static void face_texels(const mx_mesh *m, int f, int size, double t[6]) {
     for (int k = 0; k < 3; k++) {
         const float *uv = m->uv + 2 * (size_t)m->face_uv[3 * f + k];
-        t[2 * k] = uv[0] * (double)SIZE;
-        t[2 * k + 1] = uv[1] * (double)SIZE;
+        t[2 * k] = uv[0] * (double)size;
+        t[2 * k + 1] = uv[1] * (double)size;
     }
 }
 
@@ -196,12 +207,12 @@ static int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v;
 
 /* Conservative: marks every texel whose closed square meets the triangle; returns the number of
  * texels already marked by another chart. */
-static long raster_conservative(const double t[6], int comp, int *owner) {
+static long raster_conservative(const double t[6], int size, int comp, int *owner) {
     double orient = (t[2] - t[0]) * (t[5] - t[1]) - (t[4] - t[0]) * (t[3] - t[1]) >= 0 ? 1 : -1;
-    int x0 = clampi((int)floor(fmin(t[0], fmin(t[2], t[4]))), 0, SIZE - 1);
-    int x1 = clampi((int)floor(fmax(t[0], fmax(t[2], t[4]))), 0, SIZE - 1);
-    int y0 = clampi((int)floor(fmin(t[1], fmin(t[3], t[5]))), 0, SIZE - 1);
-    int y1 = clampi((int)floor(fmax(t[1], fmax(t[3], t[5]))), 0, SIZE - 1);
+    int x0 = clampi((int)floor(fmin(t[0], fmin(t[2], t[4]))), 0, size - 1);
+    int x1 = clampi((int)floor(fmax(t[0], fmax(t[2], t[4]))), 0, size - 1);
+    int y0 = clampi((int)floor(fmin(t[1], fmin(t[3], t[5]))), 0, size - 1);
+    int y1 = clampi((int)floor(fmax(t[1], fmax(t[3], t[5]))), 0, size - 1);
     long clashes = 0;
     for (int y = y0; y <= y1; y++)
         for (int x = x0; x <= x1; x++) {
@@ -212,7 +223,7 @@ static long raster_conservative(const double t[6], int comp, int *owner) {
                 inside = best >= 0;
             }
             if (!inside) continue;
-            int *o = &owner[(size_t)y * SIZE + x];
+            int *o = &owner[(size_t)y * size + x];
             if (*o >= 0 && *o != comp) clashes++;
             else *o = comp;
         }
@@ -220,82 +231,97 @@ static long raster_conservative(const double t[6], int comp, int *owner) {
 }
 
 /* Counts texel centres strictly inside the triangle into `hits`. */
-static void raster_centres(const double t[6], unsigned char *hits) {
+static void raster_centres(const double t[6], int size, unsigned char *hits) {
     double orient = (t[2] - t[0]) * (t[5] - t[1]) - (t[4] - t[0]) * (t[3] - t[1]) >= 0 ? 1 : -1;
-    int x0 = clampi((int)floor(fmin(t[0], fmin(t[2], t[4]))), 0, SIZE - 1);
-    int x1 = clampi((int)floor(fmax(t[0], fmax(t[2], t[4]))), 0, SIZE - 1);
-    int y0 = clampi((int)floor(fmin(t[1], fmin(t[3], t[5]))), 0, SIZE - 1);
-    int y1 = clampi((int)floor(fmax(t[1], fmax(t[3], t[5]))), 0, SIZE - 1);
+    int x0 = clampi((int)floor(fmin(t[0], fmin(t[2], t[4]))), 0, size - 1);
+    int x1 = clampi((int)floor(fmax(t[0], fmax(t[2], t[4]))), 0, size - 1);
+    int y0 = clampi((int)floor(fmin(t[1], fmin(t[3], t[5]))), 0, size - 1);
+    int y1 = clampi((int)floor(fmax(t[1], fmax(t[3], t[5]))), 0, size - 1);
     for (int y = y0; y <= y1; y++)
         for (int x = x0; x <= x1; x++) {
             int inside = 1;
             for (int k = 0; k < 3 && inside; k++) inside = edge_fn(t, k, orient, x + 0.5, y + 0.5) > 0;
-            if (inside && hits[(size_t)y * SIZE + x] < 255) hits[(size_t)y * SIZE + x]++;
+            if (inside && hits[(size_t)y * size + x] < 255) hits[(size_t)y * size + x]++;
         }
 }
 
 /* Texels owned by one chart that have a texel of another chart within `gutter` (Chebyshev). */
-static long gutter_violations(const int *owner) {
+static long gutter_violations(const int *owner, int size, int gutter) {
     long bad = 0;
-    for (int y = 0; y < SIZE; y++)
-        for (int x = 0; x < SIZE; x++) {
-            int o = owner[(size_t)y * SIZE + x];
+    for (int y = 0; y < size; y++)
+        for (int x = 0; x < size; x++) {
+            int o = owner[(size_t)y * size + x];
             if (o < 0) continue;
-            for (int dy = -GUTTER; dy <= GUTTER; dy++)
-                for (int dx = -GUTTER; dx <= GUTTER; dx++) {
+            for (int dy = -gutter; dy <= gutter; dy++)
+                for (int dx = -gutter; dx <= gutter; dx++) {
                     int yy = y + dy, xx = x + dx;
-                    if (yy < 0 || yy >= SIZE || xx < 0 || xx >= SIZE) continue;
-                    int q = owner[(size_t)yy * SIZE + xx];
+                    if (yy < 0 || yy >= size || xx < 0 || xx >= size) continue;
+                    int q = owner[(size_t)yy * size + xx];
                     if (q >= 0 && q != o) bad++;
                 }
         }
     return bad;
 }
 
-static void check_atlas(const char *name, const mx_mesh *m, const mx_uvatlas_report *r) {
-    CHECK(m->nuv > 0 && m->uv && m->face_uv);
-    if (!(m->nuv > 0 && m->uv && m->face_uv)) return;
-    int range_ok = 1;
-    for (size_t i = 0; i < 3 * (size_t)m->nfaces; i++) range_ok &= m->face_uv[i] >= 0 && m->face_uv[i] < m->nuv;
-    CHECK(range_ok);
-    if (!range_ok) return;
-    int in_unit = 1;
-    for (size_t i = 0; i < 2 * (size_t)m->nuv; i++) in_unit &= m->uv[i] >= 0.0f && m->uv[i] <= 1.0f;
-    CHECK(in_unit);
+typedef struct defects {
+    long clashes; /* texels that two charts' conservative rasters share */
+    long doubles; /* texel centres strictly inside two triangles */
+    long near;    /* texels with another chart's texel within the gutter */
+    int pieces;   /* charts as the UVs show them */
+    double utilisation;
+} defects;
 
-    int ncomp = 0;
-    int *comp = uv_components(m, &ncomp);
-    int *owner = malloc((size_t)SIZE * SIZE * sizeof *owner);
-    unsigned char *hits = calloc((size_t)SIZE * SIZE, 1);
-    for (size_t i = 0; i < (size_t)SIZE * SIZE; i++) owner[i] = -1;
-    long clashes = 0, doubles = 0;
+/* Rasterises the atlas at size x size and counts what must not happen. UVs must be in range. */
+static defects atlas_defects(const mx_mesh *m, int size, int gutter) {
+    defects d = {0};
+    int *comp = uv_components(m, &d.pieces);
+    int *owner = malloc((size_t)size * size * sizeof *owner);
+    unsigned char *hits = calloc((size_t)size * size, 1);
+    for (size_t i = 0; i < (size_t)size * size; i++) owner[i] = -1;
     double covered = 0;
     for (int f = 0; f < m->nfaces; f++) {
         double t[6];
-        face_texels(m, f, t);
+        face_texels(m, f, size, t);
         covered += 0.5 * fabs((t[2] - t[0]) * (t[5] - t[1]) - (t[4] - t[0]) * (t[3] - t[1]));
-        clashes += raster_conservative(t, comp[f], owner);
-        raster_centres(t, hits);
+        d.clashes += raster_conservative(t, size, comp[f], owner);
+        raster_centres(t, size, hits);
     }
-    for (size_t i = 0; i < (size_t)SIZE * SIZE; i++) doubles += hits[i] > 1;
-    long near = gutter_violations(owner);
-    double util = covered / ((double)SIZE * SIZE);
-    printf("%-10s %7d faces %5d charts (%5d pieces)  utilisation %.3f  stretch mean %.3f max %.2f  %.3f s\n",
-           name, m->nfaces, r->charts, ncomp, r->utilisation, r->stretch_mean, r->stretch_max, r->seconds);
-    if (clashes || doubles || near)
-        printf("  %s: %ld texels shared by two charts, %ld texel centres in two triangles, %ld gutter violations\n",
-               name, clashes, doubles, near);
-    CHECK(clashes == 0);
-    CHECK(doubles == 0);
-    CHECK(near == 0);
-    CHECK(ncomp <= r->charts); /* every chart is one piece; pieces touching at a vertex merge */
-    CHECK(fabs(util - r->utilisation) < 1e-3);
-    CHECK(r->stretch_mean >= 1 - 1e-3 && r->stretch_mean <= r->stretch_max + 1e-9);
+    for (size_t i = 0; i < (size_t)size * size; i++) d.doubles += hits[i] > 1;
+    d.near = gutter_violations(owner, size, gutter);
+    d.utilisation = covered / ((double)size * size);
     free(comp), free(owner), free(hits);
+    return d;
+}
+
+static int uvs_in_range(const mx_mesh *m) {
+    if (!(m->nuv > 0 && m->uv && m->face_uv)) return 0;
+    for (size_t i = 0; i < 3 * (size_t)m->nfaces; i++)
+        if (m->face_uv[i] < 0 || m->face_uv[i] >= m->nuv) return 0;
+    for (size_t i = 0; i < 2 * (size_t)m->nuv; i++)
+        if (!(m->uv[i] >= 0.0f && m->uv[i] <= 1.0f)) return 0;
+    return 1;
+}
+
+static void check_atlas(const char *name, const mx_mesh *m, const mx_uvatlas_report *r, int size, int gutter) {
+    int ok = uvs_in_range(m);
+    CHECK(ok);
+    if (!ok) return;
+    defects d = atlas_defects(m, size, gutter);
+    printf("%-10s %7d faces %5d charts (%5d pieces)  utilisation %.3f  stretch mean %.3f max %.2f  %.3f s\n",
+           name, m->nfaces, r->charts, d.pieces, r->utilisation, r->stretch_mean, r->stretch_max, r->seconds);
+    if (d.clashes || d.doubles || d.near)
+        printf("  %s: %ld texels shared by two charts, %ld texel centres in two triangles, %ld gutter violations\n",
+               name, d.clashes, d.doubles, d.near);
+    CHECK(d.clashes == 0);
+    CHECK(d.doubles == 0);
+    CHECK(d.near == 0);
+    CHECK(d.pieces <= r->charts); /* every chart is one piece; pieces touching at a vertex merge */
+    CHECK(fabs(d.utilisation - r->utilisation) < 1e-3);
+    CHECK(r->stretch_mean >= 1 - 1e-3 && r->stretch_mean <= r->stretch_max + 1e-9);
 }
 
 /* Builds the atlas twice (the second on a copy) and checks both runs agree bit for bit. */
-static void run_case(const char *name, mx_mesh *m, double min_util) {
+static void run_case(const char *name, mx_mesh *m, const mx_uvatlas_opts *o, double min_util) {
     mx_mesh copy = *m;
     copy.pos = malloc(3 * (size_t)m->nverts * sizeof *copy.pos);
     copy.faces = malloc(3 * (size_t)m->nfaces * sizeof *copy.faces);
@@ -305,13 +331,13 @@ static void run_case(const char *name, mx_mesh *m, double min_util) {
     copy.nnrm = 0, copy.nmat = 0;
     mx_status st = {0};
     mx_uvatlas_report r = {0}, r2 = {0};
-    int rc = mx_uvatlas_build(m, NULL, &r, &st);
+    int rc = mx_uvatlas_build(m, o, &r, &st);
     if (rc) fprintf(stderr, "%s: %s\n", name, st.msg);
     CHECK(rc == 0);
     if (rc == 0) {
-        check_atlas(name, m, &r);
+        check_atlas(name, m, &r, o->texture_size, o->gutter);
         CHECK(r.utilisation >= min_util);
-        CHECK(mx_uvatlas_build(&copy, NULL, &r2, &st) == 0);
+        CHECK(mx_uvatlas_build(&copy, o, &r2, &st) == 0);
         CHECK(copy.nuv == m->nuv && r2.charts == r.charts);
         if (copy.nuv == m->nuv && copy.uv) {
             CHECK(memcmp(copy.uv, m->uv, 2 * (size_t)m->nuv * sizeof *m->uv) == 0);
@@ -331,10 +357,91 @@ static void test_hand_made(void) {
         {"cylinder", make_cylinder(48, 20), 0.5}, {"terrain", make_terrain(80), 0.5},
         {"helicoid", make_helicoid(64, 3), 0.3}, {"two parts", make_two_parts(), 0.3},
     };
+    mx_uvatlas_opts o = mx_uvatlas_defaults();
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
-        run_case(cases[i].name, &cases[i].m, cases[i].min_util);
+        run_case(cases[i].name, &cases[i].m, &o, cases[i].min_util);
         free_mesh(&cases[i].m);
     }
+    /* A triangle soup is welded by position: as few charts as the shared-vertex sphere. */
+    mx_mesh welded = make_sphere(24, 48), soup = unwelded(&welded);
+    mx_uvatlas_report rw = {0}, rs = {0};
+    mx_status st = {0};
+    CHECK(mx_uvatlas_build(&welded, &o, &rw, &st) == 0);
+    run_case("sphere soup", &soup, &o, 0.5);
+    CHECK(mx_uvatlas_build(&soup, &o, &rs, &st) == -1); /* has UVs now */
+    free_mesh(&soup);
+    soup = unwelded(&welded);
+    CHECK(mx_uvatlas_build(&soup, &o, &rs, &st) == 0);
+    CHECK(rs.charts == rw.charts);
+    free_mesh(&soup), free_mesh(&welded);
+    /* Other sizes and gutters are honoured too. */
+    o.texture_size = 512, o.gutter = 5;
+    mx_mesh sphere = make_sphere(16, 32);
+    run_case("sphere 512 gutter 5", &sphere, &o, 0.4);
+    free_mesh(&sphere);
+}
+
+/* Moves every UV of piece `piece` by (dx, dy) texels. */
+static void shift_piece(mx_mesh *m, const int *comp, int piece, double dx, double dy, int size) {
+    unsigned char *moved = calloc((size_t)m->nuv, 1);
+    for (int f = 0; f < m->nfaces; f++)
+        for (int k = 0; k < 3 && comp[f] == piece; k++) {
+            int i = m->face_uv[3 * f + k];
+            if (moved[i]) continue;
+            moved[i] = 1;
+            m->uv[2 * i] += (float)(dx / size);
+            m->uv[2 * i + 1] += (float)(dy / size);
+        }
+    free(moved);
+}
+
+static void piece_min(const mx_mesh *m, const int *comp, int piece, double *x, double *y) {
+    *x = *y = INFINITY;
+    for (int f = 0; f < m->nfaces; f++)
+        for (int k = 0; k < 3 && comp[f] == piece; k++) {
+            const float *uv = m->uv + 2 * (size_t)m->face_uv[3 * f + k];
+            *x = fmin(*x, uv[0]), *y = fmin(*y, uv[1]);
+        }
+}
+
+/* The checker itself must see overlaps and charts that come too close. */
+static void test_checker_detects_defects(void) {
+    mx_mesh m = make_cube();
+    mx_status st = {0};
+    mx_uvatlas_report r = {0};
+    CHECK(mx_uvatlas_build(&m, NULL, &r, &st) == 0);
+    int pieces = 0;
+    int *comp = uv_components(&m, &pieces);
+    CHECK(pieces == 6);
+    defects clean = atlas_defects(&m, 1024, 2);
+    CHECK(clean.clashes == 0 && clean.doubles == 0 && clean.near == 0);
+    /* Piece 1 laid exactly over piece 0: both kinds of overlap. */
+    double x0, y0, x1, y1;
+    piece_min(&m, comp, 0, &x0, &y0);
+    piece_min(&m, comp, 1, &x1, &y1);
+    shift_piece(&m, comp, 1, (x0 - x1) * 1024, (y0 - y1) * 1024, 1024);
+    defects over = atlas_defects(&m, 1024, 2);
+    CHECK(over.clashes > 0 && over.doubles > 0);
+    free(comp);
+    free_mesh(&m);
+
+    /* Two unit squares laid out side by side 1.5 texels apart: no overlap, but too close. */
+    builder b = {0};
+    for (int i = 0; i < 8; i++) add_vertex(&b, 0, 0, 0);
+    add_quad(&b, 0, 1, 2, 3);
+    add_quad(&b, 4, 5, 6, 7);
+    b.m.nuv = 8;
+    b.m.uv = malloc(16 * sizeof *b.m.uv);
+    b.m.face_uv = malloc(12 * sizeof *b.m.face_uv);
+    const float square[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+    for (int i = 0; i < 8; i++) {
+        float x = (100 + square[2 * (i % 4)] * 50 + (i >= 4 ? 51.5f : 0)) / 1024, y = (100 + square[2 * (i % 4) + 1] * 50) / 1024;
+        b.m.uv[2 * i] = x, b.m.uv[2 * i + 1] = y;
+    }
+    memcpy(b.m.face_uv, b.m.faces, 12 * sizeof *b.m.face_uv);
+    defects near = atlas_defects(&b.m, 1024, 2);
+    CHECK(near.clashes == 0 && near.doubles == 0 && near.near > 0);
+    free_mesh(&b.m);
 }
 
 /* The helicoid has to be split: a single chart would cover its ring three times. */
@@ -369,14 +476,25 @@ static void test_bad_input(void) {
     o.max_chart_angle = 95;
     CHECK(mx_uvatlas_build(&sphere, &o, NULL, &st) == -1 && st.code == MX_EUSAGE);
     free_mesh(&sphere);
-    /* Too many charts for the texture: 32x32 texels with a 2-texel gutter hold at most 64
-     * charts (each takes at least 4x4), the terrain makes more than 64. */
+    /* Too many charts for the texture: 16x16 texels with a 2-texel gutter hold at most 16
+     * charts (each takes at least 4x4 with its gutter), the terrain makes more than 16. */
     mx_mesh terrain = make_terrain(80);
     o = mx_uvatlas_defaults();
-    o.texture_size = 32;
+    o.texture_size = 16;
     CHECK(mx_uvatlas_build(&terrain, &o, NULL, &st) == -1 && st.code == MX_EINPUT && strstr(st.msg, "do not fit"));
     CHECK(terrain.uv == NULL && terrain.face_uv == NULL);
     free_mesh(&terrain);
+
+    /* Only zero-area faces (all corners on one point): a valid, empty-looking atlas. */
+    builder b = {0};
+    for (int i = 0; i < 6; i++) add_vertex(&b, 0.5, 0.5, 0.5);
+    add_face(&b, 0, 1, 2);
+    add_face(&b, 3, 4, 5);
+    add_face(&b, 0, 0, 0);
+    mx_uvatlas_report r = {0};
+    CHECK(mx_uvatlas_build(&b.m, NULL, &r, &st) == 0);
+    CHECK(uvs_in_range(&b.m) && r.utilisation == 0);
+    free_mesh(&b.m);
 
     mx_mesh empty = {0};
     CHECK(mx_uvatlas_build(&empty, NULL, NULL, &st) == -1 && st.code == MX_EINPUT);
@@ -396,12 +514,14 @@ static void test_assets(void) {
         int rc = mx_io_read_mesh(path, &m, &st);
         if (rc) fprintf(stderr, "%s\n", st.msg);
         CHECK(rc == 0);
-        if (rc == 0) run_case(files[i][0], &m, 0.5);
+        mx_uvatlas_opts o = mx_uvatlas_defaults();
+        if (rc == 0) run_case(files[i][0], &m, &o, 0.5);
         free_mesh(&m);
     }
 }
 
 int main(void) {
+    test_checker_detects_defects();
     test_hand_made();
     test_fold_is_split();
     test_bad_input();

@@ -5,9 +5,14 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../pipeline/nn/clip.h"
+#include "../pipeline/nn/sd_pipeline.h"
+#include "../runtime/log.h"
+#include "../weights/convert.h"
 #include "../weights/golden_rule.h"
+#include "../weights/weights.h"
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
@@ -83,8 +88,10 @@ static void run_and_compare(const mx_clip *m, const mx_ctx *c, const char *dir, 
     mx_arena_measure(&measure);
     CHECK(mx_clip_forward(m, c, &measure, ids, B, T, last, pooled, hs, &st) == 0);
     CHECK(measure.peak > 0);
+    double t0 = mx_now();
     int ok = mx_arena_create(&arena, measure.peak, &st) == 0 &&
              mx_clip_forward(m, c, &arena, ids, B, T, last, pooled, hs, &st) == 0;
+    printf("%s: forward of %d x %d tokens in %.3f s (arena %zu bytes)\n", label, B, T, mx_now() - t0, measure.peak);
     if (!ok) fprintf(stderr, "%s: %s\n", label, st.msg);
     CHECK(ok);
     char path[1024], name[64], msg[160];
@@ -138,8 +145,46 @@ static void test_tiny(const char *weights_file, const char *outputs_file, const 
     CHECK(ok);
     mx_st_close(&sf); /* the safetensors binder keeps its own copies */
     if (ok) run_and_compare(&m, c, dir, outputs_file, label);
+    if (ok) {
+        int32_t ids[2] = {0, 1000}; /* 1000 is past the tiny vocabulary */
+        float out[2 * 32];
+        mx_arena a;
+        CHECK(mx_arena_create(&a, 1 << 20, &st) == 0);
+        CHECK(mx_clip_forward(&m, c, &a, ids, 1, 2, out, NULL, NULL, &st) != 0 && strstr(st.msg, "1000"));
+        mx_arena_destroy(&a);
+    }
     mx_clip_free(&m);
     mx_binder_free(&b);
+}
+
+/* The production path: `matex convert` of the clip_tiny folder, config from the metadata
+ * "text_encoder.config", weights bound with the prefix "text_encoder.". */
+static void test_converted(const mx_ctx *c) {
+    char dir[1024], path[256];
+    snprintf(dir, sizeof dir, "%s/golden/clip_tiny", mx_shared_dir());
+    snprintf(path, sizeof path, "/tmp/matex_test_clip_%d.mxw", (int)getpid());
+    mx_convert_opts opts = {0};
+    opts.input = dir;
+    opts.output = path;
+    opts.dtype = MX_F32;
+    mx_convert_result res;
+    mx_status st = {0};
+    mx_weightfile *wf = NULL;
+    mx_binder b = {0};
+    mx_clip m = {0};
+    mx_clip_config cfg;
+    const char *cfg_text = NULL;
+    int ok = mx_convert(&opts, &res, &st) == 0 && mx_wf_open(&wf, path, &st) == 0;
+    if (ok) cfg_text = mx_wf_meta(wf, "text_encoder.config");
+    ok = ok && cfg_text && mx_clip_config_parse(&cfg, cfg_text, strlen(cfg_text), "text_encoder.config", &st) == 0 &&
+         mx_binder_wf(&b, wf, "text_encoder.", &st) == 0 && mx_clip_load(&m, &cfg, &b, &st) == 0;
+    if (!ok) fprintf(stderr, "converted clip_tiny: %s\n", cfg_text || !wf ? st.msg : "no text_encoder.config");
+    CHECK(ok);
+    if (ok) run_and_compare(&m, c, dir, "outputs.safetensors", "converted");
+    mx_clip_free(&m);
+    mx_binder_free(&b);
+    if (wf) mx_wf_close(wf);
+    remove(path);
 }
 
 /* Loading errors name the tensor; an enumerating binder lists every parameter. */
@@ -186,6 +231,35 @@ static int bind_golden(mx_binder *b, const char *name, int ndim, const int64_t *
     return 0;
 }
 
+/* Text to embeddings in one call (tokenizer + encoder) on the prompts of the sd15_clip inputs. */
+static void check_prompt_path(const mx_clip *m, const mx_ctx *c, const char *dir) {
+    char v[1024], mg[1024], path[1100];
+    snprintf(v, sizeof v, "%s/golden/tokenizer/vocab.json", mx_shared_dir());
+    snprintf(mg, sizeof mg, "%s/golden/tokenizer/merges.txt", mx_shared_dir());
+    snprintf(path, sizeof path, "%s/outputs.safetensors", dir);
+    const char *prompts[2] = {"front and back view of a red leather jacket", ""};
+    mx_tokenizer *tok = NULL;
+    mx_status st = {0};
+    mx_safetensors sf;
+    size_t n = (size_t)2 * 77 * m->cfg.hidden_size;
+    float *got = malloc(n * sizeof(float)), *want = NULL;
+    int dropped[2] = {-1, -1};
+    int ok = got && mx_tok_load_files(&tok, v, mg, &st) == 0 &&
+             mx_sd_encode_prompts(c, m, tok, prompts, 2, got, dropped, &st) == 0 && mx_st_open(&sf, path, &st) == 0;
+    if (!ok) fprintf(stderr, "prompt path: %s\n", st.msg);
+    CHECK(ok);
+    if (ok) {
+        const mx_st_tensor *t = mx_st_find(&sf, "last_hidden_state");
+        want = t && t->nbytes / 4 == n ? mx_st_to_f32(&sf, t, &st) : NULL;
+        CHECK(want != NULL && dropped[0] == 0 && dropped[1] == 0);
+        if (want) mx_check_close("sd15 prompts -> embeddings", got, want, n, 1e-4);
+        mx_st_close(&sf);
+    }
+    mx_tok_free(tok);
+    free(got);
+    free(want);
+}
+
 static void test_sd15(const mx_ctx *c) {
     char dir[1024];
     snprintf(dir, sizeof dir, "%s/golden/sd15_clip", mx_shared_dir());
@@ -201,6 +275,7 @@ static void test_sd15(const mx_ctx *c) {
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
     if (ok) run_and_compare(&m, c, dir, "outputs.safetensors", "sd15");
+    if (ok) check_prompt_path(&m, c, dir);
     mx_clip_free(&m);
     for (size_t i = 0; i < g.n; i++) free(g.bufs[i]);
     free(g.bufs);
@@ -209,13 +284,15 @@ static void test_sd15(const mx_ctx *c) {
 int main(void) {
     mx_ctx scalar, best;
     mx_status st = {0};
-    if (mx_ctx_create(&scalar, 1, MX_ISA_SCALAR, 16 << 20, &st) || mx_ctx_create(&best, 1, mx_cpu_best_isa(), 16 << 20, &st)) {
+    if (mx_ctx_create(&scalar, 1, MX_ISA_SCALAR, 16 << 20, &st) ||
+        mx_ctx_create(&best, 2, mx_cpu_best_isa(), 16 << 20, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return 1;
     }
     test_tiny("model.safetensors", "outputs.safetensors", &scalar, "fp32 scalar");
     test_tiny("model.safetensors", "outputs.safetensors", &best, "fp32 best");
     test_tiny("model.fp16.safetensors", "outputs_fp16w.safetensors", &best, "fp16w best");
+    test_converted(&best);
     test_enumerate_and_errors();
     const char *full = getenv("MATEX_FULL");
     if (full && !strcmp(full, "1")) test_sd15(&best);

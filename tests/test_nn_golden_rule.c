@@ -116,10 +116,10 @@ static int check_tensor(const source *src, const char *name, const mx_json *e, u
     return bad ? -1 : 0;
 }
 
-/* In the sampled mode: every tensor of small networks, every 1-D tensor, and every 8th
+/* In the sampled mode: every tensor of small networks, every 1-D tensor, and every 16th
  * tensor (by position in the file) of the big ones. */
 static int selected(int full, int small_net, size_t index, const mx_json *e) {
-    return full || small_net || mx_json_len(mx_json_get(e, "shape")) == 1 || index % 8 == 0;
+    return full || small_net || mx_json_len(mx_json_get(e, "shape")) == 1 || index % 16 == 0;
 }
 
 static void check_network(const char *folder, int small_net, int full, float *buf) {

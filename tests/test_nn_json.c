@@ -68,6 +68,12 @@ static void test_values(void) {
     CHECK(j && !strcmp(mx_json_str(j), "gr\xC3\xBC\xC3\x9F"));
     mx_json_free(j);
 
+    /* Python's json writes these (diffusers scheduler configs hold -Infinity) */
+    j = parse("[NaN, Infinity, -Infinity]", &st);
+    CHECK(j && isnan(mx_json_num(mx_json_at(j, 0))) && isinf(mx_json_num(mx_json_at(j, 1))) &&
+          mx_json_num(mx_json_at(j, 2)) < 0 && isinf(mx_json_num(mx_json_at(j, 2))));
+    mx_json_free(j);
+
     j = parse("\xEF\xBB\xBF[1]", &st); /* byte order mark */
     CHECK(j && mx_json_len(j) == 1);
     mx_json_free(j);
@@ -85,7 +91,8 @@ static void test_errors(void) {
     expect_error("1e", "exponent");
     expect_error("-", NULL);
     expect_error("+1", NULL);
-    expect_error("NaN", NULL);
+    expect_error("nan", NULL);
+    expect_error("-Inf", NULL);
     expect_error("1e999", "range");
     expect_error("tru", NULL);
     expect_error("\"abc", "unterminated");
@@ -131,6 +138,31 @@ static void test_truncations(void) {
     }
 }
 
+/* Every byte of a document set to several values: parsed or refused, never a crash (ASan). */
+static void test_mutations(void) {
+    const char *doc = "{\"a\": [1, 2.5e-3, \"x\\u00e9\\n\"], \"b\": {\"c\": null, \"d\": -Infinity}, \"e\": true}";
+    size_t n = strlen(doc);
+    static const char vals[] = {0, '"', '\\', '[', '{', ']', '}', ',', ':', '-', '0', 'u', 'e', (char)0xC3, (char)0xFF};
+    int parsed = 0, refused = 0;
+    for (size_t pos = 0; pos < n; pos++)
+        for (size_t v = 0; v < sizeof vals; v++) {
+            char *copy = malloc(n);
+            memcpy(copy, doc, n);
+            copy[pos] = vals[v];
+            mx_status st;
+            mx_json *j = mx_json_parse(copy, n, "test.json", &st);
+            if (j) {
+                parsed++;
+            } else {
+                refused++;
+                CHECK(strstr(st.msg, "test.json") != NULL);
+            }
+            mx_json_free(j);
+            free(copy);
+        }
+    CHECK(parsed > 0 && refused > 0);
+}
+
 static void test_large_object(void) {
     /* a vocab.json-like object: many keys, parsed and looked up */
     size_t n = 20000, cap = n * 24 + 16, off = 0;
@@ -155,6 +187,7 @@ int main(void) {
     test_errors();
     test_depth();
     test_truncations();
+    test_mutations();
     test_large_object();
     return mx_test_finish("test_nn_json");
 }

@@ -201,6 +201,13 @@ static void test_cfg_and_config(void) {
     const char *ddim = "{\"_class_name\": \"DDIMScheduler\", \"timestep_spacing\": \"trailing\"}";
     CHECK(mx_sched_config_parse(&cfg, ddim, strlen(ddim), "ddim.json", &st) == 0);
     CHECK(cfg.kind == MX_SCHED_DDIM && cfg.timestep_spacing == MX_SPACING_TRAILING);
+    mx_sched s;
+    CHECK(mx_sched_init(&s, &cfg, 50, 1, &st) == 0); /* np.round(np.arange(1000, 0, -20)) - 1 */
+    CHECK(mx_sched_timestep(&s, 0) == 999 && mx_sched_timestep(&s, 1) == 979 && mx_sched_timestep(&s, 49) == 19);
+    mx_sched_free(&s);
+    /* diffusers writes -Infinity (Python json); "Infinity" inside a string is left alone */
+    const char *py = "{\"lambda_min_clipped\": -Infinity, \"_note\": \"Infinity\", \"solver_order\": 3}";
+    CHECK(mx_sched_config_parse(&cfg, py, strlen(py), "py.json", &st) == 0 && cfg.solver_order == 3);
 }
 
 int main(void) {

@@ -3,6 +3,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../pipeline/nn/tokenizer.h"
 #include "../runtime/json.h"
@@ -42,7 +43,11 @@ static void check_record(const mx_tokenizer *tok, const mx_json *rec) {
         if (r.ids[i] != (int32_t)mx_json_num(mx_json_at(want, (size_t)i))) first_diff = i;
     /* ids_full has BOS + every token + EOS: what was dropped is its excess over 77 */
     int dropped = (int)mx_json_len(full) > MX_CLIP_CONTEXT ? (int)mx_json_len(full) - MX_CLIP_CONTEXT : 0;
-    printf("%-60.60s %s\n", prompt, first_diff < 0 ? "ids equal" : "ids DIFFER");
+    char shown[48];
+    size_t k = 0;
+    for (; prompt[k] && k + 1 < sizeof shown; k++) shown[k] = (unsigned char)prompt[k] < 0x20 ? ' ' : prompt[k];
+    shown[k] = 0;
+    printf("%-48s %s\n", shown, first_diff < 0 ? "ids equal" : "ids DIFFER");
     if (first_diff >= 0)
         printf("    first difference at %d: got %d want %d\n", first_diff, r.ids[first_diff],
                (int)mx_json_num(mx_json_at(want, (size_t)first_diff)));
@@ -77,6 +82,60 @@ static void test_bad_utf8(const mx_tokenizer *tok) {
     CHECK(r.ids[0] == MX_CLIP_BOS_ID && r.ids[r.n_tokens - 1] == MX_CLIP_EOS_ID && r.n_dropped == 0);
 }
 
+/* The tokenizer of a matex weight file: metadata tokenizer.vocab / tokenizer.merges. */
+static void test_weight_file(const char *vocab_path, const char *merges_path) {
+    size_t vl, ml;
+    char *v = read_text(vocab_path, &vl), *m = read_text(merges_path, &ml);
+    char path[256];
+    snprintf(path, sizeof path, "/tmp/matex_test_tok_%d.mxw", (int)getpid());
+    mx_status st = {0};
+    mx_wf_writer *w = mx_wf_writer_create(&st);
+    float one = 1.0f;
+    int64_t shape[1] = {1};
+    int ok = v && m && w && mx_wf_writer_add(w, "dummy", MX_F32, 1, shape, &one, MX_F32, &st) == 0 &&
+             mx_wf_writer_meta(w, "tokenizer.vocab", v, &st) == 0 &&
+             mx_wf_writer_meta(w, "tokenizer.merges", m, &st) == 0 && mx_wf_writer_finish(w, path, &st) == 0;
+    if (!ok) fprintf(stderr, "writing %s: %s\n", path, st.msg);
+    CHECK(ok);
+    mx_wf_writer_free(w);
+    mx_weightfile *wf;
+    mx_tokenizer *tok = NULL;
+    if (ok && mx_wf_open(&wf, path, &st) == 0) {
+        CHECK(mx_tok_load_weights(&tok, wf, &st) == 0);
+        mx_tok_result r;
+        CHECK(tok && mx_tok_encode(tok, "a red jacket", &r, &st) == 0);
+        CHECK(tok && r.n_tokens == 5 && r.ids[1] == 320 && r.ids[2] == 736 && r.ids[3] == 6164);
+        mx_tok_free(tok);
+        mx_wf_close(wf);
+    } else {
+        CHECK(0);
+    }
+    remove(path);
+    free(v);
+    free(m);
+}
+
+/* Hostile sizes stay fast: a 2 MB single word and 2 MB of one-letter words. */
+static void test_huge_prompts(const mx_tokenizer *tok) {
+    size_t n = (size_t)2 << 20;
+    char *word = malloc(n + 1), *words = malloc(n + 1);
+    CHECK(word && words);
+    if (!word || !words) return;
+    for (size_t i = 0; i < n; i++) {
+        word[i] = (char)('a' + (i * 7) % 26);
+        words[i] = (i & 1) ? ' ' : 'x';
+    }
+    word[n] = words[n] = 0;
+    mx_tok_result r;
+    mx_status st = {0};
+    CHECK(mx_tok_encode(tok, word, &r, &st) == 0 && r.n_tokens == MX_CLIP_CONTEXT && r.n_dropped > 0);
+    CHECK(r.ids[MX_CLIP_CONTEXT - 1] == MX_CLIP_EOS_ID);
+    CHECK(mx_tok_encode(tok, words, &r, &st) == 0 && r.n_dropped >= MX_TOK_MAX_COUNTED - (MX_CLIP_CONTEXT - 2));
+    CHECK(r.ids[1] == mx_tok_id(tok, "x</w>"));
+    free(word);
+    free(words);
+}
+
 static void test_bad_files(void) {
     mx_tokenizer *t;
     mx_status st = {0};
@@ -101,6 +160,8 @@ int main(void) {
         CHECK(mx_tok_id(tok, "a</w>") == 320);
         test_golden(tok);
         test_bad_utf8(tok);
+        test_weight_file(v, m);
+        test_huge_prompts(tok);
     }
     test_bad_files();
     mx_tok_free(tok);

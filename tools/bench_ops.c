@@ -50,17 +50,29 @@ static double median(double *t, int n) {
 
 typedef void (*bench_fn)(void *arg);
 
-/* Median seconds of `repeats` runs after one warm-up run. */
-static double time_median(bench_fn fn, void *arg, int repeats) {
-    double t[64];
+/* Median seconds of `repeats` runs of each of two functions after one warm-up run each; the
+ * runs alternate, so a change in machine load hits both sides alike. */
+static void time_pair(bench_fn f0, bench_fn f1, void *arg, int repeats, double *t0_med, double *t1_med) {
+    double t0[64], t1[64];
     if (repeats > 64) repeats = 64;
-    fn(arg);
+    f0(arg);
+    f1(arg);
     for (int r = 0; r < repeats; r++) {
-        double t0 = mx_now();
-        fn(arg);
-        t[r] = mx_now() - t0;
+        double s = mx_now();
+        f0(arg);
+        double m = mx_now();
+        f1(arg);
+        t0[r] = m - s;
+        t1[r] = mx_now() - m;
     }
-    return median(t, repeats);
+    *t0_med = median(t0, repeats);
+    *t1_med = median(t1, repeats);
+}
+
+static double time_median(bench_fn fn, void *arg, int repeats) {
+    double t, unused;
+    time_pair(fn, fn, arg, repeats, &t, &unused);
+    return t;
 }
 
 typedef struct {
@@ -121,8 +133,9 @@ static double bench_gemms(const mx_ctx *ctx, int repeats) {
         bench_args a = {ctx, s, NULL, random_floats((size_t)s->M * s->K, 1), random_floats((size_t)s->N * s->K, 2),
                         random_floats((size_t)s->M * s->N, 3), NULL};
         double flop = 2.0 * s->M * s->N * s->K;
-        double gm = flop / time_median(run_matex_gemm, &a, repeats) * 1e-9;
-        double gb = flop / time_median(run_blas_gemm, &a, repeats) * 1e-9;
+        double tm, tb;
+        time_pair(run_matex_gemm, run_blas_gemm, &a, repeats, &tm, &tb);
+        double gm = flop / tm * 1e-9, gb = flop / tb * 1e-9;
         char name[64];
         snprintf(name, sizeof name, "%d %d %d", s->M, s->N, s->K);
         printf("%-28s %10.1f %10.1f %7.3f   GFLOP/s\n", name, gm, gb, gm / gb);
@@ -141,8 +154,9 @@ static double bench_convs(const mx_ctx *ctx, int repeats) {
         bench_args a = {ctx, NULL, c, random_floats(c->C * HW, 4), random_floats((size_t)c->C * c->C * 9, 5),
                         random_floats(c->C * HW, 6), random_floats((size_t)c->C * 9 * HW, 7)};
         double flop = 2.0 * c->C * HW * c->C * 9;
-        double gm = flop / time_median(run_matex_conv, &a, repeats) * 1e-9;
-        double gb = flop / time_median(run_blas_conv, &a, repeats) * 1e-9;
+        double tm, tb;
+        time_pair(run_matex_conv, run_blas_conv, &a, repeats, &tm, &tb);
+        double gm = flop / tm * 1e-9, gb = flop / tb * 1e-9;
         char name[64];
         snprintf(name, sizeof name, "%dx%dx%d", c->H, c->W, c->C);
         printf("%-28s %10.1f %10.1f %7.3f   GFLOP/s\n", name, gm, gb, gm / gb);

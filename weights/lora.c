@@ -223,22 +223,29 @@ int mx_lora_merge(mx_lora *l, const char *net, const char *name, int ndim, const
                        net, name, (long long)out_dim, (long long)in_dim);
     double alpha;
     float *down = mx_st_to_f32(&l->file, m->down, st), *up = down ? mx_st_to_f32(&l->file, m->up, st) : NULL;
-    if (!down || !up || read_alpha(l, m, (double)rank, &alpha, st)) {
-        free(down);
-        free(up);
-        return -1;
-    }
-    double factor = (double)scale * alpha / (double)rank;
-    for (int64_t o = 0; o < out_dim; o++)
-        for (int64_t i = 0; i < in_dim; i++) {
-            double acc = 0;
-            for (int64_t r = 0; r < rank; r++) acc += (double)up[o * rank + r] * (double)down[r * in_dim + i];
-            w[o * in_dim + i] = (float)((double)w[o * in_dim + i] + factor * acc);
+    double *acc = up ? malloc((size_t)(in_dim ? in_dim : 1) * sizeof *acc) : NULL;
+    int rc = -1;
+    if (down && up && !acc) mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    if (acc && !read_alpha(l, m, (double)rank, &alpha, st)) {
+        /* row o of up @ down, accumulated in double over r in order, rows of down read contiguously */
+        double factor = (double)scale * alpha / (double)rank;
+        for (int64_t o = 0; o < out_dim; o++) {
+            for (int64_t i = 0; i < in_dim; i++) acc[i] = 0;
+            for (int64_t r = 0; r < rank; r++) {
+                double u = up[o * rank + r];
+                const float *drow = down + r * in_dim;
+                for (int64_t i = 0; i < in_dim; i++) acc[i] += u * (double)drow[i];
+            }
+            float *wrow = w + o * in_dim;
+            for (int64_t i = 0; i < in_dim; i++) wrow[i] = (float)((double)wrow[i] + factor * acc[i]);
         }
+        m->used = 1;
+        rc = 1;
+    }
+    free(acc);
     free(down);
     free(up);
-    m->used = 1;
-    return 1;
+    return rc;
 }
 
 int mx_lora_check_all_used(const mx_lora *l, mx_status *st) {

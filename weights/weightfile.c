@@ -529,8 +529,8 @@ static int check_unique(const mx_wf_writer *w, mx_status *st) {
 }
 
 int mx_wf_writer_finish(mx_wf_writer *w, const char *path, mx_status *st) {
-    qsort(w->entries, w->count, sizeof *w->entries, cmp_entry);
-    qsort(w->meta, w->meta_count, sizeof *w->meta, cmp_meta);
+    if (w->count) qsort(w->entries, w->count, sizeof *w->entries, cmp_entry);
+    if (w->meta_count) qsort(w->meta, w->meta_count, sizeof *w->meta, cmp_meta);
     if (check_unique(w, st)) return -1;
     wf_header h = {0};
     uint64_t off = 0; /* relative to the data area */

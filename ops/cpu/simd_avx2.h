@@ -17,6 +17,8 @@ static inline vf v_load(const float *p) { return _mm256_loadu_ps(p); }
 static inline vf v_loadn(const float *p, int n) { return _mm256_maskload_ps(p, v_mask(n)); }
 static inline void v_store(float *p, vf v) { _mm256_storeu_ps(p, v); }
 static inline void v_storen(float *p, vf v, int n) { _mm256_maskstore_ps(p, v_mask(n), v); }
+/* lanes from n on set to 0 */
+static inline vf v_firstn(vf v, int n) { return _mm256_and_ps(v, _mm256_castsi256_ps(v_mask(n))); }
 static inline vf v_set1(float x) { return _mm256_set1_ps(x); }
 static inline vf v_zero(void) { return _mm256_setzero_ps(); }
 static inline vf v_add(vf a, vf b) { return _mm256_add_ps(a, b); }

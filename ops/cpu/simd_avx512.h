@@ -15,6 +15,8 @@ static inline vf v_load(const float *p) { return _mm512_loadu_ps(p); }
 static inline vf v_loadn(const float *p, int n) { return _mm512_maskz_loadu_ps(v_mask(n), p); }
 static inline void v_store(float *p, vf v) { _mm512_storeu_ps(p, v); }
 static inline void v_storen(float *p, vf v, int n) { _mm512_mask_storeu_ps(p, v_mask(n), v); }
+/* lanes from n on set to 0 */
+static inline vf v_firstn(vf v, int n) { return _mm512_maskz_mov_ps(v_mask(n), v); }
 static inline vf v_set1(float x) { return _mm512_set1_ps(x); }
 static inline vf v_zero(void) { return _mm512_setzero_ps(); }
 static inline vf v_add(vf a, vf b) { return _mm512_add_ps(a, b); }

@@ -14,6 +14,8 @@ typedef struct bp_scratch {
     size_t bin_cap;
     int32_t *list;   /* pixel indices grouped by bin, in pixel order */
     float *view_q;   /* [nlayers][h][w] this view's best |n.v| per texel */
+    struct splat *splats; /* [image pixels] footprint of each used pixel, from the count pass */
+    size_t splat_cap;
 } bp_scratch;
 
 int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
@@ -45,6 +47,7 @@ void mx_bake_free(mx_bake *b) {
         free(s->bin_start);
         free(s->list);
         free(s->view_q);
+        free(s->splats);
         free(s);
     }
     free(b->sum_wc);
@@ -78,10 +81,12 @@ typedef struct bp_job {
     bp_scratch *s;
 } bp_job;
 
-/* Splat footprint of pixel i: top-left texel (x0, y0), wrapped, and the fractions. */
+/* Splat footprint of a pixel: the 2 x 2 texels from (x0, y0) (wrapped to x1, y1), the
+ * fractions, and the material layer. Computed once per view in the count pass. */
 typedef struct splat {
-    int x0, x1, y0, y1;
+    uint16_t x0, x1, y0, y1;
     float fx, fy;
+    int32_t layer;
 } splat;
 
 static splat pixel_splat(const bp_job *j, size_t i) {
@@ -92,12 +97,17 @@ static splat pixel_splat(const bp_job *j, size_t i) {
     splat s;
     s.fx = tx - flx;
     s.fy = ty - fly;
-    s.x0 = (int)fmodf(flx, (float)b->w);
-    s.y0 = (int)fmodf(fly, (float)b->h);
-    if (s.x0 < 0) s.x0 += b->w;
-    if (s.y0 < 0) s.y0 += b->h;
-    s.x1 = s.x0 + 1 == b->w ? 0 : s.x0 + 1;
-    s.y1 = s.y0 + 1 == b->h ? 0 : s.y0 + 1;
+    int x0 = (int)flx, y0 = (int)fly;
+    /* repeat wrapping; fmod only for the rare far-away UV, to keep the int conversion valid */
+    if (x0 < -1 || x0 >= b->w) x0 = (int)fmodf(flx, (float)b->w);
+    if (y0 < -1 || y0 >= b->h) y0 = (int)fmodf(fly, (float)b->h);
+    if (x0 < 0) x0 += b->w;
+    if (y0 < 0) y0 += b->h;
+    s.x0 = (uint16_t)x0;
+    s.y0 = (uint16_t)y0;
+    s.x1 = (uint16_t)(x0 + 1 == b->w ? 0 : x0 + 1);
+    s.y1 = (uint16_t)(y0 + 1 == b->h ? 0 : y0 + 1);
+    s.layer = mx_face_layer(j->m, j->gb->face[i], b->nlayers);
     return s;
 }
 
@@ -106,27 +116,20 @@ static int pixel_used(const bp_job *j, size_t i) {
     return j->gb->face[i] >= 0 && (!j->mask || j->mask[i]) && isfinite(u) && isfinite(v);
 }
 
-static int pixel_bin(const bp_job *j, size_t i, int row) {
-    return mx_face_layer(j->m, j->gb->face[i], j->b->nlayers) * j->nbands + row / BAND_ROWS;
-}
-
-/* Calls visit(bin) for the one or two bands pixel i splats into. */
-#define FOR_PIXEL_BINS(j, i, bin_var, body)                                                      \
-    do {                                                                                         \
-        splat sp_ = pixel_splat(j, i);                                                           \
-        int b0_ = pixel_bin(j, i, sp_.y0), b1_ = pixel_bin(j, i, sp_.y1);                         \
-        { int bin_var = b0_; body; }                                                             \
-        if (b1_ != b0_) { int bin_var = b1_; body; }                                             \
-    } while (0)
-
 static void count_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
     int32_t *cnt = j->s->counts + (size_t)task * j->nbins;
     memset(cnt, 0, (size_t)j->nbins * sizeof *cnt);
     int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
-    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++)
-        if (pixel_used(j, i)) FOR_PIXEL_BINS(j, i, bin, cnt[bin]++);
+    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
+        if (!pixel_used(j, i)) continue;
+        splat sp = pixel_splat(j, i);
+        j->s->splats[i] = sp;
+        int b0 = sp.layer * j->nbands + sp.y0 / BAND_ROWS, b1 = sp.layer * j->nbands + sp.y1 / BAND_ROWS;
+        cnt[b0]++;
+        if (b1 != b0) cnt[b1]++;
+    }
 }
 
 static void fill_task(void *ctx, int task, int thread) {
@@ -134,16 +137,22 @@ static void fill_task(void *ctx, int task, int thread) {
     bp_job *j = ctx;
     int32_t *off = j->s->counts + (size_t)task * j->nbins;
     int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
-    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++)
-        if (pixel_used(j, i)) FOR_PIXEL_BINS(j, i, bin, j->s->list[off[bin]++] = (int32_t)i);
+    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
+        if (j->gb->face[i] < 0 || (j->mask && !j->mask[i]) || !pixel_used(j, i)) continue;
+        const splat *sp = &j->s->splats[i];
+        int b0 = sp->layer * j->nbands + sp->y0 / BAND_ROWS, b1 = sp->layer * j->nbands + sp->y1 / BAND_ROWS;
+        j->s->list[off[b0]++] = (int32_t)i;
+        if (b1 != b0) j->s->list[off[b1]++] = (int32_t)i;
+    }
 }
 
 static float pixel_quality(const bp_job *j, size_t i) {
     const mx_gbuffer *gb = j->gb;
-    float n[3], p[3], v[3];
+    float n[3], p[3] = {0, 0, 0}, v[3];
     mx_gbuffer_normal(gb, (int64_t)i, n);
     int x = (int)(i % (size_t)gb->w), y = (int)(i / (size_t)gb->w);
-    mx_camera_unproject(&gb->cam, (float)x + 0.5f, (float)y + 0.5f, gb->depth[i], gb->w, gb->h, p);
+    if (!gb->cam.ortho) /* orthographic: one view direction for every pixel */
+        mx_camera_unproject(&gb->cam, (float)x + 0.5f, (float)y + 0.5f, gb->depth[i], gb->w, gb->h, p);
     mx_camera_view_dir(&gb->cam, p, v);
     return fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
 }
@@ -173,10 +182,9 @@ static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32
     for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++) vq[t] = 0;
     for (int32_t k = k0; k < k1; k++) {
         size_t i = (size_t)j->s->list[k];
-        splat sp = pixel_splat(j, i);
         size_t tex[4];
         float wt[4];
-        int n = splat_texels(&sp, b->w, r0, r1, tex, wt);
+        int n = splat_texels(&j->s->splats[i], b->w, r0, r1, tex, wt);
         float q = pixel_quality(j, i);
         for (int e = 0; e < n; e++)
             if (q > vq[plane + tex[e]]) vq[plane + tex[e]] = q;
@@ -205,10 +213,9 @@ static void splat_band_task(void *ctx, int task, int thread) {
     int c = j->img->c;
     for (int32_t k = k0; k < k1; k++) {
         size_t i = (size_t)j->s->list[k];
-        splat sp = pixel_splat(j, i);
         size_t tex[4];
         float wt[4];
-        int n = splat_texels(&sp, b->w, r0, r1, tex, wt);
+        int n = splat_texels(&j->s->splats[i], b->w, r0, r1, tex, wt);
         const float *col = j->img->data + i * c;
         float q = -1;
         for (int e = 0; e < n; e++) {
@@ -251,7 +258,12 @@ static int reserve(bp_job *j, mx_status *st) {
         s->view_q = malloc(need_q * sizeof *s->view_q);
         s->q_cap = s->view_q ? need_q : 0;
     }
-    if (!s->counts || !s->bin_start || !s->list ||
+    if (need_list / 2 > s->splat_cap) {
+        free(s->splats);
+        s->splats = malloc(need_list / 2 * sizeof *s->splats);
+        s->splat_cap = s->splats ? need_list / 2 : 0;
+    }
+    if (!s->counts || !s->bin_start || !s->list || !s->splats ||
         ((j->flags & MX_BACKPROJECT_OVERWRITE) && !s->view_q))
         return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     return 0;

@@ -64,16 +64,12 @@ void mx_mask_frontal(const mx_gbuffer *gb, int normal_source, float threshold, u
         }
 }
 
-void mx_mask_internal(const mx_gbuffer *culled, const mx_gbuffer *unculled, uint8_t *mask) {
-    for (size_t i = 0; i < (size_t)culled->w * culled->h; i++) {
-        float a = culled->depth[i], b = unculled->depth[i];
-        if (isinf(b)) {
-            mask[i] = 0;
-            continue;
-        }
+void mx_mask_internal(const float *depth_culled, const float *depth_unculled, int64_t n, uint8_t *mask) {
+    for (int64_t i = 0; i < n; i++) {
+        float a = depth_culled[i], b = depth_unculled[i];
         /* without culling the nearest surface can only be closer; a visible gap means the
          * nearest surface there is a back face, i.e. the inside of an open mesh */
-        mask[i] = isinf(a) || a - b > 1e-4f * fabsf(a);
+        mask[i] = !isinf(b) && (isinf(a) || a - b > 1e-4f * fabsf(a));
     }
 }
 

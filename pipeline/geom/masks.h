@@ -20,8 +20,10 @@ void mx_mask_frontal(const mx_gbuffer *gb, int normal_source, float threshold, u
 
 /* Internal faces of open surfaces (paper Fig. 6): 1 where the depth rendered with
  * backface culling and the depth rendered without it differ (by more than a relative
- * 1e-4 of the depth, background counting as infinitely far). Both buffers: same camera. */
-void mx_mask_internal(const mx_gbuffer *culled, const mx_gbuffer *unculled, uint8_t *mask);
+ * 1e-4, background counting as infinitely far), n pixels. The two depths come from one
+ * mx_rasterize with MX_RASTER_CULL_BACK | MX_RASTER_DEPTH_UNCULLED (depth, depth_unculled)
+ * or from two renders of the same camera. */
+void mx_mask_internal(const float *depth_culled, const float *depth_unculled, int64_t n, uint8_t *mask);
 
 /* Texel of a UV for a tex_w x tex_h texture (v up, repeat), nearest texel centre. */
 int64_t mx_uv_texel(float u, float v, int tex_w, int tex_h);

@@ -14,26 +14,37 @@
 #define GUARD 16
 #define TILE 32
 #define FACES_PER_CHUNK 4096
+#define ROWS_PER_TASK 16
+
+/* A face as drawn: corners ordered so that the snapped area is positive (inside: w > 0),
+ * its pixel bounding box, and whether it is a back face. x0 > x1 when not drawn. */
+typedef struct face_setup {
+    int32_t v[3];
+    int16_t x0, y0, x1, y1;
+    uint8_t swapped, back;
+} face_setup;
+
+/* A binned face with everything drawing needs, so that a tile reads its faces in order
+ * from one array instead of gathering setups and vertices from all over memory. */
+typedef struct bin_tri {
+    int32_t face;
+    int32_t x[3], y[3]; /* snapped corners (within the guard band, so they fit) */
+    float z[3];         /* depth (perspective: inverse depth) */
+    int16_t x0, y0, x1, y1;
+    uint8_t back;
+} bin_tri;
 
 typedef struct raster_scratch {
     size_t vert_cap, face_cap, count_cap, bin_cap, tile_cap;
-    float *vz;          /* [nverts] depth */
+    float *vz;          /* [nverts] depth (perspective: its inverse) */
     int64_t *vxy;       /* [nverts][2] snapped position */
     uint8_t *vok;       /* [nverts] projected inside the guard band */
-    int16_t *face_tiles; /* [nfaces][4] tx0, ty0, tx1, ty1; tx0 > tx1 when dropped */
+    face_setup *faces;  /* [nfaces] */
+    float *fnormal;     /* [nfaces][3] unit geometric normals of drawn faces */
     int32_t *counts;    /* [nchunks][ntiles] */
     int32_t *bin_start; /* [ntiles + 1] */
-    int32_t *bin_faces; /* [total] face ids per tile, ascending */
+    bin_tri *bins;      /* [total] faces per tile, ascending face id */
 } raster_scratch;
-
-static int grow(void **p, size_t *cap, size_t need, size_t elem, mx_status *st) {
-    if (need <= *cap) return 0;
-    void *q = realloc(*p, need * elem);
-    if (!q) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory (%zu bytes)", need * elem);
-    *p = q;
-    *cap = need;
-    return 0;
-}
 
 int mx_gbuffer_init(mx_gbuffer *gb, int w, int h, mx_status *st) {
     memset(gb, 0, sizeof *gb);
@@ -59,17 +70,18 @@ void mx_gbuffer_free(mx_gbuffer *gb) {
         free(s->vz);
         free(s->vxy);
         free(s->vok);
-        free(s->face_tiles);
+        free(s->faces);
+        free(s->fnormal);
         free(s->counts);
         free(s->bin_start);
-        free(s->bin_faces);
+        free(s->bins);
         free(s);
     }
     free(gb->face);
     free(gb->depth);
+    free(gb->depth_unculled);
     free(gb->bary);
     free(gb->uv);
-    free(gb->face_normal);
     memset(gb, 0, sizeof *gb);
 }
 
@@ -96,7 +108,7 @@ static void project_vertices_task(void *ctx, int task, int thread) {
         ok = ok && isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2]) && fabs(p[0]) < lim &&
              fabs(p[1]) < lim;
         s->vok[v] = (uint8_t)ok;
-        s->vz[v] = p[2];
+        s->vz[v] = j->cam->ortho ? p[2] : 1.0f / p[2];
         s->vxy[2 * (size_t)v] = ok ? llround((double)p[0] * SUBPIX) : 0;
         s->vxy[2 * (size_t)v + 1] = ok ? llround((double)p[1] * SUBPIX) : 0;
     }
@@ -104,14 +116,6 @@ static void project_vertices_task(void *ctx, int task, int thread) {
 
 static int64_t edge_fn(int64_t ax, int64_t ay, int64_t bx, int64_t by, int64_t px, int64_t py) {
     return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
-}
-
-/* Signed doubled area of the snapped triangle; > 0 means clockwise as the camera sees
- * it (image y points down), i.e. a back face for counter-clockwise front faces. */
-static int64_t face_area(const raster_scratch *s, const int32_t *f) {
-    const int64_t *a = s->vxy + 2 * (size_t)f[0], *b = s->vxy + 2 * (size_t)f[1],
-                  *c = s->vxy + 2 * (size_t)f[2];
-    return edge_fn(a[0], a[1], b[0], b[1], c[0], c[1]);
 }
 
 static int64_t min3(int64_t a, int64_t b, int64_t c) {
@@ -133,25 +137,46 @@ static void pixel_range(int64_t lo, int64_t hi, int n, int *p0, int *p1) {
     *p1 = (int)b;
 }
 
-/* Decides whether a face is drawn and which tiles its bounding box touches. */
-static void setup_face(const raster_job *j, int f, int16_t *tiles) {
+/* Decides whether and how a face is drawn. The signed doubled area of the snapped
+ * triangle is > 0 when it is clockwise as the camera sees it (image y points down),
+ * i.e. a back face for counter-clockwise front faces. */
+static void setup_face(const raster_job *j, int f, face_setup *fs) {
     const raster_scratch *s = j->s;
     const int32_t *fv = j->m->faces + 3 * (size_t)f;
-    tiles[0] = 1;
-    tiles[2] = 0;
+    fs->x0 = 1;
+    fs->x1 = 0;
     if (!s->vok[fv[0]] || !s->vok[fv[1]] || !s->vok[fv[2]]) return;
-    int64_t area = face_area(s, fv);
-    if (area == 0 || (area > 0 && (j->flags & MX_RASTER_CULL_BACK))) return;
     const int64_t *a = s->vxy + 2 * (size_t)fv[0], *b = s->vxy + 2 * (size_t)fv[1],
                   *c = s->vxy + 2 * (size_t)fv[2];
+    int64_t area = edge_fn(a[0], a[1], b[0], b[1], c[0], c[1]);
+    int keep_back = !(j->flags & MX_RASTER_CULL_BACK) || (j->flags & MX_RASTER_DEPTH_UNCULLED);
+    if (area == 0 || (area > 0 && !keep_back)) return;
     int x0, x1, y0, y1;
     pixel_range(min3(a[0], b[0], c[0]), max3(a[0], b[0], c[0]), j->gb->w, &x0, &x1);
     pixel_range(min3(a[1], b[1], c[1]), max3(a[1], b[1], c[1]), j->gb->h, &y0, &y1);
     if (x0 > x1 || y0 > y1) return;
-    tiles[0] = (int16_t)(x0 / TILE);
-    tiles[1] = (int16_t)(y0 / TILE);
-    tiles[2] = (int16_t)(x1 / TILE);
-    tiles[3] = (int16_t)(y1 / TILE);
+    /* make the area positive: swap corners 1 and 2 of front faces */
+    fs->swapped = area < 0;
+    fs->back = area > 0 && (j->flags & MX_RASTER_CULL_BACK);
+    fs->v[0] = fv[0];
+    fs->v[1] = fs->swapped ? fv[2] : fv[1];
+    fs->v[2] = fs->swapped ? fv[1] : fv[2];
+    fs->x0 = (int16_t)x0;
+    fs->y0 = (int16_t)y0;
+    fs->x1 = (int16_t)x1;
+    fs->y1 = (int16_t)y1;
+}
+
+static void face_normal(const raster_job *j, int f, float *out) {
+    const int32_t *fv = j->m->faces + 3 * (size_t)f;
+    const float *a = j->pos + 3 * (size_t)fv[0], *b = j->pos + 3 * (size_t)fv[1],
+                *c = j->pos + 3 * (size_t)fv[2];
+    float e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    float e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    float n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                  e1[0] * e2[1] - e1[1] * e2[0]};
+    float len = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (int k = 0; k < 3; k++) out[k] = len > 0 ? n[k] / len : 0.0f;
 }
 
 static void count_bins_task(void *ctx, int task, int thread) {
@@ -164,10 +189,12 @@ static void count_bins_task(void *ctx, int task, int thread) {
     int f0 = task * FACES_PER_CHUNK, f1 = f0 + FACES_PER_CHUNK;
     if (f1 > j->m->nfaces) f1 = j->m->nfaces;
     for (int f = f0; f < f1; f++) {
-        int16_t *t = s->face_tiles + 4 * (size_t)f;
-        setup_face(j, f, t);
-        for (int ty = t[1]; t[0] <= t[2] && ty <= t[3]; ty++)
-            for (int tx = t[0]; tx <= t[2]; tx++) cnt[ty * j->tiles_x + tx]++;
+        face_setup *fs = s->faces + f;
+        setup_face(j, f, fs);
+        if (fs->x0 > fs->x1) continue;
+        face_normal(j, f, s->fnormal + 3 * (size_t)f);
+        for (int ty = fs->y0 / TILE; ty <= fs->y1 / TILE; ty++)
+            for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) cnt[ty * j->tiles_x + tx]++;
     }
 }
 
@@ -198,73 +225,62 @@ static void fill_bins_task(void *ctx, int task, int thread) {
     int f0 = task * FACES_PER_CHUNK, f1 = f0 + FACES_PER_CHUNK;
     if (f1 > j->m->nfaces) f1 = j->m->nfaces;
     for (int f = f0; f < f1; f++) {
-        const int16_t *t = s->face_tiles + 4 * (size_t)f;
-        for (int ty = t[1]; t[0] <= t[2] && ty <= t[3]; ty++)
-            for (int tx = t[0]; tx <= t[2]; tx++) s->bin_faces[off[ty * j->tiles_x + tx]++] = f;
+        const face_setup *fs = s->faces + f;
+        if (fs->x0 > fs->x1) continue;
+        bin_tri bt;
+        bt.face = f;
+        for (int k = 0; k < 3; k++) {
+            bt.x[k] = (int32_t)s->vxy[2 * (size_t)fs->v[k]];
+            bt.y[k] = (int32_t)s->vxy[2 * (size_t)fs->v[k] + 1];
+            bt.z[k] = s->vz[fs->v[k]];
+        }
+        bt.x0 = fs->x0;
+        bt.y0 = fs->y0;
+        bt.x1 = fs->x1;
+        bt.y1 = fs->y1;
+        bt.back = fs->back;
+        for (int ty = fs->y0 / TILE; ty <= fs->y1 / TILE; ty++)
+            for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) s->bins[off[ty * j->tiles_x + tx]++] = bt;
     }
 }
 
-/* Draws one face into the pixels of the tile [tx0, tx1] x [ty0, ty1]. */
-static void draw_face(const raster_job *j, int f, int tx0, int ty0, int tx1, int ty1) {
-    const raster_scratch *s = j->s;
+/* Draws one face into the pixels of the tile [tx0, tx1] x [ty0, ty1]: depth test, then
+ * face id and depth (back faces of a culled pass only reach depth_unculled). */
+static void draw_face(const raster_job *j, const bin_tri *t, int tx0, int ty0, int tx1, int ty1) {
     mx_gbuffer *gb = j->gb;
-    const int32_t *fv = j->m->faces + 3 * (size_t)f;
-    int i0 = fv[0], i1 = fv[1], i2 = fv[2];
-    int64_t area = face_area(s, fv);
-    int swapped = area < 0; /* make the area positive: inside is then w > 0 */
-    if (swapped) {
-        int t = i1;
-        i1 = i2;
-        i2 = t;
-        area = -area;
-    }
-    const int64_t *a = s->vxy + 2 * (size_t)i0, *b = s->vxy + 2 * (size_t)i1,
-                  *c = s->vxy + 2 * (size_t)i2;
-    int x0, x1, y0, y1;
-    pixel_range(min3(a[0], b[0], c[0]), max3(a[0], b[0], c[0]), gb->w, &x0, &x1);
-    pixel_range(min3(a[1], b[1], c[1]), max3(a[1], b[1], c[1]), gb->h, &y0, &y1);
-    if (x0 < tx0) x0 = tx0;
-    if (y0 < ty0) y0 = ty0;
-    if (x1 > tx1) x1 = tx1;
-    if (y1 > ty1) y1 = ty1;
+    int x0 = t->x0 > tx0 ? t->x0 : tx0, y0 = t->y0 > ty0 ? t->y0 : ty0;
+    int x1 = t->x1 < tx1 ? t->x1 : tx1, y1 = t->y1 < ty1 ? t->y1 : ty1;
     if (x0 > x1 || y0 > y1) return;
     /* edge k is opposite corner k; w_k(p) = (e.dx)(p.y - e.y) - (e.dy)(p.x - e.x) */
-    const int64_t *ea[3] = {b, c, a}, *eb[3] = {c, a, b};
+    static const int ea[3] = {1, 2, 0}, eb[3] = {2, 0, 1};
     int64_t dx[3], dy[3], row[3], bias[3];
     int64_t px = (int64_t)x0 * SUBPIX + SUBPIX / 2, py = (int64_t)y0 * SUBPIX + SUBPIX / 2;
     for (int k = 0; k < 3; k++) {
-        dx[k] = eb[k][0] - ea[k][0];
-        dy[k] = eb[k][1] - ea[k][1];
-        row[k] = edge_fn(ea[k][0], ea[k][1], eb[k][0], eb[k][1], px, py);
+        int64_t ax = t->x[ea[k]], ay = t->y[ea[k]];
+        dx[k] = t->x[eb[k]] - ax;
+        dy[k] = t->y[eb[k]] - ay;
+        row[k] = dx[k] * (py - ay) - dy[k] * (px - ax);
         /* top-left rule: pixel centres exactly on a top or left edge belong to the face */
         int top_left = dy[k] < 0 || (dy[k] == 0 && dx[k] > 0);
         bias[k] = top_left ? 0 : 1;
     }
-    float z0 = s->vz[i0], z1 = s->vz[i1], z2 = s->vz[i2];
-    int persp = !j->cam->ortho;
-    double inv_area = 1.0 / (double)area;
+    int64_t area = row[0] + row[1] + row[2]; /* the sum of the edge functions is constant */
+    float inv_area = (float)(1.0 / (double)area);
+    float z0 = t->z[0], dz1 = t->z[1] - z0, dz2 = t->z[2] - z0;
+    int persp = !j->cam->ortho, f = t->face, back = t->back;
+    float *depth_all = gb->depth_unculled;
     for (int y = y0; y <= y1; y++) {
         int64_t w0 = row[0], w1 = row[1], w2 = row[2];
-        for (int x = x0; x <= x1; x++) {
+        size_t i = (size_t)y * gb->w + x0;
+        for (int x = x0; x <= x1; x++, i++) {
             if (w0 >= bias[0] && w1 >= bias[1] && w2 >= bias[2]) {
-                float b0 = (float)((double)w0 * inv_area), b1 = (float)((double)w1 * inv_area);
-                float b2 = 1.0f - b0 - b1;
-                float z;
-                if (persp) {
-                    float q0 = b0 / z0, q1 = b1 / z1, q2 = b2 / z2, iz = q0 + q1 + q2;
-                    z = 1.0f / iz;
-                    b1 = q1 * z;
-                    b2 = q2 * z;
-                } else {
-                    z = b0 * z0 + b1 * z1 + b2 * z2;
-                }
-                size_t i = (size_t)y * gb->w + x;
-                if (z < gb->depth[i]) {
+                /* orthographic: depth is affine in the image; perspective: its inverse is */
+                float z = z0 + (float)w1 * inv_area * dz1 + (float)w2 * inv_area * dz2;
+                if (persp) z = 1.0f / z;
+                if (depth_all && z < depth_all[i]) depth_all[i] = z;
+                if (!back && z < gb->depth[i]) {
                     gb->depth[i] = z;
                     gb->face[i] = f;
-                    /* back to the face's own corner order */
-                    gb->bary[2 * i] = swapped ? b2 : b1;
-                    gb->bary[2 * i + 1] = swapped ? b1 : b2;
                 }
             }
             w0 -= dy[0] * SUBPIX;
@@ -290,55 +306,69 @@ static void draw_tile_task(void *ctx, int task, int thread) {
             size_t i = (size_t)y * gb->w + x;
             gb->face[i] = -1;
             gb->depth[i] = INFINITY;
-            gb->bary[2 * i] = gb->bary[2 * i + 1] = 0;
+            if (gb->depth_unculled) gb->depth_unculled[i] = INFINITY;
         }
     const raster_scratch *s = j->s;
     for (int32_t k = s->bin_start[task]; k < s->bin_start[task + 1]; k++)
-        draw_face(j, s->bin_faces[k], x0, y0, x1, y1);
+        draw_face(j, &s->bins[k], x0, y0, x1, y1);
 }
 
-static void face_normals_task(void *ctx, int task, int thread) {
-    (void)thread;
-    raster_job *j = ctx;
-    int f0 = task * FACES_PER_CHUNK, f1 = f0 + FACES_PER_CHUNK;
-    if (f1 > j->m->nfaces) f1 = j->m->nfaces;
-    for (int f = f0; f < f1; f++) {
-        const int32_t *fv = j->m->faces + 3 * (size_t)f;
-        const float *a = j->pos + 3 * (size_t)fv[0], *b = j->pos + 3 * (size_t)fv[1],
-                    *c = j->pos + 3 * (size_t)fv[2];
-        double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-        double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-        double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                       e1[0] * e2[1] - e1[1] * e2[0]};
-        double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        float *o = j->gb->face_normal + 3 * (size_t)f;
-        for (int k = 0; k < 3; k++) o[k] = len > 0 ? (float)(n[k] / len) : 0.0f;
+/* Barycentrics (perspective-correct) of pixel i for its face, in the face's corner order,
+ * from the snapped corners: the same numbers the coverage test used. */
+static void resolve_bary(const raster_job *j, size_t i, int f) {
+    const raster_scratch *s = j->s;
+    const face_setup *fs = s->faces + f;
+    mx_gbuffer *gb = j->gb;
+    int64_t px = (int64_t)(i % (size_t)gb->w) * SUBPIX + SUBPIX / 2;
+    int64_t py = (int64_t)(i / (size_t)gb->w) * SUBPIX + SUBPIX / 2;
+    const int64_t *a = s->vxy + 2 * (size_t)fs->v[0], *b = s->vxy + 2 * (size_t)fs->v[1],
+                  *c = s->vxy + 2 * (size_t)fs->v[2];
+    double w1 = (double)edge_fn(c[0], c[1], a[0], a[1], px, py);
+    double w2 = (double)edge_fn(a[0], a[1], b[0], b[1], px, py);
+    double w0 = (double)edge_fn(b[0], b[1], c[0], c[1], px, py);
+    double sum = w0 + w1 + w2;
+    double b1 = w1 / sum, b2 = w2 / sum;
+    if (!j->cam->ortho) {
+        /* weights of 1/z, renormalised */
+        double q0 = (1 - b1 - b2) * s->vz[fs->v[0]], q1 = b1 * s->vz[fs->v[1]], q2 = b2 * s->vz[fs->v[2]];
+        double q = q0 + q1 + q2;
+        b1 = q1 / q;
+        b2 = q2 / q;
     }
+    gb->bary[2 * i] = (float)(fs->swapped ? b2 : b1);
+    gb->bary[2 * i + 1] = (float)(fs->swapped ? b1 : b2);
 }
 
-#define UV_ROWS 16
-static void resolve_uv_task(void *ctx, int task, int thread) {
+static void resolve_uv(const raster_job *j, size_t i, int f) {
+    const mx_mesh *m = j->m;
+    mx_gbuffer *gb = j->gb;
+    const int32_t *fu = m->face_uv + 3 * (size_t)f;
+    if (fu[0] < 0 || fu[1] < 0 || fu[2] < 0) { /* a face without UVs: no texel */
+        gb->uv[2 * i] = gb->uv[2 * i + 1] = NAN;
+        return;
+    }
+    float b1 = gb->bary[2 * i], b2 = gb->bary[2 * i + 1], b0 = 1.0f - b1 - b2;
+    const float *u0 = m->uv + 2 * (size_t)fu[0], *u1 = m->uv + 2 * (size_t)fu[1],
+                *u2 = m->uv + 2 * (size_t)fu[2];
+    gb->uv[2 * i] = b0 * u0[0] + b1 * u1[0] + b2 * u2[0];
+    gb->uv[2 * i + 1] = b0 * u0[1] + b1 * u1[1] + b2 * u2[1];
+}
+
+static void resolve_task(void *ctx, int task, int thread) {
     (void)thread;
     raster_job *j = ctx;
     mx_gbuffer *gb = j->gb;
-    const mx_mesh *m = j->m;
-    int y0 = task * UV_ROWS, y1 = y0 + UV_ROWS < gb->h ? y0 + UV_ROWS : gb->h;
+    int with_uv = (j->flags & MX_RASTER_UV) && j->m->face_uv;
+    int y0 = task * ROWS_PER_TASK, y1 = y0 + ROWS_PER_TASK < gb->h ? y0 + ROWS_PER_TASK : gb->h;
     for (size_t i = (size_t)y0 * gb->w; i < (size_t)y1 * gb->w; i++) {
         int f = gb->face[i];
         if (f < 0) {
-            gb->uv[2 * i] = gb->uv[2 * i + 1] = 0;
+            gb->bary[2 * i] = gb->bary[2 * i + 1] = 0;
+            if (with_uv) gb->uv[2 * i] = gb->uv[2 * i + 1] = 0;
             continue;
         }
-        const int32_t *fu = m->face_uv + 3 * (size_t)f;
-        if (fu[0] < 0 || fu[1] < 0 || fu[2] < 0) { /* a face without UVs: no texel */
-            gb->uv[2 * i] = gb->uv[2 * i + 1] = NAN;
-            continue;
-        }
-        float b1 = gb->bary[2 * i], b2 = gb->bary[2 * i + 1], b0 = 1.0f - b1 - b2;
-        const float *u0 = m->uv + 2 * (size_t)fu[0], *u1 = m->uv + 2 * (size_t)fu[1],
-                    *u2 = m->uv + 2 * (size_t)fu[2];
-        gb->uv[2 * i] = b0 * u0[0] + b1 * u1[0] + b2 * u2[0];
-        gb->uv[2 * i + 1] = b0 * u0[1] + b1 * u1[1] + b2 * u2[1];
+        resolve_bary(j, i, f);
+        if (with_uv) resolve_uv(j, i, f);
     }
 }
 
@@ -358,7 +388,7 @@ static int check_mesh(const mx_mesh *m, mx_status *st) {
 static int reserve_scratch(raster_job *j, mx_status *st) {
     raster_scratch *s = j->s;
     size_t nv = (size_t)j->m->nverts + 1, nf = (size_t)j->m->nfaces + 1;
-    size_t ntiles = (size_t)j->tiles_x * j->tiles_y;
+    size_t ntiles = (size_t)j->tiles_x * j->tiles_y, ncounts = (size_t)j->nchunks * ntiles + 1;
     if (nv > s->vert_cap) {
         free(s->vz);
         free(s->vxy);
@@ -369,24 +399,43 @@ static int reserve_scratch(raster_job *j, mx_status *st) {
         s->vert_cap = s->vz && s->vxy && s->vok ? nv : 0;
         if (!s->vert_cap) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
     }
-    if (grow((void **)&s->face_tiles, &s->face_cap, 4 * nf, sizeof *s->face_tiles, st)) return -1;
-    if (grow((void **)&s->counts, &s->count_cap, (size_t)j->nchunks * ntiles + 1,
-             sizeof *s->counts, st))
-        return -1;
-    return grow((void **)&s->bin_start, &s->tile_cap, ntiles + 1, sizeof *s->bin_start, st);
+    if (nf > s->face_cap) {
+        free(s->faces);
+        free(s->fnormal);
+        s->faces = malloc(nf * sizeof *s->faces);
+        s->fnormal = malloc(3 * nf * sizeof *s->fnormal);
+        s->face_cap = s->faces && s->fnormal ? nf : 0;
+        if (!s->face_cap) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
+    }
+    if (ncounts > s->count_cap) {
+        free(s->counts);
+        s->counts = malloc(ncounts * sizeof *s->counts);
+        s->count_cap = s->counts ? ncounts : 0;
+        if (!s->counts) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
+    }
+    if (ntiles + 1 > s->tile_cap) {
+        free(s->bin_start);
+        s->bin_start = malloc((ntiles + 1) * sizeof *s->bin_start);
+        s->tile_cap = s->bin_start ? ntiles + 1 : 0;
+        if (!s->bin_start) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
+    }
+    return 0;
 }
 
 static int reserve_outputs(raster_job *j, mx_status *st) {
     mx_gbuffer *gb = j->gb;
-    if (gb->nfaces != j->m->nfaces || !gb->face_normal) {
-        free(gb->face_normal);
-        gb->face_normal = malloc(3 * ((size_t)j->m->nfaces + 1) * sizeof *gb->face_normal);
-        gb->nfaces = j->m->nfaces;
-        if (!gb->face_normal) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
-    }
+    size_t n = (size_t)gb->w * gb->h;
     if ((j->flags & MX_RASTER_UV) && j->m->face_uv && !gb->uv) {
-        gb->uv = malloc(2 * (size_t)gb->w * gb->h * sizeof *gb->uv);
+        gb->uv = malloc(2 * n * sizeof *gb->uv);
         if (!gb->uv) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
+    }
+    int want_unculled = (j->flags & MX_RASTER_DEPTH_UNCULLED) && (j->flags & MX_RASTER_CULL_BACK);
+    if (!want_unculled) {
+        free(gb->depth_unculled); /* NULL tells the reader it was not filled */
+        gb->depth_unculled = NULL;
+    } else if (!gb->depth_unculled) {
+        gb->depth_unculled = malloc(n * sizeof *gb->depth_unculled);
+        if (!gb->depth_unculled) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
     }
     return 0;
 }
@@ -397,30 +446,29 @@ int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int f
     raster_job j = {m, pos ? pos : m->pos, cam, flags, gb, gb->scratch, 0, 0, 0};
     j.tiles_x = (gb->w + TILE - 1) / TILE;
     j.tiles_y = (gb->h + TILE - 1) / TILE;
-    j.nchunks = (m->nfaces > m->nverts ? m->nfaces : m->nverts) / FACES_PER_CHUNK + 1;
+    j.nchunks = m->nfaces / FACES_PER_CHUNK + 1;
     if (reserve_scratch(&j, st) || reserve_outputs(&j, st)) return -1;
     gb->cam = *cam;
-    int vchunks = m->nverts / FACES_PER_CHUNK + 1, fchunks = m->nfaces / FACES_PER_CHUNK + 1;
-    mx_pool_for(pool, vchunks, project_vertices_task, &j);
-    mx_pool_for(pool, fchunks, count_bins_task, &j);
-    for (int c = fchunks; c < j.nchunks; c++)
-        memset(j.s->counts + (size_t)c * j.tiles_x * j.tiles_y, 0,
-               (size_t)j.tiles_x * j.tiles_y * sizeof(int32_t));
+    mx_pool_for(pool, m->nverts / FACES_PER_CHUNK + 1, project_vertices_task, &j);
+    mx_pool_for(pool, j.nchunks, count_bins_task, &j);
     int64_t total = prefix_bins(&j);
     if (total < 0) return mx_fail(st, MX_EINPUT, "%s: too many face-tile pairs", m->source_path);
-    if (grow((void **)&j.s->bin_faces, &j.s->bin_cap, (size_t)total + 1, sizeof(int32_t), st))
-        return -1;
-    mx_pool_for(pool, fchunks, fill_bins_task, &j);
+    if ((size_t)total + 1 > j.s->bin_cap) {
+        free(j.s->bins);
+        j.s->bins = malloc(((size_t)total + 1) * sizeof *j.s->bins);
+        j.s->bin_cap = j.s->bins ? (size_t)total + 1 : 0;
+        if (!j.s->bins) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
+    }
+    mx_pool_for(pool, j.nchunks, fill_bins_task, &j);
     mx_pool_for(pool, j.tiles_x * j.tiles_y, draw_tile_task, &j);
-    mx_pool_for(pool, fchunks, face_normals_task, &j);
-    if ((flags & MX_RASTER_UV) && m->face_uv)
-        mx_pool_for(pool, (gb->h + UV_ROWS - 1) / UV_ROWS, resolve_uv_task, &j);
+    mx_pool_for(pool, (gb->h + ROWS_PER_TASK - 1) / ROWS_PER_TASK, resolve_task, &j);
     return 0;
 }
 
 void mx_gbuffer_normal(const mx_gbuffer *gb, int64_t i, float out[3]) {
     int f = gb->face[i];
-    for (int k = 0; k < 3; k++) out[k] = f >= 0 ? gb->face_normal[3 * (size_t)f + k] : 0.0f;
+    const raster_scratch *s = gb->scratch;
+    for (int k = 0; k < 3; k++) out[k] = f >= 0 ? s->fnormal[3 * (size_t)f + k] : 0.0f;
 }
 
 void mx_texture_sample(const mx_image *img, float u, float v, float *out) {
@@ -453,7 +501,7 @@ static void render_textured_task(void *ctx, int task, int thread) {
     (void)thread;
     textured_job *j = ctx;
     const mx_gbuffer *gb = j->gb;
-    int y0 = task * UV_ROWS, y1 = y0 + UV_ROWS < gb->h ? y0 + UV_ROWS : gb->h;
+    int y0 = task * ROWS_PER_TASK, y1 = y0 + ROWS_PER_TASK < gb->h ? y0 + ROWS_PER_TASK : gb->h;
     for (size_t i = (size_t)y0 * gb->w; i < (size_t)y1 * gb->w; i++) {
         float *o = j->out->data + 3 * i;
         int f = gb->face[i];
@@ -485,7 +533,7 @@ int mx_render_textured(const mx_gbuffer *gb, const mx_mesh *m, const mx_image *t
             return mx_fail(st, MX_EINPUT, "render: texture %d has a bad shape", k);
     if (mx_image_alloc(out, gb->w, gb->h, 3, st)) return -1;
     textured_job j = {gb, m, textures, ntex, background, out};
-    mx_pool_for(pool, (gb->h + UV_ROWS - 1) / UV_ROWS, render_textured_task, &j);
+    mx_pool_for(pool, (gb->h + ROWS_PER_TASK - 1) / ROWS_PER_TASK, render_textured_task, &j);
     return 0;
 }
 

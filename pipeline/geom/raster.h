@@ -5,7 +5,9 @@
  *
  * Per pixel it gives the face id (-1: background), perspective-correct barycentrics,
  * the depth (distance along the viewing axis), and, when asked, the interpolated
- * per-corner UV. Face normals (geometric, unit, world space) come with the buffer. */
+ * per-corner UV and the depth without backface culling (same pass). Only face ids and
+ * depths are written while drawing; barycentrics and UVs are resolved afterwards, once
+ * per pixel. */
 #ifndef MX_RASTER_H
 #define MX_RASTER_H
 
@@ -19,22 +21,21 @@
 enum {
     MX_RASTER_CULL_BACK = 1, /* skip faces whose corners appear clockwise from the camera */
     MX_RASTER_UV = 2,        /* fill gbuffer.uv from the mesh's per-corner UVs */
+    MX_RASTER_DEPTH_UNCULLED = 4, /* with CULL_BACK: also fill depth_unculled in the same pass */
 };
 
 typedef struct mx_gbuffer {
     int w, h;
-    int32_t *face;      /* [h][w] face id, -1 where no face is visible */
-    float *depth;       /* [h][w] view depth, INFINITY where face < 0 */
-    float *bary;        /* [h][w][2] barycentric weights of corners 1 and 2 (corner 0: 1-b1-b2) */
-    float *uv;          /* [h][w][2] UV (v up; NaN on faces without UVs), NULL if none */
-    float *face_normal; /* [nfaces][3] unit geometric normals of the mesh (counter-clockwise) */
-    int nfaces;
+    int32_t *face;         /* [h][w] face id, -1 where no face is visible */
+    float *depth;          /* [h][w] view depth, INFINITY where face < 0 */
+    float *depth_unculled; /* [h][w] depth with back faces too (MX_RASTER_DEPTH_UNCULLED), or NULL */
+    float *bary;           /* [h][w][2] barycentric weights of corners 1 and 2 (corner 0: 1-b1-b2) */
+    float *uv;             /* [h][w][2] UV (v up; NaN on faces without UVs), NULL if none */
     mx_camera cam;
-    /* scratch reused between calls (screen-space vertices, bins) */
-    void *scratch;
+    void *scratch; /* reused between calls (screen-space vertices, face setup and normals, bins) */
 } mx_gbuffer;
 
-/* Allocates a w x h buffer (uv storage is allocated on first use). */
+/* Allocates a w x h buffer (uv and depth_unculled storage is allocated on first use). */
 int mx_gbuffer_init(mx_gbuffer *gb, int w, int h, mx_status *st);
 void mx_gbuffer_free(mx_gbuffer *gb);
 
@@ -43,7 +44,8 @@ void mx_gbuffer_free(mx_gbuffer *gb);
 int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int flags,
                  mx_pool *pool, mx_gbuffer *gb, mx_status *st);
 
-/* Geometric normal of the face visible at pixel i (zero vector for background). */
+/* Unit geometric normal (counter-clockwise, world space) of the face visible at pixel i;
+ * zero vector for background or a degenerate face. */
 void mx_gbuffer_normal(const mx_gbuffer *gb, int64_t i, float out[3]);
 
 /* Textured render: out (RGB, w x h, allocated here) gets the bilinear lookup of the face's

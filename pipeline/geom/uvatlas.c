@@ -1,29 +1,36 @@
-/* UV atlas: segment -> project -> validate/split -> orient -> pack -> write UVs.
+/* UV atlas: segment -> project (split until valid) -> merge small charts -> orient -> pack
+ * -> write UVs.
  *
- * Segmentation grows charts over edge-adjacent faces while a face's normal stays within
- * max_chart_angle of the chart's (area-weighted) mean normal. Each chart is projected onto the
- * plane of its mean normal; a chart whose projection would tilt a face by more than
- * HARD_ANGLE_DEG or makes two triangles overlap is split in two (median cut along the chart's
- * longest 3D axis) until every chart projects injectively. Charts are turned to their smallest
- * bounding rectangle and packed with a skyline packer; one scale for all charts (uniform texel
- * density), the largest that fits, found by bisection. */
+ * Segmentation grows charts breadth-first over edge-adjacent faces while a face's normal stays
+ * within max_chart_angle of the chart's (area-weighted) mean normal. Each chart is projected
+ * onto the plane of its mean normal; a chart whose projection tilts a face by more than
+ * max_chart_angle + HARD_MARGIN_DEG or makes two triangles overlap is cut in two (median of the
+ * face centroids along its longest 3D axis) until every chart projects injectively. Small
+ * charts then join a neighbour when they fit on its plane (fewer seams). Each chart is turned
+ * to its smallest bounding rectangle, and the charts are dropped onto a texel skyline by their
+ * column profiles (tetris-like), all at one scale (uniform texel density): the largest scale
+ * that fits, found by bisection. Everything is sequential and ordered by face index, so the
+ * result is deterministic. */
 #include "uvatlas.h"
 
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <stdio.h>
 
 #include "../../runtime/log.h"
 
-#define HARD_ANGLE_DEG 80.0  /* a projected face may tilt at most this much (stretch <= 5.8) */
+/* A projected face may tilt at most max_chart_angle + HARD_MARGIN_DEG from its chart's plane
+ * (the chart's mean normal drifts while it grows): 70 degrees by default, area stretch <= 2.9. */
+#define HARD_MARGIN_DEG 10.0
+#define MAX_CHART_ANGLE_DEG 75.0
 #define ORIENT_STEPS 36      /* rotations tried (over 90 degrees) for the bounding rectangle */
 #define PACK_BISECT_STEPS 10 /* scale bisection steps over [0, full]: 0.1% of the full scale */
-#define DEGENERATE_AREA 1e-30
+#define DEGENERATE_AREA 1e-14 /* relative to the squared bounding-box diagonal */
 
 typedef struct chart {
     int start, count;     /* range in atlas.order */
+    int next, tail, total; /* merging: chain of absorbed charts, its last link, faces in all */
     double n[3], u[3], v[3]; /* projection normal and in-plane basis (u x v = n) */
     double cs, sn;        /* rotation to the smallest bounding rectangle */
     double x0, y0, w, h;  /* bounding rectangle in rotated plane coordinates */
@@ -42,6 +49,7 @@ typedef struct atlas {
     int ncharts;
     double *xy;   /* [nfaces][3][2] scratch: projected corners, indexed by order position */
     int32_t *chart_of; /* [nfaces] chart index of each face */
+    int32_t *weld;     /* [nverts] lowest vertex index at the same position */
     double *seg;  /* [3 * nfaces][4] chart boundary edges in rotated chart coordinates */
     double total_area;
 } atlas;
@@ -99,6 +107,13 @@ static int check_mesh(const mx_mesh *m, mx_status *st) {
 
 static void compute_face_geometry(atlas *a) {
     const mx_mesh *m = a->m;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, diag2 = 0;
+    for (int v = 0; v < m->nverts; v++)
+        for (int k = 0; k < 3; k++) {
+            lo[k] = dmin(lo[k], m->pos[3 * (size_t)v + k]);
+            hi[k] = dmax(hi[k], m->pos[3 * (size_t)v + k]);
+        }
+    for (int k = 0; k < 3; k++) diag2 += (hi[k] - lo[k]) * (hi[k] - lo[k]);
     a->total_area = 0;
     for (int f = 0; f < m->nfaces; f++) {
         double p0[3], p1[3], p2[3], e1[3], e2[3], *n = a->fn + 3 * (size_t)f;
@@ -112,7 +127,7 @@ static void compute_face_geometry(atlas *a) {
         cross3(e1, e2, n);
         double len = normalize3(n);
         a->area[f] = 0.5 * len;
-        if (a->area[f] <= DEGENERATE_AREA) n[0] = n[1] = n[2] = a->area[f] = 0;
+        if (a->area[f] <= DEGENERATE_AREA * diag2) n[0] = n[1] = n[2] = a->area[f] = 0;
         a->total_area += a->area[f];
     }
 }
@@ -130,13 +145,47 @@ static int half_edge_cmp(const void *pa, const void *pb) {
     return (a->corner > b->corner) - (a->corner < b->corner);
 }
 
+typedef struct keyed_vertex {
+    float p[3];
+    int32_t v;
+} keyed_vertex;
+
+static int keyed_vertex_cmp(const void *pa, const void *pb) {
+    const keyed_vertex *a = pa, *b = pb;
+    for (int k = 0; k < 3; k++)
+        if (a->p[k] != b->p[k]) return a->p[k] < b->p[k] ? -1 : 1;
+    return (a->v > b->v) - (a->v < b->v);
+}
+
+/* weld[v]: the lowest index of a vertex with the same position as v, so that meshes stored
+ * with split vertices (seams of an old layout, triangle soups) still have face neighbours. */
+static int weld_vertices(atlas *a) {
+    const mx_mesh *m = a->m;
+    keyed_vertex *kv = malloc((size_t)m->nverts * sizeof *kv);
+    if (!kv) return -1;
+    for (int v = 0; v < m->nverts; v++) {
+        memcpy(kv[v].p, m->pos + 3 * (size_t)v, sizeof kv[v].p);
+        kv[v].v = v;
+    }
+    qsort(kv, m->nverts, sizeof *kv, keyed_vertex_cmp);
+    for (int i = 0; i < m->nverts;) {
+        int j = i + 1;
+        while (j < m->nverts && keyed_vertex_cmp(&(keyed_vertex){{kv[i].p[0], kv[i].p[1], kv[i].p[2]}, kv[j].v}, &kv[j]) == 0) j++;
+        for (int k = i; k < j; k++) a->weld[kv[k].v] = kv[i].v; /* ties sort by index: kv[i] is lowest */
+        i = j;
+    }
+    free(kv);
+    return 0;
+}
+
 static int build_adjacency(atlas *a, mx_status *st) {
     const mx_mesh *m = a->m;
     size_t ne = 3 * (size_t)m->nfaces;
+    if (weld_vertices(a)) return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory for %d vertices", m->nverts);
     half_edge *e = malloc(ne * sizeof *e);
     if (!e) return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory for %zu edges", ne);
     for (size_t c = 0; c < ne; c++) {
-        int32_t v0 = m->faces[c], v1 = m->faces[c % 3 == 2 ? c - 2 : c + 1];
+        int32_t v0 = a->weld[m->faces[c]], v1 = a->weld[m->faces[c % 3 == 2 ? c - 2 : c + 1]];
         e[c] = (half_edge){v0 < v1 ? v0 : v1, v0 < v1 ? v1 : v0, (int32_t)c};
         a->adj[c] = -1;
     }
@@ -207,6 +256,59 @@ static int segment(atlas *a, double max_angle_deg) {
     return 0;
 }
 
+/* Region growing leaves saw-tooth chart borders (a face that two faces of another chart
+ * surround). Such a face moves to that chart when its normal fits there; every move removes at
+ * least one border edge, so this ends. The charts are then regrouped into ranges of `order`
+ * (faces by index within a chart) without the ones left empty. */
+static int smooth_boundaries(atlas *a, double max_angle_deg) {
+    int nf = a->m->nfaces, nc = a->ncharts;
+    double *sum = calloc(3 * (size_t)nc, sizeof *sum);
+    int32_t *first = calloc((size_t)nc + 1, sizeof *first), *renum = malloc((size_t)nc * sizeof *renum);
+    if (!sum || !first || !renum) {
+        free(sum), free(first), free(renum);
+        return -1;
+    }
+    for (int f = 0; f < nf; f++)
+        for (int k = 0; k < 3; k++) sum[3 * (size_t)a->chart_of[f] + k] += a->area[f] * a->fn[3 * (size_t)f + k];
+    double cos_max = cos(max_angle_deg * M_PI / 180.0);
+    for (int moved = 1; moved;) {
+        moved = 0;
+        for (int f = 0; f < nf; f++) {
+            const int32_t *adj = a->adj + 3 * (size_t)f;
+            int c = a->chart_of[f], x = -1;
+            for (int k = 0; k < 3 && x < 0; k++) {
+                int ck = adj[k] >= 0 ? a->chart_of[adj[k]] : -1;
+                int ck1 = adj[(k + 1) % 3] >= 0 ? a->chart_of[adj[(k + 1) % 3]] : -1;
+                if (ck >= 0 && ck != c && ck == ck1) x = ck;
+            }
+            if (x < 0) continue;
+            double mean[3] = {sum[3 * (size_t)x], sum[3 * (size_t)x + 1], sum[3 * (size_t)x + 2]};
+            const double *n = a->fn + 3 * (size_t)f;
+            if (normalize3(mean) > 0 && a->area[f] > 0 && dot3(n, mean) < cos_max) continue;
+            for (int k = 0; k < 3; k++) {
+                sum[3 * (size_t)c + k] -= a->area[f] * n[k];
+                sum[3 * (size_t)x + k] += a->area[f] * n[k];
+            }
+            a->chart_of[f] = x;
+            moved++;
+        }
+    }
+    for (int f = 0; f < nf; f++) first[a->chart_of[f] + 1]++;
+    int kept = 0;
+    for (int c = 0; c < nc; c++) renum[c] = first[c + 1] ? kept++ : -1;
+    for (int c = 0; c < nc; c++) first[c + 1] += first[c];
+    for (int c = 0; c < nc; c++)
+        if (renum[c] >= 0) a->charts[renum[c]] = (chart){.start = first[c], .count = first[c + 1] - first[c]};
+    for (int f = 0; f < nf; f++) {
+        int c = a->chart_of[f];
+        a->order[first[c]++] = f;
+        a->chart_of[f] = renum[c];
+    }
+    a->ncharts = kept;
+    free(sum), free(first), free(renum);
+    return 0;
+}
+
 /* ---------- projection and validation ---------- */
 
 static void chart_basis(atlas *a, chart *c) {
@@ -217,7 +319,8 @@ static void chart_basis(atlas *a, chart *c) {
     }
     if (normalize3(sum) == 0) sum[0] = 0, sum[1] = 0, sum[2] = 1;
     memcpy(c->n, sum, sizeof sum);
-    /* u: the axis least aligned with n, made orthogonal; v = n x u so that u x v = n. */
+    /* v: perpendicular to n and to the coordinate axis least aligned with n; u = v x n, so that
+     * u x v = n and front faces keep their counter-clockwise order in the plane. */
     double axis[3] = {0, 0, 0};
     int least = fabs(sum[0]) <= fabs(sum[1]) ? (fabs(sum[0]) <= fabs(sum[2]) ? 0 : 2)
                                              : (fabs(sum[1]) <= fabs(sum[2]) ? 1 : 2);
@@ -343,16 +446,17 @@ static int chart_self_overlaps(atlas *a, const chart *c) {
     return found;
 }
 
-/* 1 if the projection is injective and no face is tilted beyond the hard angle. */
+/* 1 if the projection is injective and no face is tilted beyond the hard angle. A single
+ * face always is (it lies in its own plane), which ends the splitting. */
 static int chart_is_valid(atlas *a, const chart *c, double cos_hard, int *nomem) {
+    if (c->count == 1) return 1;
     for (int i = 0; i < c->count; i++) {
         int f = a->order[c->start + i];
         if (a->area[f] == 0) continue;
-        if (dot3(a->fn + 3 * (size_t)f, c->n) < cos_hard) { fprintf(stderr, "H%d ", c->count); return 0; }
-        if (tri_area2(a->xy + 6 * (size_t)(c->start + i)) <= 0) { fprintf(stderr, "F%d ", c->count); return 0; }
+        if (dot3(a->fn + 3 * (size_t)f, c->n) < cos_hard) return 0;
+        if (tri_area2(a->xy + 6 * (size_t)(c->start + i)) <= 0) return 0;
     }
     int r = chart_self_overlaps(a, c);
-    if (r) fprintf(stderr, "O%d ", c->count);
     if (r < 0) *nomem = 1;
     return r == 0;
 }
@@ -430,9 +534,42 @@ static void split_chart(atlas *a, chart *c, keyed_face *tmp) {
     c->count = half;
 }
 
+/* Straightens the cut between chart `id` and its second half `nid` (adjacent ranges): a face
+ * whose two neighbours lie in the other half moves there, until none does; then the range is
+ * partitioned again. A median cut through a mesh is saw-toothed otherwise. */
+static void smooth_cut(atlas *a, int id, int nid, int32_t *buf) {
+    chart *c = &a->charts[id], *d = &a->charts[nid];
+    int start = c->start, n = c->count + d->count;
+    for (int moved = 1; moved;) {
+        moved = 0;
+        for (int i = 0; i < n; i++) {
+            int f = a->order[start + i], other = a->chart_of[f] == id ? nid : id, near = 0;
+            for (int k = 0; k < 3; k++) {
+                int g = a->adj[3 * (size_t)f + k];
+                near += g >= 0 && a->chart_of[g] == other;
+            }
+            if (near >= 2) a->chart_of[f] = other, moved++;
+        }
+    }
+    int kept = 0, rest = n;
+    for (int i = 0; i < n; i++) {
+        int f = a->order[start + i];
+        if (a->chart_of[f] == id) buf[kept++] = f;
+        else buf[--rest] = f;
+    }
+    if (kept == 0 || kept == n) { /* both halves must stay non-empty: undo */
+        for (int i = 0; i < n; i++) a->chart_of[a->order[start + i]] = i < c->count ? id : nid;
+        return;
+    }
+    for (int i = 0; i < kept; i++) a->order[start + i] = buf[i];
+    for (int i = kept; i < n; i++) a->order[start + i] = buf[n - 1 - (i - kept)];
+    c->count = kept;
+    d->start = start + kept, d->count = n - kept;
+}
+
 /* Projects every chart, splitting the ones that fold until all are valid. */
-static int project_all(atlas *a, mx_status *st) {
-    double cos_hard = cos(HARD_ANGLE_DEG * M_PI / 180.0);
+static int project_all(atlas *a, double max_angle_deg, mx_status *st) {
+    double cos_hard = cos((max_angle_deg + HARD_MARGIN_DEG) * M_PI / 180.0);
     size_t nf = (size_t)a->m->nfaces;
     keyed_face *tmp = malloc(nf * sizeof *tmp);
     int32_t *visit = malloc(nf * sizeof *visit), *buf = malloc(nf * sizeof *buf);
@@ -455,11 +592,171 @@ static int project_all(atlas *a, mx_status *st) {
                 return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory checking chart overlap");
             }
             split_chart(a, c, tmp); /* count >= 2 here: one face is always valid */
+            smooth_cut(a, i, a->ncharts - 1, buf);
             splits++;
         }
     }
     free(tmp), free(visit), free(buf);
     mx_debug("uv atlas: %d charts grown, %d after %d splits", grown, a->ncharts, splits);
+    return 0;
+}
+
+/* ---------- merging small charts into a neighbour ----------
+ * Splitting and growing leave many small charts, each costing a gutter ring in the atlas. A
+ * chart is merged into a neighbouring chart (most shared edges first) when, projected onto that
+ * chart's plane, its faces stay within the growing angle, keep their orientation and overlap
+ * nothing. The neighbour keeps its basis, so its own projection does not change. Merged charts
+ * form chains (chart.next) that are gathered into ranges again at the end. */
+
+#define MERGE_MAX_FACES 20 /* larger charts are left alone (their projection is good) */
+
+typedef struct merge_scratch {
+    double *xy;          /* [MERGE_MAX_FACES][6] the small chart on the neighbour's plane */
+    int32_t *near;       /* [nfaces] the neighbour's triangles (order positions) near it */
+    int32_t *nb, *shared; /* [MERGE_MAX_FACES * 3] neighbour charts and shared edge counts */
+} merge_scratch;
+
+/* Neighbour charts of chart `id` (its chain), sorted by shared edges, most first. */
+static int chart_neighbours(const atlas *a, int id, merge_scratch *ms) {
+    int n = 0;
+    for (int ci = id; ci >= 0; ci = a->charts[ci].next) {
+        const chart *c = &a->charts[ci];
+        for (int i = 0; i < c->count; i++) {
+            int f = a->order[c->start + i];
+            for (int k = 0; k < 3; k++) {
+                int g = a->adj[3 * (size_t)f + k];
+                if (g < 0 || a->chart_of[g] == id) continue;
+                int j = 0;
+                while (j < n && ms->nb[j] != a->chart_of[g]) j++;
+                if (j == n) ms->nb[n] = a->chart_of[g], ms->shared[n++] = 0;
+                ms->shared[j]++;
+            }
+        }
+    }
+    for (int i = 1; i < n; i++) /* insertion sort: shared desc, id asc */
+        for (int j = i; j > 0 && (ms->shared[j] > ms->shared[j - 1] ||
+                                  (ms->shared[j] == ms->shared[j - 1] && ms->nb[j] < ms->nb[j - 1]));
+             j--) {
+            int t = ms->nb[j];
+            ms->nb[j] = ms->nb[j - 1], ms->nb[j - 1] = t;
+            t = ms->shared[j], ms->shared[j] = ms->shared[j - 1], ms->shared[j - 1] = t;
+        }
+    return n;
+}
+
+/* 1 if chart `small` (chain) can join chart `big`: fills ms->xy with its projection. */
+static int merge_fits(const atlas *a, int big, int small, double cos_max, merge_scratch *ms) {
+    const chart *d = &a->charts[big];
+    int n = 0;
+    tri_box box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+    for (int ci = small; ci >= 0; ci = a->charts[ci].next) {
+        const chart *c = &a->charts[ci];
+        for (int i = 0; i < c->count; i++, n++) {
+            int f = a->order[c->start + i];
+            if (a->area[f] > 0 && dot3(a->fn + 3 * (size_t)f, d->n) < cos_max) return 0;
+            double *t = ms->xy + 6 * (size_t)n;
+            for (int k = 0; k < 3; k++) {
+                double p[3];
+                corner_pos(a->m, f, k, p);
+                t[2 * k] = dot3(p, d->u), t[2 * k + 1] = dot3(p, d->v);
+            }
+            if (a->area[f] > 0 && tri_area2(t) <= 0) return 0;
+            tri_box b = triangle_box(t);
+            box.x0 = dmin(box.x0, b.x0), box.y0 = dmin(box.y0, b.y0);
+            box.x1 = dmax(box.x1, b.x1), box.y1 = dmax(box.y1, b.y1);
+        }
+    }
+    double eps = 1e-9 * dmax(dmax(fabs(box.x0), fabs(box.x1)), dmax(fabs(box.y0), fabs(box.y1)));
+    int nnear = 0;
+    for (int ci = big; ci >= 0; ci = a->charts[ci].next) {
+        const chart *c = &a->charts[ci];
+        for (int i = 0; i < c->count; i++) {
+            tri_box b = triangle_box(a->xy + 6 * (size_t)(c->start + i));
+            if (b.x0 <= box.x1 && b.x1 >= box.x0 && b.y0 <= box.y1 && b.y1 >= box.y0) ms->near[nnear++] = c->start + i;
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        const double *t = ms->xy + 6 * (size_t)i;
+        for (int j = 0; j < nnear; j++)
+            if (triangles_overlap(t, a->xy + 6 * (size_t)ms->near[j], eps)) return 0;
+        for (int j = i + 1; j < n; j++)
+            if (triangles_overlap(t, ms->xy + 6 * (size_t)j, eps)) return 0;
+    }
+    return 1;
+}
+
+static void merge_commit(atlas *a, int big, int small, const merge_scratch *ms) {
+    int n = 0;
+    for (int ci = small; ci >= 0; ci = a->charts[ci].next) {
+        const chart *c = &a->charts[ci];
+        memcpy(a->xy + 6 * (size_t)c->start, ms->xy + 6 * (size_t)n, 6 * (size_t)c->count * sizeof *a->xy);
+        n += c->count;
+        for (int i = 0; i < c->count; i++) a->chart_of[a->order[c->start + i]] = big;
+    }
+    a->charts[a->charts[big].tail].next = small;
+    a->charts[big].tail = a->charts[small].tail;
+    a->charts[big].total += a->charts[small].total;
+    a->charts[small].total = 0; /* absorbed */
+}
+
+/* Gathers every remaining chain into one range of a fresh face order and renumbers the charts. */
+static int gather_chains(atlas *a) {
+    size_t nf = (size_t)a->m->nfaces;
+    int32_t *order = malloc(nf * sizeof *order);
+    double *xy = malloc(6 * nf * sizeof *xy);
+    chart *charts = malloc(nf * sizeof *charts);
+    if (!order || !xy || !charts) {
+        free(order), free(xy), free(charts);
+        return -1;
+    }
+    int pos = 0, kept = 0;
+    for (int id = 0; id < a->ncharts; id++) {
+        if (a->charts[id].total == 0) continue;
+        chart head = a->charts[id];
+        for (int ci = id; ci >= 0; ci = a->charts[ci].next) {
+            const chart *c = &a->charts[ci];
+            memcpy(order + pos, a->order + c->start, (size_t)c->count * sizeof *order);
+            memcpy(xy + 6 * (size_t)pos, a->xy + 6 * (size_t)c->start, 6 * (size_t)c->count * sizeof *xy);
+            pos += c->count;
+        }
+        head.start = pos - head.total, head.count = head.total, head.next = -1, head.tail = kept;
+        for (int i = head.start; i < pos; i++) a->chart_of[order[i]] = kept;
+        charts[kept++] = head;
+    }
+    free(a->order), free(a->xy), free(a->charts);
+    a->order = order, a->xy = xy, a->charts = charts, a->ncharts = kept;
+    return 0;
+}
+
+static int merge_small_charts(atlas *a, double max_angle_deg, mx_status *st) {
+    size_t nf = (size_t)a->m->nfaces;
+    merge_scratch ms = {malloc(6 * (size_t)MERGE_MAX_FACES * sizeof *ms.xy), malloc(nf * sizeof *ms.near),
+                        malloc(3 * (size_t)MERGE_MAX_FACES * sizeof *ms.nb),
+                        malloc(3 * (size_t)MERGE_MAX_FACES * sizeof *ms.shared)};
+    keyed_face *by_size = malloc((size_t)a->ncharts * sizeof *by_size);
+    int rc = 0, before = a->ncharts;
+    if (!ms.xy || !ms.near || !ms.nb || !ms.shared || !by_size) rc = -1;
+    for (int i = 0; !rc && i < a->ncharts; i++) {
+        chart *c = &a->charts[i];
+        c->next = -1, c->tail = i, c->total = c->count;
+        by_size[i] = (keyed_face){c->count, i};
+    }
+    if (!rc) qsort(by_size, a->ncharts, sizeof *by_size, keyed_face_cmp);
+    double cos_max = cos(max_angle_deg * M_PI / 180.0);
+    for (int r = 0; !rc && r < a->ncharts; r++) {
+        int small = by_size[r].face;
+        if (a->charts[small].total == 0 || a->charts[small].total > MERGE_MAX_FACES) continue;
+        int nn = chart_neighbours(a, small, &ms);
+        for (int j = 0; j < nn; j++)
+            if (merge_fits(a, ms.nb[j], small, cos_max, &ms)) {
+                merge_commit(a, ms.nb[j], small, &ms);
+                break;
+            }
+    }
+    if (!rc) rc = gather_chains(a);
+    free(ms.xy), free(ms.near), free(ms.nb), free(ms.shared), free(by_size);
+    if (rc) return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory merging charts");
+    mx_debug("uv atlas: %d charts merged into %d", before, a->ncharts);
     return 0;
 }
 
@@ -642,10 +939,10 @@ typedef struct packing {
     size_t ncolumns;
 } packing;
 
-/* Packs every chart at `scale`; returns 1 if all fit in size x size. With commit, records each
- * chart's turn and position. */
+/* Packs every chart at `scale`; returns 1 if all fit in size x size, 0 if not, -1 without
+ * memory. With commit, records each chart's turn and position. */
 static int pack_at_scale(atlas *a, const int32_t *order, double scale, int size, int gutter, packing *pk,
-                         int commit, mx_status *st, int *nomem) {
+                         int commit) {
     size_t need = 0;
     for (int i = 0; i < a->ncharts; i++)
         for (int k = 0; k < 2; k++) need += 2 * (size_t)profile_width(&a->charts[i], k, scale);
@@ -653,10 +950,7 @@ static int pack_at_scale(atlas *a, const int32_t *order, double scale, int size,
         free(pk->columns);
         pk->columns = malloc(need * sizeof *pk->columns);
         pk->ncolumns = pk->columns ? need : 0;
-        if (!pk->columns) {
-            *nomem = 1;
-            return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory packing %d charts", a->ncharts) + 1;
-        }
+        if (!pk->columns) return -1;
     }
     for (int i = 0; i < size; i++) pk->sky[i] = 0;
     for (int r = 0; r < a->ncharts; r++) {
@@ -707,18 +1001,20 @@ static int pack_charts(atlas *a, int size, int gutter, double *scale_out, mx_sta
         free(order), free(pk.sky);
         return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory packing %d charts", a->ncharts);
     }
-    int nomem = 0, rc = 0;
+    int fits = 1;
     double lo = 0, hi = area2d > 0 ? size / sqrt(area2d) : 1.0;
-    for (int s = 0; !rc && s < PACK_BISECT_STEPS; s++) {
+    for (int s = 0; fits >= 0 && s < PACK_BISECT_STEPS; s++) {
         double mid = 0.5 * (lo + hi);
-        if (pack_at_scale(a, order, mid, size, gutter, &pk, 0, st, &nomem)) lo = mid;
-        else if (nomem) rc = -1;
+        fits = pack_at_scale(a, order, mid, size, gutter, &pk, 0);
+        if (fits > 0) lo = mid;
         else hi = mid;
     }
-    if (!rc && !pack_at_scale(a, order, lo, size, gutter, &pk, 1, st, &nomem))
-        rc = nomem ? -1
-                   : mx_fail(st, MX_EINPUT, "uv atlas: %d charts do not fit in a %dx%d texture with a %d-texel gutter",
-                             a->ncharts, size, size, gutter);
+    if (fits >= 0 && lo > 0) fits = pack_at_scale(a, order, lo, size, gutter, &pk, 1);
+    int rc = 0;
+    if (fits < 0) rc = mx_fail(st, MX_ENOMEM, "uv atlas: out of memory packing %d charts", a->ncharts);
+    else if (lo == 0 || fits == 0) /* (the final packing repeats a successful one: it fits) */
+        rc = mx_fail(st, MX_EINPUT, "uv atlas: %d charts do not fit in a %dx%d texture with a %d-texel gutter",
+                     a->ncharts, size, size, gutter);
     *scale_out = lo;
     free(order), free(pk.sky), free(pk.columns);
     return rc;
@@ -734,7 +1030,7 @@ static void chart_to_uv(const chart *c, double x, double y, double scale, double
     uv[1] = (float)((c->py + ty) / size);
 }
 
-/* One UV per (chart, vertex): vertices on a chart boundary get one UV in each chart. */
+/* One UV per (chart, welded vertex): vertices on a chart boundary get one UV in each chart. */
 static int write_uvs(atlas *a, mx_mesh *m, double scale, int size, mx_status *st) {
     int32_t *slot = malloc((size_t)m->nverts * sizeof *slot), *stamp = malloc((size_t)m->nverts * sizeof *stamp);
     int32_t *face_uv = malloc(3 * (size_t)m->nfaces * sizeof *face_uv);
@@ -751,7 +1047,7 @@ static int write_uvs(atlas *a, mx_mesh *m, double scale, int size, mx_status *st
             int f = a->order[c->start + i];
             const double *xy = a->xy + 6 * (size_t)(c->start + i);
             for (int k = 0; k < 3; k++) {
-                int v = m->faces[3 * (size_t)f + k];
+                int v = a->weld[m->faces[3 * (size_t)f + k]];
                 if (stamp[v] != ci) {
                     stamp[v] = ci;
                     slot[v] = nuv;
@@ -805,14 +1101,15 @@ static int resolve_opts(const mx_uvatlas_opts *o, mx_uvatlas_opts *out, mx_statu
         return mx_fail(st, MX_EUSAGE, "uv atlas: texture size %d outside [16, 65536]", out->texture_size);
     if (out->gutter < 0 || out->gutter > out->texture_size / 8)
         return mx_fail(st, MX_EUSAGE, "uv atlas: gutter %d outside [0, %d]", out->gutter, out->texture_size / 8);
-    if (!(out->max_chart_angle > 0 && out->max_chart_angle < HARD_ANGLE_DEG))
-        return mx_fail(st, MX_EUSAGE, "uv atlas: max chart angle %g outside (0, %g) degrees",
-                       (double)out->max_chart_angle, HARD_ANGLE_DEG);
+    if (!(out->max_chart_angle > 0 && out->max_chart_angle <= MAX_CHART_ANGLE_DEG))
+        return mx_fail(st, MX_EUSAGE, "uv atlas: max chart angle %g outside (0, %g] degrees",
+                       (double)out->max_chart_angle, MAX_CHART_ANGLE_DEG);
     return 0;
 }
 
 static void free_atlas(atlas *a) {
-    free(a->fn), free(a->area), free(a->adj), free(a->order), free(a->charts), free(a->xy), free(a->chart_of), free(a->seg);
+    free(a->fn), free(a->area), free(a->adj), free(a->order), free(a->charts), free(a->xy);
+    free(a->chart_of), free(a->seg), free(a->weld);
 }
 
 int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r, mx_status *st) {
@@ -829,15 +1126,18 @@ int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r,
     a.xy = malloc(6 * nf * sizeof *a.xy);
     a.chart_of = malloc(nf * sizeof *a.chart_of);
     a.seg = malloc(12 * nf * sizeof *a.seg);
-    if (!a.fn || !a.area || !a.adj || !a.order || !a.charts || !a.xy || !a.chart_of || !a.seg) {
+    a.weld = malloc((size_t)m->nverts * sizeof *a.weld);
+    if (!a.fn || !a.area || !a.adj || !a.order || !a.charts || !a.xy || !a.chart_of || !a.seg || !a.weld) {
         free_atlas(&a);
         return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory for %zu faces", nf);
     }
     compute_face_geometry(&a);
     double scale = 0;
     int rc = build_adjacency(&a, st);
-    if (!rc && segment(&a, opt.max_chart_angle) < 0) rc = mx_fail(st, MX_ENOMEM, "uv atlas: out of memory");
-    if (!rc) rc = project_all(&a, st);
+    if (!rc && (segment(&a, opt.max_chart_angle) < 0 || smooth_boundaries(&a, opt.max_chart_angle) < 0))
+        rc = mx_fail(st, MX_ENOMEM, "uv atlas: out of memory");
+    if (!rc) rc = project_all(&a, opt.max_chart_angle, st);
+    if (!rc) rc = merge_small_charts(&a, opt.max_chart_angle, st);
     for (int i = 0; !rc && i < a.ncharts; i++) orient_chart(&a, &a.charts[i]);
     if (!rc) collect_boundary(&a);
     if (!rc) rc = pack_charts(&a, opt.texture_size, opt.gutter, &scale, st);
@@ -846,6 +1146,7 @@ int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r,
         measure(&a, m, scale, opt.texture_size, r);
         r->seconds = mx_now() - t0;
     }
+    if (rc) mx_fail_prefix(st, "%s", m->source_path[0] ? m->source_path : "mesh");
     free_atlas(&a);
     return rc;
 }

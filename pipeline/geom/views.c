@@ -1,10 +1,13 @@
 #include "views.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "masks.h"
 #include "raster.h"
+
+#define VIEW_RASTER_FLAGS (MX_RASTER_CULL_BACK | MX_RASTER_UV | MX_RASTER_DEPTH_UNCULLED)
 
 void mx_view_cache_free(mx_view_cache *vc) {
     if (vc->texels)
@@ -16,9 +19,9 @@ void mx_view_cache_free(mx_view_cache *vc) {
 }
 
 /* Texel ids of the usable pixels of one rendered candidate. */
-static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_gbuffer *culled,
+static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_gbuffer *gb,
                           const uint8_t *usable, mx_status *st) {
-    size_t n = (size_t)culled->w * culled->h, plane = (size_t)vc->tex_w * vc->tex_h;
+    size_t n = (size_t)gb->w * gb->h, plane = (size_t)vc->tex_w * vc->tex_h;
     int64_t count = 0;
     for (size_t i = 0; i < n; i++) count += usable[i];
     vc->texels[c] = malloc(((size_t)count + 1) * sizeof **vc->texels);
@@ -26,9 +29,9 @@ static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_g
     int64_t k = 0;
     for (size_t i = 0; i < n; i++) {
         if (!usable[i]) continue;
-        int layer = m->face_mat ? m->face_mat[culled->face[i]] : 0;
+        int layer = m->face_mat ? m->face_mat[gb->face[i]] : 0;
         if (layer < 0 || layer >= vc->nlayers) layer = 0;
-        int64_t t = mx_uv_texel(culled->uv[2 * i], culled->uv[2 * i + 1], vc->tex_w, vc->tex_h);
+        int64_t t = mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], vc->tex_w, vc->tex_h);
         vc->texels[c][k++] = (int32_t)((size_t)layer * plane + (size_t)t);
     }
     vc->ntexels[c] = k;
@@ -36,14 +39,12 @@ static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_g
 }
 
 /* usable = foreground, finite UV, not internal, frontal. */
-static void usable_pixels(const mx_gbuffer *culled, const mx_gbuffer *unculled, float thr,
-                          uint8_t *usable, uint8_t *tmp) {
-    size_t n = (size_t)culled->w * culled->h;
-    mx_mask_frontal(culled, MX_NORMAL_GEOMETRIC, thr, usable);
-    mx_mask_internal(culled, unculled, tmp);
+static void usable_pixels(const mx_gbuffer *gb, float thr, uint8_t *usable, uint8_t *tmp) {
+    size_t n = (size_t)gb->w * gb->h;
+    mx_mask_frontal(gb, MX_NORMAL_GEOMETRIC, thr, usable);
+    mx_mask_internal(gb->depth, gb->depth_unculled, (int64_t)n, tmp);
     for (size_t i = 0; i < n; i++)
-        usable[i] = usable[i] && !tmp[i] && culled->uv[2 * i] == culled->uv[2 * i] &&
-                    culled->uv[2 * i + 1] == culled->uv[2 * i + 1];
+        usable[i] = usable[i] && !tmp[i] && isfinite(gb->uv[2 * i]) && isfinite(gb->uv[2 * i + 1]);
 }
 
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
@@ -62,21 +63,18 @@ int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
     vc->texels = calloc((size_t)ncand, sizeof *vc->texels);
     vc->ntexels = calloc((size_t)ncand, sizeof *vc->ntexels);
     uint8_t *usable = malloc((size_t)size * size), *tmp = malloc((size_t)size * size);
-    mx_gbuffer culled = {0}, unculled = {0};
+    mx_gbuffer gb = {0};
     int ok = vc->cams && vc->texels && vc->ntexels && usable && tmp;
     if (!ok) mx_fail(st, MX_ENOMEM, "view selection: out of memory");
-    ok = ok && !mx_gbuffer_init(&culled, size, size, st) &&
-         !mx_gbuffer_init(&unculled, size, size, st);
+    ok = ok && !mx_gbuffer_init(&gb, size, size, st);
     for (int c = 0; ok && c < ncand; c++) {
         vc->cams[c] = cams[c];
-        ok = !mx_rasterize(m, pos, &cams[c], MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &culled, st) &&
-             !mx_rasterize(m, pos, &cams[c], 0, pool, &unculled, st);
+        ok = !mx_rasterize(m, pos, &cams[c], VIEW_RASTER_FLAGS, pool, &gb, st);
         if (!ok) break;
-        usable_pixels(&culled, &unculled, frontal_threshold, usable, tmp);
-        ok = !collect_texels(vc, c, m, &culled, usable, st);
+        usable_pixels(&gb, frontal_threshold, usable, tmp);
+        ok = !collect_texels(vc, c, m, &gb, usable, st);
     }
-    mx_gbuffer_free(&culled);
-    mx_gbuffer_free(&unculled);
+    mx_gbuffer_free(&gb);
     free(usable);
     free(tmp);
     if (!ok) {
@@ -184,7 +182,7 @@ int mx_view_buffers_init(mx_view_buffers *vb, int size, mx_status *st) {
         mx_view_buffers_free(vb);
         return mx_fail(st, MX_ENOMEM, "view buffers: out of memory");
     }
-    if (mx_gbuffer_init(&vb->culled, size, size, st) || mx_gbuffer_init(&vb->unculled, size, size, st)) {
+    if (mx_gbuffer_init(&vb->gb, size, size, st)) {
         mx_view_buffers_free(vb);
         return -1;
     }
@@ -192,8 +190,7 @@ int mx_view_buffers_init(mx_view_buffers *vb, int size, mx_status *st) {
 }
 
 void mx_view_buffers_free(mx_view_buffers *vb) {
-    mx_gbuffer_free(&vb->culled);
-    mx_gbuffer_free(&vb->unculled);
+    mx_gbuffer_free(&vb->gb);
     free(vb->mask);
     free(vb->tmp);
     memset(vb, 0, sizeof *vb);
@@ -201,12 +198,10 @@ void mx_view_buffers_free(mx_view_buffers *vb) {
 
 int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, const mx_camera *cam,
                     int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st) {
-    if (mx_rasterize(m, pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &vb->culled, st) ||
-        mx_rasterize(m, pos, cam, 0, pool, &vb->unculled, st))
-        return -1;
-    int64_t n = (int64_t)vb->culled.w * vb->culled.h;
-    mx_mask_frontal(&vb->culled, normal_source, frontal_threshold, vb->mask);
-    mx_mask_internal(&vb->culled, &vb->unculled, vb->tmp);
+    if (mx_rasterize(m, pos, cam, VIEW_RASTER_FLAGS, pool, &vb->gb, st)) return -1;
+    int64_t n = (int64_t)vb->gb.w * vb->gb.h;
+    mx_mask_frontal(&vb->gb, normal_source, frontal_threshold, vb->mask);
+    mx_mask_internal(vb->gb.depth, vb->gb.depth_unculled, n, vb->tmp);
     mx_mask_and_not(vb->mask, vb->tmp, vb->mask, n);
     return 0;
 }

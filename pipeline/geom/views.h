@@ -22,8 +22,9 @@ typedef struct mx_view_cache {
     int64_t *ntexels;
 } mx_view_cache;
 
-/* Renders every candidate at size x size (culled + unculled for the internal-face mask,
- * geometric normals against frontal_threshold; 0 keeps every visible pixel). */
+/* Renders every candidate at size x size (culled, with the unculled depth for the
+ * internal-face mask; geometric normals against frontal_threshold, 0 keeps every visible
+ * pixel). */
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
                         const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
                         int nlayers, float frontal_threshold, mx_pool *pool, mx_status *st);
@@ -55,18 +56,18 @@ int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
                       double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st);
 void mx_view_plan_free(mx_view_plan *plan);
 
-/* One view ready for backprojection: its culled render with UVs (for depth, images and
- * UVs), the unculled render (internal faces), and the backprojection mask
+/* One view ready for backprojection: its culled render with UVs and the unculled depth
+ * (gb: depth, images, UVs, internal faces), and the backprojection mask
  * (foreground & frontal & not internal). */
 typedef struct mx_view_buffers {
-    mx_gbuffer culled, unculled;
+    mx_gbuffer gb;
     uint8_t *mask; /* [size][size] */
     uint8_t *tmp;
 } mx_view_buffers;
 
 int mx_view_buffers_init(mx_view_buffers *vb, int size, mx_status *st);
 void mx_view_buffers_free(mx_view_buffers *vb);
-/* Rasterizes both renders of `cam` and computes the mask (normal_source and threshold as
+/* Rasterizes `cam` and computes the mask (normal_source and threshold as
  * in mx_mask_frontal; threshold 0 keeps every foreground pixel that is not internal). */
 int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, const mx_camera *cam,
                     int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st);

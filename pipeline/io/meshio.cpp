@@ -354,14 +354,16 @@ int read_openmesh(const char *path, mx_mesh *m, mx_status *st) {
     Mesh mesh;
     mesh.request_vertex_texcoords2D();
     OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexTexCoord;
-    omerr().disable(); // failures are reported through st, not OpenMesh's own stream
-    omlog().disable();
+    // Failures are reported through st: silence OpenMesh's own error stream during the read.
+    omerr().disable();
     bool ok = OpenMesh::IO::read_mesh(mesh, path, opt);
+    omerr().enable();
     if (!ok) return mx_fail(st, MX_EINPUT, "%s: cannot read mesh (missing, malformed or unsupported)", path);
     size_t nv = mesh.n_vertices();
     if (nv > kMaxElements) return mx_fail(st, MX_EINPUT, "%s: too many vertices", path);
     std::vector<float> pos(3 * nv), uv;
-    bool has_uv = opt.check(OpenMesh::IO::Options::VertexTexCoord);
+    // STL has no texcoords, but OpenMesh's STL reader leaves the requested option set.
+    bool has_uv = opt.check(OpenMesh::IO::Options::VertexTexCoord) && lower_ext(path) != "stl";
     if (has_uv) uv.resize(2 * nv);
     for (auto vh : mesh.vertices()) {
         auto p = mesh.point(vh);

@@ -147,7 +147,8 @@ static void embed(const mx_clip *m, const int32_t *ids, int B, int T, float *x) 
             size_t tok = (size_t)ids[b * T + t] * (size_t)C, pos = (size_t)t * (size_t)C;
             float *row = x + ((size_t)b * T + t) * C;
             for (int c = 0; c < C; c++)
-                row[c] = mx_w_get(m->token_embedding, tok + (size_t)c) + mx_w_get(m->position_embedding, pos + (size_t)c);
+                row[c] = mx_w_get(m->token_embedding, tok + (size_t)c) +
+                         mx_w_get(m->position_embedding, pos + (size_t)c);
         }
 }
 

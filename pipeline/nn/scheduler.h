@@ -98,7 +98,7 @@ int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_stat
 
 /* Noising for the first timestep still to run (SDEdit): y = a·x0 + b·noise with
  * a = sqrt(acp[t]), b = sqrt(1-acp[t]) for DDIM and a = 1/sqrt(sigma^2+1), b = sigma·a
- * for DPM-Solver++ (sigma of the current step), as diffusers' add_noise. y may equal x0. */
+ * for DPM-Solver++ (sigma of the current step), as diffusers' add_noise. y may equal x0 or noise. */
 void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n);
 
 /* Classifier-free guidance: out = u + g·(c - u) over n floats (out may equal u or c). */

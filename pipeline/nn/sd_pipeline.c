@@ -181,6 +181,31 @@ int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int 
     return rc;
 }
 
+int mx_sd_encode_prompts(const mx_ctx *c, const mx_clip *clip, const mx_tokenizer *tok, const char *const *prompts,
+                         int n, float *embeds, int *n_dropped, mx_status *st) {
+    if (n < 1) return mx_fail(st, MX_EUSAGE, "encode prompts: no prompt");
+    int32_t *ids = malloc(sizeof(int32_t) * (size_t)n * MX_CLIP_CONTEXT);
+    if (!ids) return mx_fail(st, MX_ENOMEM, "encode prompts: out of memory");
+    int rc = -1;
+    mx_arena a = {0};
+    for (int i = 0; i < n; i++) {
+        mx_tok_result r;
+        if (mx_tok_encode(tok, prompts[i], &r, st)) goto done;
+        memcpy(ids + (size_t)i * MX_CLIP_CONTEXT, r.ids, sizeof r.ids);
+        if (n_dropped) n_dropped[i] = r.n_dropped;
+    }
+    mx_arena_measure(&a);
+    if (mx_clip_forward(clip, c, &a, ids, n, MX_CLIP_CONTEXT, embeds, NULL, NULL, st)) goto done;
+    size_t bytes = a.peak;
+    if (mx_arena_create(&a, bytes, st) || mx_clip_forward(clip, c, &a, ids, n, MX_CLIP_CONTEXT, embeds, NULL, NULL, st))
+        goto done;
+    rc = 0;
+done:
+    mx_arena_destroy(&a);
+    free(ids);
+    return rc;
+}
+
 int mx_sd_decode_latents(const mx_ctx *c, const mx_vae *vae, const float *latents, int n, int h, int w,
                          float *image, mx_status *st) {
     const mx_vae_config *vc = mx_vae_cfg(vae);

@@ -15,8 +15,10 @@
 
 #include "../../ops/ops.h"
 #include "../../runtime/status.h"
+#include "clip.h"
 #include "controlnet.h"
 #include "scheduler.h"
+#include "tokenizer.h"
 #include "unet.h"
 #include "vae.h"
 
@@ -54,6 +56,13 @@ typedef struct mx_sd_request {
  * eps, one arena sized by dry runs of the networks) is allocated once before the loop. */
 int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int n, int h, int w,
                   mx_status *st);
+
+/* Prompt embeddings as the SD pipelines make them: each prompt tokenized to 77 ids and
+ * encoded, embeds [n, 77, hidden] = last_hidden_state. n_dropped (may be NULL) receives the
+ * tokens each prompt lost to truncation (the caller warns). An empty prompt is the usual
+ * negative prompt. */
+int mx_sd_encode_prompts(const mx_ctx *c, const mx_clip *clip, const mx_tokenizer *tok, const char *const *prompts,
+                         int n, float *embeds, int *n_dropped, mx_status *st);
 
 /* image [n, 3, 8h, 8w] in [0, 1] = clamp(decode(latents / 0.18215) / 2 + 0.5, 0, 1). */
 int mx_sd_decode_latents(const mx_ctx *c, const mx_vae *vae, const float *latents, int n, int h, int w,

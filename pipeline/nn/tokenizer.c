@@ -466,7 +466,8 @@ static size_t utf8_get(const unsigned char *s, size_t n, unsigned *cp) {
  * (leading/trailing spaces are harmless: the pattern never matches a space). */
 static unsigned *clean_text(const char *text, size_t *out_n, mx_status *st) {
     size_t len = strlen(text);
-    unsigned *cps = malloc(sizeof(unsigned) * (3 * len + 1));
+    /* at most one code point per byte: a CJK ideograph (3-4 bytes) becomes 3 */
+    unsigned *cps = malloc(sizeof(unsigned) * (len + 1));
     if (!cps) return mx_fail(st, MX_ENOMEM, "tokenizer: out of memory for a %zu-byte prompt", len), NULL;
     size_t n = 0;
     for (size_t i = 0; i < len;) {
@@ -581,19 +582,33 @@ static int bpe_word(const mx_tokenizer *t, int32_t *sym, size_t n, id_list *out,
     return 0;
 }
 
-/* Byte symbols of cps[0..n) as UTF-8, the last byte with "</w>", then BPE. */
-static int encode_pretoken(const mx_tokenizer *t, const unsigned *cps, size_t n, id_list *out, int32_t *sym,
-                           mx_status *st) {
+/* Byte symbols of cps[0..n) as UTF-8, the last byte with "</w>" when `word_end`, then BPE. */
+static int encode_piece(const mx_tokenizer *t, const unsigned *cps, size_t n, int word_end, id_list *out,
+                        int32_t *sym, mx_status *st) {
     size_t nb = 0;
+    char u[4];
     for (size_t i = 0; i < n; i++) {
-        char u[4];
         size_t k = utf8_put(cps[i], u);
         for (size_t j = 0; j < k; j++) sym[nb++] = t->byte_id[(unsigned char)u[j]];
     }
-    char u[4];
-    size_t k = utf8_put(cps[n - 1], u);
-    sym[nb - 1] = t->byte_end_id[(unsigned char)u[k - 1]];
+    if (word_end) {
+        size_t k = utf8_put(cps[n - 1], u);
+        sym[nb - 1] = t->byte_end_id[(unsigned char)u[k - 1]];
+    }
     return bpe_word(t, sym, nb, out, st);
+}
+
+/* BPE is quadratic in the word length: a hostile prompt with one enormous "word" is cut into
+ * pieces of MAX_PIECE code points (only the last ends the word), far beyond any real word. */
+#define MAX_PIECE 1024
+
+static int encode_pretoken(const mx_tokenizer *t, const unsigned *cps, size_t n, id_list *out, int32_t *sym,
+                           mx_status *st) {
+    for (size_t i = 0; i < n; i += MAX_PIECE) {
+        size_t k = n - i < MAX_PIECE ? n - i : MAX_PIECE;
+        if (encode_piece(t, cps + i, k, i + k == n, out, sym, st)) return -1;
+    }
+    return 0;
 }
 
 static void frame_ids(const id_list *tokens, mx_tok_result *out) {
@@ -611,14 +626,14 @@ int mx_tok_encode(const mx_tokenizer *t, const char *text, mx_tok_result *out, m
     size_t n;
     unsigned *cps = clean_text(text, &n, st);
     if (!cps) return -1;
-    int32_t *sym = malloc(sizeof(int32_t) * (4 * n + 1));
+    int32_t *sym = malloc(sizeof(int32_t) * (4 * (n < MAX_PIECE ? n : MAX_PIECE) + 1));
     id_list tokens = {0};
     int rc = -1;
     if (!sym) {
         mx_fail(st, MX_ENOMEM, "tokenizer: out of memory");
         goto done;
     }
-    for (size_t i = 0; i < n;) {
+    for (size_t i = 0; i < n && tokens.n < MX_TOK_MAX_COUNTED;) {
         if (cps[i] == ' ') {
             i++;
             continue;

@@ -31,6 +31,10 @@ int mx_tok_load_weights(mx_tokenizer **out, const mx_weightfile *wf, mx_status *
 void mx_tok_free(mx_tokenizer *t);
 
 /* Result of encoding one prompt. */
+/* Tokens are counted up to this many; past it the rest of the prompt is not encoded (so
+ * n_dropped is then a lower bound) and the work per prompt stays bounded. */
+#define MX_TOK_MAX_COUNTED 4096
+
 typedef struct mx_tok_result {
     int32_t ids[MX_CLIP_CONTEXT]; /* BOS, tokens, EOS, then EOS padding */
     int n_tokens;                 /* ids used before padding, BOS and EOS included (2..77) */

@@ -1,0 +1,27 @@
+/* Control images for the ControlNets and the moves between the renders (HWC images at the
+ * render size) and the model's planar batches (NCHW at the model image size). */
+#ifndef MX_CONDITION_H
+#define MX_CONDITION_H
+
+#include <stdint.h>
+
+#include "../geom/image.h"
+#include "../geom/raster.h"
+
+/* Depth control of ControlNet depth v1.1 (3 channels, in [0, 1], near = bright): over the
+ * visible pixels, value = 0.2 + 0.8 (d_far - d) / (d_far - d_near); background 0. */
+int mx_depth_image(const mx_gbuffer *gb, mx_image *out, mx_status *st);
+/* A uint8 mask as a 1-channel float image (1 where set). */
+int mx_mask_image(const uint8_t *mask, int w, int h, mx_image *out, mx_status *st);
+/* Inpainting control (ControlNet inpaint v1.1): rgb where mask < 0.5, -1 where mask >= 0.5
+ * (the pixels to paint). rgb (3+ channels) and mask (1 channel) have the same size. */
+int mx_inpaint_image(const mx_image *rgb, const mx_image *mask, mx_image *out, mx_status *st);
+
+/* Writes the channels of img (HWC) into planes [c][plane_h][plane_w] at column x0
+ * (plane_h = img->h; the image must fit). */
+void mx_image_to_planes(const mx_image *img, float *planes, int plane_w, int x0);
+/* out (allocated, HWC, c channels) = the w columns from x0 of planes [c][h][plane_w]. */
+int mx_planes_to_image(const float *planes, int c, int h, int plane_w, int x0, int w, mx_image *out,
+                       mx_status *st);
+
+#endif

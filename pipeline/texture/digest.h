@@ -1,0 +1,14 @@
+/* A fast 64-bit digest of a file, to identify the weights a texture was made with.
+ * "mxd64": the file is read in 8-byte little-endian words w_i (zero-padded tail);
+ * h = len * 0x9E3779B97F4A7C15; for each word: h = rotl(h ^ mix(w_i + i), 27) * 0x94D049BB133111EB
+ * with mix = the splitmix64 finaliser; final h = mix(h). Not cryptographic. */
+#ifndef MX_DIGEST_H
+#define MX_DIGEST_H
+
+#include <stdint.h>
+
+/* Writes 16 hex digits + NUL into out (at least 17 bytes); "unreadable" when the file can't be read. */
+void mx_file_digest_hex(const char *path, char out[32]);
+uint64_t mx_digest64(const void *data, uint64_t len);
+
+#endif

@@ -1,0 +1,147 @@
+/* `matex enhance` (paper §4.4, texture enhancement): SDEdit over views of a textured mesh.
+ * Views: front, back, then the candidates that Algorithm 1 picks from an empty T^B. Each view's
+ * render of the ORIGINAL texture is VAE-encoded, noised to `strength`, denoised under the
+ * prompt (with depth control when the file has a depth ControlNet) and backprojected; texels
+ * that no view reached keep the original texture. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../runtime/log.h"
+#include "../geom/raster.h"
+#include "condition.h"
+#include "job.h"
+#include "texture.h"
+
+#define MIN_UNTEXTURED_PIXELS 16
+
+/* The original textures resampled to the bake's size, one per layer (grey where missing). */
+static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
+    int T = j->o->tex_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
+    mx_image *src = calloc((size_t)nm, sizeof *src);
+    if (!src) return mx_fail(st, MX_ENOMEM, "textures: out of memory");
+    int rc = j->mesh.nmat > 0 ? mx_mesh_load_textures(&j->mesh, src, st) : 0, have = 0;
+    for (int l = 0; !rc && l < j->nlayers; l++) {
+        if ((rc = mx_image_alloc(&out[l], T, T, 3, st))) break;
+        const mx_image *s = l < nm ? &src[l] : NULL;
+        have += s && s->data;
+        for (int y = 0; y < T; y++)
+            for (int x = 0; x < T; x++) {
+                float rgba[4] = {0.5f, 0.5f, 0.5f, 1.0f}, *d = out[l].data + ((size_t)y * T + x) * 3;
+                if (s && s->data) mx_texture_sample(s, (x + 0.5f) / T, 1.0f - (y + 0.5f) / T, rgba);
+                if (s && s->data && s->c < 3) rgba[1] = rgba[2] = rgba[0];
+                memcpy(d, rgba, 3 * sizeof(float));
+            }
+    }
+    for (int i = 0; i < nm; i++) mx_image_free(&src[i]);
+    free(src);
+    if (!rc && !have) rc = mx_fail(st, MX_EINPUT, "%s: the mesh has no texture to enhance", j->o->mesh_path);
+    return rc;
+}
+
+/* Cameras: front, back, then the plan of Algorithm 1 from an empty T^B. */
+static int enhance_cameras(mx_job *j, mx_camera *cams, int *n, mx_status *st) {
+    mx_camera_ortho(&cams[0], 0.0f, 0.0f, 3.0f, 1.02f);
+    mx_camera_ortho(&cams[1], 180.0f, 0.0f, 3.0f, 1.02f);
+    *n = 2;
+    if (j->o->views <= 2) return 0;
+    mx_view_plan plan;
+    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->views - 2, j->o->coverage_stop, MIN_UNTEXTURED_PIXELS, &plan,
+                          st))
+        return -1;
+    for (int i = 0; i < plan.n && *n < j->o->views; i++) cams[(*n)++] = j->vc.cams[plan.cand[i]];
+    mx_view_plan_free(&plan);
+    return 0;
+}
+
+/* One view: render the original texture, SDEdit it, backproject. */
+static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int index, mx_status *st) {
+    const mx_texture_opts *o = j->o;
+    int S = o->image_size, rc = -1;
+    size_t per = (size_t)3 * S * S;
+    float *depth = malloc(sizeof(float) * per), *init = malloc(sizeof(float) * per);
+    float *image = malloc(sizeof(float) * per);
+    mx_image rgb = {0}, small = {0};
+    const float grey[3] = {0.5f, 0.5f, 0.5f};
+    if (!depth || !init || !image) {
+        mx_fail(st, MX_ENOMEM, "enhance: out of memory");
+        goto done;
+    }
+    snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->prompt);
+    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, depth, NULL, S, 0, st) ||
+        mx_render_textured(&v->vb.gb, &j->mesh, orig, j->nlayers, grey, j->ctx.pool, &rgb, st) ||
+        mx_crop_resize(&rgb, v->crop, S, &small, st))
+        goto done;
+    mx_image_to_planes(&small, init, S, 0);
+    const char *prompts[1] = {v->prompt};
+    char stage[32];
+    snprintf(stage, sizeof stage, "enhance view %d", index + 1);
+    mx_gen_batch b = {1, S, S, prompts, depth, NULL, o->depth_weight[0], 0.0f, init, o->strength, (uint64_t)index,
+                      stage};
+    if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
+    mx_job_report_view(j, v, "enhance", index, j->models.cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
+    rc = 0;
+done:
+    mx_image_free(&rgb);
+    mx_image_free(&small);
+    free(depth);
+    free(init);
+    free(image);
+    return rc;
+}
+
+/* Final textures: enhanced texels where a view reached them, the original elsewhere. */
+static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_status *st) {
+    if (mx_job_current_textures(j, out, st)) return -1;
+    size_t T2 = (size_t)j->o->tex_size * j->o->tex_size;
+    for (int l = 0; l < j->nlayers; l++)
+        for (size_t i = 0; i < T2; i++)
+            if (!j->bake.known[l * T2 + i]) memcpy(out[l].data + 3 * i, orig[l].data + 3 * i, 3 * sizeof(float));
+    return 0;
+}
+
+int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
+    if (!o->mesh_path || !o->weights_path || !o->out_dir || !o->prompt)
+        return mx_fail(st, MX_EUSAGE, "mesh, --weights and -o are required");
+    if (!(o->strength > 0.0f && o->strength <= 1.0f))
+        return mx_fail(st, MX_EUSAGE, "--strength must be in (0, 1], not %g", (double)o->strength);
+    if (o->views < 1 || o->views > 64) return mx_fail(st, MX_EUSAGE, "--views must be in 1..64, not %d", o->views);
+    mx_job j;
+    int rc = mx_job_open(&j, o, 0, 1, st);
+    mx_image *orig = NULL, *out = NULL;
+    mx_camera *cams = NULL;
+    int ncam = 0;
+    if (!rc) {
+        orig = calloc((size_t)j.nlayers, sizeof *orig);
+        out = calloc((size_t)j.nlayers, sizeof *out);
+        cams = calloc((size_t)(o->views > 2 ? o->views : 2), sizeof *cams);
+        if (!orig || !out || !cams) rc = mx_fail(st, MX_ENOMEM, "enhance: out of memory");
+    }
+    if (!rc) rc = original_textures(&j, orig, st);
+    if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
+    double t = mx_now();
+    for (int i = 0; !rc && i < ncam && i < o->views; i++) {
+        mx_job_view v;
+        memset(&v, 0, sizeof v);
+        v.cam = cams[i];
+        rc = enhance_view(&j, orig, &v, i, st);
+        mx_job_view_free(&v);
+    }
+    if (!rc) {
+        mx_job_stage_done(&j, "views", mx_now() - t);
+        rc = merge_textures(&j, orig, out, st);
+    }
+    if (!rc) rc = mx_job_finish(&j, out, st);
+    if (!rc && res) {
+        res->coverage = mx_job_coverage(&j);
+        res->views = j.views_done;
+        res->seconds = mx_now() - j.t0;
+    }
+    for (int l = 0; orig && l < j.nlayers; l++) mx_image_free(&orig[l]);
+    for (int l = 0; out && l < j.nlayers; l++) mx_image_free(&out[l]);
+    free(orig);
+    free(out);
+    free(cams);
+    mx_job_close(&j);
+    return rc;
+}

@@ -1,0 +1,433 @@
+#include "job.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../runtime/log.h"
+#include "../../runtime/rng.h"
+#include "../geom/export.h"
+#include "../geom/masks.h"
+#include "../geom/uvfill.h"
+#include "../nn/sd_pipeline.h"
+#include "condition.h"
+#include "digest.h"
+#include "outdir.h"
+
+#define SCRATCH_BYTES ((size_t)64 << 20)
+#define CANDIDATE_RENDER_SIZE 256
+#define CAMERA_RADIUS 3.0f
+#define CAMERA_HALF_EXTENT 1.02f /* the normalised mesh lies in the unit sphere */
+#define CROP_MARGIN 0.05f
+#define UV_GUTTER 4
+static const float GREY[3] = {0.5f, 0.5f, 0.5f};
+
+void mx_job_progress(const mx_job *j, const char *fmt, ...) {
+    if (j->o->quiet) return;
+    char line[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+}
+
+static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
+    mx_mesh *m = &j->mesh;
+    if (m->nuv > 0) {
+        j->nlayers = m->nmat > 1 && m->face_mat ? m->nmat : 1;
+        return 0;
+    }
+    if (need_uvs)
+        return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
+    mx_uvatlas_opts ao = mx_uvatlas_defaults();
+    ao.texture_size = j->o->tex_size;
+    if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return mx_fail_prefix(st, "%s: UV atlas", j->o->mesh_path);
+    j->atlas_built = 1;
+    /* one atlas for the whole mesh: every face renders and exports with material 0 */
+    free(m->face_mat);
+    m->face_mat = NULL;
+    j->nlayers = 1;
+    mx_job_progress(j, "UV atlas: %d charts, utilisation %.3f, %.2fs", j->atlas.charts, j->atlas.utilisation,
+                    j->atlas.seconds);
+    return 0;
+}
+
+static int build_candidates(mx_job *j, mx_status *st) {
+    int n = j->o->candidates;
+    mx_camera tmpl, *cams = calloc((size_t)n, sizeof *cams);
+    if (!cams) return mx_fail(st, MX_ENOMEM, "candidate cameras: out of memory");
+    mx_camera_ortho(&tmpl, 0, 0, CAMERA_RADIUS, CAMERA_HALF_EXTENT);
+    mx_camera_fibonacci(cams, n, &tmpl);
+    int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
+                                 j->o->tex_size, j->nlayers, j->o->frontal_threshold, j->ctx.pool, st);
+    free(cams);
+    if (rc) return -1;
+    j->vc_ready = 1;
+    size_t texels = (size_t)j->nlayers * j->o->tex_size * j->o->tex_size;
+    j->visible = calloc(texels, 1);
+    if (!j->visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
+    mx_view_cache_visible(&j->vc, j->visible);
+    j->n_visible = mx_mask_count(j->visible, (int64_t)texels);
+    return 0;
+}
+
+static int encode_negative(mx_job *j, mx_status *st) {
+    int C = mx_models_text_dim(&j->models);
+    j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
+    if (!j->uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
+    int dropped = 0;
+    if (mx_models_encode_text(&j->models, &j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
+    if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
+    return 0;
+}
+
+static void report_header(mx_job *j) {
+    const mx_texture_opts *o = j->o;
+    mx_jw *w = &j->report;
+    mx_jw_init(w);
+    mx_jw_begin_obj(w, NULL);
+    mx_jw_str(w, "matex_version", "0.1");
+    mx_jw_str(w, "mesh", o->mesh_path);
+    mx_jw_str(w, "prompt", o->prompt);
+    mx_jw_str(w, "negative_prompt", o->negative_prompt);
+    mx_jw_int(w, "seed", (long long)o->seed);
+    mx_jw_int(w, "steps", o->steps);
+    mx_jw_num(w, "guidance", o->guidance);
+    mx_jw_int(w, "texture_size", o->tex_size);
+    mx_jw_int(w, "render_size", o->render_size);
+    mx_jw_int(w, "image_size", o->image_size);
+    mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
+    mx_jw_str(w, "weights", o->weights_path);
+    char digest[32];
+    mx_file_digest_hex(o->weights_path, digest);
+    mx_jw_str(w, "weights_digest", digest);
+    mx_jw_int(w, "faces", j->mesh.nfaces);
+    mx_jw_int(w, "vertices", j->mesh.nverts);
+    mx_jw_int(w, "textures", j->nlayers);
+    mx_jw_bool(w, "uv_atlas_built", j->atlas_built);
+    if (j->atlas_built) {
+        mx_jw_begin_obj(w, "uv_atlas");
+        mx_jw_int(w, "charts", j->atlas.charts);
+        mx_jw_num(w, "utilisation", j->atlas.utilisation);
+        mx_jw_num(w, "stretch_mean", j->atlas.stretch_mean);
+        mx_jw_num(w, "seconds", j->atlas.seconds);
+        mx_jw_end_obj(w);
+    }
+    mx_jw_int(w, "candidate_views", o->candidates);
+    mx_jw_num(w, "candidate_visible_texels", (double)j->n_visible);
+    mx_jw_begin_arr(w, "views");
+}
+
+int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st) {
+    memset(j, 0, sizeof *j);
+    j->o = o;
+    j->t0 = mx_now();
+    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    j->ctx_ready = 1;
+    if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
+    j->models_ready = 1;
+    mx_job_progress(j, "loaded weights %s", o->weights_path);
+    if (mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
+    if (prepare_uvs(j, need_uvs, st)) return -1;
+    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
+    if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
+    j->bake_ready = 1;
+    if (build_candidates(j, st) || encode_negative(j, st)) return -1;
+    mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
+                    j->nlayers, o->candidates);
+    report_header(j);
+    mx_job_stage_done(j, "load", mx_now() - j->t0);
+    return 0;
+}
+
+void mx_job_close(mx_job *j) {
+    for (int i = 0; i < j->prompts.n; i++) {
+        free(j->prompts.text[i]);
+        free(j->prompts.emb[i]);
+    }
+    free(j->uncond);
+    free(j->visible);
+    if (j->vc_ready) mx_view_cache_free(&j->vc);
+    if (j->bake_ready) mx_bake_free(&j->bake);
+    free(j->pos);
+    mx_mesh_free(&j->mesh);
+    if (j->models_ready) mx_models_free(&j->models);
+    if (j->ctx_ready) mx_ctx_destroy(&j->ctx);
+    mx_jw_free(&j->report);
+    memset(j, 0, sizeof *j);
+}
+
+/* Cached CLIP embedding of a prompt ([77][C], owned by the cache). */
+static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st) {
+    mx_prompt_cache *pc = &j->prompts;
+    for (int i = 0; i < pc->n; i++)
+        if (!strcmp(pc->text[i], text)) return pc->emb[i];
+    if (pc->n == MX_JOB_MAX_PROMPTS) {
+        free(pc->text[0]);
+        free(pc->emb[0]);
+        memmove(pc->text, pc->text + 1, sizeof(pc->text[0]) * (MX_JOB_MAX_PROMPTS - 1));
+        memmove(pc->emb, pc->emb + 1, sizeof(pc->emb[0]) * (MX_JOB_MAX_PROMPTS - 1));
+        pc->n--;
+    }
+    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    float *emb = malloc(floats * sizeof *emb);
+    char *copy = strdup(text);
+    int dropped = 0;
+    if (!emb || !copy || mx_models_encode_text(&j->models, &j->ctx, text, emb, &dropped, st)) {
+        free(emb);
+        free(copy);
+        if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
+        return NULL;
+    }
+    if (dropped && !j->truncation_warned) {
+        mx_warn("prompt longer than 77 tokens: truncated (%d tokens dropped): \"%s\"", dropped, text);
+        j->truncation_warned = 1;
+    }
+    pc->text[pc->n] = copy;
+    pc->emb[pc->n] = emb;
+    return pc->emb[pc->n++];
+}
+
+typedef struct {
+    const mx_job *job;
+    const char *stage;
+} progress_ctx;
+
+static int report_step(void *user, int step, int n_steps, int64_t timestep, const float *latents, size_t numel) {
+    (void)latents;
+    (void)numel;
+    const progress_ctx *p = user;
+    mx_job_progress(p->job, "%s: step %d/%d (t=%lld)", p->stage, step + 1, n_steps, (long long)timestep);
+    return 0;
+}
+
+/* Embeddings of every item, cond and uncond, [n][77][C]. */
+static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float *uncond, mx_status *st) {
+    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    for (int i = 0; i < b->n; i++) {
+        const float *e = prompt_embedding(j, b->prompts[i], st);
+        if (!e) return -1;
+        memcpy(cond + i * per, e, per * sizeof *e);
+        memcpy(uncond + i * per, j->uncond, per * sizeof *e);
+    }
+    return 0;
+}
+
+/* Start latents: seeded noise per item, or (enhance) the encoded images noised to strength. */
+static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *lat, size_t per_item, int h, int w,
+                         mx_status *st) {
+    size_t numel = per_item * b->n;
+    for (int i = 0; i < b->n; i++)
+        mx_rng_fill_normal(lat + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
+    if (!b->init_images) {
+        mx_scale(&j->ctx, lat, lat, mx_sched_init_noise_sigma(s), numel);
+        return 0;
+    }
+    if (mx_sched_set_strength(s, b->strength, st)) return -1;
+    float *x0 = malloc(numel * sizeof *x0);
+    if (!x0) return mx_fail(st, MX_ENOMEM, "latents: out of memory");
+    int rc = mx_sd_encode_image(&j->ctx, j->models.vae, b->init_images, b->n, h * mx_vae_factor(j->models.vae),
+                                w * mx_vae_factor(j->models.vae), x0, st);
+    if (!rc) mx_sched_add_noise(s, lat, x0, lat, numel);
+    free(x0);
+    return rc;
+}
+
+int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
+    int f = mx_vae_factor(j->models.vae);
+    if (b->image_h % f || b->image_w % f)
+        return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
+                       b->image_h, f);
+    int h = b->image_h / f, w = b->image_w / f;
+    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    float *lat = malloc(per_item * b->n * sizeof *lat);
+    float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
+    mx_sched s;
+    memset(&s, 0, sizeof s);
+    int rc = -1, sched_ready = 0;
+    if (!lat || !cond || !uncond) {
+        mx_fail(st, MX_ENOMEM, "generation buffers: out of memory");
+        goto done;
+    }
+    if (batch_embeddings(j, b, cond, uncond, st)) goto done;
+    if (mx_sched_init(&s, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
+    sched_ready = 1;
+    if (start_latents(j, b, &s, lat, per_item, h, w, st)) goto done;
+    mx_sd_control controls[2];
+    int nc = 0;
+    if (b->depth_planes && j->models.cn_depth && b->w_depth != 0)
+        controls[nc++] = (mx_sd_control){j->models.cn_depth, b->depth_planes, b->w_depth};
+    if (b->inpaint_planes && j->models.cn_inpaint && b->w_inpaint != 0)
+        controls[nc++] = (mx_sd_control){j->models.cn_inpaint, b->inpaint_planes, b->w_inpaint};
+    progress_ctx pc = {j, b->stage};
+    mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
+                        report_step, &pc};
+    if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) goto done;
+    rc = mx_sd_decode_latents(&j->ctx, j->models.vae, lat, b->n, h, w, images, st);
+done:
+    if (sched_ready) mx_sched_free(&s);
+    free(lat);
+    free(cond);
+    free(uncond);
+    return rc;
+}
+
+int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
+    int R = j->o->render_size;
+    if (mx_view_buffers_init(&v->vb, R, st)) return -1;
+    v->vb_ready = 1;
+    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx.pool,
+                        st))
+        return -1;
+    uint8_t *fg = malloc((size_t)R * R);
+    if (!fg) return mx_fail(st, MX_ENOMEM, "view mask: out of memory");
+    mx_mask_foreground(&v->vb.gb, fg);
+    v->crop = mx_crop_from_mask(fg, R, R, CROP_MARGIN);
+    free(fg);
+    return 0;
+}
+
+void mx_job_view_free(mx_job_view *v) {
+    if (v->vb_ready) mx_view_buffers_free(&v->vb);
+    v->vb_ready = 0;
+}
+
+int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
+    for (int l = 0; l < j->nlayers; l++)
+        if (mx_bake_texture(&j->bake, l, GREY, &tex[l], st)) {
+            for (int k = 0; k < l; k++) mx_image_free(&tex[k]);
+            return -1;
+        }
+    return 0;
+}
+
+/* crop + resize of a render to the model size, then into the planes. */
+static int place_control(const mx_image *full, mx_crop crop, int S, float *planes, int plane_w, int x0,
+                         mx_status *st) {
+    mx_image small;
+    if (mx_crop_resize(full, crop, S, &small, st)) return -1;
+    mx_image_to_planes(&small, planes, plane_w, x0);
+    mx_image_free(&small);
+    return 0;
+}
+
+static int inpaint_control(mx_job *j, mx_job_view *v, float *planes, int plane_w, int x0, mx_status *st) {
+    int R = j->o->render_size, S = j->o->image_size, rc = -1;
+    mx_image tex[j->nlayers], rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, ctl = {0};
+    uint8_t *mask = malloc((size_t)R * R);
+    if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
+    if (mx_job_current_textures(j, tex, st)) {
+        free(mask);
+        return -1;
+    }
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, j->bake.known, j->o->tex_size, j->o->tex_size, mask);
+    v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
+    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx.pool, &rgb, st) &&
+        !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
+        !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) && !mx_inpaint_image(&rgb_s, &mask_s, &ctl, st)) {
+        mx_image_to_planes(&ctl, planes, plane_w, x0);
+        rc = 0;
+    }
+    for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
+    mx_image_free(&rgb);
+    mx_image_free(&mask_img);
+    mx_image_free(&rgb_s);
+    mx_image_free(&mask_s);
+    mx_image_free(&ctl);
+    free(mask);
+    return rc;
+}
+
+int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes, int plane_w,
+                         int x0, mx_status *st) {
+    mx_image depth;
+    if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
+    int rc = place_control(&depth, v->crop, j->o->image_size, depth_planes, plane_w, x0, st);
+    mx_image_free(&depth);
+    if (rc || !inpaint_planes) return rc;
+    return inpaint_control(j, v, inpaint_planes, plane_w, x0, st);
+}
+
+int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st) {
+    int R = j->o->render_size, S = j->o->image_size;
+    mx_image gen, canvas;
+    if (mx_planes_to_image(planes, 3, S, plane_w, x0, S, &gen, st)) return -1;
+    if (mx_image_alloc(&canvas, R, R, 3, st)) {
+        mx_image_free(&gen);
+        return -1;
+    }
+    mx_crop_paste(&gen, v->crop, &canvas);
+    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, 0, j->ctx.pool, st);
+    mx_image_free(&gen);
+    mx_image_free(&canvas);
+    j->views_done++;
+    return rc;
+}
+
+void mx_job_stage_done(mx_job *j, const char *name, double seconds) {
+    if (j->nstages == (int)(sizeof j->stage_s / sizeof j->stage_s[0])) return;
+    j->stage_name[j->nstages] = name;
+    j->stage_s[j->nstages++] = seconds;
+}
+
+double mx_job_coverage(const mx_job *j) {
+    if (j->n_visible == 0) return 1.0;
+    int64_t n = (int64_t)j->nlayers * j->o->tex_size * j->o->tex_size, hit = 0;
+    for (int64_t i = 0; i < n; i++) hit += j->visible[i] && j->bake.known[i];
+    return (double)hit / (double)j->n_visible;
+}
+
+void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int batch, float w_depth,
+                        float w_inpaint) {
+    mx_jw *w = &j->report;
+    mx_jw_begin_obj(w, NULL);
+    mx_jw_str(w, "stage", stage);
+    mx_jw_int(w, "batch", batch);
+    mx_jw_num(w, "azimuth", v->cam.azimuth);
+    mx_jw_num(w, "elevation", v->cam.elevation);
+    mx_jw_str(w, "view_word", mx_camera_view_word(&v->cam));
+    mx_jw_str(w, "prompt", v->prompt);
+    mx_jw_num(w, "depth_weight", w_depth);
+    mx_jw_num(w, "inpaint_weight", w_inpaint);
+    mx_jw_int(w, "untextured_pixels", v->untextured_pixels);
+    mx_jw_num(w, "coverage_after", mx_job_coverage(j));
+    mx_jw_num(w, "time_s", mx_now() - j->t0);
+    mx_jw_end_obj(w);
+}
+
+/* Push-pull fill of every layer's unreached chart texels. */
+static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
+    int T = j->o->tex_size;
+    uint8_t *chart = malloc((size_t)T * T);
+    if (!chart) return mx_fail(st, MX_ENOMEM, "UV fill: out of memory");
+    int rc = 0;
+    for (int l = 0; l < j->nlayers && !rc; l++) {
+        const uint8_t *known = j->bake.known + (size_t)l * T * T;
+        rc = mx_uv_chart_mask(&j->mesh, l, j->nlayers, T, T, chart, st) || mx_uv_fill(&tex[l], known, chart, UV_GUTTER, st);
+    }
+    free(chart);
+    return rc ? -1 : 0;
+}
+
+int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
+    double t = mx_now();
+    if (fill_textures(j, tex, st)) return -1;
+    mx_jw *w = &j->report;
+    mx_jw_end_arr(w); /* views */
+    mx_jw_num(w, "coverage", mx_job_coverage(j));
+    mx_jw_int(w, "views_generated", j->views_done);
+    mx_job_stage_done(j, "uv_fill", mx_now() - t);
+    mx_jw_begin_obj(w, "stages_s");
+    for (int i = 0; i < j->nstages; i++) mx_jw_num(w, j->stage_name[i], j->stage_s[i]);
+    mx_jw_end_obj(w);
+    mx_jw_num(w, "total_s", mx_now() - j->t0);
+    mx_jw_end_obj(w);
+    const char *text = mx_jw_text(w);
+    if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
+    if (mx_outdir_write(j->o->out_dir, &j->mesh, tex, j->nlayers, text, st)) return -1;
+    mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
+    return 0;
+}

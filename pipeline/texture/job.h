@@ -1,0 +1,110 @@
+/* The state shared by `matex texture` and `matex enhance`: context, models, the mesh with
+ * its normalised positions, the bake (texture accumulation and T^B), candidate views, the
+ * prompt-embedding cache and the report. Internal to pipeline/texture. */
+#ifndef MX_JOB_H
+#define MX_JOB_H
+
+#include <stdint.h>
+
+#include "../geom/backproject.h"
+#include "../geom/camera.h"
+#include "../geom/uvatlas.h"
+#include "../geom/views.h"
+#include "jsonw.h"
+#include "models.h"
+#include "texture.h"
+
+#define MX_JOB_MAX_PROMPTS 16
+
+typedef struct mx_prompt_cache {
+    int n;
+    char *text[MX_JOB_MAX_PROMPTS];
+    float *emb[MX_JOB_MAX_PROMPTS]; /* [77][C] */
+} mx_prompt_cache;
+
+typedef struct mx_job {
+    const mx_texture_opts *o;
+    mx_ctx ctx;
+    int ctx_ready;
+    mx_models models;
+    int models_ready;
+    mx_mesh mesh;
+    float *pos;  /* normalised positions for rendering */
+    int nlayers; /* textures: one per material keeping its own UVs, else 1 */
+    mx_bake bake;
+    int bake_ready;
+    mx_view_cache vc;
+    int vc_ready;
+    uint8_t *visible; /* texels seen by some candidate [nlayers][tex][tex] */
+    int64_t n_visible;
+    mx_prompt_cache prompts;
+    float *uncond; /* negative prompt embedding [77][C] */
+    int truncation_warned;
+    int atlas_built;
+    mx_uvatlas_report atlas;
+    mx_jw report; /* open object; the views array is written as views are generated */
+    int views_done;
+    double t0;
+    int nstages; /* seconds per stage, for the report */
+    const char *stage_name[8];
+    double stage_s[8];
+} mx_job;
+
+/* One view of a batch: its camera, prompt word, renders and crop. */
+typedef struct mx_job_view {
+    mx_camera cam;
+    char prompt[1200];
+    mx_view_buffers vb;
+    int vb_ready;
+    mx_crop crop;
+    int64_t untextured_pixels;
+} mx_job_view;
+
+/* What one diffusion call generates: n items of image_h x image_w, with their control
+ * planes [n][3][image_h][image_w] (NULL: that ControlNet is off) and prompts. */
+typedef struct mx_gen_batch {
+    int n, image_h, image_w;
+    const char *const *prompts;
+    const float *depth_planes;
+    const float *inpaint_planes;
+    float w_depth, w_inpaint;
+    const float *init_images; /* enhance: [n][3][h][w] in [0,1] to encode and noise, else NULL */
+    float strength;
+    uint64_t first_stream; /* item i uses noise stream first_stream + i */
+    const char *stage;     /* for progress lines */
+} mx_gen_batch;
+
+/* Context, models (needs: MX_MODELS_NEED_*), mesh and its normalised copy, bake sized
+ * tex_size with nlayers layers, candidate cache and the report's header. */
+int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
+void mx_job_close(mx_job *j);
+
+/* Runs one diffusion call: images out [n][3][h][w] in [0, 1]. */
+int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st);
+
+/* Renders the view (culled + unculled, backprojection mask) and its object crop. */
+int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st);
+void mx_job_view_free(mx_job_view *v);
+/* Control planes of a view at the model image size S, written at column x0 of planes with
+ * row width plane_w: depth into depth_planes, and (when inpaint_planes is not NULL) the current
+ * texture's render with the untextured pixels set to -1. */
+int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes, int plane_w,
+                         int x0, mx_status *st);
+/* The current textures (one per layer), unknown texels mid grey. Free each with mx_image_free. */
+int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st);
+/* Pastes a generated image (planes [3][S][plane_w] from column x0) back into the view's crop
+ * and backprojects it into the untextured texels. */
+int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st);
+/* Adds the view to the report. */
+void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int batch, float w_depth,
+                        float w_inpaint);
+/* Fraction of candidate-visible texels in T^B. */
+double mx_job_coverage(const mx_job *j);
+/* Fills unreached texels, writes the output folder (staged, then moved into place). */
+int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
+/* Records the time of a finished stage (name: a string literal). */
+void mx_job_stage_done(mx_job *j, const char *name, double seconds);
+/* Progress line on stderr (unless quiet). */
+void mx_job_progress(const mx_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+#endif

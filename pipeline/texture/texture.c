@@ -1,0 +1,207 @@
+#include "texture.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../runtime/log.h"
+#include "../geom/masks.h"
+#include "job.h"
+
+#define MIN_UNTEXTURED_PIXELS 16 /* at the candidate render size */
+
+void mx_texture_opts_default(mx_texture_opts *o) {
+    memset(o, 0, sizeof *o);
+    o->negative_prompt = "";
+    o->steps = 10;
+    o->views = 6;
+    o->candidates = 40;
+    o->tex_size = 1024;
+    o->render_size = 1024;
+    o->image_size = 512;
+    o->max_batch = 4;
+    o->guidance = 7.5f;
+    o->grid_depth_weight = 1.0f;
+    o->depth_weight[0] = 1.0f;
+    o->depth_weight[1] = 0.7f;
+    o->inpaint_weight[0] = 0.8f;
+    o->inpaint_weight[1] = 1.0f;
+    o->frontal_threshold = 0.3f;
+    o->normal_source = MX_NORMAL_FROM_DEPTH;
+    o->coverage_stop = 0.995f;
+    o->up = MX_UP_Y;
+    o->strength = 0.5f;
+    o->grid_word = "front and back view of";
+}
+
+static void free_views(mx_job_view *v, int n) {
+    for (int i = 0; i < n; i++) mx_job_view_free(&v[i]);
+}
+
+/* Stage 0 (paper §3.1, "Global Consistency"): front and back depth side by side, one image. */
+static int grid_stage(mx_job *j, mx_status *st) {
+    const mx_texture_opts *o = j->o;
+    double t = mx_now();
+    int S = o->image_size, W = 2 * S, rc = -1;
+    mx_job_view v[2];
+    memset(v, 0, sizeof v);
+    mx_camera_ortho(&v[0].cam, 0.0f, 0.0f, 3.0f, 1.02f);
+    mx_camera_ortho(&v[1].cam, 180.0f, 0.0f, 3.0f, 1.02f);
+    float *planes = malloc(sizeof(float) * 3 * S * W), *image = malloc(sizeof(float) * 3 * S * W);
+    const char *prompts[1];
+    if (!planes || !image) {
+        mx_fail(st, MX_ENOMEM, "grid: out of memory");
+        goto done;
+    }
+    for (int i = 0; i < 2; i++) {
+        snprintf(v[i].prompt, sizeof v[i].prompt, "%s %s", o->grid_word, o->prompt);
+        if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], planes, NULL, W, i * S, st))
+            goto done;
+    }
+    prompts[0] = v[0].prompt;
+    mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->grid_depth_weight);
+    mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->grid_depth_weight, 0.0f, NULL, 0.0f, 0, "grid"};
+    if (mx_job_generate(j, &b, image, st)) goto done;
+    for (int i = 0; i < 2; i++) {
+        if (mx_job_backproject(j, &v[i], image, W, i * S, st)) goto done;
+        mx_job_report_view(j, &v[i], "grid", 0, o->grid_depth_weight, 0.0f);
+    }
+    mx_job_progress(j, "stage grid done: coverage %.4f", mx_job_coverage(j));
+    mx_job_stage_done(j, "grid", mx_now() - t);
+    rc = 0;
+done:
+    free_views(v, 2);
+    free(planes);
+    free(image);
+    return rc;
+}
+
+static float lerp_schedule(const float w[2], int k, int n) {
+    float t = n > 1 ? (float)k / (float)(n - 1) : 0.0f;
+    return w[0] + t * (w[1] - w[0]);
+}
+
+/* Views of the plan's first group (at most max_batch of them). */
+static int first_group(const mx_view_plan *plan, int max_batch, int *cand) {
+    int n = 0;
+    for (int i = 0; i < plan->n && n < max_batch; i++)
+        if (plan->group[i] == plan->group[0]) cand[n++] = plan->cand[i];
+    return n;
+}
+
+/* One batch of later views: depth + inpainting control, then backprojection. */
+static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int batch_id, mx_status *st) {
+    const mx_texture_opts *o = j->o;
+    int S = o->image_size, rc = -1;
+    size_t per = (size_t)3 * S * S;
+    float wd = lerp_schedule(o->depth_weight, k, n_later), wi = lerp_schedule(o->inpaint_weight, k, n_later);
+    mx_job_view *v = calloc((size_t)n, sizeof *v);
+    float *depth = malloc(sizeof(float) * per * n), *inpaint = malloc(sizeof(float) * per * n);
+    float *image = malloc(sizeof(float) * per * n);
+    const char **prompts = calloc((size_t)n, sizeof *prompts);
+    if (!v || !depth || !inpaint || !image || !prompts) {
+        mx_fail(st, MX_ENOMEM, "views: out of memory");
+        goto done;
+    }
+    for (int i = 0; i < n; i++) {
+        v[i].cam = j->vc.cams[cand[i]];
+        snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->prompt);
+        prompts[i] = v[i].prompt;
+        if (mx_job_view_prepare(j, &v[i], st) ||
+            mx_job_view_controls(j, &v[i], depth + i * per, inpaint + i * per, S, 0, st))
+            goto done;
+        mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->views,
+                        v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
+                        (long long)v[i].untextured_pixels);
+    }
+    char stage[32];
+    snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
+    mx_gen_batch b = {n, S, S, prompts, depth, inpaint, wd, wi, NULL, 0.0f, (uint64_t)(k + 1), stage};
+    if (mx_job_generate(j, &b, image, st)) goto done;
+    for (int i = 0; i < n; i++) {
+        if (mx_job_backproject(j, &v[i], image + i * per, S, 0, st)) goto done;
+        mx_job_report_view(j, &v[i], "inpaint", batch_id, wd, wi);
+    }
+    rc = 0;
+done:
+    if (v) free_views(v, n);
+    free(v);
+    free(depth);
+    free(inpaint);
+    free(image);
+    free(prompts);
+    return rc;
+}
+
+/* Automatic view selection (paper Alg. 1), re-planned from the real T^B after each batch. */
+static int view_stage(mx_job *j, mx_status *st) {
+    const mx_texture_opts *o = j->o;
+    double t = mx_now();
+    int n_later = o->views - 2, k = 0, batch_id = 1;
+    int *cand = malloc(sizeof(int) * (o->max_batch > 0 ? o->max_batch : 1));
+    if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
+    while (k < n_later) {
+        mx_view_plan plan;
+        if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->coverage_stop, MIN_UNTEXTURED_PIXELS, &plan,
+                              st)) {
+            free(cand);
+            return -1;
+        }
+        int n = plan.n ? first_group(&plan, o->max_batch > 0 ? o->max_batch : 1, cand) : 0;
+        mx_view_plan_free(&plan);
+        if (n == 0) {
+            mx_job_progress(j, "view selection: nothing left to paint after %d views", k + 2);
+            break;
+        }
+        if (view_batch(j, cand, n, k, n_later, batch_id++, st)) {
+            free(cand);
+            return -1;
+        }
+        k += n;
+        mx_job_progress(j, "coverage after %d views: %.4f", k + 2, mx_job_coverage(j));
+    }
+    free(cand);
+    mx_job_stage_done(j, "views", mx_now() - t);
+    return 0;
+}
+
+static int check_opts(const mx_texture_opts *o, mx_status *st) {
+    if (!o->mesh_path || !o->weights_path || !o->out_dir || !o->prompt)
+        return mx_fail(st, MX_EUSAGE, "mesh, prompt, --weights and -o are required");
+    if (o->steps < 1 || o->steps > 200) return mx_fail(st, MX_EUSAGE, "--steps must be in 1..200, not %d", o->steps);
+    if (o->views < 2 || o->views > 64) return mx_fail(st, MX_EUSAGE, "--views must be in 2..64, not %d", o->views);
+    if (o->candidates < 1 || o->candidates > 4096)
+        return mx_fail(st, MX_EUSAGE, "--candidates must be in 1..4096, not %d", o->candidates);
+    if (o->tex_size < 16 || o->tex_size > 8192)
+        return mx_fail(st, MX_EUSAGE, "--texture-size must be in 16..8192, not %d", o->tex_size);
+    if (o->render_size < 16 || o->render_size > 8192)
+        return mx_fail(st, MX_EUSAGE, "--render-size must be in 16..8192, not %d", o->render_size);
+    if (o->image_size < 8 || o->image_size > 2048 || o->image_size % 8)
+        return mx_fail(st, MX_EUSAGE, "--image-size must be a multiple of 8 in 8..2048, not %d", o->image_size);
+    if (!(o->strength > 0.0f && o->strength <= 1.0f))
+        return mx_fail(st, MX_EUSAGE, "--strength must be in (0, 1], not %g", (double)o->strength);
+    return 0;
+}
+
+int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
+    if (check_opts(o, st)) return -1;
+    mx_job j;
+    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
+    if (!rc) rc = grid_stage(&j, st);
+    if (!rc) rc = view_stage(&j, st);
+    if (!rc) {
+        mx_image tex[j.nlayers];
+        rc = mx_job_current_textures(&j, tex, st);
+        if (!rc) {
+            rc = mx_job_finish(&j, tex, st);
+            for (int l = 0; l < j.nlayers; l++) mx_image_free(&tex[l]);
+        }
+    }
+    if (!rc && res) {
+        res->coverage = mx_job_coverage(&j);
+        res->views = j.views_done;
+        res->seconds = mx_now() - j.t0;
+    }
+    mx_job_close(&j);
+    return rc;
+}

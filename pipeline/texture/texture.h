@@ -1,0 +1,64 @@
+/* The Make-A-Texture method (paper §3, DESIGN.md §2) as one call: `matex texture` and
+ * `matex enhance`.
+ *
+ * texture: load mesh (atlas if it has no UVs) -> front+back grid with depth control ->
+ * backproject -> automatic view selection (Alg. 1) with depth + inpainting control, views
+ * whose untextured texels do not overlap generated in one batch -> backproject into the
+ * untextured texels -> UV fill -> export (PNG, EXR, OBJ/MTL, GLB, report.json).
+ * enhance: the same views over an already textured mesh; each view's render is VAE-encoded,
+ * noised to `strength` (SDEdit), denoised under the prompt and backprojected.
+ *
+ * Control-weight schedule (overridable): the grid uses w_D = grid_depth_weight (1.0) and no
+ * inpainting; the k-th of the n later views (k = 0..n-1, t = k/(n-1), t = 0 when n = 1) uses
+ * w_D = depth_weight[0] + t (depth_weight[1] - depth_weight[0])   (default 1.0 -> 0.7)
+ * w_I = inpaint_weight[0] + t (inpaint_weight[1] - inpaint_weight[0]) (default 0.8 -> 1.0):
+ * early views paint large new regions and follow the shape; late views fill small gaps and
+ * must match what is already painted. */
+#ifndef MX_TEXTURE_H
+#define MX_TEXTURE_H
+
+#include <stdint.h>
+
+#include "../../runtime/status.h"
+#include "../geom/mesh.h"
+
+typedef struct mx_texture_opts {
+    const char *mesh_path;
+    const char *prompt;
+    const char *negative_prompt; /* "" by default */
+    const char *weights_path;
+    const char *out_dir;
+    uint64_t seed;           /* 0 */
+    int steps;               /* 10 */
+    int views;               /* view budget, front and back included: 6 */
+    int candidates;          /* candidate cameras on the Fibonacci lattice: 40 */
+    int tex_size;            /* texture side: 1024 */
+    int render_size;         /* side of the renders that are backprojected: 1024 */
+    int image_size;          /* side of one model image: 512 (latent 64) */
+    int max_batch;           /* most views generated in one batch: 4 */
+    float guidance;          /* 7.5 */
+    float grid_depth_weight; /* 1.0 */
+    float depth_weight[2];   /* first, last later view: 1.0, 0.7 */
+    float inpaint_weight[2]; /* first, last later view: 0.8, 1.0 */
+    float frontal_threshold; /* |n.v| needed to backproject a pixel: 0.3 */
+    int normal_source;       /* MX_NORMAL_FROM_DEPTH (paper) or MX_NORMAL_GEOMETRIC */
+    float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted: 0.995 */
+    mx_up_axis up;
+    int threads;             /* 0: all CPUs */
+    int quiet;
+    float strength;          /* enhance: SDEdit strength in (0, 1]: 0.5 */
+    const char *grid_word;   /* "front and back view of" */
+} mx_texture_opts;
+
+void mx_texture_opts_default(mx_texture_opts *o);
+
+typedef struct mx_texture_result {
+    double coverage;   /* fraction of candidate-visible texels painted by views */
+    int views;         /* views generated (front and back count as two) */
+    double seconds;
+} mx_texture_result;
+
+int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
+int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
+
+#endif

@@ -1,0 +1,224 @@
+/* Runtime tests: thread-count invariance of every threaded op (bit-exact for 1, 2 and 16
+ * threads, at every ISA level), arena exhaustion, tensor shape validation, Philox
+ * known-answer vectors (Random123) and the statistics of mx_rng_normal. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../ops/ops.h"
+#include "../runtime/rng.h"
+#include "util_test.h"
+
+enum { NTHREADS = 3 };
+static const int thread_counts[NTHREADS] = {1, 2, 16};
+
+/* Inputs shared by the op runs: big enough that every op splits into many tasks. */
+typedef struct {
+    float *x, *w, *q, *k, *v, *big;
+    size_t nbig;
+} inputs;
+
+/* Runs op number `op` writing into y; returns the output length or 0 past the last op. */
+static size_t run_op(const mx_ctx *c, int op, const inputs *in, float *y, const char **name) {
+    const int M = 150, N = 70, K = 300;
+    switch (op) {
+    case 0:
+        *name = "linear";
+        mx_linear(c, y, in->x, mx_w_f32(in->w), mx_w_f32(in->w + 5), M, N, K);
+        return (size_t)M * N;
+    case 1:
+        *name = "conv2d 3x3";
+        mx_conv2d(c, y, in->x, 2, 30, 20, 25, mx_w_f32(in->w), mx_w_f32(in->w), 40, 3, 3, 1, 1);
+        return (size_t)2 * 40 * 20 * 25;
+    case 2:
+        *name = "group_norm+silu";
+        mx_group_norm(c, y, in->big, 2, 64, 1000, 32, mx_w_f32(in->w), mx_w_f32(in->w + 64), 1e-5f, 1);
+        return (size_t)2 * 64 * 1000;
+    case 3:
+        *name = "layer_norm";
+        mx_layer_norm(c, y, in->x, M, K, mx_w_f32(in->w), mx_w_f32(in->w + K), 1e-5f);
+        return (size_t)M * K;
+    case 4:
+        *name = "softmax";
+        memcpy(y, in->x, (size_t)M * K * sizeof *y);
+        mx_softmax(c, y, M, K);
+        return (size_t)M * K;
+    case 5:
+        *name = "attention";
+        mx_attention(c, y, in->q, in->k, in->v, 2, 4, 100, 77, 40, 160, 160, 160, 0, 0.158f);
+        return (size_t)2 * 100 * 160;
+    case 6:
+        *name = "attention causal";
+        mx_attention(c, y, in->q, in->k, in->v, 1, 2, 77, 77, 64, 128, 128, 128, 1, 0.125f);
+        return (size_t)77 * 128;
+    case 7:
+    case 8:
+    case 9:
+        memcpy(y, in->big, in->nbig * sizeof *y);
+        *name = op == 7 ? "gelu" : op == 8 ? "quick_gelu" : "silu";
+        (op == 7 ? mx_gelu : op == 8 ? mx_quick_gelu : mx_silu)(c, y, in->nbig);
+        return in->nbig;
+    case 10:
+        *name = "geglu";
+        mx_geglu(c, y, in->x, M, K / 2);
+        return (size_t)M * (K / 2);
+    case 11: {
+        *name = "binary broadcast";
+        int64_t as[3] = {2, 64, 1000}, bs[3] = {2, 64, 1};
+        mx_binary(c, MX_BIN_ADD, y, in->big, as, in->x, bs, 3);
+        return in->nbig;
+    }
+    case 12:
+        *name = "scale";
+        mx_scale(c, y, in->big, 0.3f, in->nbig);
+        return in->nbig;
+    case 13:
+        *name = "upsample_nearest2x";
+        mx_upsample_nearest2x(c, y, in->big, 64, 20, 25);
+        return (size_t)64 * 40 * 50;
+    case 14:
+        *name = "transpose_chw_hwc";
+        mx_transpose_chw_hwc(c, y, in->big, 2, 64, 1000);
+        return in->nbig;
+    case 15:
+        *name = "resize_bilinear";
+        mx_resize_bilinear(c, y, in->big, 64, 20, 25, 37, 11, 0);
+        return (size_t)64 * 37 * 11;
+    default: return 0;
+    }
+}
+
+static void test_thread_invariance(mx_isa isa) {
+    mx_status st;
+    inputs in;
+    in.nbig = (size_t)2 * 64 * 1000;
+    in.x = malloc((size_t)150 * 300 * sizeof(float));
+    in.w = malloc((size_t)70 * 300 * sizeof(float) + 4096);
+    in.q = malloc((size_t)2 * 100 * 160 * sizeof(float));
+    in.k = malloc((size_t)2 * 77 * 160 * sizeof(float));
+    in.v = malloc((size_t)2 * 77 * 160 * sizeof(float));
+    in.big = malloc(in.nbig * sizeof(float));
+    mx_fill_random(in.x, (size_t)150 * 300, 1, -2, 2);
+    mx_fill_random(in.w, (size_t)70 * 300 + 1024, 2, -1, 1);
+    mx_fill_random(in.q, (size_t)2 * 100 * 160, 3, -2, 2);
+    mx_fill_random(in.k, (size_t)2 * 77 * 160, 4, -2, 2);
+    mx_fill_random(in.v, (size_t)2 * 77 * 160, 5, -1, 1);
+    mx_fill_random(in.big, in.nbig, 6, -3, 3);
+    size_t cap = (size_t)1 << 20;
+    float *out[NTHREADS];
+    mx_ctx ctx[NTHREADS];
+    for (int t = 0; t < NTHREADS; t++) {
+        out[t] = malloc(cap * sizeof(float));
+        CHECK(mx_ctx_create(&ctx[t], thread_counts[t], isa, (size_t)16 << 20, &st) == 0);
+    }
+    for (int op = 0;; op++) {
+        const char *name = "";
+        size_t n = 0;
+        for (int t = 0; t < NTHREADS; t++) {
+            memset(out[t], 0xff, cap * sizeof(float)); /* NaN everywhere: unwritten outputs show */
+            n = run_op(&ctx[t], op, &in, out[t], &name);
+        }
+        if (n == 0) break;
+        int same = memcmp(out[0], out[1], n * sizeof(float)) == 0 && memcmp(out[0], out[2], n * sizeof(float)) == 0;
+        int finite = 1;
+        for (size_t i = 0; i < n; i++) finite &= isfinite(out[0][i]) != 0;
+        printf("%-8s %-22s 1/2/16 threads: %s%s\n", mx_isa_name(ctx[0].k->isa), name, same ? "identical" : "DIFFER",
+               finite ? "" : " (non-finite output)");
+        CHECK(same && finite);
+    }
+    for (int t = 0; t < NTHREADS; t++) {
+        CHECK(ctx[t].scratch->used == 0); /* kernels give their scratch back */
+        mx_ctx_destroy(&ctx[t]);
+        free(out[t]);
+    }
+    free(in.x), free(in.w), free(in.q), free(in.k), free(in.v), free(in.big);
+}
+
+static void test_arena(void) {
+    mx_arena a;
+    mx_status st;
+    mx_status_clear(&st);
+    CHECK(mx_arena_create(&a, 1000, &st) == 0);
+    void *p1 = mx_arena_alloc(&a, 600, &st);
+    CHECK(p1 != NULL && ((uintptr_t)p1 % MX_ARENA_ALIGN) == 0);
+    size_t mark = mx_arena_mark(&a);
+    void *p2 = mx_arena_alloc(&a, 600, &st);
+    CHECK(p2 == NULL);
+    CHECK(st.code == MX_ENOMEM);
+    CHECK(strstr(st.msg, "out of memory") != NULL);
+    printf("arena overrun: \"%s\"\n", st.msg);
+    CHECK(mx_arena_floats(&a, SIZE_MAX / 2, &st) == NULL && st.code == MX_ENOMEM);
+    mx_arena_reset(&a, mark);
+    CHECK(mx_arena_alloc(&a, 300, &st) != NULL);
+    mx_arena_destroy(&a);
+
+    mx_arena m;
+    mx_arena_measure(&m);
+    CHECK(mx_arena_alloc(&m, 100, &st) == NULL);
+    CHECK(mx_arena_alloc(&m, 1 << 20, &st) == NULL);
+    CHECK(m.peak >= (1 << 20) + 100);
+}
+
+static void test_tensor_shapes(void) {
+    mx_tensor t;
+    mx_status st;
+    int64_t ok[2] = {3, 4}, neg[2] = {3, -1}, huge[3] = {INT64_MAX / 2, 4, 4}, zero[2] = {0, 5};
+    CHECK(mx_tensor_init(&t, MX_F32, 2, ok, NULL, "ok", &st) == 0 && mx_tensor_numel(&t) == 12);
+    CHECK(mx_tensor_init(&t, MX_F32, 0, ok, NULL, "t0", &st) == -1 && strstr(st.msg, "t0") != NULL);
+    CHECK(mx_tensor_init(&t, MX_F32, 6, ok, NULL, "t6", &st) == -1 && strstr(st.msg, "t6") != NULL);
+    CHECK(mx_tensor_init(&t, MX_F32, 2, neg, NULL, "tneg", &st) == -1 && strstr(st.msg, "tneg") != NULL);
+    CHECK(mx_tensor_init(&t, MX_F32, 3, huge, NULL, "thuge", &st) == -1 && strstr(st.msg, "thuge") != NULL);
+    CHECK(mx_tensor_init(&t, MX_F16, 2, zero, NULL, "tzero", &st) == 0 && mx_tensor_nbytes(&t) == 0);
+    CHECK(mx_tensor_init(&t, (mx_dtype)17, 2, ok, NULL, "tdt", &st) == -1);
+}
+
+static void test_philox(void) {
+    static const uint32_t cases[3][10] = {
+        {0, 0, 0, 0, 0, 0, 0x6627e8d5, 0xe169c58d, 0xbc57ac4c, 0x9b00dbd8},
+        {0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff, 0xffffffff, 0x408f276d, 0x41c83b0e, 0xa20bc7c6,
+         0x6d5451fd},
+        {0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344, 0xa4093822, 0x299f31d0, 0xd16cfe09, 0x94fdcceb, 0x5001e420,
+         0x24126ea1},
+    };
+    for (int i = 0; i < 3; i++) {
+        uint32_t out[4];
+        mx_philox4x32_10(cases[i], cases[i] + 4, out);
+        int ok = memcmp(out, cases[i] + 6, sizeof out) == 0;
+        printf("philox4x32-10 known answer %d: %08x %08x %08x %08x %s\n", i, out[0], out[1], out[2], out[3],
+               ok ? "ok" : "FAIL");
+        CHECK(ok);
+    }
+}
+
+static void test_rng_normal(void) {
+    enum { N = 200000 };
+    double sum = 0, sq = 0;
+    int tail = 0;
+    for (uint64_t i = 0; i < N; i++) {
+        double v = mx_rng_normal(42, 7, i);
+        sum += v;
+        sq += v * v;
+        tail += fabs(v) > 1.959964;
+    }
+    double mean = sum / N, sd = sqrt(sq / N - mean * mean), ptail = (double)tail / N;
+    printf("mx_rng_normal: mean %.4f std %.4f P(|x|>1.96) %.4f\n", mean, sd, ptail);
+    CHECK(fabs(mean) < 0.01);
+    CHECK(fabs(sd - 1) < 0.01);
+    CHECK(fabs(ptail - 0.05) < 0.003);
+    CHECK(mx_rng_normal(42, 7, 5) == mx_rng_normal(42, 7, 5));
+    CHECK(mx_rng_normal(42, 7, 5) != mx_rng_normal(42, 8, 5));
+    float buf[4];
+    mx_rng_fill_normal(buf, 4, 42, 7, 3);
+    CHECK(buf[2] == mx_rng_normal(42, 7, 5));
+}
+
+int main(void) {
+    test_arena();
+    test_tensor_shapes();
+    test_philox();
+    test_rng_normal();
+    for (mx_isa isa = MX_ISA_SCALAR; isa <= MX_ISA_AVX512; isa++)
+        if (mx_kernels_for(isa)->isa == isa) test_thread_invariance(isa);
+    return mx_test_finish("test_core_runtime");
+}

@@ -1,0 +1,212 @@
+/* The whole StableDiffusionControlNetPipeline with the tiny golden networks
+ * (golden/pipeline_controlnet_tiny): CLIP prompt embeddings, DPM-Solver++ timesteps, the
+ * latents after each of the 6 steps (guidance 7.5, ControlNet scale 0.8) and the decoded
+ * image, each ≤ 1e-4 rel L2 against diffusers. Also: cancellation from the progress
+ * callback, and request validation. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/clip.h"
+#include "../pipeline/nn/sd_pipeline.h"
+#include "nn_golden.h"
+#include "util_test.h"
+
+#define PIPE "pipeline_controlnet_tiny"
+
+typedef struct nets {
+    mx_safetensors wf[4];
+    mx_binder b[4];
+    mx_unet_config ucfg, ccfg;
+    mx_vae_config vcfg;
+    mx_clip_config clip_cfg;
+    mx_unet *unet;
+    mx_controlnet *cnet;
+    mx_vae *vae;
+    mx_clip clip;
+    int loaded;
+} nets;
+
+/* Opens net/file and a binder over it (slot i). */
+static int bind_golden(nets *n, int i, const char *net, const char *file, mx_status *st) {
+    if (golden_open(&n->wf[i], net, file)) return mx_fail(st, MX_EINPUT, "%s/%s: cannot open", net, file);
+    return mx_binder_st(&n->b[i], &n->wf[i], "", st);
+}
+
+static int load_nets(nets *n, mx_status *st) {
+    memset(n, 0, sizeof *n);
+    size_t lu, lc, lv, ll;
+    char *tu = golden_text("unet_tiny", "config.json", &lu), *tc = golden_text("controlnet_tiny", "config.json", &lc);
+    char *tv = golden_text("vae_tiny", "config.json", &lv), *tl = golden_text("clip_tiny", "config.json", &ll);
+    int rc = -1;
+    if (!tu || !tc || !tv || !tl) {
+        mx_fail(st, MX_EINPUT, "a tiny network config.json is missing");
+        goto done;
+    }
+    if (mx_unet_config_parse(&n->ucfg, tu, lu, "unet_tiny", st) ||
+        mx_unet_config_parse(&n->ccfg, tc, lc, "controlnet_tiny", st) ||
+        mx_vae_config_parse(&n->vcfg, tv, lv, "vae_tiny", st) ||
+        mx_clip_config_parse(&n->clip_cfg, tl, ll, "clip_tiny", st))
+        goto done;
+    if (bind_golden(n, 0, "unet_tiny", "diffusion_pytorch_model.safetensors", st) ||
+        mx_unet_load(&n->unet, &n->ucfg, &n->b[0], st) ||
+        bind_golden(n, 1, "controlnet_tiny", "diffusion_pytorch_model.safetensors", st) ||
+        mx_controlnet_load(&n->cnet, &n->ccfg, &n->b[1], st) ||
+        bind_golden(n, 2, "vae_tiny", "diffusion_pytorch_model.safetensors", st) ||
+        mx_vae_load(&n->vae, &n->vcfg, &n->b[2], st) || bind_golden(n, 3, "clip_tiny", "model.safetensors", st) ||
+        mx_clip_load(&n->clip, &n->clip_cfg, &n->b[3], st))
+        goto done;
+    n->loaded = 1;
+    rc = 0;
+done:
+    free(tu);
+    free(tc);
+    free(tv);
+    free(tl);
+    return rc;
+}
+
+static void free_nets(nets *n) {
+    mx_unet_free(n->unet);
+    mx_controlnet_free(n->cnet);
+    mx_vae_free(n->vae);
+    if (n->loaded) mx_clip_free(&n->clip);
+    for (int i = 0; i < 4; i++) {
+        mx_binder_free(&n->b[i]);
+        if (n->wf[i].map) mx_st_close(&n->wf[i]);
+    }
+}
+
+/* Prompt embeddings from the golden ids, compared with the pipeline's. */
+static void check_embeddings(const nets *n, const mx_ctx *c, const mx_safetensors *in, const mx_safetensors *out) {
+    const char *ids_name[2] = {"prompt_ids", "negative_prompt_ids"};
+    const char *emb_name[2] = {"prompt_embeds", "negative_prompt_embeds"};
+    for (int k = 0; k < 2; k++) {
+        size_t nid, nemb;
+        float *fid = golden_f32(in, ids_name[k], &nid), *want = golden_f32(out, emb_name[k], &nemb);
+        float *got = malloc(sizeof(float) * (nemb ? nemb : 1));
+        int32_t ids[77];
+        mx_status st = {0};
+        mx_arena a;
+        CHECK(fid && want && nid == 77 && nemb == 77 * (size_t)n->clip_cfg.hidden_size);
+        if (fid && want && nid == 77 && nemb == 77 * (size_t)n->clip_cfg.hidden_size &&
+            mx_arena_create(&a, (size_t)1 << 20, &st) == 0) {
+            for (int i = 0; i < 77; i++) ids[i] = (int32_t)fid[i];
+            CHECK(mx_clip_forward(&n->clip, c, &a, ids, 1, 77, got, NULL, NULL, &st) == 0);
+            mx_check_close(emb_name[k], got, want, nemb, 1e-4);
+            mx_arena_destroy(&a);
+        }
+        free(fid);
+        free(want);
+        free(got);
+    }
+}
+
+/* Progress callback: compares the latents after each step with the golden ones. */
+typedef struct step_check {
+    const float *want; /* [steps, numel] */
+    int steps_seen;
+    int cancel_at;     /* -1: never */
+} step_check;
+
+static int on_step(void *user, int step, int n_steps, int64_t t, const float *latents, size_t numel) {
+    step_check *sc = user;
+    char name[64];
+    sc->steps_seen++;
+    if (sc->want) {
+        snprintf(name, sizeof name, "latents after step %d/%d (t=%lld)", step + 1, n_steps, (long long)t);
+        mx_check_close(name, latents, sc->want + (size_t)step * numel, numel, 1e-4);
+    }
+    return step == sc->cancel_at;
+}
+
+static void test_pipeline(const nets *n, const mx_ctx *c) {
+    mx_safetensors in, out;
+    if (golden_open(&in, PIPE, "inputs.safetensors") || golden_open(&out, PIPE, "outputs.safetensors")) {
+        CHECK(0);
+        return;
+    }
+    check_embeddings(n, c, &in, &out);
+    size_t nlat, nctl, ncond, nunc, nts, nafter, nimg, lsched;
+    float *lat = golden_f32(&in, "latents", &nlat), *ctl = golden_f32(&in, "control_image", &nctl);
+    float *cond = golden_f32(&out, "prompt_embeds", &ncond), *unc = golden_f32(&out, "negative_prompt_embeds", &nunc);
+    float *ts = golden_f32(&out, "timesteps", &nts), *after = golden_f32(&out, "latents_after_step", &nafter);
+    float *img_want = golden_f32(&out, "image", &nimg);
+    char *sched_text = golden_text(PIPE, "scheduler_config.json", &lsched);
+    mx_status st = {0};
+    mx_sched_config scfg;
+    mx_sched s;
+    int ok = lat && ctl && cond && unc && ts && after && img_want && sched_text && nlat == 4 * 8 * 8 &&
+             mx_sched_config_parse(&scfg, sched_text, lsched, "scheduler_config.json", &st) == 0 &&
+             mx_sched_init(&s, &scfg, 6, nlat, &st) == 0;
+    if (!ok) fprintf(stderr, "pipeline setup: %s\n", st.msg);
+    CHECK(ok);
+    if (ok) {
+        int ts_equal = (size_t)mx_sched_steps(&s) == nts;
+        for (size_t i = 0; ts_equal && i < nts; i++) ts_equal = (float)mx_sched_timestep(&s, (int)i) == ts[i];
+        CHECK(ts_equal);
+        mx_sd_control control = {n->cnet, ctl, 0.8f};
+        step_check sc = {after, 0, -1};
+        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc};
+        CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) == 0);
+        CHECK(sc.steps_seen == 6);
+        float *img = malloc(sizeof(float) * nimg);
+        int dec = img && mx_sd_decode_latents(c, n->vae, lat, 1, 8, 8, img, &st) == 0;
+        if (!dec) fprintf(stderr, "decode: %s\n", st.msg);
+        CHECK(dec);
+        if (dec) mx_check_close("decoded image", img, img_want, nimg, 1e-4);
+        free(img);
+        mx_sched_free(&s);
+        /* two ControlNets at 0.5 and 0.3 sum to the one at 0.8 (residuals are linear in the scale) */
+        float *lat2 = golden_f32(&in, "latents", NULL);
+        CHECK(lat2 && mx_sched_init(&s, &scfg, 6, nlat, &st) == 0);
+        mx_sd_control two[2] = {{n->cnet, ctl, 0.5f}, {n->cnet, ctl, 0.3f}};
+        rq.controls = two;
+        rq.n_controls = 2;
+        rq.progress = NULL;
+        CHECK(lat2 && mx_sd_denoise(&rq, c, lat2, 1, 8, 8, &st) == 0);
+        if (lat2) mx_check_close("two ControlNets, 0.5 + 0.3", lat2, after + 5 * nlat, nlat, 1e-4);
+        free(lat2);
+        rq.controls = &control;
+        rq.n_controls = 1;
+        rq.progress = on_step;
+        mx_sched_free(&s);
+        /* a progress callback that returns non-zero stops the loop with an error */
+        CHECK(mx_sched_init(&s, &scfg, 6, nlat, &st) == 0);
+        step_check cancel = {NULL, 0, 1};
+        rq.sched = &s;
+        rq.progress_user = &cancel;
+        CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) != 0 && cancel.steps_seen == 2);
+        CHECK(strstr(st.msg, "cancelled") != NULL);
+        /* a scheduler sized for other latents is refused */
+        mx_sched_free(&s);
+        CHECK(mx_sched_init(&s, &scfg, 6, nlat * 2, &st) == 0);
+        rq.progress = NULL;
+        CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) != 0);
+        mx_sched_free(&s);
+    }
+    free(lat);
+    free(ctl);
+    free(cond);
+    free(unc);
+    free(ts);
+    free(after);
+    free(img_want);
+    free(sched_text);
+    mx_st_close(&in);
+    mx_st_close(&out);
+}
+
+int main(void) {
+    mx_ctx c;
+    mx_status st = {0};
+    nets n;
+    if (golden_ctx(&c)) return 1;
+    int ok = load_nets(&n, &st) == 0;
+    if (!ok) fprintf(stderr, "%s\n", st.msg);
+    CHECK(ok);
+    if (ok) test_pipeline(&n, &c);
+    free_nets(&n);
+    mx_ctx_destroy(&c);
+    return mx_test_finish("test_nn_pipeline");
+}

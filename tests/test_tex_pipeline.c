@@ -1,0 +1,243 @@
+/* The whole method with tiny random weights (MATEX_DEMO_WEIGHTS, made by
+ * tools/make_demo_weights.sh) on every mesh of ../shared/assets: outputs exist and are valid,
+ * coverage, determinism across thread counts, and bad input. Small sizes keep it fast. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../pipeline/geom/gltf.h"
+#include "../pipeline/geom/mesh.h"
+#include "../pipeline/io/io.h"
+#include "../pipeline/texture/texture.h"
+#include "../runtime/json.h"
+#include "../runtime/log.h"
+#include "util_test.h"
+
+#define TEX 256
+
+static const char *ASSETS[] = {
+    "spot/spot_triangulated.obj", "bob/bob_tri.obj", "blub/blub_triangulated.obj", "spot_ply/spot.ply",
+    "garment_female_casual/female_casualsuit01.obj", "garment_female_elegant/female_elegantsuit01.obj",
+    "shoes_pair/shoes03.obj", "fedora_hat/fedora.obj", "boot/boot.obj", "koala/koala.obj",
+    "mountain/mountain.obj", "hammer/hammer.obj", "wooden_stool/painted_wooden_stool_1k.gltf",
+    "flight_helmet/FlightHelmet.gltf", "cesium_milk_truck/CesiumMilkTruck.glb",
+};
+
+static void small_opts(mx_texture_opts *o, const char *mesh, const char *weights, const char *out) {
+    mx_texture_opts_default(o);
+    o->mesh_path = mesh;
+    o->prompt = "a test object";
+    o->weights_path = weights;
+    o->out_dir = out;
+    o->steps = 2;
+    o->views = 6;
+    o->candidates = 24;
+    o->tex_size = TEX;
+    o->render_size = 512;
+    o->image_size = 64;
+    o->threads = 2;
+    o->quiet = 1;
+    o->seed = 7;
+}
+
+static int file_exists(const char *dir, const char *name) {
+    char p[2048];
+    snprintf(p, sizeof p, "%s/%s", dir, name);
+    struct stat sb;
+    return stat(p, &sb) == 0 && S_ISREG(sb.st_mode) && sb.st_size > 0;
+}
+
+static char *read_file(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *s = malloc((size_t)n + 1);
+    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
+        free(s);
+        s = NULL;
+    }
+    fclose(f);
+    if (s) s[n] = 0;
+    if (len) *len = (size_t)n;
+    return s;
+}
+
+/* texture.png of the right size, GLB and OBJ readable back with the same face count,
+ * report.json parseable with a coverage. Returns the reported coverage (-1 on failure). */
+static double check_outputs(const char *dir, int nfaces) {
+    static const char *names[] = {"texture.png", "texture.exr", "mesh.obj", "mesh.mtl", "mesh.glb", "report.json"};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        if (!file_exists(dir, names[i])) {
+            fprintf(stderr, "%s: missing %s\n", dir, names[i]);
+            mx_test_failures++;
+            return -1;
+        }
+    }
+    char p[2048];
+    mx_status st;
+    mx_image img;
+    snprintf(p, sizeof p, "%s/texture.png", dir);
+    if (mx_io_read_image(p, &img, &st) == 0) {
+        CHECK(img.w == TEX && img.h == TEX);
+        mx_image_free(&img);
+    } else {
+        fprintf(stderr, "%s\n", st.msg);
+        mx_test_failures++;
+    }
+    mx_mesh back;
+    snprintf(p, sizeof p, "%s/mesh.glb", dir);
+    if (mx_gltf_load(p, &back, &st) == 0) {
+        CHECK(back.nfaces == nfaces);
+        CHECK(back.nuv > 0);
+        mx_mesh_free(&back);
+    } else {
+        fprintf(stderr, "%s\n", st.msg);
+        mx_test_failures++;
+    }
+    snprintf(p, sizeof p, "%s/mesh.obj", dir);
+    if (mx_mesh_load(p, &back, &st) == 0) {
+        CHECK(back.nfaces == nfaces);
+        CHECK(back.nmat >= 1 && back.mats[0].texture_path[0] != 0);
+        mx_mesh_free(&back);
+    } else {
+        fprintf(stderr, "%s\n", st.msg);
+        mx_test_failures++;
+    }
+    snprintf(p, sizeof p, "%s/report.json", dir);
+    size_t len;
+    char *text = read_file(p, &len);
+    mx_json *j = text ? mx_json_parse(text, len, p, &st) : NULL;
+    double cov = j ? mx_json_get_num(j, "coverage", -1) : -1;
+    CHECK(j != NULL && mx_json_len(mx_json_get(j, "views")) >= 2);
+    mx_json_free(j);
+    free(text);
+    return cov;
+}
+
+static void test_all_assets(const char *weights, const char *tmp) {
+    for (size_t i = 0; i < sizeof ASSETS / sizeof ASSETS[0]; i++) {
+        char mesh[1024], out[1024];
+        snprintf(mesh, sizeof mesh, "%s/assets/%s", mx_shared_dir(), ASSETS[i]);
+        snprintf(out, sizeof out, "%s/asset%zu", tmp, i);
+        mx_texture_opts o;
+        small_opts(&o, mesh, weights, out);
+        mx_texture_result r;
+        mx_status st;
+        mx_status_clear(&st);
+        mx_mesh m;
+        if (mx_mesh_load(mesh, &m, &st)) {
+            printf("%-52s cannot load: %s\n", ASSETS[i], st.msg);
+            mx_test_failures++;
+            continue;
+        }
+        int nfaces = m.nfaces;
+        mx_mesh_free(&m);
+        if (mx_texture_run(&o, &r, &st)) {
+            printf("%-52s FAIL: %s\n", ASSETS[i], st.msg);
+            mx_test_failures++;
+            continue;
+        }
+        double cov = check_outputs(out, nfaces);
+        printf("%-52s views %d coverage %.4f (report %.4f) %.1fs\n", ASSETS[i], r.views, r.coverage, cov, r.seconds);
+        CHECK(r.views >= 2 && r.views <= 6);
+        CHECK(cov >= 0.90);
+    }
+}
+
+static int files_equal(const char *a, const char *b) {
+    size_t la, lb;
+    char *x = read_file(a, &la), *y = read_file(b, &lb);
+    int eq = x && y && la == lb && memcmp(x, y, la) == 0;
+    free(x);
+    free(y);
+    return eq;
+}
+
+static void test_thread_determinism(const char *weights, const char *tmp) {
+    char mesh[1024], out1[1024], out2[1024], a[1100], b[1100];
+    snprintf(mesh, sizeof mesh, "%s/assets/fedora_hat/fedora.obj", mx_shared_dir());
+    snprintf(out1, sizeof out1, "%s/threads1", tmp);
+    snprintf(out2, sizeof out2, "%s/threads3", tmp);
+    mx_texture_opts o;
+    mx_status st;
+    small_opts(&o, mesh, weights, out1);
+    o.threads = 1;
+    CHECK(mx_texture_run(&o, NULL, &st) == 0);
+    small_opts(&o, mesh, weights, out2);
+    o.threads = 3;
+    CHECK(mx_texture_run(&o, NULL, &st) == 0);
+    snprintf(a, sizeof a, "%s/texture.exr", out1);
+    snprintf(b, sizeof b, "%s/texture.exr", out2);
+    int same = files_equal(a, b);
+    printf("texture with 1 and 3 threads: %s\n", same ? "identical" : "DIFFERENT");
+    CHECK(same);
+}
+
+static void expect_failure(const char *what, const mx_texture_opts *o, const char *needle) {
+    mx_status st;
+    mx_status_clear(&st);
+    int rc = mx_texture_run(o, NULL, &st);
+    struct stat sb;
+    int wrote = stat(o->out_dir, &sb) == 0;
+    printf("bad input (%s): %s\n", what, rc ? st.msg : "accepted!");
+    CHECK(rc != 0);
+    CHECK(strstr(st.msg, needle) != NULL);
+    CHECK(!wrote);
+}
+
+static void test_bad_input(const char *weights, const char *tmp) {
+    char mesh[1024], out[1024], empty[1024], unet_only[1024];
+    snprintf(mesh, sizeof mesh, "%s/assets/spot/spot_triangulated.obj", mx_shared_dir());
+    snprintf(out, sizeof out, "%s/bad", tmp);
+    mx_texture_opts o;
+    small_opts(&o, mesh, "/nonexistent/weights.mxw", out);
+    expect_failure("missing weights", &o, "/nonexistent/weights.mxw");
+
+    snprintf(unet_only, sizeof unet_only, "%s", getenv("MATEX_UNET_ONLY_WEIGHTS") ? getenv("MATEX_UNET_ONLY_WEIGHTS") : "");
+    if (unet_only[0]) {
+        small_opts(&o, mesh, unet_only, out);
+        expect_failure("wrong network in the file", &o, "text_encoder");
+    }
+
+    snprintf(empty, sizeof empty, "%s/empty.obj", tmp);
+    FILE *f = fopen(empty, "w");
+    if (f) {
+        fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\n", f);
+        fclose(f);
+    }
+    small_opts(&o, empty, weights, out);
+    expect_failure("mesh without faces", &o, "empty.obj");
+
+    /* a prompt longer than 77 tokens is truncated with a warning, not an error */
+    char long_prompt[2000] = "";
+    for (int i = 0; i < 120; i++) strcat(long_prompt, "red ");
+    snprintf(out, sizeof out, "%s/longprompt", tmp);
+    small_opts(&o, mesh, weights, out);
+    o.prompt = long_prompt;
+    o.views = 2;
+    mx_status st;
+    CHECK(mx_texture_run(&o, NULL, &st) == 0);
+    CHECK(file_exists(out, "texture.png"));
+}
+
+int main(void) {
+    const char *weights = getenv("MATEX_DEMO_WEIGHTS");
+    if (!weights || access(weights, R_OK) != 0) {
+        fprintf(stderr, "MATEX_DEMO_WEIGHTS must name the demo weight file (make test sets it)\n");
+        return 1;
+    }
+    mx_log_set_level(MX_LOG_WARN);
+    char tmp[] = "/tmp/matex_tex_XXXXXX";
+    if (!mkdtemp(tmp)) return 1;
+    test_bad_input(weights, tmp);
+    test_thread_determinism(weights, tmp);
+    test_all_assets(weights, tmp);
+    char cmd[256];
+    snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
+    if (mx_test_failures == 0 && system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);
+    return mx_test_finish("test_tex_pipeline");
+}

@@ -1,0 +1,23 @@
+#!/bin/sh
+# `make bench`: runs every benchmark program built in BUILD/tools (bench_*), one after the
+# other. Usage: sh tools/bench.sh BUILD. Exits non-zero when one fails or none is built.
+BUILD=${1:-build}
+status=0
+found=0
+for b in "$BUILD"/tools/bench_*; do
+    case "$b" in *.o | *.d) continue ;; esac
+    [ -x "$b" ] || continue
+    found=1
+    echo "== $(basename "$b")"
+    "$b"
+    rc=$?
+    if [ $rc -ne 0 ]; then
+        echo "$(basename "$b"): failed (exit $rc)"
+        status=1
+    fi
+done
+if [ $found -eq 0 ]; then
+    echo "bench.sh: no benchmark programs in $BUILD/tools" >&2
+    exit 1
+fi
+exit $status

@@ -1,0 +1,199 @@
+#include "cli_texture_opts.h"
+
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/geom/masks.h"
+#include "../runtime/log.h"
+
+void mx_cli_texture_options_help(FILE *f) {
+    fprintf(f,
+            "  --weights FILE           matex weight file (matex convert); required\n"
+            "  -o, --output DIR         output folder: texture.png/.exr, mesh.obj/.mtl, mesh.glb, report.json\n"
+            "  --seed N                 noise seed (default 0); the same seed gives the same texture\n"
+            "  --steps N                denoising steps (default 10)\n"
+            "  --views N                view budget, front and back included (default 6)\n"
+            "  --candidates N           candidate cameras on a Fibonacci sphere (default 40)\n"
+            "  --texture-size N         texture side in texels (default 1024)\n"
+            "  --render-size N          side of the renders that are backprojected (default 1024)\n"
+            "  --image-size N           side of one generated image, multiple of 8 (default 512)\n"
+            "  --batch N                most views generated in one batch (default 4)\n"
+            "  --negative TEXT          negative prompt (default empty)\n"
+            "  --guidance G             classifier-free guidance scale (default 7.5)\n"
+            "  --grid-depth-weight W    depth control weight of the front+back grid (default 1.0)\n"
+            "  --depth-weight A[,B]     depth control weight of the first[,last] later view (default 1.0,0.7)\n"
+            "  --inpaint-weight A[,B]   inpainting control weight of the first[,last] later view (default 0.8,1.0)\n"
+            "  --frontal-threshold T    min |n.v| of a backprojected pixel (default 0.3)\n"
+            "  --normals depth|geometric  normal used by the frontal mask (default depth, as the paper)\n"
+            "  --coverage-stop C        stop adding views at this painted fraction (default 0.995)\n"
+            "  --front-back-words TEXT  prompt prefix of the grid (default \"front and back view of\")\n"
+            "  --up y|z                 up axis of the mesh (default y)\n"
+            "  --threads N              CPU threads (default: all)\n"
+            "  --device cpu|cuda        compute device (default cpu)\n"
+            "  --quiet                  no progress on stderr\n"
+            "  --json                   print a JSON summary on stdout\n"
+            "  -h, --help               this help\n");
+}
+
+static int usage_error(const char *verb, const char *msg, const char *arg) {
+    fprintf(stderr, "matex %s: %s%s%s\n(matex %s --help for usage)\n", verb, msg, arg ? " " : "", arg ? arg : "",
+            verb);
+    return 2;
+}
+
+static int parse_int(const char *s, int *out) {
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    if (errno || end == s || *end || v < -2147483647L || v > 2147483647L) return -1;
+    *out = (int)v;
+    return 0;
+}
+
+static int parse_float(const char *s, float *out) {
+    char *end;
+    errno = 0;
+    float v = strtof(s, &end);
+    if (errno || end == s || *end) return -1;
+    *out = v;
+    return 0;
+}
+
+/* "A" or "A,B" into w[2] (B = A when absent). */
+static int parse_pair(const char *s, float w[2]) {
+    char buf[64];
+    snprintf(buf, sizeof buf, "%s", s);
+    char *comma = strchr(buf, ',');
+    if (comma) *comma = 0;
+    if (parse_float(buf, &w[0])) return -1;
+    if (!comma) {
+        w[1] = w[0];
+        return 0;
+    }
+    return parse_float(comma + 1, &w[1]);
+}
+
+static int parse_seed(const char *s, uint64_t *out) {
+    char *end;
+    errno = 0;
+    unsigned long long v = strtoull(s, &end, 10);
+    if (errno || end == s || *end || s[0] == '-') return -1;
+    *out = v;
+    return 0;
+}
+
+/* Options that take a value; returns 1 if handled, -1 on a bad value, 0 if unknown. */
+static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
+    if (!strcmp(arg, "--weights")) return o->weights_path = val, 1;
+    if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) return o->out_dir = val, 1;
+    if (!strcmp(arg, "--negative")) return o->negative_prompt = val, 1;
+    if (!strcmp(arg, "--front-back-words")) return o->grid_word = val, 1;
+    if (!strcmp(arg, "--seed")) return parse_seed(val, &o->seed) ? -1 : 1;
+    if (!strcmp(arg, "--steps")) return parse_int(val, &o->steps) ? -1 : 1;
+    if (!strcmp(arg, "--views")) return parse_int(val, &o->views) ? -1 : 1;
+    if (!strcmp(arg, "--candidates")) return parse_int(val, &o->candidates) ? -1 : 1;
+    if (!strcmp(arg, "--texture-size")) return parse_int(val, &o->tex_size) ? -1 : 1;
+    if (!strcmp(arg, "--render-size")) return parse_int(val, &o->render_size) ? -1 : 1;
+    if (!strcmp(arg, "--image-size")) return parse_int(val, &o->image_size) ? -1 : 1;
+    if (!strcmp(arg, "--batch")) return parse_int(val, &o->max_batch) || o->max_batch < 1 ? -1 : 1;
+    if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) || o->threads < 0 ? -1 : 1;
+    if (!strcmp(arg, "--guidance")) return parse_float(val, &o->guidance) ? -1 : 1;
+    if (!strcmp(arg, "--strength")) return parse_float(val, &o->strength) ? -1 : 1;
+    if (!strcmp(arg, "--grid-depth-weight")) return parse_float(val, &o->grid_depth_weight) ? -1 : 1;
+    if (!strcmp(arg, "--depth-weight")) return parse_pair(val, o->depth_weight) ? -1 : 1;
+    if (!strcmp(arg, "--inpaint-weight")) return parse_pair(val, o->inpaint_weight) ? -1 : 1;
+    if (!strcmp(arg, "--frontal-threshold")) return parse_float(val, &o->frontal_threshold) ? -1 : 1;
+    if (!strcmp(arg, "--coverage-stop")) return parse_float(val, &o->coverage_stop) ? -1 : 1;
+    if (!strcmp(arg, "--normals")) {
+        if (!strcmp(val, "depth")) return o->normal_source = MX_NORMAL_FROM_DEPTH, 1;
+        if (!strcmp(val, "geometric")) return o->normal_source = MX_NORMAL_GEOMETRIC, 1;
+        return -1;
+    }
+    if (!strcmp(arg, "--up")) {
+        if (!strcmp(val, "y")) return o->up = MX_UP_Y, 1;
+        if (!strcmp(val, "z")) return o->up = MX_UP_Z, 1;
+        return -1;
+    }
+    if (!strcmp(arg, "--device")) return !strcmp(val, "cpu") ? 1 : -2;
+    return 0;
+}
+
+int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_optional, void (*usage)(FILE *)) {
+    const char *verb = argv[0];
+    memset(c, 0, sizeof *c);
+    mx_texture_opts_default(&c->o);
+    int npos = 0;
+    for (int i = 1; i < argc; i++) {
+        const char *arg = argv[i];
+        if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
+            usage(stdout);
+            return 0;
+        }
+        if (!strcmp(arg, "--quiet")) {
+            c->o.quiet = 1;
+            continue;
+        }
+        if (!strcmp(arg, "--json")) {
+            c->json = 1;
+            continue;
+        }
+        if (arg[0] == '-' && arg[1]) {
+            if (i + 1 >= argc) return usage_error(verb, "missing value after", arg);
+            int r = parse_valued(&c->o, arg, argv[++i]);
+            if (r == 0) return usage_error(verb, "unknown option", arg);
+            if (r == -2)
+                return usage_error(verb, "this build has no CUDA device support (make cuda builds the kernels only);"
+                                         " --device must be cpu, not", argv[i]);
+            if (r < 0) return usage_error(verb, "bad value for", arg);
+            continue;
+        }
+        if (npos == 0)
+            c->o.mesh_path = arg;
+        else if (npos == 1)
+            c->o.prompt = arg;
+        else
+            return usage_error(verb, "unexpected argument", arg);
+        npos++;
+    }
+    if (!c->o.mesh_path) return usage_error(verb, "missing MESH", NULL);
+    if (!c->o.prompt) {
+        if (!prompt_optional) return usage_error(verb, "missing PROMPT", NULL);
+        c->o.prompt = "";
+    }
+    if (!c->o.weights_path) return usage_error(verb, "missing --weights FILE", NULL);
+    if (!c->o.out_dir) return usage_error(verb, "missing -o OUT_DIR", NULL);
+    return -1;
+}
+
+static void print_json_string(const char *s) {
+    putchar('"');
+    for (; *s; s++) {
+        if (*s == '"' || *s == '\\')
+            printf("\\%c", *s);
+        else if ((unsigned char)*s < 0x20)
+            printf("\\u%04x", *s);
+        else
+            putchar(*s);
+    }
+    putchar('"');
+}
+
+int mx_cli_texture_run(const mx_cli_texture *c, const char *verb,
+                       int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *)) {
+    if (c->o.quiet) mx_log_set_level(MX_LOG_ERROR);
+    mx_status st;
+    mx_status_clear(&st);
+    mx_texture_result res;
+    if (run(&c->o, &res, &st)) {
+        fprintf(stderr, "matex %s: %s\n", verb, st.msg);
+        if (c->json) printf("{\"ok\":false,\"error\":\"%s\"}\n", "see stderr");
+        return st.code == MX_EUSAGE ? 2 : 1;
+    }
+    if (c->json) {
+        printf("{\"ok\":true,\"out\":");
+        print_json_string(c->o.out_dir);
+        printf(",\"coverage\":%.6f,\"views\":%d,\"seconds\":%.3f}\n", res.coverage, res.views, res.seconds);
+    }
+    return 0;
+}

@@ -1,0 +1,25 @@
+/* Command-line options shared by `matex texture` and `matex enhance`. */
+#ifndef MX_CLI_TEXTURE_OPTS_H
+#define MX_CLI_TEXTURE_OPTS_H
+
+#include <stdio.h>
+
+#include "../pipeline/texture/texture.h"
+
+typedef struct mx_cli_texture {
+    mx_texture_opts o;
+    int json;
+} mx_cli_texture;
+
+/* Parses argv (argv[0] = verb). Positional: MESH then PROMPT (optional when
+ * prompt_optional). Returns -1 to go on, else the exit code (0 after --help, 2 on a usage
+ * error, message printed). */
+int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_optional,
+                         void (*usage)(FILE *));
+/* The option list (printed by both verbs' --help). */
+void mx_cli_texture_options_help(FILE *f);
+/* Runs the verb's function and prints errors / the --json summary; returns the exit code. */
+int mx_cli_texture_run(const mx_cli_texture *c, const char *verb,
+                       int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *));
+
+#endif
