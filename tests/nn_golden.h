@@ -11,12 +11,12 @@
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
-static void golden_path(char *buf, size_t cap, const char *net, const char *file) {
+static inline void golden_path(char *buf, size_t cap, const char *net, const char *file) {
     snprintf(buf, cap, "%s/golden/%s/%s", mx_shared_dir(), net, file);
 }
 
 /* Whole file as a NUL-terminated string (caller frees), or NULL. */
-static char *golden_text(const char *net, const char *file, size_t *len) {
+static inline char *golden_text(const char *net, const char *file, size_t *len) {
     char path[1024];
     golden_path(path, sizeof path, net, file);
     FILE *f = fopen(path, "rb");
@@ -37,7 +37,7 @@ static char *golden_text(const char *net, const char *file, size_t *len) {
     return s;
 }
 
-static int golden_open(mx_safetensors *f, const char *net, const char *file) {
+static inline int golden_open(mx_safetensors *f, const char *net, const char *file) {
     char path[1024];
     mx_status st;
     golden_path(path, sizeof path, net, file);
@@ -49,7 +49,7 @@ static int golden_open(mx_safetensors *f, const char *net, const char *file) {
 }
 
 /* fp32 copy of a tensor (malloc'ed), with its element count; NULL when absent. */
-static float *golden_f32(const mx_safetensors *f, const char *name, size_t *n) {
+static inline float *golden_f32(const mx_safetensors *f, const char *name, size_t *n) {
     mx_status st;
     const mx_st_tensor *t = mx_st_find(f, name);
     if (!t) {
@@ -62,7 +62,7 @@ static float *golden_f32(const mx_safetensors *f, const char *name, size_t *n) {
     return x;
 }
 
-static int golden_ctx(mx_ctx *c) {
+static inline int golden_ctx(mx_ctx *c) {
     mx_status st;
     int threads = getenv("MX_TEST_THREADS") ? atoi(getenv("MX_TEST_THREADS")) : 0;
     if (mx_ctx_create(c, threads, mx_cpu_best_isa(), (size_t)64 << 20, &st)) {

@@ -154,6 +154,8 @@ static void test_attention_ops(const levels *lv) {
     test_attention_case(lv, 1, 1, 1, 3, 13, 0);
     test_attention_case(lv, 1, 1, 9, 5, 7, 1);
     test_attention_case(lv, 1, 1, 3, 2, 300, 0);
+    test_attention_case(lv, 1, 1, 150, 150, 24, 1);
+    test_attention_case(lv, 1, 1, 70, 70, 512, 0);
 }
 
 static void test_group_norm_case(const levels *lv, int B, int C, int HW, int groups, mx_dtype dt, int silu) {
@@ -329,6 +331,40 @@ static void test_simd_levels(void) {
     mx_pool_destroy(pool);
 }
 
+/* Layout ops (reference only, shared by all levels): known answers. */
+static void test_known_layout(const mx_ctx *c) {
+    /* bilinear 2x2 -> 4x4: half-pixel centres (PyTorch align_corners=False) and align_corners=True */
+    const float x[4] = {0, 1, 2, 3};
+    float y[16];
+    mx_resize_bilinear(c, y, x, 1, 2, 2, 4, 4, 0);
+    const float want_hp[16] = {0, 0.25f, 0.75f, 1, 0.5f, 0.75f, 1.25f, 1.5f, 1.5f, 1.75f, 2.25f, 2.5f, 2, 2.25f, 2.75f, 3};
+    mx_check_close("known resize_bilinear 2x2->4x4", y, want_hp, 16, 1e-7);
+    mx_resize_bilinear(c, y, x, 1, 2, 2, 4, 4, 1);
+    const float third = 1.0f / 3, want_ac[16] = {0, third, 2 * third, 1, 2 * third, 1, 4 * third, 5 * third,
+                                                 4 * third, 5 * third, 2, 7 * third, 2, 7 * third, 8 * third, 3};
+    mx_check_close("known resize_bilinear align_corners", y, want_ac, 16, 1e-6);
+    const float x3[9] = {0, 1, 2, 3, 4, 5, 6, 7, 8}; /* 3x3 -> 2x2 downscale, half-pixel: src 0.25, 1.75 */
+    mx_resize_bilinear(c, y, x3, 1, 3, 3, 2, 2, 0);
+    const float want_dn[4] = {1, 2.5f, 5.5f, 7};
+    mx_check_close("known resize_bilinear 3x3->2x2", y, want_dn, 4, 1e-7);
+    mx_upsample_nearest2x(c, y, x, 1, 2, 2);
+    const float want_up[16] = {0, 0, 1, 1, 0, 0, 1, 1, 2, 2, 3, 3, 2, 2, 3, 3};
+    mx_check_close("known upsample_nearest2x", y, want_up, 16, 0);
+    /* [1, 2, 3] <-> [1, 3, 2] */
+    const float chw[6] = {1, 2, 3, 4, 5, 6}, hwc_want[6] = {1, 4, 2, 5, 3, 6};
+    float t[6], back[6];
+    mx_transpose_chw_hwc(c, t, chw, 1, 2, 3);
+    mx_check_close("known transpose_chw_hwc", t, hwc_want, 6, 0);
+    mx_transpose_hwc_chw(c, back, t, 1, 2, 3);
+    mx_check_close("known transpose_hwc_chw", back, chw, 6, 0);
+    /* concat of [2, 1, 2] and [2, 2, 2] along channels */
+    const float a[4] = {1, 2, 3, 4}, b[8] = {5, 6, 7, 8, 9, 10, 11, 12};
+    const float cat_want[12] = {1, 2, 5, 6, 7, 8, 3, 4, 9, 10, 11, 12};
+    float cat[12];
+    mx_concat_channels(c, cat, a, 1, b, 2, 2, 2);
+    mx_check_close("known concat_channels", cat, cat_want, 12, 0);
+}
+
 int main(void) {
     mx_ctx c = {NULL, mx_kernels_scalar(), NULL};
     test_simd_levels();
@@ -337,5 +373,6 @@ int main(void) {
     test_known_attention(&c);
     test_known_group_norm(&c);
     test_known_timestep_embedding();
+    test_known_layout(&c);
     return mx_test_finish("test_core_ops");
 }

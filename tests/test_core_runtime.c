@@ -135,6 +135,31 @@ static void test_thread_invariance(mx_isa isa) {
     free(in.x), free(in.w), free(in.q), free(in.k), free(in.v), free(in.big);
 }
 
+/* A scratch arena too small for the kernels must cost speed only: same bits as a roomy one. */
+static void test_small_scratch(void) {
+    mx_status st;
+    mx_ctx roomy, tiny;
+    CHECK(mx_ctx_create(&roomy, 2, MX_ISA_AVX512, (size_t)16 << 20, &st) == 0);
+    CHECK(mx_ctx_create(&tiny, 2, MX_ISA_AVX512, 256, &st) == 0);
+    enum { M = 70, N = 90, K = 200, T = 100, D = 40 };
+    float *x = malloc(sizeof(float) * M * K), *w = malloc(sizeof(float) * N * K), *q = malloc(sizeof(float) * T * D);
+    float *y0 = malloc(sizeof(float) * M * N), *y1 = malloc(sizeof(float) * M * N);
+    mx_fill_random(x, (size_t)M * K, 1, -1, 1);
+    mx_fill_random(w, (size_t)N * K, 2, -1, 1);
+    mx_fill_random(q, (size_t)T * D, 3, -1, 1);
+    mx_linear(&roomy, y0, x, mx_w_f32(w), mx_w_none(), M, N, K);
+    mx_linear(&tiny, y1, x, mx_w_f32(w), mx_w_none(), M, N, K);
+    CHECK(memcmp(y0, y1, sizeof(float) * M * N) == 0);
+    mx_attention(&roomy, y0, q, q, q, 1, 1, T, T, D, D, D, D, 0, 0.2f);
+    mx_attention(&tiny, y1, q, q, q, 1, 1, T, T, D, D, D, D, 0, 0.2f);
+    CHECK(memcmp(y0, y1, sizeof(float) * T * D) == 0);
+    CHECK(tiny.scratch->used == 0 && roomy.scratch->used == 0);
+    printf("tiny scratch arena (heap fallback): same results\n");
+    free(x), free(w), free(q), free(y0), free(y1);
+    mx_ctx_destroy(&roomy);
+    mx_ctx_destroy(&tiny);
+}
+
 static void test_arena(void) {
     mx_arena a;
     mx_status st;
@@ -218,6 +243,7 @@ int main(void) {
     test_tensor_shapes();
     test_philox();
     test_rng_normal();
+    test_small_scratch();
     for (mx_isa isa = MX_ISA_SCALAR; isa <= MX_ISA_AVX512; isa++)
         if (mx_kernels_for(isa)->isa == isa) test_thread_invariance(isa);
     return mx_test_finish("test_core_runtime");

@@ -143,6 +143,17 @@ static void test_hostile_gltf(void) {
     expect_fail("no_bin.gltf", "cannot open");
     write_gltf("cycle.gltf", "[{\"mesh\":0,\"children\":[0]}]", "", GOOD_VIEW, GOOD_BUFFER);
     expect_fail("cycle.gltf", "deeper");
+    /* Each node lists the next one 8 times: 8^20 instances unless the loader bounds the work. */
+    char dag[4096] = "[";
+    for (int i = 0; i < 20; i++) {
+        char one[160];
+        snprintf(one, sizeof one, "{\"mesh\":0,\"children\":[%d,%d,%d,%d,%d,%d,%d,%d]},", i + 1, i + 1, i + 1, i + 1, i + 1,
+                 i + 1, i + 1, i + 1);
+        strcat(dag, one);
+    }
+    strcat(dag, "{\"mesh\":0}]");
+    write_gltf("dag.gltf", dag, "", GOOD_VIEW, GOOD_BUFFER);
+    expect_fail("dag.gltf", "node instances");
     write_gltf("child.gltf", "[{\"mesh\":0,\"children\":[5]}]", "", GOOD_VIEW, GOOD_BUFFER);
     expect_fail("child.gltf", "out of range");
     write_gltf("mesh_idx.gltf", "[{\"mesh\":3}]", "", GOOD_VIEW, GOOD_BUFFER);

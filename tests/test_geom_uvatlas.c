@@ -10,7 +10,6 @@
 #include <string.h>
 
 #include "../pipeline/geom/uvatlas.h"
-#include "../pipeline/io/io.h"
 #include "util_test.h"
 
 /* ---------- hand-made meshes ---------- */
@@ -43,12 +42,6 @@ static void add_face(builder *b, int a, int c, int d) {
 static void add_quad(builder *b, int a, int c, int d, int e) {
     add_face(b, a, c, d);
     add_face(b, a, d, e);
-}
-
-static void free_mesh(mx_mesh *m) {
-    free(m->pos), free(m->faces), free(m->uv), free(m->face_uv), free(m->nrm), free(m->face_nrm);
-    free(m->mats), free(m->face_mat);
-    memset(m, 0, sizeof *m);
 }
 
 static mx_mesh make_cube(void) {
@@ -315,7 +308,7 @@ static void check_atlas(const char *name, const mx_mesh *m, const mx_uvatlas_rep
     CHECK(d.clashes == 0);
     CHECK(d.doubles == 0);
     CHECK(d.near == 0);
-    CHECK(d.pieces <= r->charts); /* every chart is one piece; pieces touching at a vertex merge */
+    CHECK(d.pieces == r->charts); /* every chart is one edge-connected piece with its own UVs */
     CHECK(fabs(d.utilisation - r->utilisation) < 1e-3);
     CHECK(r->stretch_mean >= 1 - 1e-3 && r->stretch_mean <= r->stretch_max + 1e-9);
 }
@@ -344,7 +337,7 @@ static void run_case(const char *name, mx_mesh *m, const mx_uvatlas_opts *o, dou
             CHECK(memcmp(copy.face_uv, m->face_uv, 3 * (size_t)m->nfaces * sizeof *m->face_uv) == 0);
         }
     }
-    free_mesh(&copy);
+    mx_mesh_free(&copy);
 }
 
 static void test_hand_made(void) {
@@ -360,25 +353,24 @@ static void test_hand_made(void) {
     mx_uvatlas_opts o = mx_uvatlas_defaults();
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         run_case(cases[i].name, &cases[i].m, &o, cases[i].min_util);
-        free_mesh(&cases[i].m);
+        mx_mesh_free(&cases[i].m);
     }
     /* A triangle soup is welded by position: as few charts as the shared-vertex sphere. */
     mx_mesh welded = make_sphere(24, 48), soup = unwelded(&welded);
     mx_uvatlas_report rw = {0}, rs = {0};
     mx_status st = {0};
     CHECK(mx_uvatlas_build(&welded, &o, &rw, &st) == 0);
-    run_case("sphere soup", &soup, &o, 0.5);
-    CHECK(mx_uvatlas_build(&soup, &o, &rs, &st) == -1); /* has UVs now */
-    free_mesh(&soup);
-    soup = unwelded(&welded);
     CHECK(mx_uvatlas_build(&soup, &o, &rs, &st) == 0);
     CHECK(rs.charts == rw.charts);
-    free_mesh(&soup), free_mesh(&welded);
+    mx_mesh_free(&soup);
+    soup = unwelded(&welded);
+    run_case("sphere soup", &soup, &o, 0.5);
+    mx_mesh_free(&soup), mx_mesh_free(&welded);
     /* Other sizes and gutters are honoured too. */
     o.texture_size = 512, o.gutter = 5;
     mx_mesh sphere = make_sphere(16, 32);
     run_case("sphere 512 gutter 5", &sphere, &o, 0.4);
-    free_mesh(&sphere);
+    mx_mesh_free(&sphere);
 }
 
 /* Moves every UV of piece `piece` by (dx, dy) texels. */
@@ -423,7 +415,7 @@ static void test_checker_detects_defects(void) {
     defects over = atlas_defects(&m, 1024, 2);
     CHECK(over.clashes > 0 && over.doubles > 0);
     free(comp);
-    free_mesh(&m);
+    mx_mesh_free(&m);
 
     /* Two unit squares laid out side by side 1.5 texels apart: no overlap, but too close. */
     builder b = {0};
@@ -441,7 +433,7 @@ static void test_checker_detects_defects(void) {
     memcpy(b.m.face_uv, b.m.faces, 12 * sizeof *b.m.face_uv);
     defects near = atlas_defects(&b.m, 1024, 2);
     CHECK(near.clashes == 0 && near.doubles == 0 && near.near > 0);
-    free_mesh(&b.m);
+    mx_mesh_free(&b.m);
 }
 
 /* The helicoid has to be split: a single chart would cover its ring three times. */
@@ -451,7 +443,7 @@ static void test_fold_is_split(void) {
     mx_status st = {0};
     CHECK(mx_uvatlas_build(&m, NULL, &r, &st) == 0);
     CHECK(r.charts >= 3);
-    free_mesh(&m);
+    mx_mesh_free(&m);
 }
 
 static void test_bad_input(void) {
@@ -466,7 +458,7 @@ static void test_bad_input(void) {
     m.pos[4] = 0;
     CHECK(mx_uvatlas_build(&m, NULL, NULL, &st) == 0);
     CHECK(mx_uvatlas_build(&m, NULL, NULL, &st) == -1 && strstr(st.msg, "already has UVs"));
-    free_mesh(&m);
+    mx_mesh_free(&m);
 
     mx_mesh sphere = make_sphere(8, 16);
     mx_uvatlas_opts o = mx_uvatlas_defaults();
@@ -475,7 +467,7 @@ static void test_bad_input(void) {
     o = mx_uvatlas_defaults();
     o.max_chart_angle = 95;
     CHECK(mx_uvatlas_build(&sphere, &o, NULL, &st) == -1 && st.code == MX_EUSAGE);
-    free_mesh(&sphere);
+    mx_mesh_free(&sphere);
     /* Too many charts for the texture: 16x16 texels with a 2-texel gutter hold at most 16
      * charts (each takes at least 4x4 with its gutter), the terrain makes more than 16. */
     mx_mesh terrain = make_terrain(80);
@@ -483,7 +475,7 @@ static void test_bad_input(void) {
     o.texture_size = 16;
     CHECK(mx_uvatlas_build(&terrain, &o, NULL, &st) == -1 && st.code == MX_EINPUT && strstr(st.msg, "do not fit"));
     CHECK(terrain.uv == NULL && terrain.face_uv == NULL);
-    free_mesh(&terrain);
+    mx_mesh_free(&terrain);
 
     /* Only zero-area faces (all corners on one point): a valid, empty-looking atlas. */
     builder b = {0};
@@ -494,7 +486,7 @@ static void test_bad_input(void) {
     mx_uvatlas_report r = {0};
     CHECK(mx_uvatlas_build(&b.m, NULL, &r, &st) == 0);
     CHECK(uvs_in_range(&b.m) && r.utilisation == 0);
-    free_mesh(&b.m);
+    mx_mesh_free(&b.m);
 
     mx_mesh empty = {0};
     CHECK(mx_uvatlas_build(&empty, NULL, NULL, &st) == -1 && st.code == MX_EINPUT);
@@ -511,12 +503,12 @@ static void test_assets(void) {
         snprintf(path, sizeof path, "%s/assets/%s", mx_shared_dir(), files[i][1]);
         mx_mesh m = {0};
         mx_status st = {0};
-        int rc = mx_io_read_mesh(path, &m, &st);
+        int rc = mx_mesh_load(path, &m, &st);
         if (rc) fprintf(stderr, "%s\n", st.msg);
         CHECK(rc == 0);
         mx_uvatlas_opts o = mx_uvatlas_defaults();
         if (rc == 0) run_case(files[i][0], &m, &o, 0.5);
-        free_mesh(&m);
+        mx_mesh_free(&m);
     }
 }
 

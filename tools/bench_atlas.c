@@ -6,19 +6,12 @@
 #include <string.h>
 
 #include "../pipeline/geom/uvatlas.h"
-#include "../pipeline/io/io.h"
-
-static void free_mesh_arrays(mx_mesh *m) {
-    free(m->pos), free(m->faces), free(m->uv), free(m->face_uv), free(m->nrm), free(m->face_nrm);
-    free(m->mats), free(m->face_mat);
-    memset(m, 0, sizeof *m);
-}
 
 /* Loads path, builds the atlas `runs` times (UVs dropped between runs) and prints one line. */
 static int bench_mesh(const char *path, int runs) {
     mx_mesh m = {0};
     mx_status st = {0};
-    if (mx_io_read_mesh(path, &m, &st)) {
+    if (mx_mesh_load(path, &m, &st)) {
         fprintf(stderr, "bench_atlas: %s\n", st.msg);
         return 1;
     }
@@ -28,7 +21,7 @@ static int bench_mesh(const char *path, int runs) {
     for (int i = 0; i < runs; i++) {
         if (mx_uvatlas_build(&m, NULL, &r, &st)) {
             fprintf(stderr, "bench_atlas: %s: %s\n", path, st.msg);
-            free_mesh_arrays(&m);
+            mx_mesh_free(&m);
             return 1;
         }
         if (i == 0 || r.seconds < best.seconds) best = r;
@@ -38,7 +31,7 @@ static int bench_mesh(const char *path, int runs) {
     const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
     printf("%-20s %7d faces %5d charts  utilisation %.3f  stretch mean %.3f max %.2f  %.3f s\n", name, m.nfaces,
            best.charts, best.utilisation, best.stretch_mean, best.stretch_max, best.seconds);
-    free_mesh_arrays(&m);
+    mx_mesh_free(&m);
     return 0;
 }
 

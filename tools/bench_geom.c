@@ -58,12 +58,9 @@ int main(int argc, char **argv) {
         const mx_camera *cam = &cands[2 + r % NCAND];
         mx_bake_reset(&bake);
         double t0 = mx_now();
-        mx_rasterize(&m, pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV | MX_RASTER_DEPTH_UNCULLED, pool,
-                     &vb.gb, &st);
+        mx_rasterize(&m, pos, cam, MX_VIEW_RASTER_FLAGS, pool, &vb.gb, &st);
         double t1 = mx_now();
-        mx_mask_frontal(&vb.gb, MX_NORMAL_GEOMETRIC, 0.1f, vb.mask);
-        mx_mask_internal(vb.gb.depth, vb.gb.depth_unculled, (int64_t)SIZE * SIZE, vb.tmp);
-        mx_mask_and_not(vb.mask, vb.tmp, vb.mask, (int64_t)SIZE * SIZE);
+        mx_view_masks(&vb, MX_NORMAL_GEOMETRIC, 0.1f, pool);
         double t2 = mx_now();
         mx_backproject(&bake, &vb.gb, &m, &img, vb.mask, 0, pool, &st);
         double t3 = mx_now();

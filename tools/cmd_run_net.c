@@ -1,11 +1,385 @@
-/* PLACEHOLDER: replaced by the real verb; must not survive to a submission. */
+/* matex run-net NET --weights W --inputs IN.safetensors --out OUT.safetensors: runs one network
+ * on tensors from a safetensors file and writes its outputs (the parity and debugging tool). */
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
+#include "../ops/ops.h"
+#include "../pipeline/nn/clip.h"
+#include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/unet.h"
+#include "../pipeline/nn/vae.h"
+#include "../runtime/log.h"
+#include "../weights/safetensors.h"
+#include "../weights/weights.h"
 #include "cli.h"
 
+#define MAX_OUTS (MX_UNET_MAX_RES + 4)
+#define SCRATCH_BYTES ((size_t)256 << 20)
+
+static void usage(FILE *f) {
+    fprintf(f,
+            "usage: matex run-net NET --weights W.mxw --inputs IN.safetensors --out OUT.safetensors [options]\n"
+            "\n"
+            "Runs one network of a matex weight file on the tensors of IN and writes its outputs (fp32).\n"
+            "NET and its tensors (B = batch; any batch and any valid size):\n"
+            "  unet        sample [B,C,H,W], timestep [B] or [1] (I64, I32 or F32), encoder_hidden_states [B,T,D],\n"
+            "              optional down_block_res_sample.{i} and mid_block_res_sample   -> out\n"
+            "  controlnet  sample, timestep, encoder_hidden_states, controlnet_cond [B,3,8H,8W],\n"
+            "              conditioning_scale (one float, default 1)  -> down_block_res_sample.{i}, mid_block_res_sample\n"
+            "  vae-encode  image [B,3,H,W] in [-1,1]                  -> mean, logvar\n"
+            "  vae-decode  latents [B,4,h,w] (unscaled)               -> image\n"
+            "  clip        input_ids [B,T] (I64 or I32)               -> last_hidden_state, pooler_output, hidden_states.{i}\n"
+            "\n"
+            "options:\n"
+            "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., text_encoder.;\n"
+            "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
+            "  --threads N     worker threads (default: all CPUs)\n"
+            "  -h, --help      this help\n");
+}
+
+/* Everything one invocation holds; released by io_free. */
+typedef struct run_io {
+    const char *in_path, *out_path;
+    mx_safetensors in;
+    int in_open;
+    mx_weightfile *wf;
+    mx_binder b;
+    mx_ctx ctx;
+    int ctx_ok;
+    mx_arena arena;
+    int arena_ok;
+    float *tmp[MAX_OUTS * 2];
+    int ntmp;
+    mx_st_out outs[MAX_OUTS];
+    char names[MAX_OUTS][48];
+    int nout;
+} run_io;
+
+static float *keep(run_io *io, float *p) {
+    if (p && io->ntmp < (int)(sizeof io->tmp / sizeof io->tmp[0])) io->tmp[io->ntmp++] = p;
+    else free(p);
+    return p;
+}
+
+static float *new_floats(run_io *io, size_t n, mx_status *st) {
+    float *p = keep(io, calloc(n ? n : 1, sizeof(float)));
+    if (!p) mx_fail(st, MX_ENOMEM, "out of memory (%zu floats)", n);
+    return p;
+}
+
+/* Input tensor as fp32 with its shape checked: want[i] = -1 accepts any size (filled in). */
+static float *input(run_io *io, const char *name, int ndim, int64_t *want, int required, mx_status *st) {
+    const mx_st_tensor *t = mx_st_find(&io->in, name);
+    if (!t) {
+        if (required) mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name);
+        return NULL;
+    }
+    int ok = t->ndim == ndim;
+    for (int i = 0; ok && i < ndim; i++) ok = want[i] < 0 ? t->shape[i] > 0 : t->shape[i] == want[i];
+    if (!ok) {
+        char got[96], exp[96];
+        mx_shape_str(t->ndim, t->shape, got, sizeof got);
+        mx_shape_str(ndim, want, exp, sizeof exp);
+        mx_fail(st, MX_EINPUT, "%s: tensor %s has shape %s, expected %s (-1: any)", io->in_path, name, got, exp);
+        return NULL;
+    }
+    for (int i = 0; i < ndim; i++) {
+        if (t->shape[i] > 1 << 20) {
+            mx_fail(st, MX_EINPUT, "%s: tensor %s: dimension %d is too large", io->in_path, name, i);
+            return NULL;
+        }
+        want[i] = t->shape[i];
+    }
+    return keep(io, mx_st_to_f32(&io->in, t, st));
+}
+
+/* Timesteps: one per batch item or a single one (any dtype, any shape of 1 or B elements). */
+static float *timesteps(run_io *io, int B, mx_status *st) {
+    const mx_st_tensor *t = mx_st_find(&io->in, "timestep");
+    if (!t) return mx_fail(st, MX_EINPUT, "%s: missing input tensor timestep", io->in_path), NULL;
+    int64_t n = t->ndim == 0 ? 1 : mx_shape_numel(t->ndim, t->shape);
+    if (n != 1 && n != B)
+        return mx_fail(st, MX_EINPUT, "%s: tensor timestep has %lld elements, expected 1 or %d", io->in_path,
+                       (long long)n, B), NULL;
+    float *v = keep(io, mx_st_to_f32(&io->in, t, st)), *ts = new_floats(io, (size_t)B, st);
+    if (!v || !ts) return NULL;
+    for (int i = 0; i < B; i++) ts[i] = v[n == 1 ? 0 : i];
+    return ts;
+}
+
+static int add_output(run_io *io, const char *name, int ndim, const int64_t *shape, const float *data, mx_status *st) {
+    if (io->nout == MAX_OUTS) return mx_fail(st, MX_EINTERNAL, "too many outputs");
+    mx_st_out *o = &io->outs[io->nout];
+    snprintf(io->names[io->nout], sizeof io->names[0], "%s", name);
+    o->name = io->names[io->nout];
+    o->dtype = MX_ST_F32;
+    o->ndim = ndim;
+    memcpy(o->shape, shape, (size_t)ndim * sizeof *shape);
+    o->data = data;
+    io->nout++;
+    return 0;
+}
+
+static int make_arena(run_io *io, size_t bytes, mx_status *st) {
+    if (mx_arena_create(&io->arena, bytes, st)) return -1;
+    io->arena_ok = 1;
+    return 0;
+}
+
+/* Config text of the network under `prefix` ("<prefix>config" metadata). */
+static const char *net_config(run_io *io, const char *prefix, char *key, size_t cap, mx_status *st) {
+    snprintf(key, cap, "%sconfig", prefix);
+    const char *cfg = mx_wf_meta(io->wf, key);
+    if (!cfg) mx_fail(st, MX_EINPUT, "%s: no metadata \"%s\" (wrong --prefix?)", mx_wf_path(io->wf), key);
+    return cfg;
+}
+
+static int run_unet(run_io *io, const char *prefix, mx_status *st) {
+    char key[96];
+    mx_unet_config cfg;
+    mx_unet *u = NULL;
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_unet_config_parse(&cfg, text, strlen(text), key, st)) return -1;
+    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_unet_load(&u, &cfg, &io->b, st)) return -1;
+    int rc = -1;
+    int64_t ss[4] = {-1, cfg.in_channels, -1, -1}, es[3] = {-1, -1, cfg.cross_attention_dim};
+    float *sample = input(io, "sample", 4, ss, 1, st), *ehs = NULL, *ts = NULL, *out;
+    if (sample) es[0] = ss[0];
+    if (sample) ehs = input(io, "encoder_hidden_states", 3, es, 1, st);
+    if (ehs) ts = timesteps(io, (int)ss[0], st);
+    if (!ts) goto done;
+    int B = (int)ss[0], H = (int)ss[2], W = (int)ss[3], n = mx_unet_num_residuals(&cfg), C, h, w;
+    const float *res[MX_UNET_MAX_RES];
+    mx_unet_input in = {sample, ts, ehs, B, H, W, (int)es[1], NULL, NULL};
+    if (mx_unet_check_sizes(&cfg, B, H, W, in.T, st)) goto done;
+    int have = mx_st_find(&io->in, "down_block_res_sample.0") != NULL;
+    for (int i = 0; i <= n && (have || mx_st_find(&io->in, "mid_block_res_sample")); i++) {
+        char name[48];
+        if (i < n) snprintf(name, sizeof name, "down_block_res_sample.%d", i);
+        else snprintf(name, sizeof name, "mid_block_res_sample");
+        mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
+        int64_t rs[4] = {B, C, h, w};
+        const float *p = input(io, name, 4, rs, 1, st);
+        if (!p) goto done;
+        if (i < n) res[i] = p;
+        else in.mid_residual = p;
+    }
+    if (have) in.down_residuals = res;
+    size_t bytes;
+    int64_t os[4] = {B, cfg.out_channels, H, W};
+    if (!(out = new_floats(io, (size_t)B * cfg.out_channels * H * W, st))) goto done;
+    if (mx_unet_arena_bytes(u, B, H, W, in.T, &bytes, st) || make_arena(io, bytes, st) ||
+        mx_unet_forward(&io->ctx, u, &in, out, &io->arena, st))
+        goto done;
+    rc = add_output(io, "out", 4, os, out, st);
+done:
+    mx_unet_free(u);
+    return rc;
+}
+
+static int run_controlnet(run_io *io, const char *prefix, mx_status *st) {
+    char key[96];
+    mx_unet_config cfg;
+    mx_controlnet *m = NULL;
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_unet_config_parse(&cfg, text, strlen(text), key, st)) return -1;
+    if (!cfg.is_controlnet) return mx_fail(st, MX_EINPUT, "%s: \"%s\" is not a ControlNetModel config", mx_wf_path(io->wf), key);
+    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_controlnet_load(&m, &cfg, &io->b, st)) return -1;
+    int rc = -1, n = mx_unet_num_residuals(&cfg), f = 1 << (cfg.n_cond_emb - 1), C, h, w;
+    int64_t ss[4] = {-1, cfg.in_channels, -1, -1}, es[3] = {-1, -1, cfg.cross_attention_dim}, cs[4], one[1] = {1};
+    float *sample = input(io, "sample", 4, ss, 1, st), *ehs = NULL, *ts = NULL, *cond = NULL, *scale = NULL;
+    float *down[MX_UNET_MAX_RES + 1];
+    if (sample) {
+        es[0] = ss[0];
+        ehs = input(io, "encoder_hidden_states", 3, es, 1, st);
+    }
+    if (ehs) ts = timesteps(io, (int)ss[0], st);
+    if (ts) {
+        cs[0] = ss[0], cs[1] = cfg.conditioning_channels, cs[2] = ss[2] * f, cs[3] = ss[3] * f;
+        cond = input(io, "controlnet_cond", 4, cs, 1, st);
+    }
+    if (!cond) goto done;
+    if (mx_st_find(&io->in, "conditioning_scale") && !(scale = input(io, "conditioning_scale", 1, one, 1, st))) goto done;
+    int B = (int)ss[0], H = (int)ss[2], W = (int)ss[3];
+    mx_controlnet_input in = {sample, ts, ehs, cond, B, H, W, (int)es[1], scale ? scale[0] : 1.0f};
+    if (mx_unet_check_sizes(&cfg, B, H, W, in.T, st)) goto done;
+    for (int i = 0; i <= n; i++) {
+        char name[48];
+        mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
+        int64_t rs[4] = {B, C, h, w};
+        if (i < n) snprintf(name, sizeof name, "down_block_res_sample.%d", i);
+        else snprintf(name, sizeof name, "mid_block_res_sample");
+        if (!(down[i] = new_floats(io, (size_t)B * C * h * w, st)) || add_output(io, name, 4, rs, down[i], st)) goto done;
+    }
+    size_t bytes;
+    if (mx_controlnet_arena_bytes(m, B, H, W, in.T, &bytes, st) || make_arena(io, bytes, st) ||
+        mx_controlnet_forward(&io->ctx, m, &in, down, down[n], 0, &io->arena, st))
+        goto done;
+    rc = 0;
+done:
+    mx_controlnet_free(m);
+    return rc;
+}
+
+static int run_vae(run_io *io, const char *prefix, int decode, mx_status *st) {
+    char key[96];
+    mx_vae_config cfg;
+    mx_vae *v = NULL;
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_vae_config_parse(&cfg, text, strlen(text), key, st)) return -1;
+    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_vae_load(&v, &cfg, &io->b, st)) return -1;
+    int rc = -1, f = mx_vae_factor(v), lc = cfg.latent_channels;
+    size_t bytes;
+    if (decode) {
+        int64_t ls[4] = {-1, lc, -1, -1};
+        float *lat = input(io, "latents", 4, ls, 1, st), *img;
+        if (!lat) goto done;
+        int B = (int)ls[0], h = (int)ls[2], w = (int)ls[3];
+        int64_t os[4] = {B, cfg.out_channels, (int64_t)h * f, (int64_t)w * f};
+        if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, st) || make_arena(io, bytes, st) ||
+            !(img = new_floats(io, (size_t)B * cfg.out_channels * h * f * w * f, st)) ||
+            mx_vae_decode(&io->ctx, v, lat, B, h, w, img, &io->arena, st))
+            goto done;
+        rc = add_output(io, "image", 4, os, img, st);
+    } else {
+        int64_t is[4] = {-1, cfg.in_channels, -1, -1};
+        float *img = input(io, "image", 4, is, 1, st), *mean, *logvar;
+        if (!img) goto done;
+        int B = (int)is[0], H = (int)is[2], W = (int)is[3];
+        if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, st) || make_arena(io, bytes, st)) goto done;
+        size_t n = (size_t)B * lc * (H / f) * (W / f);
+        int64_t os[4] = {B, lc, H / f, W / f};
+        if (!(mean = new_floats(io, n, st)) || !(logvar = new_floats(io, n, st)) ||
+            mx_vae_encode(&io->ctx, v, img, B, H, W, mean, logvar, &io->arena, st))
+            goto done;
+        rc = add_output(io, "mean", 4, os, mean, st) || add_output(io, "logvar", 4, os, logvar, st) ? -1 : 0;
+    }
+done:
+    mx_vae_free(v);
+    return rc;
+}
+
+static int run_clip(run_io *io, const char *prefix, mx_status *st) {
+    char key[96];
+    mx_clip_config cfg;
+    mx_clip m;
+    memset(&m, 0, sizeof m);
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_clip_config_parse(&cfg, text, strlen(text), key, st)) return -1;
+    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_clip_load(&m, &cfg, &io->b, st)) return -1;
+    int rc = -1, L = cfg.num_hidden_layers, C = cfg.hidden_size;
+    int64_t is[2] = {-1, -1};
+    float *idf = input(io, "input_ids", 2, is, 1, st), *last, *pooled;
+    float **hs = calloc((size_t)L + 1, sizeof *hs);
+    int32_t *ids = NULL;
+    if (!idf || !hs) goto done;
+    int B = (int)is[0], T = (int)is[1];
+    if (T > cfg.max_position_embeddings) {
+        mx_fail(st, MX_EINPUT, "%s: input_ids has %d tokens, the model takes at most %d", io->in_path, T,
+                cfg.max_position_embeddings);
+        goto done;
+    }
+    ids = malloc((size_t)B * T * sizeof *ids);
+    if (!ids) goto done;
+    for (size_t i = 0; i < (size_t)B * T; i++) ids[i] = (int32_t)idf[i];
+    size_t btc = (size_t)B * T * C;
+    int64_t hshape[3] = {B, T, C}, pshape[2] = {B, C};
+    if (!(last = new_floats(io, btc, st)) || !(pooled = new_floats(io, (size_t)B * C, st))) goto done;
+    for (int i = 0; i <= L; i++)
+        if (!(hs[i] = new_floats(io, btc, st))) goto done;
+    mx_arena dry;
+    mx_arena_measure(&dry);
+    if (mx_clip_forward(&m, &io->ctx, &dry, ids, B, T, last, pooled, hs, st) ||
+        make_arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st) ||
+        mx_clip_forward(&m, &io->ctx, &io->arena, ids, B, T, last, pooled, hs, st))
+        goto done;
+    if (add_output(io, "last_hidden_state", 3, hshape, last, st) || add_output(io, "pooler_output", 2, pshape, pooled, st))
+        goto done;
+    for (int i = 0; i <= L; i++) {
+        char name[48];
+        snprintf(name, sizeof name, "hidden_states.%d", i);
+        if (add_output(io, name, 3, hshape, hs[i], st)) goto done;
+    }
+    rc = 0;
+done:
+    free(ids);
+    free(hs);
+    mx_clip_free(&m);
+    return rc;
+}
+
+static void io_free(run_io *io) {
+    if (io->arena_ok) mx_arena_destroy(&io->arena);
+    if (io->ctx_ok) mx_ctx_destroy(&io->ctx);
+    mx_binder_free(&io->b);
+    if (io->wf) mx_wf_close(io->wf);
+    if (io->in_open) mx_st_close(&io->in);
+    for (int i = 0; i < io->ntmp; i++) free(io->tmp[i]);
+}
+
+static const char *default_prefix(const char *net) {
+    if (!strcmp(net, "unet")) return "unet.";
+    if (!strcmp(net, "controlnet")) return "controlnet.";
+    if (!strcmp(net, "vae-encode") || !strcmp(net, "vae-decode")) return "vae.";
+    if (!strcmp(net, "clip")) return "text_encoder.";
+    return NULL;
+}
+
+static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_status *st) {
+    if (mx_st_open(&io->in, io->in_path, st)) return -1;
+    io->in_open = 1;
+    if (mx_wf_open(&io->wf, weights, st)) return -1;
+    if (mx_ctx_create(&io->ctx, threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    io->ctx_ok = 1;
+    double t0 = mx_now();
+    int rc = !strcmp(net, "unet")         ? run_unet(io, prefix, st)
+             : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
+             : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
+             : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
+                                          : run_clip(io, prefix, st);
+    if (rc) return -1;
+    mx_info("run-net %s: %.3f s", net, mx_now() - t0);
+    return mx_st_write(io->out_path, io->outs, (size_t)io->nout, st);
+}
+
 int cmd_run_net(int argc, char **argv) {
-    (void)argc;
-    (void)argv;
-    fprintf(stderr, "matex: 'run_net' is not built yet\n");
-    return 2;
+    const char *net = NULL, *weights = NULL, *prefix = NULL;
+    int threads = 0;
+    run_io io;
+    memset(&io, 0, sizeof io);
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+            usage(stdout);
+            return 0;
+        }
+        int has_val = i + 1 < argc;
+        if (!strcmp(a, "--weights") && has_val) weights = argv[++i];
+        else if (!strcmp(a, "--inputs") && has_val) io.in_path = argv[++i];
+        else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
+        else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
+        else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
+        else if (a[0] != '-' && !net) net = a;
+        else {
+            fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
+            usage(stderr);
+            return 2;
+        }
+    }
+    if (!net || !weights || !io.in_path || !io.out_path || !default_prefix(net)) {
+        fprintf(stderr, "matex run-net: %s\n", !net || default_prefix(net) ? "NET, --weights, --inputs and --out are required"
+                                                                         : "NET must be clip, unet, controlnet, vae-encode or vae-decode");
+        usage(stderr);
+        return 2;
+    }
+    mx_status st;
+    mx_status_clear(&st);
+    int rc = run(&io, net, weights, prefix ? prefix : default_prefix(net), threads, &st);
+    io_free(&io);
+    if (rc) {
+        fprintf(stderr, "matex run-net: %s\n", st.msg);
+        return st.code == MX_EUSAGE ? 2 : 1;
+    }
+    return 0;
 }

@@ -138,7 +138,7 @@ static void fill_task(void *ctx, int task, int thread) {
     int32_t *off = j->s->counts + (size_t)task * j->nbins;
     int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
     for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
-        if (j->gb->face[i] < 0 || (j->mask && !j->mask[i]) || !pixel_used(j, i)) continue;
+        if (!pixel_used(j, i)) continue;
         const splat *sp = &j->s->splats[i];
         int b0 = sp->layer * j->nbands + sp->y0 / BAND_ROWS, b1 = sp->layer * j->nbands + sp->y1 / BAND_ROWS;
         j->s->list[off[b0]++] = (int32_t)i;

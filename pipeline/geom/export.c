@@ -394,9 +394,9 @@ done:
 
 /* ---- the output folder ---- */
 
-/* "texture_<name>.png" with the name reduced to [A-Za-z0-9_-]; material i's index is added
- * when an earlier material gave the same file name. */
-static void material_texture_name(const mx_mesh *m, int i, char *out, size_t cap) {
+/* names[i] = "texture_<name>.png" with the material name reduced to [A-Za-z0-9_-]; the
+ * material index is added when an earlier material already gave that file name. */
+static void material_texture_name(const mx_mesh *m, int i, char names[][160]) {
     char clean[128];
     size_t n = 0;
     for (const char *s = m->mats[i].name; *s && n + 1 < sizeof clean; s++) {
@@ -405,15 +405,12 @@ static void material_texture_name(const mx_mesh *m, int i, char *out, size_t cap
         clean[n++] = ok ? c : '_';
     }
     clean[n] = 0;
-    snprintf(out, cap, "texture_%s.png", n ? clean : "material");
-    for (int k = 0; k < i; k++) {
-        char prev[160];
-        material_texture_name(m, k, prev, sizeof prev);
-        if (!strcmp(prev, out)) {
-            snprintf(out, cap, "texture_%s_%d.png", n ? clean : "material", i);
+    snprintf(names[i], 160, "texture_%s.png", n ? clean : "material");
+    for (int k = 0; k < i; k++)
+        if (!strcmp(names[k], names[i])) {
+            snprintf(names[i], 160, "texture_%s_%d.png", n ? clean : "material", i);
             return;
         }
-    }
 }
 
 static int join(char *out, size_t cap, const char *dir, const char *name, mx_status *st) {
@@ -426,11 +423,14 @@ static int write_textures(const char *dir, const mx_mesh *m, const mx_image *tex
     char path[1200];
     if (join(path, sizeof path, dir, "texture.png", st) || mx_io_write_png(path, &textures[0], st)) return -1;
     if (join(path, sizeof path, dir, "texture.exr", st) || mx_io_write_exr(path, &textures[0], st)) return -1;
+    if (ntex == 1) {
+        snprintf(names[0], 160, "texture.png");
+        return 0;
+    }
     for (int i = 0; i < ntex; i++) {
-        snprintf(names[i], 160, "texture.png");
-        if (ntex == 1 || !textures[i].data) continue;
-        material_texture_name(m, i, names[i], 160);
-        if (join(path, sizeof path, dir, names[i], st) || mx_io_write_png(path, &textures[i], st)) return -1;
+        material_texture_name(m, i, names);
+        if (textures[i].data && (join(path, sizeof path, dir, names[i], st) || mx_io_write_png(path, &textures[i], st)))
+            return -1;
     }
     return 0;
 }

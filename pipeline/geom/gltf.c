@@ -16,6 +16,7 @@
 #define GLB_CHUNK_JSON 0x4E4F534Au /* "JSON" */
 #define GLB_CHUNK_BIN 0x004E4942u  /* "BIN\0" */
 #define MAX_NODE_DEPTH 256
+#define MAX_NODE_VISITS 100000 /* node instances; bounds the work of a hostile DAG of children */
 #define MAX_FILE_BYTES ((size_t)1 << 31)
 
 typedef struct {
@@ -42,6 +43,7 @@ typedef struct {
     int32_t *face_has_uv, *face_has_nrm; /* per face: 1 if the primitive had the attribute */
     size_t nfaces, cap_faces;
     int any_uv, any_nrm;
+    size_t node_visits;
 } merged;
 
 static uint32_t rd_u32(const unsigned char *p) {
@@ -610,6 +612,8 @@ static int visit_node(const gltf_doc *d, size_t idx, const double parent[16], in
     const mx_json *nodes = mx_json_get(d->root, "nodes");
     const mx_json *node = mx_json_at(nodes, idx);
     if (depth > MAX_NODE_DEPTH) return mx_fail(st, MX_EINPUT, "%s: node hierarchy deeper than %d (a cycle?)", d->path, MAX_NODE_DEPTH);
+    if (++g->node_visits > MAX_NODE_VISITS)
+        return mx_fail(st, MX_EINPUT, "%s: more than %d node instances (shared children?)", d->path, MAX_NODE_VISITS);
     if (mx_json_kind(node) != MX_JSON_OBJ) return mx_fail(st, MX_EINPUT, "%s: nodes[%zu] is not an object", d->path, idx);
     double local[16], world[16];
     if (node_local(d, node, idx, local, st)) return -1;

@@ -56,7 +56,12 @@ static float geometric_cosine(const mx_gbuffer *gb, int x, int y) {
 }
 
 void mx_mask_frontal(const mx_gbuffer *gb, int normal_source, float threshold, uint8_t *mask) {
-    for (int y = 0; y < gb->h; y++)
+    mx_mask_frontal_rows(gb, normal_source, threshold, 0, gb->h, mask);
+}
+
+void mx_mask_frontal_rows(const mx_gbuffer *gb, int normal_source, float threshold, int y0, int y1,
+                          uint8_t *mask) {
+    for (int y = y0; y < y1; y++)
         for (int x = 0; x < gb->w; x++) {
             float c = normal_source == MX_NORMAL_FROM_DEPTH ? depth_normal_cosine(gb, x, y)
                                                             : geometric_cosine(gb, x, y);

@@ -17,6 +17,10 @@ void mx_mask_foreground(const mx_gbuffer *gb, uint8_t *mask);
  * the paper's choice: cross product of the unprojected neighbours' differences; at depth
  * discontinuities the smaller one-sided difference is used). 0 on background. */
 void mx_mask_frontal(const mx_gbuffer *gb, int normal_source, float threshold, uint8_t *mask);
+/* The same for rows [y0, y1) only (mask is still the whole [h][w] array), so that callers
+ * can split the work into tasks. */
+void mx_mask_frontal_rows(const mx_gbuffer *gb, int normal_source, float threshold, int y0, int y1,
+                          uint8_t *mask);
 
 /* Internal faces of open surfaces (paper Fig. 6): 1 where the depth rendered with
  * backface culling and the depth rendered without it differ (by more than a relative

@@ -88,20 +88,18 @@ static void corner_pos(const mx_mesh *m, int f, int k, double *p) {
 /* ---------- input checks and face geometry ---------- */
 
 static int check_mesh(const mx_mesh *m, mx_status *st) {
-    const char *name = m->source_path[0] ? m->source_path : "mesh";
     if (m->nuv > 0 || m->uv || m->face_uv)
-        return mx_fail(st, MX_EINPUT, "%s: already has UVs; the atlas is only built for meshes without", name);
+        return mx_fail(st, MX_EINPUT, "uv atlas: the mesh already has UVs (the atlas is for meshes without)");
     if (m->nfaces <= 0 || m->nverts <= 0 || !m->faces || !m->pos)
-        return mx_fail(st, MX_EINPUT, "%s: no faces to lay out", name);
+        return mx_fail(st, MX_EINPUT, "uv atlas: no faces to lay out");
     if (m->nfaces > INT32_MAX / 6)
-        return mx_fail(st, MX_EINPUT, "%s: %d faces is more than the atlas handles", name, m->nfaces);
+        return mx_fail(st, MX_EINPUT, "uv atlas: %d faces is more than the atlas handles", m->nfaces);
     for (size_t i = 0; i < 3 * (size_t)m->nfaces; i++)
         if (m->faces[i] < 0 || m->faces[i] >= m->nverts)
-            return mx_fail(st, MX_EINPUT, "%s: face %zu has vertex index %d outside [0, %d)", name, i / 3,
+            return mx_fail(st, MX_EINPUT, "uv atlas: face %zu has vertex index %d outside [0, %d)", i / 3,
                            (int)m->faces[i], m->nverts);
     for (size_t i = 0; i < 3 * (size_t)m->nverts; i++)
-        if (!isfinite(m->pos[i]))
-            return mx_fail(st, MX_EINPUT, "%s: vertex %zu has a non-finite position", name, i / 3);
+        if (!isfinite(m->pos[i])) return mx_fail(st, MX_EINPUT, "uv atlas: vertex %zu has a non-finite position", i / 3);
     return 0;
 }
 
@@ -1114,8 +1112,9 @@ static void free_atlas(atlas *a) {
 
 int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r, mx_status *st) {
     double t0 = mx_now();
+    const char *name = m->source_path[0] ? m->source_path : "mesh";
     mx_uvatlas_opts opt;
-    if (resolve_opts(o, &opt, st) || check_mesh(m, st)) return -1;
+    if (resolve_opts(o, &opt, st) || check_mesh(m, st)) return mx_fail_prefix(st, "%s", name);
     size_t nf = (size_t)m->nfaces;
     atlas a = {.m = m};
     a.fn = malloc(3 * nf * sizeof *a.fn);
@@ -1129,7 +1128,7 @@ int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r,
     a.weld = malloc((size_t)m->nverts * sizeof *a.weld);
     if (!a.fn || !a.area || !a.adj || !a.order || !a.charts || !a.xy || !a.chart_of || !a.seg || !a.weld) {
         free_atlas(&a);
-        return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory for %zu faces", nf);
+        return mx_fail(st, MX_ENOMEM, "%s: uv atlas: out of memory for %zu faces", name, nf);
     }
     compute_face_geometry(&a);
     double scale = 0;
@@ -1146,7 +1145,7 @@ int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r,
         measure(&a, m, scale, opt.texture_size, r);
         r->seconds = mx_now() - t0;
     }
-    if (rc) mx_fail_prefix(st, "%s", m->source_path[0] ? m->source_path : "mesh");
+    if (rc) mx_fail_prefix(st, "%s", name);
     free_atlas(&a);
     return rc;
 }

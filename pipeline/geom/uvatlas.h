@@ -1,7 +1,8 @@
-/* UV atlas for meshes without UVs (DESIGN.md §2 step 2): chart segmentation by region growing
- * on face normals, a planar projection per chart (split until no triangle folds or overlaps),
- * and skyline packing of the charts' rectangles into the unit square at one common scale
- * (uniform texel density) with a gutter between charts. Deterministic: the same mesh and
+/* UV atlas for meshes without UVs (DESIGN.md §2 step 2): charts grown over faces whose normals
+ * stay within a cone, each projected onto its plane (and cut until no triangle folds over or
+ * overlaps another), small charts merged into neighbours, then all charts packed by their
+ * outlines (tetris-like skyline) into the unit square at one common scale, so the texel density
+ * is uniform, with a gutter of empty texels between charts. Deterministic: the same mesh and
  * options always give the same atlas. */
 #ifndef MX_UVATLAS_H
 #define MX_UVATLAS_H
@@ -11,8 +12,11 @@
 
 typedef struct mx_uvatlas_opts {
     int texture_size;      /* texels per side the atlas is laid out for; 0: 1024 */
-    int gutter;            /* empty texels guaranteed between two charts (and the border); 0: 2 */
-    float max_chart_angle; /* degrees between a face normal and its chart's normal; 0: 60 */
+    int gutter;            /* empty texels guaranteed between two charts (conservatively
+                              rasterised at texture_size); 0: 2. Charts may touch the border. */
+    float max_chart_angle; /* degrees, in (0, 75]: a chart grows over faces within this angle of
+                              its mean normal; no face is projected at more than this + 10
+                              degrees, so area stretch <= 1 / cos(angle + 10). 0: 60 */
 } mx_uvatlas_opts;
 
 typedef struct mx_uvatlas_report {
@@ -27,10 +31,12 @@ typedef struct mx_uvatlas_report {
 /* Default options (1024 texels, gutter 2, 60 degrees). */
 mx_uvatlas_opts mx_uvatlas_defaults(void);
 
-/* Fills m->nuv, m->uv and m->face_uv (per-corner UVs in [0,1], v up) for a mesh without UVs;
- * fails if the mesh already has UVs, has an out-of-range index or a non-finite position, or if
- * the charts cannot be packed at the texture size. o and r may be NULL. On failure the mesh is
- * unchanged. */
+/* Fills m->nuv, m->uv and m->face_uv (per-corner UVs in [0,1], v up; malloc'ed, freed by
+ * mx_mesh_free) for a mesh without UVs. Vertices with identical positions are treated as one
+ * (triangle soups get proper charts). Fails if the mesh already has UVs, has an out-of-range
+ * index or a non-finite position, or if the charts cannot be packed at the texture size; the
+ * mesh is then unchanged and st->msg reads "<source_path or 'mesh'>: uv atlas: <problem>".
+ * o and r may be NULL. */
 int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r, mx_status *st);
 
 #endif

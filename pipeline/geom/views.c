@@ -7,8 +7,6 @@
 #include "masks.h"
 #include "raster.h"
 
-#define VIEW_RASTER_FLAGS (MX_RASTER_CULL_BACK | MX_RASTER_UV | MX_RASTER_DEPTH_UNCULLED)
-
 void mx_view_cache_free(mx_view_cache *vc) {
     if (vc->texels)
         for (int c = 0; c < vc->ncand; c++) free(vc->texels[c]);
@@ -69,7 +67,7 @@ int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
     ok = ok && !mx_gbuffer_init(&gb, size, size, st);
     for (int c = 0; ok && c < ncand; c++) {
         vc->cams[c] = cams[c];
-        ok = !mx_rasterize(m, pos, &cams[c], VIEW_RASTER_FLAGS, pool, &gb, st);
+        ok = !mx_rasterize(m, pos, &cams[c], MX_VIEW_RASTER_FLAGS, pool, &gb, st);
         if (!ok) break;
         usable_pixels(&gb, frontal_threshold, usable, tmp);
         ok = !collect_texels(vc, c, m, &gb, usable, st);
@@ -196,12 +194,34 @@ void mx_view_buffers_free(mx_view_buffers *vb) {
     memset(vb, 0, sizeof *vb);
 }
 
+#define MASK_ROWS 16
+
+typedef struct mask_job {
+    mx_view_buffers *vb;
+    int normal_source;
+    float threshold;
+} mask_job;
+
+static void view_mask_task(void *ctx, int task, int thread) {
+    (void)thread;
+    mask_job *j = ctx;
+    mx_view_buffers *vb = j->vb;
+    int y0 = task * MASK_ROWS, y1 = y0 + MASK_ROWS < vb->gb.h ? y0 + MASK_ROWS : vb->gb.h;
+    size_t o = (size_t)y0 * vb->gb.w;
+    int64_t n = (int64_t)(y1 - y0) * vb->gb.w;
+    mx_mask_frontal_rows(&vb->gb, j->normal_source, j->threshold, y0, y1, vb->mask);
+    mx_mask_internal(vb->gb.depth + o, vb->gb.depth_unculled + o, n, vb->tmp + o);
+    mx_mask_and_not(vb->mask + o, vb->tmp + o, vb->mask + o, n);
+}
+
+void mx_view_masks(mx_view_buffers *vb, int normal_source, float frontal_threshold, mx_pool *pool) {
+    mask_job j = {vb, normal_source, frontal_threshold};
+    mx_pool_for(pool, (vb->gb.h + MASK_ROWS - 1) / MASK_ROWS, view_mask_task, &j);
+}
+
 int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, const mx_camera *cam,
                     int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st) {
-    if (mx_rasterize(m, pos, cam, VIEW_RASTER_FLAGS, pool, &vb->gb, st)) return -1;
-    int64_t n = (int64_t)vb->gb.w * vb->gb.h;
-    mx_mask_frontal(&vb->gb, normal_source, frontal_threshold, vb->mask);
-    mx_mask_internal(vb->gb.depth, vb->gb.depth_unculled, n, vb->tmp);
-    mx_mask_and_not(vb->mask, vb->tmp, vb->mask, n);
+    if (mx_rasterize(m, pos, cam, MX_VIEW_RASTER_FLAGS, pool, &vb->gb, st)) return -1;
+    mx_view_masks(vb, normal_source, frontal_threshold, pool);
     return 0;
 }

@@ -65,11 +65,17 @@ typedef struct mx_view_buffers {
     uint8_t *tmp;
 } mx_view_buffers;
 
+/* The rasterizer flags of a view: culled, with UVs and the unculled depth. */
+#define MX_VIEW_RASTER_FLAGS (MX_RASTER_CULL_BACK | MX_RASTER_UV | MX_RASTER_DEPTH_UNCULLED)
+
 int mx_view_buffers_init(mx_view_buffers *vb, int size, mx_status *st);
 void mx_view_buffers_free(mx_view_buffers *vb);
-/* Rasterizes `cam` and computes the mask (normal_source and threshold as
- * in mx_mask_frontal; threshold 0 keeps every foreground pixel that is not internal). */
+/* Rasterizes `cam` (MX_VIEW_RASTER_FLAGS) and computes the mask with mx_view_masks. */
 int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, const mx_camera *cam,
                     int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st);
+/* The backprojection mask of vb->gb (rasterized with MX_VIEW_RASTER_FLAGS): foreground &
+ * frontal (normal_source and threshold as in mx_mask_frontal; 0 keeps every foreground
+ * pixel) & not internal. */
+void mx_view_masks(mx_view_buffers *vb, int normal_source, float frontal_threshold, mx_pool *pool);
 
 #endif

@@ -143,8 +143,6 @@ typedef struct mx_unet_encoder {
 
 int mx_unet_encoder_load(mx_unet_encoder *e, const mx_unet_config *cfg, mx_binder *b, mx_status *st);
 void mx_unet_encoder_free(mx_unet_encoder *e);
-/* Checks B, H, W, T against the config (latent divisibility, size bounds). */
-int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, mx_status *st);
 /* conv_in(sample) [+ add, when not NULL] -> res[0]; down levels -> res[1..]; mid block -> mid.
  * res[i] are caller buffers shaped by mx_unet_residual_shape. */
 int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample, const float *add, int B, int H,

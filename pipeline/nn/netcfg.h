@@ -57,7 +57,14 @@ typedef struct mx_vae_config {
 int mx_unet_config_parse(mx_unet_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
 int mx_vae_config_parse(mx_vae_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
 
-/* "_class_name" of a config text, copied into buf (empty when absent). */
+/* Class of a config text ("_class_name", else "architectures"[0], else CLIPTextModel for
+ * model_type clip_text_model), copied into buf (empty when none). */
 int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, const char *what, mx_status *st);
+
+/* Enumerates the parameter list (names without prefix, shapes) of the network a config text
+ * describes (UNet2DConditionModel, ControlNetModel, AutoencoderKL or CLIPTextModel) into an
+ * enumerating binder (mx_binder_enum), through the networks' own load code. */
+struct mx_binder;
+int mx_net_enumerate(struct mx_binder *b, const char *text, size_t len, const char *what, mx_status *st);
 
 #endif

@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../weights/golden_rule.h"
 #include "../../weights/safetensors.h"
 #include "../../weights/weights.h"
 
@@ -68,7 +69,9 @@ int mx_binder_wf(mx_binder *b, const mx_weightfile *wf, const char *prefix, mx_s
 /* ---- safetensors file: owned aligned copies ---- */
 
 typedef struct st_binder {
-    const mx_safetensors *f;
+    const mx_safetensors *f; /* NULL for the rule binder */
+    uint64_t seed;           /* rule binder */
+    mx_dtype dtype;          /* rule binder: MX_F32 or MX_F16 */
     void **bufs;
     size_t n, cap;
 } st_binder;
@@ -128,6 +131,38 @@ int mx_binder_st(mx_binder *b, const mx_safetensors *f, const char *prefix, mx_s
     if (!s) return mx_fail(st, MX_ENOMEM, "out of memory");
     s->f = f;
     b->bind = bind_st;
+    b->impl = s;
+    return 0;
+}
+
+/* ---- golden-v1 rule: owned generated copies (shares the safetensors binder's storage) ---- */
+
+static int bind_rule(mx_binder *b, const char *name, int ndim, const int64_t *shape, mx_wptr *out, mx_status *st) {
+    st_binder *s = b->impl;
+    int64_t numel = mx_shape_numel(ndim, shape);
+    if (numel < 0) return mx_fail(st, MX_EINTERNAL, "parameter %s: bad shape", name);
+    size_t n = (size_t)numel;
+    float *f32 = keep_buffer(s, n * sizeof(float), st);
+    if (!f32) return -1;
+    mx_golden_v1_fill(name, ndim, shape, s->seed, f32);
+    out->data = f32;
+    out->dtype = MX_F32;
+    if (s->dtype == MX_F16) { /* narrowed in place: the fp16 values fill the first half */
+        uint16_t *h = (uint16_t *)f32;
+        for (size_t i = 0; i < n; i++) h[i] = mx_float_to_half(f32[i]);
+        out->dtype = MX_F16;
+    }
+    return 0;
+}
+
+int mx_binder_rule(mx_binder *b, uint64_t seed, mx_dtype dtype, mx_status *st) {
+    memset(b, 0, sizeof *b);
+    if (dtype != MX_F32 && dtype != MX_F16) return mx_fail(st, MX_EINTERNAL, "mx_binder_rule: dtype must be F32 or F16");
+    st_binder *s = calloc(1, sizeof *s);
+    if (!s) return mx_fail(st, MX_ENOMEM, "out of memory");
+    s->seed = seed;
+    s->dtype = dtype;
+    b->bind = bind_rule;
     b->impl = s;
     return 0;
 }
@@ -202,7 +237,7 @@ void mx_binder_free(mx_binder *b) {
         for (size_t i = 0; i < e->n; i++) free(e->list[i].name);
         free(e->list);
         free(e);
-    } else if (b->bind == bind_st) {
+    } else if (b->bind == bind_st || b->bind == bind_rule) {
         free_st(b->impl);
     }
     b->impl = NULL;

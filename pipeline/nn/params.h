@@ -42,6 +42,10 @@ int mx_binder_wf(mx_binder *b, const struct mx_weightfile *wf, const char *prefi
  * is copied into an owned 64-byte aligned buffer (F32/F16/BF16 kept as is, F64 narrowed to
  * F32), so the binder must outlive the network; the file may be closed after loading. */
 int mx_binder_st(mx_binder *b, const struct mx_safetensors *f, const char *prefix, mx_status *st);
+/* Generates each bound tensor by the golden-v1 rule (weights/golden_rule.h) with `seed` into
+ * an owned buffer, stored as MX_F32 or MX_F16 (`dtype`): the SD1.5-size networks without a
+ * weight file (tests, benchmarks). Names are used without prefix. */
+int mx_binder_rule(mx_binder *b, uint64_t seed, mx_dtype dtype, mx_status *st);
 /* Records (name, ndim, shape) of every bind call, binds nothing (out->data = NULL). */
 int mx_binder_enum(mx_binder *b, mx_status *st);
 void mx_binder_free(mx_binder *b);

@@ -47,6 +47,10 @@ const mx_unet_config *mx_unet_cfg(const mx_unet *u);
 int mx_unet_num_residuals(const mx_unet_config *cfg);
 void mx_unet_residual_shape(const mx_unet_config *cfg, int i, int H, int W, int *C, int *h, int *w);
 
+/* Checks batch, latent size and context length against a UNet/ControlNet config (latent a
+ * multiple of 2^(levels-1), sizes within int range); the message says what is wrong. */
+int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, mx_status *st);
+
 /* Arena bytes a forward with these sizes needs (dry run). */
 int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st);
 /* out: [B, out_channels, H, W] (caller's buffer). Fails with a message on bad sizes or when

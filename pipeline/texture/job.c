@@ -44,7 +44,7 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
         return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
     mx_uvatlas_opts ao = mx_uvatlas_defaults();
     ao.texture_size = j->o->tex_size;
-    if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return mx_fail_prefix(st, "%s: UV atlas", j->o->mesh_path);
+    if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
     j->atlas_built = 1;
     /* one atlas for the whole mesh: every face renders and exports with material 0 */
     free(m->face_mat);

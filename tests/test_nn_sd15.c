@@ -1,0 +1,198 @@
+/* SD1.5-size networks (weights by the golden-v1 rule, generated in memory) against
+ * ../shared/golden/sd15_{unet,controlnet,vae}: runs only with MATEX_FULL=1 (minutes, GBs). */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/unet.h"
+#include "../pipeline/nn/vae.h"
+#include "../runtime/log.h"
+#include "nn_golden.h"
+
+static int with_arena(mx_arena *a, size_t bytes) {
+    mx_status st;
+    if (mx_arena_create(a, bytes, &st)) return fprintf(stderr, "%s\n", st.msg), -1;
+    return 0;
+}
+
+static void compare(const mx_safetensors *out, const char *label, const char *name, const float *got) {
+    size_t n;
+    char l[192];
+    float *want = golden_f32(out, name, &n);
+    CHECK(want != NULL);
+    snprintf(l, sizeof l, "%s %s", label, name);
+    if (want) mx_check_close(l, got, want, n, 1e-4);
+    free(want);
+}
+
+static void sd15_unet(const mx_ctx *c) {
+    mx_status st;
+    mx_unet_config cfg;
+    mx_binder b;
+    mx_unet *u = NULL;
+    mx_safetensors in, out;
+    size_t len, bytes;
+    char *text = golden_text("sd15_unet", "config.json", &len);
+    CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_unet", &st) == 0);
+    free(text);
+    double t0 = mx_now();
+    CHECK(mx_binder_rule(&b, 1, MX_F32, &st) == 0 && mx_unet_load(&u, &cfg, &b, &st) == 0);
+    printf("sd15_unet: weights generated in %.1f s\n", mx_now() - t0);
+    CHECK(golden_open(&in, "sd15_unet", "inputs.safetensors") == 0 && golden_open(&out, "sd15_unet", "outputs.safetensors") == 0);
+    if (!u) return;
+    const mx_st_tensor *ts = mx_st_find(&in, "sample"), *te = mx_st_find(&in, "encoder_hidden_states");
+    float *sample = golden_f32(&in, "sample", NULL), *ehs = golden_f32(&in, "encoder_hidden_states", NULL);
+    float *tsteps = golden_f32(&in, "timestep", NULL);
+    mx_unet_input ui = {sample, tsteps, ehs, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3], (int)te->shape[1],
+                        NULL, NULL};
+    float *got = malloc((size_t)ui.B * cfg.out_channels * ui.H * ui.W * sizeof *got);
+    mx_arena a;
+    CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0 && with_arena(&a, bytes) == 0);
+    printf("sd15_unet: arena %.1f MB\n", bytes / 1e6);
+    int n = mx_unet_num_residuals(&cfg);
+    for (int s = -1; s < 2; s++) {
+        float *res[MX_UNET_MAX_RES + 1] = {0};
+        char name[64];
+        if (s >= 0) {
+            for (int i = 0; i <= n; i++) {
+                char rn[96];
+                if (i < n) snprintf(rn, sizeof rn, "residual.scale%d.down_block_res_sample.%d", s, i);
+                else snprintf(rn, sizeof rn, "residual.scale%d.mid_block_res_sample", s);
+                res[i] = golden_f32(&in, rn, NULL);
+            }
+            ui.down_residuals = (const float *const *)res;
+            ui.mid_residual = res[n];
+            snprintf(name, sizeof name, "out_controlnet_scale%d", s);
+        } else {
+            snprintf(name, sizeof name, "out_plain");
+        }
+        t0 = mx_now();
+        CHECK(mx_unet_forward(c, u, &ui, got, &a, &st) == 0);
+        printf("sd15_unet %s: %.2f s\n", name, mx_now() - t0);
+        compare(&out, "sd15_unet", name, got);
+        for (int i = 0; i <= n; i++) free(res[i]);
+    }
+    mx_arena_destroy(&a);
+    free(got);
+    free(sample);
+    free(ehs);
+    free(tsteps);
+    mx_st_close(&in);
+    mx_st_close(&out);
+    mx_unet_free(u);
+    mx_binder_free(&b);
+}
+
+static void sd15_controlnet(const mx_ctx *c) {
+    mx_status st;
+    mx_unet_config cfg;
+    mx_binder b;
+    mx_controlnet *m = NULL;
+    mx_safetensors in, out;
+    size_t len, bytes;
+    char *text = golden_text("sd15_controlnet", "config.json", &len);
+    CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_controlnet", &st) == 0);
+    free(text);
+    CHECK(mx_binder_rule(&b, 2, MX_F32, &st) == 0 && mx_controlnet_load(&m, &cfg, &b, &st) == 0);
+    CHECK(golden_open(&in, "sd15_controlnet", "inputs.safetensors") == 0 &&
+          golden_open(&out, "sd15_controlnet", "outputs.safetensors") == 0);
+    if (!m) return;
+    const mx_st_tensor *ts = mx_st_find(&in, "sample"), *te = mx_st_find(&in, "encoder_hidden_states");
+    float *sample = golden_f32(&in, "sample", NULL), *ehs = golden_f32(&in, "encoder_hidden_states", NULL);
+    float *tsteps = golden_f32(&in, "timestep", NULL), *cond = golden_f32(&in, "controlnet_cond", NULL);
+    mx_controlnet_input ci = {sample, tsteps, ehs, cond, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3],
+                              (int)te->shape[1], 1.0f};
+    int n = mx_unet_num_residuals(&cfg), C, h, w;
+    float *res[MX_UNET_MAX_RES + 1];
+    for (int i = 0; i <= n; i++) {
+        mx_unet_residual_shape(&cfg, i, ci.H, ci.W, &C, &h, &w);
+        res[i] = malloc((size_t)ci.B * C * h * w * sizeof(float));
+    }
+    mx_arena a;
+    CHECK(mx_controlnet_arena_bytes(m, ci.B, ci.H, ci.W, ci.T, &bytes, &st) == 0 && with_arena(&a, bytes) == 0);
+    const float scales[2] = {1.0f, 0.5f};
+    for (int s = 0; s < 2; s++) {
+        ci.scale = scales[s];
+        double t0 = mx_now();
+        CHECK(mx_controlnet_forward(c, m, &ci, res, res[n], 0, &a, &st) == 0);
+        printf("sd15_controlnet scale %g: %.2f s\n", scales[s], mx_now() - t0);
+        for (int i = 0; i <= n; i++) {
+            char name[96];
+            if (i < n) snprintf(name, sizeof name, "scale%d.down_block_res_sample.%d", s, i);
+            else snprintf(name, sizeof name, "scale%d.mid_block_res_sample", s);
+            compare(&out, "sd15_controlnet", name, res[i]);
+        }
+    }
+    mx_arena_destroy(&a);
+    for (int i = 0; i <= n; i++) free(res[i]);
+    free(sample);
+    free(ehs);
+    free(tsteps);
+    free(cond);
+    mx_st_close(&in);
+    mx_st_close(&out);
+    mx_controlnet_free(m);
+    mx_binder_free(&b);
+}
+
+static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
+    mx_status st;
+    mx_vae_config cfg;
+    mx_binder b;
+    mx_vae *v = NULL;
+    mx_safetensors in, out;
+    size_t len, bytes;
+    char *text = golden_text("sd15_vae", "config.json", &len);
+    CHECK(text && mx_vae_config_parse(&cfg, text, len, "sd15_vae", &st) == 0);
+    free(text);
+    CHECK(mx_binder_rule(&b, 1, dt, &st) == 0 && mx_vae_load(&v, &cfg, &b, &st) == 0);
+    CHECK(golden_open(&in, "sd15_vae", "inputs.safetensors") == 0 && golden_open(&out, "sd15_vae", outfile) == 0);
+    if (!v) return;
+    const mx_st_tensor *ti = mx_st_find(&in, "image");
+    float *img = golden_f32(&in, "image", NULL), *lat = golden_f32(&in, "latents", NULL);
+    int B = (int)ti->shape[0], H = (int)ti->shape[2], W = (int)ti->shape[3], f = mx_vae_factor(v);
+    size_t nl = (size_t)B * cfg.latent_channels * (H / f) * (W / f), ni = (size_t)B * cfg.out_channels * H * W;
+    float *mean = malloc(nl * sizeof(float)), *logvar = malloc(nl * sizeof(float)), *dec = malloc(ni * sizeof(float));
+    mx_arena a;
+    size_t b2;
+    CHECK(mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st) == 0 && mx_vae_decode_arena_bytes(v, B, H / f, W / f, &b2, &st) == 0);
+    CHECK(with_arena(&a, bytes > b2 ? bytes : b2) == 0);
+    double t0 = mx_now();
+    CHECK(mx_vae_encode(c, v, img, B, H, W, mean, logvar, &a, &st) == 0);
+    printf("sd15_vae encode: %.2f s\n", mx_now() - t0);
+    compare(&out, outfile, "encode.mean", mean);
+    compare(&out, outfile, "encode.logvar", logvar);
+    t0 = mx_now();
+    CHECK(mx_vae_decode(c, v, lat, B, H / f, W / f, dec, &a, &st) == 0);
+    printf("sd15_vae decode: %.2f s\n", mx_now() - t0);
+    compare(&out, outfile, "decode", dec);
+    CHECK(mx_vae_decode(c, v, mean, B, H / f, W / f, dec, &a, &st) == 0);
+    compare(&out, outfile, "decode_of_encode_mean", dec);
+    mx_arena_destroy(&a);
+    free(mean);
+    free(logvar);
+    free(dec);
+    free(img);
+    free(lat);
+    mx_st_close(&in);
+    mx_st_close(&out);
+    mx_vae_free(v);
+    mx_binder_free(&b);
+}
+
+int main(void) {
+    const char *full = getenv("MATEX_FULL");
+    if (!full || strcmp(full, "1")) {
+        printf("test_nn_sd15: SD1.5-size parity runs only with MATEX_FULL=1\n");
+        return 0;
+    }
+    mx_ctx c;
+    if (golden_ctx(&c)) return 1;
+    sd15_vae(&c, MX_F32, "outputs.safetensors");
+    sd15_vae(&c, MX_F16, "outputs_fp16w.safetensors");
+    sd15_controlnet(&c);
+    sd15_unet(&c);
+    mx_ctx_destroy(&c);
+    return mx_test_finish("test_nn_sd15");
+}

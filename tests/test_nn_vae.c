@@ -1,0 +1,162 @@
+/* AutoencoderKL against the golden vectors of vae_tiny and vae_mini (fp32 and fp16 weights):
+ * encode -> moments, mean, logvar, std, sample (with the stored noise); decode(latents);
+ * decode(encode mean). Plus a non-square image and batch independence. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/vae.h"
+#include "nn_golden.h"
+
+typedef struct vae_case {
+    mx_vae *v;
+    mx_binder b;
+    mx_safetensors wf;
+    mx_vae_config cfg;
+} vae_case;
+
+static int load_vae(vae_case *k, const char *net, const char *wfile) {
+    mx_status st;
+    size_t len;
+    memset(k, 0, sizeof *k);
+    char *cfg = golden_text(net, "config.json", &len);
+    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
+    int rc = mx_vae_config_parse(&k->cfg, cfg, len, net, &st);
+    free(cfg);
+    if (rc || golden_open(&k->wf, net, wfile) || mx_binder_st(&k->b, &k->wf, "", &st) ||
+        mx_vae_load(&k->v, &k->cfg, &k->b, &st)) {
+        fprintf(stderr, "%s: %s\n", net, st.msg);
+        return -1;
+    }
+    return 0;
+}
+
+static void free_vae(vae_case *k) {
+    mx_vae_free(k->v);
+    mx_binder_free(&k->b);
+    mx_st_close(&k->wf);
+}
+
+static int encode(const mx_ctx *c, const mx_vae *v, const float *img, int B, int H, int W, float *mean, float *logvar) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st) || mx_arena_create(&a, bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    int rc = mx_vae_encode(c, v, img, B, H, W, mean, logvar, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+static int decode(const mx_ctx *c, const mx_vae *v, const float *lat, int B, int h, int w, float *img) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, &st) || mx_arena_create(&a, bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    int rc = mx_vae_decode(c, v, lat, B, h, w, img, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+static void compare(const mx_safetensors *out, const char *net, const char *outfile, const char *name, const float *got) {
+    size_t n;
+    char label[160];
+    float *want = golden_f32(out, name, &n);
+    CHECK(want != NULL);
+    snprintf(label, sizeof label, "%s %s %s", net, outfile, name);
+    if (want) mx_check_close(label, got, want, n, 1e-4);
+    free(want);
+}
+
+static void check_golden(const mx_ctx *c, const char *net, const char *wfile, const char *outfile) {
+    vae_case k;
+    mx_safetensors in, out;
+    CHECK(load_vae(&k, net, wfile) == 0);
+    CHECK(golden_open(&in, net, "inputs.safetensors") == 0);
+    CHECK(golden_open(&out, net, outfile) == 0);
+    if (!k.v) return;
+    float *img = golden_f32(&in, "image", NULL), *noise = golden_f32(&in, "sample_noise", NULL);
+    float *lat = golden_f32(&in, "latents", NULL);
+    const mx_st_tensor *ti = mx_st_find(&in, "image");
+    CHECK(img && noise && lat && ti);
+    if (!img || !noise || !lat || !ti) return;
+    int B = (int)ti->shape[0], H = (int)ti->shape[2], W = (int)ti->shape[3], f = mx_vae_factor(k.v);
+    int lc = k.cfg.latent_channels, h = H / f, w = W / f;
+    size_t nl = (size_t)B * lc * h * w, ni = (size_t)B * k.cfg.out_channels * H * W, per = nl / (size_t)B;
+    float *mean = malloc(nl * sizeof(float)), *logvar = malloc(nl * sizeof(float)), *tmp = malloc(2 * nl * sizeof(float));
+    float *dec = malloc(ni * sizeof(float));
+    CHECK(encode(c, k.v, img, B, H, W, mean, logvar) == 0);
+    compare(&out, net, outfile, "encode.mean", mean);
+    compare(&out, net, outfile, "encode.logvar", logvar);
+    for (int b = 0; b < B; b++) { /* moments = [mean | logvar] per item (no clamping at these values) */
+        memcpy(tmp + (size_t)b * 2 * per, mean + (size_t)b * per, per * sizeof(float));
+        memcpy(tmp + (size_t)b * 2 * per + per, logvar + (size_t)b * per, per * sizeof(float));
+    }
+    compare(&out, net, outfile, "encode.moments", tmp);
+    for (size_t i = 0; i < nl; i++) tmp[i] = expf(0.5f * logvar[i]);
+    compare(&out, net, outfile, "encode.std", tmp);
+    for (size_t i = 0; i < nl; i++) tmp[i] = mean[i] + tmp[i] * noise[i];
+    compare(&out, net, outfile, "encode.sample", tmp);
+    CHECK(decode(c, k.v, lat, B, h, w, dec) == 0);
+    compare(&out, net, outfile, "decode", dec);
+    CHECK(decode(c, k.v, mean, B, h, w, dec) == 0);
+    compare(&out, net, outfile, "decode_of_encode_mean", dec);
+    free(mean);
+    free(logvar);
+    free(tmp);
+    free(dec);
+    free(img);
+    free(noise);
+    free(lat);
+    mx_st_close(&in);
+    mx_st_close(&out);
+    free_vae(&k);
+}
+
+/* Non-square: item 1 of a batch of 2 (image 32×64) equals that item alone, for encode and decode. */
+static void check_batch_independence(const mx_ctx *c) {
+    vae_case k;
+    CHECK(load_vae(&k, "vae_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    if (!k.v) return;
+    int f = mx_vae_factor(k.v), H = 4 * f, W = 8 * f, lc = k.cfg.latent_channels;
+    size_t ni = (size_t)k.cfg.in_channels * H * W, nl = (size_t)lc * (H / f) * (W / f);
+    size_t no = (size_t)k.cfg.out_channels * H * W;
+    float *img = malloc(2 * ni * sizeof(float)), *m2 = malloc(2 * nl * sizeof(float)), *m1 = malloc(nl * sizeof(float));
+    float *d2 = malloc(2 * no * sizeof(float)), *d1 = malloc(no * sizeof(float));
+    mx_fill_random(img, 2 * ni, 21, -1.0f, 1.0f);
+    CHECK(encode(c, k.v, img, 2, H, W, m2, NULL) == 0);
+    CHECK(encode(c, k.v, img + ni, 1, H, W, m1, NULL) == 0);
+    mx_check_close("vae_tiny 32x64 encode: item 1 vs alone", m1, m2 + nl, nl, 1e-6);
+    CHECK(decode(c, k.v, m2, 2, H / f, W / f, d2) == 0);
+    CHECK(decode(c, k.v, m2 + nl, 1, H / f, W / f, d1) == 0);
+    mx_check_close("vae_tiny 32x64 decode: item 1 vs alone", d1, d2 + no, no, 1e-6);
+    mx_status st;
+    size_t bytes;
+    CHECK(mx_vae_encode_arena_bytes(k.v, 1, H + 1, W, &bytes, &st) == -1 && strstr(st.msg, "multiples"));
+    free(img);
+    free(m2);
+    free(m1);
+    free(d2);
+    free(d1);
+    free_vae(&k);
+}
+
+int main(void) {
+    mx_ctx c;
+    if (golden_ctx(&c)) return 1;
+    check_golden(&c, "vae_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+    check_golden(&c, "vae_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
+    check_golden(&c, "vae_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+    check_golden(&c, "vae_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
+    check_batch_independence(&c);
+    mx_ctx_destroy(&c);
+    return mx_test_finish("test_nn_vae");
+}
