@@ -167,6 +167,35 @@ static void test_large_budget(const char *weights, const char *tmp) {
     }
 }
 
+/* enhance: a textured mesh goes through SDEdit over views; a mesh without UVs is refused. */
+static void test_enhance(const char *weights, const char *tmp) {
+    char mesh[1024], out[1024];
+    snprintf(mesh, sizeof mesh, "%s/assets/bob/bob_tri.obj", mx_shared_dir());
+    snprintf(out, sizeof out, "%s/enhance", tmp);
+    mx_texture_opts o;
+    small_opts(&o, mesh, weights, out);
+    o.views = 4;
+    o.strength = 0.6f;
+    mx_texture_result r;
+    mx_status st;
+    mx_status_clear(&st);
+    int rc = mx_enhance_run(&o, &r, &st);
+    if (rc) printf("enhance failed: %s\n", st.msg);
+    CHECK(rc == 0);
+    if (rc == 0) {
+        double cov = check_outputs(out, 10688);
+        printf("enhance bob: views %d coverage %.4f\n", r.views, cov);
+        CHECK(r.views == 4);
+    }
+    snprintf(mesh, sizeof mesh, "%s/assets/spot_ply/spot.ply", mx_shared_dir());
+    snprintf(out, sizeof out, "%s/enhance_bad", tmp);
+    small_opts(&o, mesh, weights, out);
+    mx_status_clear(&st);
+    CHECK(mx_enhance_run(&o, &r, &st) != 0);
+    printf("enhance of a mesh without UVs: %s\n", st.msg);
+    CHECK(strstr(st.msg, "no UVs") != NULL);
+}
+
 static int files_equal(const char *a, const char *b) {
     size_t la, lb;
     char *x = read_file(a, &la), *y = read_file(b, &lb);
@@ -256,6 +285,7 @@ int main(void) {
     test_thread_determinism(weights, tmp);
     test_all_assets(weights, tmp);
     test_large_budget(weights, tmp);
+    test_enhance(weights, tmp);
     char cmd[256];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
     if (mx_test_failures == 0 && system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);

@@ -16,23 +16,18 @@
 #define FACES_PER_CHUNK 4096
 #define ROWS_PER_TASK 16
 
-/* A face as drawn: corners ordered so that the snapped area is positive (inside: w > 0),
- * its pixel bounding box, and whether it is a back face. x0 > x1 when not drawn. */
+/* A face as drawn, with everything drawing and resolving need (so that those passes read
+ * one record per face instead of gathering vertices from all over memory): corners ordered
+ * so that the snapped area is positive (inside: w > 0), their snapped positions (within
+ * the guard band, so they fit in 32 bits) and depths, the pixel bounding box, and whether
+ * it is a back face. x0 > x1 when the face is not drawn. Tiles get copies in their bins. */
 typedef struct face_setup {
-    int32_t v[3];
+    int32_t face;
+    int32_t x[3], y[3];
+    float z[3]; /* depth (perspective: inverse depth) */
     int16_t x0, y0, x1, y1;
     uint8_t swapped, back;
 } face_setup;
-
-/* A binned face with everything drawing needs, so that a tile reads its faces in order
- * from one array instead of gathering setups and vertices from all over memory. */
-typedef struct bin_tri {
-    int32_t face;
-    int32_t x[3], y[3]; /* snapped corners (within the guard band, so they fit) */
-    float z[3];         /* depth (perspective: inverse depth) */
-    int16_t x0, y0, x1, y1;
-    uint8_t back;
-} bin_tri;
 
 typedef struct raster_scratch {
     size_t vert_cap, face_cap, count_cap, bin_cap, tile_cap;
@@ -43,7 +38,7 @@ typedef struct raster_scratch {
     float *fnormal;     /* [nfaces][3] unit geometric normals of drawn faces */
     int32_t *counts;    /* [nchunks][ntiles] */
     int32_t *bin_start; /* [ntiles + 1] */
-    bin_tri *bins;      /* [total] faces per tile, ascending face id */
+    face_setup *bins;   /* [total] faces per tile, ascending face id */
 } raster_scratch;
 
 int mx_gbuffer_init(mx_gbuffer *gb, int w, int h, mx_status *st) {
@@ -156,11 +151,15 @@ static void setup_face(const raster_job *j, int f, face_setup *fs) {
     pixel_range(min3(a[1], b[1], c[1]), max3(a[1], b[1], c[1]), j->gb->h, &y0, &y1);
     if (x0 > x1 || y0 > y1) return;
     /* make the area positive: swap corners 1 and 2 of front faces */
+    fs->face = f;
     fs->swapped = area < 0;
     fs->back = area > 0 && (j->flags & MX_RASTER_CULL_BACK);
-    fs->v[0] = fv[0];
-    fs->v[1] = fs->swapped ? fv[2] : fv[1];
-    fs->v[2] = fs->swapped ? fv[1] : fv[2];
+    int32_t v[3] = {fv[0], fs->swapped ? fv[2] : fv[1], fs->swapped ? fv[1] : fv[2]};
+    for (int k = 0; k < 3; k++) {
+        fs->x[k] = (int32_t)s->vxy[2 * (size_t)v[k]];
+        fs->y[k] = (int32_t)s->vxy[2 * (size_t)v[k] + 1];
+        fs->z[k] = s->vz[v[k]];
+    }
     fs->x0 = (int16_t)x0;
     fs->y0 = (int16_t)y0;
     fs->x1 = (int16_t)x1;
@@ -219,34 +218,23 @@ static int64_t prefix_bins(raster_job *j) {
 static void fill_bins_task(void *ctx, int task, int thread) {
     (void)thread;
     raster_job *j = ctx;
-    raster_scratch *s = j->s;
-    int ntiles = j->tiles_x * j->tiles_y;
-    int32_t *off = s->counts + (size_t)task * ntiles;
+    const face_setup *faces = j->s->faces;
+    face_setup *bins = j->s->bins;
+    int ntiles = j->tiles_x * j->tiles_y, tiles_x = j->tiles_x;
+    int32_t *off = j->s->counts + (size_t)task * ntiles;
     int f0 = task * FACES_PER_CHUNK, f1 = f0 + FACES_PER_CHUNK;
     if (f1 > j->m->nfaces) f1 = j->m->nfaces;
     for (int f = f0; f < f1; f++) {
-        const face_setup *fs = s->faces + f;
+        const face_setup *fs = faces + f;
         if (fs->x0 > fs->x1) continue;
-        bin_tri bt;
-        bt.face = f;
-        for (int k = 0; k < 3; k++) {
-            bt.x[k] = (int32_t)s->vxy[2 * (size_t)fs->v[k]];
-            bt.y[k] = (int32_t)s->vxy[2 * (size_t)fs->v[k] + 1];
-            bt.z[k] = s->vz[fs->v[k]];
-        }
-        bt.x0 = fs->x0;
-        bt.y0 = fs->y0;
-        bt.x1 = fs->x1;
-        bt.y1 = fs->y1;
-        bt.back = fs->back;
         for (int ty = fs->y0 / TILE; ty <= fs->y1 / TILE; ty++)
-            for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) s->bins[off[ty * j->tiles_x + tx]++] = bt;
+            for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) bins[off[ty * tiles_x + tx]++] = *fs;
     }
 }
 
 /* Draws one face into the pixels of the tile [tx0, tx1] x [ty0, ty1]: depth test, then
  * face id and depth (back faces of a culled pass only reach depth_unculled). */
-static void draw_face(const raster_job *j, const bin_tri *t, int tx0, int ty0, int tx1, int ty1) {
+static void draw_face(const raster_job *j, const face_setup *t, int tx0, int ty0, int tx1, int ty1) {
     mx_gbuffer *gb = j->gb;
     int x0 = t->x0 > tx0 ? t->x0 : tx0, y0 = t->y0 > ty0 ? t->y0 : ty0;
     int x1 = t->x1 < tx1 ? t->x1 : tx1, y1 = t->y1 < ty1 ? t->y1 : ty1;
@@ -316,21 +304,18 @@ static void draw_tile_task(void *ctx, int task, int thread) {
 /* Barycentrics (perspective-correct) of pixel i for its face, in the face's corner order,
  * from the snapped corners: the same numbers the coverage test used. */
 static void resolve_bary(const raster_job *j, size_t i, int f) {
-    const raster_scratch *s = j->s;
-    const face_setup *fs = s->faces + f;
+    const face_setup *fs = j->s->faces + f;
     mx_gbuffer *gb = j->gb;
     int64_t px = (int64_t)(i % (size_t)gb->w) * SUBPIX + SUBPIX / 2;
     int64_t py = (int64_t)(i / (size_t)gb->w) * SUBPIX + SUBPIX / 2;
-    const int64_t *a = s->vxy + 2 * (size_t)fs->v[0], *b = s->vxy + 2 * (size_t)fs->v[1],
-                  *c = s->vxy + 2 * (size_t)fs->v[2];
-    double w1 = (double)edge_fn(c[0], c[1], a[0], a[1], px, py);
-    double w2 = (double)edge_fn(a[0], a[1], b[0], b[1], px, py);
-    double w0 = (double)edge_fn(b[0], b[1], c[0], c[1], px, py);
+    double w1 = (double)edge_fn(fs->x[2], fs->y[2], fs->x[0], fs->y[0], px, py);
+    double w2 = (double)edge_fn(fs->x[0], fs->y[0], fs->x[1], fs->y[1], px, py);
+    double w0 = (double)edge_fn(fs->x[1], fs->y[1], fs->x[2], fs->y[2], px, py);
     double sum = w0 + w1 + w2;
     double b1 = w1 / sum, b2 = w2 / sum;
     if (!j->cam->ortho) {
         /* weights of 1/z, renormalised */
-        double q0 = (1 - b1 - b2) * s->vz[fs->v[0]], q1 = b1 * s->vz[fs->v[1]], q2 = b2 * s->vz[fs->v[2]];
+        double q0 = (1 - b1 - b2) * fs->z[0], q1 = b1 * fs->z[1], q2 = b2 * fs->z[2];
         double q = q0 + q1 + q2;
         b1 = q1 / q;
         b2 = q2 / q;
