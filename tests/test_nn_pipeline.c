@@ -82,7 +82,7 @@ static void check_embeddings(const nets *n, const mx_ctx *c, const mx_safetensor
     const char *ids_name[2] = {"prompt_ids", "negative_prompt_ids"};
     const char *emb_name[2] = {"prompt_embeds", "negative_prompt_embeds"};
     for (int k = 0; k < 2; k++) {
-        size_t nid, nemb;
+        size_t nid = 0, nemb = 0;
         float *fid = golden_f32(in, ids_name[k], &nid), *want = golden_f32(out, emb_name[k], &nemb);
         float *got = malloc(sizeof(float) * (nemb ? nemb : 1));
         int32_t ids[77];

@@ -32,7 +32,7 @@ static void sd15_unet(const mx_ctx *c) {
     mx_binder b;
     mx_unet *u = NULL;
     mx_safetensors in, out;
-    size_t len, bytes;
+    size_t len, bytes = 0;
     char *text = golden_text("sd15_unet", "config.json", &len);
     CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_unet", &st) == 0);
     free(text);
@@ -42,6 +42,8 @@ static void sd15_unet(const mx_ctx *c) {
     CHECK(golden_open(&in, "sd15_unet", "inputs.safetensors") == 0 && golden_open(&out, "sd15_unet", "outputs.safetensors") == 0);
     if (!u) return;
     const mx_st_tensor *ts = mx_st_find(&in, "sample"), *te = mx_st_find(&in, "encoder_hidden_states");
+    CHECK(ts && te);
+    if (!ts || !te) return;
     float *sample = golden_f32(&in, "sample", NULL), *ehs = golden_f32(&in, "encoder_hidden_states", NULL);
     float *tsteps = golden_f32(&in, "timestep", NULL);
     mx_unet_input ui = {sample, tsteps, ehs, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3], (int)te->shape[1],
@@ -90,7 +92,7 @@ static void sd15_controlnet(const mx_ctx *c) {
     mx_binder b;
     mx_controlnet *m = NULL;
     mx_safetensors in, out;
-    size_t len, bytes;
+    size_t len, bytes = 0;
     char *text = golden_text("sd15_controlnet", "config.json", &len);
     CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_controlnet", &st) == 0);
     free(text);
@@ -99,6 +101,8 @@ static void sd15_controlnet(const mx_ctx *c) {
           golden_open(&out, "sd15_controlnet", "outputs.safetensors") == 0);
     if (!m) return;
     const mx_st_tensor *ts = mx_st_find(&in, "sample"), *te = mx_st_find(&in, "encoder_hidden_states");
+    CHECK(ts && te);
+    if (!ts || !te) return;
     float *sample = golden_f32(&in, "sample", NULL), *ehs = golden_f32(&in, "encoder_hidden_states", NULL);
     float *tsteps = golden_f32(&in, "timestep", NULL), *cond = golden_f32(&in, "controlnet_cond", NULL);
     mx_controlnet_input ci = {sample, tsteps, ehs, cond, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3],
@@ -142,7 +146,7 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     mx_binder b;
     mx_vae *v = NULL;
     mx_safetensors in, out;
-    size_t len, bytes;
+    size_t len, bytes = 0;
     char *text = golden_text("sd15_vae", "config.json", &len);
     CHECK(text && mx_vae_config_parse(&cfg, text, len, "sd15_vae", &st) == 0);
     free(text);
@@ -150,12 +154,14 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     CHECK(golden_open(&in, "sd15_vae", "inputs.safetensors") == 0 && golden_open(&out, "sd15_vae", outfile) == 0);
     if (!v) return;
     const mx_st_tensor *ti = mx_st_find(&in, "image");
+    CHECK(ti != NULL);
+    if (!ti) return;
     float *img = golden_f32(&in, "image", NULL), *lat = golden_f32(&in, "latents", NULL);
     int B = (int)ti->shape[0], H = (int)ti->shape[2], W = (int)ti->shape[3], f = mx_vae_factor(v);
     size_t nl = (size_t)B * cfg.latent_channels * (H / f) * (W / f), ni = (size_t)B * cfg.out_channels * H * W;
     float *mean = malloc(nl * sizeof(float)), *logvar = malloc(nl * sizeof(float)), *dec = malloc(ni * sizeof(float));
     mx_arena a;
-    size_t b2;
+    size_t b2 = 0;
     CHECK(mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st) == 0 && mx_vae_decode_arena_bytes(v, B, H / f, W / f, &b2, &st) == 0);
     CHECK(with_arena(&a, bytes > b2 ? bytes : b2) == 0);
     double t0 = mx_now();

@@ -151,6 +151,52 @@ static void check_batch_independence(const mx_ctx *c) {
     free_unet(&k);
 }
 
+/* use_linear_projection: a linear proj_in/proj_out with the 1×1 conv weights (same memory
+ * layout, [C, C] vs [C, C, 1, 1]) must give the conv model's output. The wrapper binder
+ * serves the linear shapes from the conv tensors. */
+typedef struct linear_view {
+    mx_binder *inner;
+} linear_view;
+
+static int bind_linear_view(mx_binder *b, const char *name, int ndim, const int64_t *shape, mx_wptr *out,
+                            mx_status *st) {
+    linear_view *lv = b->impl;
+    size_t n = strlen(name);
+    int proj = ndim == 2 && n > 14 && (!strcmp(name + n - 14, "proj_in.weight") || !strcmp(name + n - 15, "proj_out.weight"));
+    if (!proj) return lv->inner->bind(lv->inner, name, ndim, shape, out, st);
+    int64_t conv_shape[4] = {shape[0], shape[1], 1, 1};
+    return lv->inner->bind(lv->inner, name, 4, conv_shape, out, st);
+}
+
+static void check_linear_projection(const mx_ctx *c) {
+    unet_case k;
+    mx_status st;
+    CHECK(load_unet(&k, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    if (!k.u) return;
+    mx_unet_config lcfg = k.cfg;
+    lcfg.use_linear_projection = 1;
+    linear_view lv = {&k.b};
+    mx_binder view = {bind_linear_view, &lv, "", 0};
+    mx_unet *ul = NULL;
+    CHECK(mx_unet_load(&ul, &lcfg, &view, &st) == 0);
+    int H = 8, W = 8, T = 7, C = k.cfg.in_channels;
+    size_t ns = (size_t)C * H * W, ne = (size_t)T * k.cfg.cross_attention_dim, no = (size_t)k.cfg.out_channels * H * W;
+    float *sample = malloc(ns * sizeof(float)), *ehs = malloc(ne * sizeof(float));
+    float *o1 = malloc(no * sizeof(float)), *o2 = malloc(no * sizeof(float)), ts[1] = {500.0f};
+    mx_fill_random(sample, ns, 31, -1.0f, 1.0f);
+    mx_fill_random(ehs, ne, 32, -1.0f, 1.0f);
+    mx_unet_input in = {sample, ts, ehs, 1, H, W, T, NULL, NULL};
+    CHECK(run_unet(c, k.u, &in, o1) == 0);
+    if (ul) CHECK(run_unet(c, ul, &in, o2) == 0);
+    if (ul) mx_check_close("unet_tiny linear projection vs 1x1 conv", o2, o1, no, 1e-5);
+    mx_unet_free(ul);
+    free(sample);
+    free(ehs);
+    free(o1);
+    free(o2);
+    free_unet(&k);
+}
+
 int main(void) {
     mx_ctx c;
     if (golden_ctx(&c)) return 1;
@@ -159,6 +205,7 @@ int main(void) {
     check_golden(&c, "unet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors", 1);
     check_golden(&c, "unet_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors", 0);
     check_batch_independence(&c);
+    check_linear_projection(&c);
     mx_ctx_destroy(&c);
     return mx_test_finish("test_nn_unet");
 }

@@ -1,7 +1,8 @@
 /* Geometry benchmark: on the largest shared mesh (koala, 100k faces; UVs from the atlas),
  * the time of one 1024^2 view (rasterize culled with the unculled depth, masks, backproject), and of the
  * view-selection loop: 40 candidates (cached at 256^2), front + back + 4 picked views, each
- * baked at 1024^2. 2 threads. Usage: bench_geom [MESH] [THREADS]. */
+ * baked at 1024^2. 2 threads. Usage: bench_geom [MESH] [THREADS]; the mesh defaults to
+ * $MATEX_SHARED/assets/koala/koala.obj (../shared without the variable). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -26,7 +27,10 @@ static int bake_view(mx_bake *bake, mx_view_buffers *vb, const mx_mesh *m, const
 }
 
 int main(int argc, char **argv) {
-    const char *path = argc > 1 ? argv[1] : "../shared/assets/koala/koala.obj";
+    char koala[2048];
+    const char *shared = getenv("MATEX_SHARED");
+    snprintf(koala, sizeof koala, "%s/assets/koala/koala.obj", shared ? shared : "../shared");
+    const char *path = argc > 1 ? argv[1] : koala;
     int threads = argc > 2 ? atoi(argv[2]) : 2;
     mx_status st;
     mx_mesh m = {0};

@@ -17,18 +17,22 @@ static int min_int(int a, int b) { return a < b ? a : b; }
 static int max_int(int a, int b) { return a > b ? a : b; }
 static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 
-/* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]. */
+#define WIDEN_ROWS 8
+
+/* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
+ * weights are widened WIDEN_ROWS rows at a time first. */
 static void pack_rows(const mx_gemm_kernel *g, float *dst, mx_wptr src, size_t ld, int first, int valid,
                       int width, int k0, int kc) {
-    float tmp[KC_MAX];
-    for (int i = 0; i < valid; i++) {
-        size_t off = (size_t)(first + i) * ld + (size_t)k0;
-        const float *row = tmp;
-        if (src.dtype == MX_F32)
-            row = (const float *)src.data + off;
-        else
-            g->widen(tmp, src, off, (size_t)kc);
-        for (int k = 0; k < kc; k++) dst[(size_t)k * width + i] = row[k];
+    size_t base = (size_t)first * ld + (size_t)k0;
+    if (src.dtype == MX_F32)
+        g->transpose(dst, (size_t)width, (const float *)src.data + base, ld, valid, kc);
+    else {
+        float tmp[WIDEN_ROWS * KC_MAX];
+        for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
+            int n = min_int(WIDEN_ROWS, valid - r0);
+            for (int i = 0; i < n; i++) g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
+            g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);
+        }
     }
     for (int k = 0; k < kc && valid < width; k++)
         memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);

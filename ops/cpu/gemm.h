@@ -19,6 +19,8 @@ typedef struct mx_gemm_kernel {
     void (*micro)(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n, int accumulate);
     /* y[i] = widened x[i] for a weight row (fp32, fp16 or bf16). */
     void (*widen)(float *y, mx_wptr x, size_t offset, size_t n);
+    /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols (the packing transpose). */
+    void (*transpose)(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols);
 } mx_gemm_kernel;
 
 typedef struct mx_gemm_problem mx_gemm_problem;

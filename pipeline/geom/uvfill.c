@@ -16,7 +16,9 @@ static void mark_texel(uint8_t *chart, int w, int h, int x, int y) {
 static void mark_triangle(uint8_t *chart, int w, int h, const float p[3][2]) {
     float minx = fminf(p[0][0], fminf(p[1][0], p[2][0])), maxx = fmaxf(p[0][0], fmaxf(p[1][0], p[2][0]));
     float miny = fminf(p[0][1], fminf(p[1][1], p[2][1])), maxy = fmaxf(p[0][1], fmaxf(p[1][1], p[2][1]));
-    if (!(maxx - minx < 4.0f * w && maxy - miny < 4.0f * h)) return; /* NaN or absurd */
+    /* NaN, absurdly far (int conversion) or absurdly large (loop length): skip */
+    if (!(maxx - minx < 4.0f * w && maxy - miny < 4.0f * h && fabsf(minx) < 1e8f && fabsf(miny) < 1e8f))
+        return;
     double area = (double)(p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) -
                   (double)(p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
     double sgn = area < 0 ? -1.0 : 1.0;
