@@ -11,6 +11,11 @@
  *   [Cout, Cin, kh, kw].
  * - All ops may use ctx->pool for threads and ctx->scratch for temporary memory
  *   (they restore the scratch mark before returning). Results never depend on the thread count.
+ *   Scratch the SIMD kernels take per call: linear/conv2d (min(M, 4096) + min(N, 4096) + 44)
+ *   · min(K, 320) + max(M, N) floats (conv: M = Cout, N = Ho·Wo, K = Cin·kh·kw; at most ~11 MB);
+ *   attention B·H·D·(Tk + 63) + threads·64·(2D + 2) floats; layer norm 2C floats. With less
+ *   (or no) scratch they use the heap, so a small arena costs speed, never correctness.
+ *   32 MiB covers SD1.5 at 512×512 (UNet with CFG batch 2, VAE mid-block attention).
  * - Output buffers must not alias inputs unless an op says "in place".
  */
 #ifndef MX_OPS_H

@@ -125,11 +125,15 @@ static void test_gemm_ops(const levels *lv) {
     test_linear_case(lv, 77, 67, 300, MX_F16, 1);
     test_linear_case(lv, 50, 33, 530, MX_BF16, 0);
     test_linear_case(lv, 130, 100, 17, MX_F32, 0);
+    test_linear_case(lv, 4200, 45, 21, MX_F32, 1); /* crosses the 4096-row outer block */
+    test_linear_case(lv, 3, 4133, 19, MX_F16, 1);  /* crosses the 4096-column outer block */
     test_conv_case(lv, 1, 3, 9, 11, 5, 3, 1, 1, MX_F32);
     test_conv_case(lv, 2, 7, 13, 10, 17, 3, 2, 1, MX_F16);
     test_conv_case(lv, 2, 33, 1, 1, 19, 1, 1, 0, MX_BF16);
     test_conv_case(lv, 1, 40, 17, 19, 13, 3, 1, 1, MX_F32);
     test_conv_case(lv, 1, 9, 6, 7, 70, 1, 1, 0, MX_F32);
+    test_conv_case(lv, 1, 2, 70, 71, 3, 3, 1, 1, MX_F32); /* 4970 pixels: two outer blocks */
+    test_conv_case(lv, 2, 40, 70, 60, 13, 3, 1, 1, MX_F16); /* batch × K blocks × outer blocks */
 }
 
 static void test_attention_case(const levels *lv, int B, int H, int Tq, int Tk, int D, int causal) {
@@ -216,6 +220,24 @@ static void test_unary_case(const levels *lv, const char *op, unary_op fn, size_
     free(x), free(want);
 }
 
+/* GELU of negative inputs is tiny: check the relative error of each value, not only the L2. */
+static void test_gelu_tail(const levels *lv) {
+    enum { N = 4001 };
+    float x[N], want[N];
+    for (int i = 0; i < N; i++) x[i] = -9.0f + 9.0f * (float)i / N;
+    memcpy(want, x, sizeof x);
+    mx_gelu(lv->ref, want, N);
+    mx_gelu(lv->simd, x, N);
+    double worst = 0;
+    for (int i = 0; i < N; i++)
+        if (want[i] != 0) {
+            double e = fabs((double)x[i] - want[i]) / fabs((double)want[i]);
+            worst = e > worst ? e : worst;
+        }
+    printf("%s gelu on [-9, 0): max relative error %.2e (bound 2e-6)\n", lv->isa, worst);
+    CHECK(worst <= 2e-6);
+}
+
 static void test_geglu_case(const levels *lv, int M, int N) {
     size_t n = (size_t)M * N;
     float *x = rnd(2 * n, 61), *y = rnd(n, 62), *want = rnd(n, 63);
@@ -258,6 +280,7 @@ static void test_elementwise_ops(const levels *lv) {
     test_softmax_case(lv, 2, 4099);
     test_unary_case(lv, "gelu", mx_gelu, 100003, 8);
     test_unary_case(lv, "gelu", mx_gelu, 37, 0.5f);
+    test_gelu_tail(lv);
     test_unary_case(lv, "quick_gelu", mx_quick_gelu, 50001, 12);
     test_unary_case(lv, "silu", mx_silu, 70001, 100);
     test_geglu_case(lv, 7, 37);
@@ -316,7 +339,7 @@ static void test_simd_levels(void) {
     for (mx_isa isa = MX_ISA_AVX2; isa <= MX_ISA_AVX512; isa++) {
         const mx_kernels *k = mx_kernels_for(isa);
         if (k->isa != isa) {
-            printf("%s: not supported by this CPU, skipped\n", mx_isa_name(isa));
+            printf("%s: not available (CPU or MATEX_ISA), skipped\n", mx_isa_name(isa));
             continue;
         }
         mx_ctx simd = {pool, k, &scratch};
@@ -337,7 +360,8 @@ static void test_known_layout(const mx_ctx *c) {
     const float x[4] = {0, 1, 2, 3};
     float y[16];
     mx_resize_bilinear(c, y, x, 1, 2, 2, 4, 4, 0);
-    const float want_hp[16] = {0, 0.25f, 0.75f, 1, 0.5f, 0.75f, 1.25f, 1.5f, 1.5f, 1.75f, 2.25f, 2.5f, 2, 2.25f, 2.75f, 3};
+    const float want_hp[16] = {0,    0.25f, 0.75f, 1,     0.5f, 0.75f, 1.25f, 1.5f,
+                               1.5f, 1.75f, 2.25f, 2.5f, 2,    2.25f, 2.75f, 3};
     mx_check_close("known resize_bilinear 2x2->4x4", y, want_hp, 16, 1e-7);
     mx_resize_bilinear(c, y, x, 1, 2, 2, 4, 4, 1);
     const float third = 1.0f / 3, want_ac[16] = {0, third, 2 * third, 1, 2 * third, 1, 4 * third, 5 * third,

@@ -190,7 +190,7 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
 int main(void) {
     const char *full = getenv("MATEX_FULL");
     if (!full || strcmp(full, "1")) {
-        printf("test_nn_sd15: SD1.5-size parity runs only with MATEX_FULL=1\n");
+        printf("test_nn_sd15: SD1.5-size parity runs only with MATEX_FULL=1 (make test-full)\n");
         return 0;
     }
     mx_ctx c;

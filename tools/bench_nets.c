@@ -283,6 +283,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
 
 int main(int argc, char **argv) {
     bench_opts o = {0, 0, 0, DEFAULT_WEIGHTS};
+    setvbuf(stdout, NULL, _IOLBF, 0); /* progress lines show up as they happen */
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];

@@ -373,9 +373,17 @@ int cmd_run_net(int argc, char **argv) {
         usage(stderr);
         return 2;
     }
+    char pfx[80];
+    if (!prefix) prefix = default_prefix(net);
+    if (strlen(prefix) > 64) {
+        fprintf(stderr, "matex run-net: --prefix is too long\n");
+        return 2;
+    }
+    /* "controlnet_depth" and "controlnet_depth." name the same network */
+    snprintf(pfx, sizeof pfx, "%s%s", prefix, *prefix && prefix[strlen(prefix) - 1] != '.' ? "." : "");
     mx_status st;
     mx_status_clear(&st);
-    int rc = run(&io, net, weights, prefix ? prefix : default_prefix(net), threads, &st);
+    int rc = run(&io, net, weights, pfx, threads, &st);
     io_free(&io);
     if (rc) {
         fprintf(stderr, "matex run-net: %s\n", st.msg);

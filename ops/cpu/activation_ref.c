@@ -5,7 +5,8 @@
 
 typedef float (*unary_fn)(float);
 
-static float gelu_one(float v) { return (float)(0.5 * v * (1.0 + erf((double)v * 0.70710678118654752440))); }
+/* x/2 · (1 + erf(x/√2)) written with erfc, which keeps the tiny values of negative x exact */
+static float gelu_one(float v) { return (float)(0.5 * v * erfc(-(double)v * 0.70710678118654752440)); }
 static float quick_gelu_one(float v) { return (float)((double)v / (1.0 + exp(-1.702 * (double)v))); }
 static float silu_one(float v) { return (float)((double)v / (1.0 + exp(-(double)v))); }
 

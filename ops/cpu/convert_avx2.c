@@ -32,7 +32,8 @@ void mx_f32_to_bf16_avx2(uint16_t *y, const float *x, size_t n) {
     for (; i + 8 <= n; i += 8) {
         __m256 f = _mm256_loadu_ps(x + i);
         __m256i b = _mm256_castps_si256(f);
-        __m256i r = _mm256_srli_epi32(_mm256_add_epi32(_mm256_add_epi32(b, bias), _mm256_and_si256(_mm256_srli_epi32(b, 16), one)), 16);
+        __m256i odd = _mm256_and_si256(_mm256_srli_epi32(b, 16), one); /* ties go to even */
+        __m256i r = _mm256_srli_epi32(_mm256_add_epi32(_mm256_add_epi32(b, bias), odd), 16);
         __m256i q = _mm256_or_si256(_mm256_srli_epi32(b, 16), _mm256_set1_epi32(0x40)); /* quiet NaN */
         r = _mm256_blendv_epi8(r, q, _mm256_castps_si256(_mm256_cmp_ps(f, f, _CMP_UNORD_Q)));
         /* pack 8 × 32-bit (values < 65536) to 16-bit: packus works per 128-bit lane, then fix the order */

@@ -33,7 +33,8 @@ void mx_f32_to_bf16_avx512(uint16_t *y, const float *x, size_t n) {
     for (; i + 16 <= n; i += 16) {
         __m512 f = _mm512_loadu_ps(x + i);
         __m512i b = _mm512_castps_si512(f);
-        __m512i r = _mm512_srli_epi32(_mm512_add_epi32(_mm512_add_epi32(b, bias), _mm512_and_si512(_mm512_srli_epi32(b, 16), one)), 16);
+        __m512i odd = _mm512_and_si512(_mm512_srli_epi32(b, 16), one); /* ties go to even */
+        __m512i r = _mm512_srli_epi32(_mm512_add_epi32(_mm512_add_epi32(b, bias), odd), 16);
         __m512i q = _mm512_or_si512(_mm512_srli_epi32(b, 16), _mm512_set1_epi32(0x40)); /* quiet NaN */
         r = _mm512_mask_mov_epi32(r, _mm512_cmp_ps_mask(f, f, _CMP_UNORD_Q), q);
         _mm256_storeu_si256((__m256i *)(y + i), _mm512_cvtepi32_epi16(r));

@@ -30,7 +30,8 @@ static void pack_rows(const mx_gemm_kernel *g, float *dst, mx_wptr src, size_t l
         float tmp[WIDEN_ROWS * KC_MAX];
         for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
             int n = min_int(WIDEN_ROWS, valid - r0);
-            for (int i = 0; i < n; i++) g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
+            for (int i = 0; i < n; i++)
+                g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
             g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);
         }
     }
@@ -91,11 +92,16 @@ void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, fl
     }
 }
 
+/* Outer blocks of C bound the packed buffers (≤ OUTER_MAX rows of A and columns of B per K
+ * block, ~5 MiB each), whatever the problem size, e.g. a VAE conv over 512×512 pixels. */
+#define OUTER_MAX 4096
+
 typedef struct {
     const mx_gemm_kernel *g;
     const mx_gemm_problem *p;
     float *apack, *bpack;
     const float *bias; /* widened, or NULL */
+    int m_off, m_end, n_off, n_end; /* the outer block of C */
     int k0, kc, first_block, last_block;
     int mpanels, npanels, mc_panels, nc_panels, nmb, nnb;
 } gemm_job;
@@ -107,7 +113,7 @@ static void pack_a_task(void *arg, int task, int thread) {
     const gemm_job *j = arg;
     int mr = j->g->mr;
     for (int mp = task * PACK_PANELS_PER_TASK; mp < min_int(j->mpanels, (task + 1) * PACK_PANELS_PER_TASK); mp++)
-        j->p->pack_a(j->p, j->g, j->apack + (size_t)mp * j->kc * mr, mp * mr, mr, j->k0, j->kc);
+        j->p->pack_a(j->p, j->g, j->apack + (size_t)mp * j->kc * mr, j->m_off + mp * mr, mr, j->k0, j->kc);
 }
 
 static void pack_b_task(void *arg, int task, int thread) {
@@ -115,17 +121,16 @@ static void pack_b_task(void *arg, int task, int thread) {
     const gemm_job *j = arg;
     int nr = j->g->nr;
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
-        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * j->kc * nr, np * nr, nr, j->k0, j->kc);
+        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * j->kc * nr, j->n_off + np * nr, nr, j->k0, j->kc);
 }
 
-static void add_bias(const gemm_job *j, int m0, int m1, int n0, int n1) {
-    const mx_gemm_problem *p = j->p;
+static void add_bias(const mx_gemm_problem *p, const float *bias, int m0, int m1, int n0, int n1) {
     for (int m = m0; m < m1; m++) {
         float *row = p->C + (size_t)m * p->ldc;
         if (p->bias_per_row)
-            for (int n = n0; n < n1; n++) row[n] += j->bias[m];
+            for (int n = n0; n < n1; n++) row[n] += bias[m];
         else
-            for (int n = n0; n < n1; n++) row[n] += j->bias[n];
+            for (int n = n0; n < n1; n++) row[n] += bias[n];
     }
 }
 
@@ -140,59 +145,99 @@ static void compute_task(void *arg, int task, int thread) {
     int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
     for (int np = np0; np < np1; np++) {
         const float *b = j->bpack + (size_t)np * j->kc * nr;
-        int n0 = np * nr, n = min_int(nr, p->N - n0);
+        int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
         for (int mp = mp0; mp < mp1; mp++) {
-            int m0 = mp * mr, m = min_int(mr, p->M - m0);
+            int m0 = j->m_off + mp * mr, m = min_int(mr, j->m_end - m0);
             j->g->micro(j->kc, j->apack + (size_t)mp * j->kc * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m, n,
                         !j->first_block);
         }
     }
     if (j->last_block && j->bias)
-        add_bias(j, mp0 * mr, min_int(p->M, mp1 * mr), np0 * nr, min_int(p->N, np1 * nr));
+        add_bias(p, j->bias, j->m_off + mp0 * mr, min_int(j->m_end, j->m_off + mp1 * mr), j->n_off + np0 * nr,
+                 min_int(j->n_end, j->n_off + np1 * nr));
 }
 
-void mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
-    if (p->M <= 0 || p->N <= 0) return;
-    gemm_job j = {.g = g, .p = p};
-    j.mpanels = ceil_div(p->M, g->mr);
-    j.npanels = ceil_div(p->N, g->nr);
-    j.mc_panels = max_int(1, MC_ROWS / g->mr);
-    j.nmb = ceil_div(j.mpanels, j.mc_panels);
+/* Task grid of the current outer block: MC-row blocks × NC-column blocks. */
+static void plan_tiles(gemm_job *j) {
+    const mx_gemm_kernel *g = j->g;
+    j->mpanels = ceil_div(j->m_end - j->m_off, g->mr);
+    j->npanels = ceil_div(j->n_end - j->n_off, g->nr);
+    j->mc_panels = max_int(1, MC_ROWS / g->mr);
+    j->nmb = ceil_div(j->mpanels, j->mc_panels);
     /* narrow the N blocks when there are few M blocks, so that there are enough tasks */
-    j.nc_panels = max_int(1, min_int(8, j.npanels * j.nmb / TASKS_WANTED));
-    j.nnb = ceil_div(j.npanels, j.nc_panels);
+    j->nc_panels = max_int(1, min_int(8, j->npanels * j->nmb / TASKS_WANTED));
+    j->nnb = ceil_div(j->npanels, j->nc_panels);
+}
+
+/* The problem of batch item b: its own C and image. */
+static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
+    mx_gemm_problem q = *p;
+    q.C += (size_t)b * p->c_batch_stride;
+    if (q.image) q.image += (size_t)b * p->image_batch_stride;
+    return q;
+}
+
+/* One K block of the rows [m_off, m_end): A is packed once, then reused for every batch item
+ * and every outer block of columns. */
+static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, int nb_max) {
+    j->p = p;
+    j->n_off = 0;
+    j->n_end = min_int(p->N, nb_max);
+    plan_tiles(j);
+    mx_par_for(c, ceil_div(j->mpanels, PACK_PANELS_PER_TASK), pack_a_task, j);
+    for (int b = 0; b < p->batch; b++) {
+        mx_gemm_problem item = batch_item(p, b);
+        j->p = &item;
+        for (j->n_off = 0; j->n_off < p->N; j->n_off += nb_max) {
+            j->n_end = min_int(p->N, j->n_off + nb_max);
+            plan_tiles(j);
+            mx_par_for(c, ceil_div(j->npanels, PACK_PANELS_PER_TASK), pack_b_task, j);
+            mx_par_for(c, j->nmb * j->nnb, compute_task, j);
+        }
+    }
+    j->p = p;
+}
+
+int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
+    if (p->M <= 0 || p->N <= 0 || p->batch <= 0) return 0;
+    /* outer blocks end on whole panels */
+    int mb_max = OUTER_MAX / g->mr * g->mr, nb_max = OUTER_MAX / g->nr * g->nr;
+    int mb = min_int(p->M, mb_max), nb = min_int(p->N, nb_max);
     int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
-    size_t apack_n = (size_t)j.mpanels * g->mr * kc_max, bpack_n = (size_t)j.npanels * g->nr * kc_max;
+    size_t apack_n = (size_t)ceil_div(mb, g->mr) * g->mr * kc_max;
+    size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * kc_max;
     mx_scratch s;
     float *mem = mx_scratch_take(c, (apack_n + bpack_n + bias_n) * sizeof(float), &s);
-    j.apack = mem;
-    j.bpack = mem + apack_n;
+    if (!mem) return -1;
+    gemm_job j = {.g = g, .p = p, .apack = mem, .bpack = mem + apack_n};
     if (bias_n) {
         float *bias = mem + apack_n + bpack_n;
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
         j.bias = bias;
     }
-    if (p->K <= 0) { /* empty sum: C = bias or 0 */
-        for (int m = 0; m < p->M; m++) memset(p->C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
-        j.last_block = 1;
-        if (j.bias) add_bias(&j, 0, p->M, 0, p->N);
+    for (int b = 0; b < p->batch && p->K <= 0; b++) { /* empty sum: C = bias or 0 */
+        mx_gemm_problem item = batch_item(p, b);
+        for (int m = 0; m < p->M; m++) memset(item.C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
+        if (j.bias) add_bias(&item, j.bias, 0, p->M, 0, p->N);
     }
-    for (int kb = 0; kb < nkb && p->K > 0; kb++) {
-        j.k0 = kb * kc_max;
-        j.kc = min_int(kc_max, p->K - j.k0);
-        j.first_block = kb == 0;
-        j.last_block = kb == nkb - 1;
-        mx_par_for(c, ceil_div(j.mpanels, PACK_PANELS_PER_TASK), pack_a_task, &j);
-        mx_par_for(c, ceil_div(j.npanels, PACK_PANELS_PER_TASK), pack_b_task, &j);
-        mx_par_for(c, j.nmb * j.nnb, compute_task, &j);
+    for (j.m_off = 0; j.m_off < p->M && p->K > 0; j.m_off += mb_max) {
+        j.m_end = min_int(p->M, j.m_off + mb_max);
+        for (int kb = 0; kb < nkb; kb++) {
+            j.k0 = kb * kc_max;
+            j.kc = min_int(kc_max, p->K - j.k0);
+            j.first_block = kb == 0;
+            j.last_block = kb == nkb - 1;
+            run_k_block(c, &j, p, nb_max);
+        }
     }
     mx_scratch_release(c, &s);
+    return 0;
 }
 
 void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
                     int M, int N, int K) {
-    mx_gemm_problem p = {.M = M, .N = N, .K = K, .C = y, .ldc = (size_t)N};
+    mx_gemm_problem p = {.M = M, .N = N, .K = K, .batch = 1, .C = y, .ldc = (size_t)N};
     p.pack_a = mx_gemm_pack_a_rows;
     p.pack_b = mx_gemm_pack_b_rows;
     p.a_mat = mx_w_f32(x);
@@ -200,7 +245,7 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     p.b_mat = w;
     p.b_ld = (size_t)K;
     p.bias = bias;
-    mx_gemm_run(c, g, &p);
+    if (mx_gemm_run(c, g, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
 }
 
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
@@ -221,9 +266,10 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     p.Wo = Wo;
     p.bias = bias;
     p.bias_per_row = 1;
-    for (int b = 0; b < B; b++) {
-        p.image = x + (size_t)b * Cin * H * W;
-        p.C = y + (size_t)b * Cout * Ho * Wo;
-        mx_gemm_run(c, g, &p);
-    }
+    p.batch = B;
+    p.image = x;
+    p.image_batch_stride = (size_t)Cin * H * W;
+    p.C = y;
+    p.c_batch_stride = (size_t)Cout * Ho * Wo;
+    if (mx_gemm_run(c, g, &p) != 0) mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }

@@ -31,13 +31,17 @@ typedef void (*mx_gemm_pack_fn)(const mx_gemm_problem *p, const mx_gemm_kernel *
 
 struct mx_gemm_problem {
     int M, N, K;
+    /* batch items share A (the weights): item b has C + b·c_batch_stride and, for conv,
+     * image + b·image_batch_stride; A is packed once for all of them */
+    int batch;
     float *C;
-    size_t ldc;
+    size_t ldc, c_batch_stride;
     mx_gemm_pack_fn pack_a, pack_b;
     /* operand sources used by the packers */
     mx_wptr a_mat, b_mat; /* row-major matrices for mx_gemm_pack_rows */
     size_t a_ld, b_ld;
-    const float *image;   /* conv: one batch item [Cin, H, W] */
+    const float *image;   /* conv: batch item 0 [Cin, H, W] */
+    size_t image_batch_stride;
     int Cin, H, W, kh, kw, stride, pad, Wo;
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
@@ -54,9 +58,11 @@ void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, floa
 void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int cols,
                            int k0, int kc);
 
-void mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);
+/* Returns -1 (and writes nothing) when no memory for the packed panels could be had. */
+int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);
 
-/* linear and conv2d on top of mx_gemm_run, for a given micro-kernel. */
+/* linear and conv2d on top of mx_gemm_run, for a given micro-kernel; they fall back to the
+ * scalar reference when mx_gemm_run has no memory. */
 void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
                     int M, int N, int K);
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,

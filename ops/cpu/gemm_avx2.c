@@ -1,7 +1,6 @@
 /* AVX2+FMA GEMM micro-kernel (6×16: 12 ymm accumulators, 2 B loads and 6 broadcasts per k),
  * weight widening with F16C / integer shifts, and linear + conv2d on the GEMM engine. */
 #include <immintrin.h>
-#include <string.h>
 
 #include "gemm.h"
 #include "transpose_avx.h"
@@ -30,6 +29,11 @@
 
 static void micro_6x16(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n, int accumulate) {
     ALL_ROWS(ROW_DECL)
+    /* the C tile is read at the end: start fetching it now (it is usually outside L2) */
+    for (int i = 0; accumulate && i < m; i++) {
+        _mm_prefetch((const char *)(c + (size_t)i * ldc), _MM_HINT_T0);
+        _mm_prefetch((const char *)(c + (size_t)i * ldc + NR - 1), _MM_HINT_T0);
+    }
     for (int k = 0; k < kc; k++) {
         __m256 b0 = _mm256_loadu_ps(b), b1 = _mm256_loadu_ps(b + 8);
         ALL_ROWS(ROW_FMA)
@@ -43,7 +47,10 @@ static void micro_6x16(int kc, const float *a, const float *b, float *c, size_t 
     ALL_ROWS(ROW_OUT)
     if (direct) return;
     for (int i = 0; i < m; i++)
-        for (int j = 0; j < n; j++) c[(size_t)i * ldc + j] = (accumulate ? c[(size_t)i * ldc + j] : 0.0f) + tile[i * NR + j];
+        for (int j = 0; j < n; j++) {
+            float *cij = c + (size_t)i * ldc + j;
+            *cij = (accumulate ? *cij : 0.0f) + tile[i * NR + j];
+        }
 }
 
 static void widen_avx2(float *y, mx_wptr w, size_t off, size_t n) {

@@ -1,7 +1,6 @@
 /* AVX-512F GEMM micro-kernel (12×32: 24 zmm accumulators, 2 B loads and 12 broadcasts per k),
  * weight widening with F16C / integer shifts, and linear + conv2d on the GEMM engine. */
 #include <immintrin.h>
-#include <string.h>
 
 #include "gemm.h"
 #include "transpose_avx.h"
@@ -31,6 +30,11 @@
 static void micro_12x32(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n,
                         int accumulate) {
     ALL_ROWS(ROW_DECL)
+    /* the C tile is read at the end: start fetching it now (it is usually outside L2) */
+    for (int i = 0; accumulate && i < m; i++) {
+        _mm_prefetch((const char *)(c + (size_t)i * ldc), _MM_HINT_T0);
+        _mm_prefetch((const char *)(c + (size_t)i * ldc + NR - 1), _MM_HINT_T0);
+    }
     for (int k = 0; k < kc; k++) {
         __m512 b0 = _mm512_loadu_ps(b), b1 = _mm512_loadu_ps(b + 16);
         ALL_ROWS(ROW_FMA)
@@ -45,14 +49,18 @@ static void micro_12x32(int kc, const float *a, const float *b, float *c, size_t
     ALL_ROWS(ROW_OUT)
     if (direct) return;
     for (int i = 0; i < m; i++)
-        for (int j = 0; j < n; j++) c[(size_t)i * ldc + j] = (accumulate ? c[(size_t)i * ldc + j] : 0.0f) + tile[i * NR + j];
+        for (int j = 0; j < n; j++) {
+            float *cij = c + (size_t)i * ldc + j;
+            *cij = (accumulate ? *cij : 0.0f) + tile[i * NR + j];
+        }
 }
 
 static void widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
     const uint16_t *x = (const uint16_t *)w.data + off;
     size_t i = 0;
     if (w.dtype == MX_F16)
-        for (; i + 16 <= n; i += 16) _mm512_storeu_ps(y + i, _mm512_cvtph_ps(_mm256_loadu_si256((const __m256i *)(x + i))));
+        for (; i + 16 <= n; i += 16)
+            _mm512_storeu_ps(y + i, _mm512_cvtph_ps(_mm256_loadu_si256((const __m256i *)(x + i))));
     else
         for (; i + 16 <= n; i += 16) {
             __m512i v = _mm512_cvtepu16_epi32(_mm256_loadu_si256((const __m256i *)(x + i)));

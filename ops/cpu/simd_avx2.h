@@ -36,6 +36,10 @@ static inline vf v_copysign(vf a, vf s) {
 static inline vf v_zero_below(vf v, vf x, float lo) {
     return _mm256_and_ps(v, _mm256_cmp_ps(x, _mm256_set1_ps(lo), _CMP_NLT_UQ));
 }
+/* neg where x < 0, else pos */
+static inline vf v_blend_negative(vf x, vf pos, vf neg) {
+    return _mm256_blendv_ps(pos, neg, _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_LT_OQ));
+}
 static inline float v_hsum(vf v) {
     __m128 s = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
     s = _mm_add_ps(s, _mm_movehl_ps(s, s));

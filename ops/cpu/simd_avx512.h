@@ -37,6 +37,10 @@ static inline vf v_copysign(vf a, vf s) {
 static inline vf v_zero_below(vf v, vf x, float lo) {
     return _mm512_maskz_mov_ps(_mm512_cmp_ps_mask(x, _mm512_set1_ps(lo), _CMP_NLT_UQ), v);
 }
+/* neg where x < 0, else pos */
+static inline vf v_blend_negative(vf x, vf pos, vf neg) {
+    return _mm512_mask_mov_ps(pos, _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LT_OQ), neg);
+}
 /* Horizontal reductions, fixed order (determinism). */
 static inline float v_hsum(vf v) { return _mm512_reduce_add_ps(v); }
 static inline float v_hmax(vf v) { return _mm512_reduce_max_ps(v); }

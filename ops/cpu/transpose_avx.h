@@ -34,7 +34,8 @@ static void transpose_avx(float *dst, size_t dst_ld, const float *src, size_t sr
     int r = 0;
     for (; r + 8 <= rows; r += 8) {
         int c = 0;
-        for (; c + 8 <= cols; c += 8) transpose_8x8(dst + (size_t)c * dst_ld + r, dst_ld, src + (size_t)r * src_ld + c, src_ld);
+        for (; c + 8 <= cols; c += 8)
+            transpose_8x8(dst + (size_t)c * dst_ld + r, dst_ld, src + (size_t)r * src_ld + c, src_ld);
         for (; c < cols; c++)
             for (int i = 0; i < 8; i++) dst[(size_t)c * dst_ld + r + i] = src[(size_t)(r + i) * src_ld + c];
     }

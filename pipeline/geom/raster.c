@@ -191,7 +191,7 @@ static void count_bins_task(void *ctx, int task, int thread) {
         face_setup *fs = s->faces + f;
         setup_face(j, f, fs);
         if (fs->x0 > fs->x1) continue;
-        face_normal(j, f, s->fnormal + 3 * (size_t)f);
+        if (!fs->back) face_normal(j, f, s->fnormal + 3 * (size_t)f); /* culled faces never show */
         for (int ty = fs->y0 / TILE; ty <= fs->y1 / TILE; ty++)
             for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) cnt[ty * j->tiles_x + tx]++;
     }

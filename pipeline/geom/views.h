@@ -47,7 +47,8 @@ typedef struct mx_view_plan {
     double coverage; /* simulated fraction of candidate-visible texels in T^B at the end */
 } mx_view_plan;
 
-/* Plans up to `budget` views from the current T^B: greedy Alg. 1 with simulated
+/* Plans up to `budget` views from the current T^B (the caller bakes front and back
+ * first, paper stage 0, and passes the budget left): greedy Alg. 1 with simulated
  * coverage (a picked view's texels count as textured), stopping early when the
  * simulated coverage of candidate-visible texels reaches coverage_stop or no candidate
  * has min_pixels untextured pixels left. A view joins the current group when none of its

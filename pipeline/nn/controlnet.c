@@ -78,10 +78,14 @@ void mx_controlnet_free(mx_controlnet *m) {
 static int cond_embed_run(mx_run *r, const cond_embed *ce, const mx_unet_config *c, float *emb, const float *cond,
                           int B, int H, int W) {
     size_t mark = mx_arena_mark(r->a);
-    int f = 1 << (c->n_cond_emb - 1), h = H * f, w = W * f, cmax = c->conditioning_channels;
-    for (int i = 0; i < c->n_cond_emb; i++)
-        if (c->cond_emb_channels[i] > cmax) cmax = c->cond_emb_channels[i];
-    float *p[2] = {mx_run_alloc(r, (size_t)B * cmax * h * w), mx_run_alloc(r, (size_t)B * cmax * h * w)};
+    int f = 1 << (c->n_cond_emb - 1), h = H * f, w = W * f;
+    /* stage i holds cond_emb_channels[i] channels at 1/2^i of the image size */
+    size_t need = (size_t)c->conditioning_channels * h * w;
+    for (int i = 0; i < c->n_cond_emb; i++) {
+        size_t n = (size_t)c->cond_emb_channels[i] * (size_t)(h >> i) * (size_t)(w >> i);
+        if (n > need) need = n;
+    }
+    float *p[2] = {mx_run_alloc(r, (size_t)B * need), mx_run_alloc(r, (size_t)B * need)};
     if (!p[0] || !p[1]) return -1;
     const float *x = cond;
     if (c->cond_bgr && !r->dry) { /* controlnet_conditioning_channel_order "bgr": flip channels */

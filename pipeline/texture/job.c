@@ -265,8 +265,12 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     progress_ctx pc = {j, b->stage};
     mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
                         report_step, &pc};
+    double t = mx_now();
     if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) goto done;
+    j->last_denoise_s = mx_now() - t;
+    t = mx_now();
     rc = mx_sd_decode_latents(&j->ctx, j->models.vae, lat, b->n, h, w, images, st);
+    j->last_decode_s = mx_now() - t;
 done:
     if (sched_ready) mx_sched_free(&s);
     free(lat);
@@ -394,6 +398,8 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_num(w, "inpaint_weight", w_inpaint);
     mx_jw_int(w, "untextured_pixels", v->untextured_pixels);
     mx_jw_num(w, "coverage_after", mx_job_coverage(j));
+    mx_jw_num(w, "batch_denoise_s", j->last_denoise_s);
+    mx_jw_num(w, "batch_decode_s", j->last_decode_s);
     mx_jw_num(w, "time_s", mx_now() - j->t0);
     mx_jw_end_obj(w);
 }

@@ -45,6 +45,7 @@ typedef struct mx_job {
     mx_jw report; /* open object; the views array is written as views are generated */
     int views_done;
     double t0;
+    double last_denoise_s, last_decode_s; /* of the latest mx_job_generate, for the report */
     int nstages; /* seconds per stage, for the report */
     const char *stage_name[8];
     double stage_s[8];

@@ -1,0 +1,25 @@
+#!/bin/sh
+# Builds a full-size SD1.5 model set with random weights (the golden-v1 rule; configs from
+# ../shared/golden/sd15_*), the real CLIP vocabulary, two ControlNets (depth, inpaint), as an
+# fp16 matex weight file: what the end-to-end benchmark times. ~3.6 GB, about a minute.
+# usage: sh tools/make_sd15_weights.sh MATEX OUT.mxw
+set -eu
+MATEX=$1
+OUT=$2
+G=${MATEX_SHARED:-../shared}/golden
+DIR=$(mktemp -d "${TMPDIR:-/tmp}/matex_sd15.XXXXXX")
+trap 'rm -rf "$DIR"' EXIT
+net() { # folder golden-case seed weights-file-name
+    mkdir -p "$DIR/$1"
+    cp "$G/$2/config.json" "$DIR/$1/config.json"
+    "$MATEX" gen-weights "$DIR/$1/config.json" --seed "$3" --dtype f16 -o "$DIR/$1/$4"
+}
+net unet sd15_unet 1 diffusion_pytorch_model.safetensors
+net controlnet_depth sd15_controlnet 2 diffusion_pytorch_model.safetensors
+net controlnet_inpaint sd15_controlnet 3 diffusion_pytorch_model.safetensors
+net vae sd15_vae 1 diffusion_pytorch_model.safetensors
+net text_encoder sd15_clip 1 model.safetensors
+mkdir -p "$DIR/tokenizer"
+cp "$G/tokenizer/vocab.json" "$G/tokenizer/merges.txt" "$DIR/tokenizer/"
+"$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \
+    --dtype f16 --quiet -o "$OUT"
