@@ -44,6 +44,8 @@ LIBMATEX    = $(BUILD)/libmatex.a
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
 .PHONY: all test asan bench clean cuda test-full demo install
+# Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
+.SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
 
 matex: $(BUILD)/matex

@@ -6,7 +6,8 @@
 
 /* Largest block of K packed at once: an NR-column B panel of KC_MAX rows (40 KiB for NR=32)
  * stays in L1 while the micro-kernel streams the MC×kc block of A from L2. 320 keeps the
- * K=320 GEMMs of the UNet's first level in one block (measured better than 256 on Zen 5). */
+ * K=320 GEMMs of the UNet's first level in one block (on this Zen 5 at least as fast as 256;
+ * the shared machine was too noisy to separate them better). */
 #define KC_MAX 320
 /* Rows of A per compute task (rounded down to whole MR panels). */
 #define MC_ROWS 96
@@ -17,6 +18,7 @@ static int min_int(int a, int b) { return a < b ? a : b; }
 static int max_int(int a, int b) { return a > b ? a : b; }
 static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 
+/* 16-bit weight rows widened per transpose call (8 × KC_MAX floats of stack). */
 #define WIDEN_ROWS 8
 
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit

@@ -1,6 +1,13 @@
 /* Internal to ops/: the kernel functions behind the dispatch table (ops/cpu/dispatch.c),
  * the scratch-memory helper and the parallel-for helper they share.
- * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512. */
+ * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512.
+ *
+ * Files: <family>_ref.c are the references (linear, conv, norm, attention, activation, binary,
+ * layout, convert). gemm.c is the blocked GEMM engine behind linear and conv2d; gemm_<isa>.c
+ * holds its micro-kernels. The other SIMD kernels are written once as templates
+ * (attention_simd.inc, norm_simd.inc, activation_simd.inc, vmath_simd.inc for exp/erfc) over a
+ * small vector vocabulary (simd_avx2.h, simd_avx512.h) and instantiated by attention_<isa>.c
+ * and elementwise_<isa>.c; convert_<isa>.c are the fp16/bf16 conversions. */
 #ifndef MX_OPS_CPU_KERNELS_H
 #define MX_OPS_CPU_KERNELS_H
 
