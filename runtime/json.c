@@ -121,7 +121,7 @@ static int sbuf_put(parser *p, size_t at, const char *bytes, size_t n) {
     return 0;
 }
 
-static size_t utf8_encode(uint32_t cp, char *out) {
+size_t mx_utf8_encode(uint32_t cp, char *out) {
     if (cp < 0x80) {
         out[0] = (char)cp;
         return 1;
@@ -216,7 +216,7 @@ static int parse_escape(parser *p, size_t *n) {
     case 'u': {
         uint32_t cp = 0;
         if (parse_unicode_escape(p, &cp)) return -1;
-        k = utf8_encode(cp, out);
+        k = mx_utf8_encode(cp, out);
         break;
     }
     default: p->pos--; return perr(p, "unknown escape in string");

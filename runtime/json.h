@@ -35,4 +35,7 @@ double mx_json_get_num(const mx_json *obj, const char *key, double dflt);
 const char *mx_json_get_str(const mx_json *obj, const char *key, const char *dflt);
 int mx_json_get_bool(const mx_json *obj, const char *key, int dflt);
 
+/* UTF-8 bytes of code point cp (< 0x110000) into out[0..3]; returns the count (1..4). */
+size_t mx_utf8_encode(uint32_t cp, char *out);
+
 #endif

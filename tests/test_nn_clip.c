@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "../pipeline/nn/clip.h"
+#include "../runtime/fileio.h"
 #include "../pipeline/nn/sd_pipeline.h"
 #include "../runtime/log.h"
 #include "../weights/convert.h"
@@ -16,30 +17,12 @@
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
-static char *read_text(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = n >= 0 ? malloc((size_t)n + 1) : NULL;
-    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
-        free(buf);
-        buf = NULL;
-    }
-    fclose(f);
-    if (buf) {
-        buf[n] = 0;
-        *len = (size_t)n;
-    }
-    return buf;
-}
 
 static int load_config(const char *dir, mx_clip_config *cfg) {
     char path[1024];
     size_t len;
     snprintf(path, sizeof path, "%s/config.json", dir);
-    char *text = read_text(path, &len);
+    char *text = mx_read_file(path, (size_t)1 << 30, &len, NULL);
     mx_status st = {0};
     int ok = text && mx_clip_config_parse(cfg, text, len, path, &st) == 0;
     if (!ok) fprintf(stderr, "%s: %s\n", path, text ? st.msg : "cannot read");

@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "../runtime/json.h"
+#include "../runtime/fileio.h"
 #include "../weights/golden_rule.h"
 #include "util_test.h"
 
@@ -43,17 +44,6 @@ static void test_worked_example(void) {
     for (int i = 0; i < 64; i++) CHECK(fabsf(w[i] - 1) <= 0.1f && fabsf(b[i]) <= 0.05f);
 }
 
-static char *read_text(const char *path, size_t *n) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long len = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *p = malloc((size_t)len + 1);
-    *n = fread(p, 1, (size_t)len, f);
-    fclose(f);
-    return p;
-}
 
 static uint64_t hex_of(const mx_json *arr, size_t i) {
     const char *s = mx_json_str(mx_json_at(arr, i));
@@ -126,7 +116,7 @@ static void check_network(const char *folder, int small_net, int full, float *bu
     char path[512];
     snprintf(path, sizeof path, "%s/golden/%s/weights_checksums.json", mx_shared_dir(), folder);
     source src;
-    char *text = read_text(path, &src.len);
+    char *text = mx_read_file(path, (size_t)1 << 30, &src.len, NULL);
     src.text = text;
     mx_status st;
     mx_json *root = text ? mx_json_parse(text, src.len, path, &st) : NULL;

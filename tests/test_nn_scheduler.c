@@ -7,28 +7,11 @@
 #include <string.h>
 
 #include "../pipeline/nn/scheduler.h"
+#include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
-static char *read_text(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = n >= 0 ? malloc((size_t)n + 1) : NULL;
-    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
-        free(buf);
-        buf = NULL;
-    }
-    fclose(f);
-    if (buf) {
-        buf[n] = 0;
-        *len = (size_t)n;
-    }
-    return buf;
-}
 
 static float *load_f32(const mx_safetensors *sf, const char *name, size_t *numel) {
     mx_status st = {0};
@@ -128,7 +111,7 @@ static void test_golden_cases(void) {
     snprintf(dir, sizeof dir, "%s/golden/scheduler_dpmsolver_multistep", mx_shared_dir());
     snprintf(path, sizeof path, "%s/manifest.json", dir);
     size_t len;
-    char *text = read_text(path, &len);
+    char *text = mx_read_file(path, (size_t)1 << 30, &len, NULL);
     CHECK(text != NULL);
     if (!text) return;
     replace_infinity(text);

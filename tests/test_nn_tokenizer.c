@@ -6,27 +6,10 @@
 #include <unistd.h>
 
 #include "../pipeline/nn/tokenizer.h"
+#include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "util_test.h"
 
-static char *read_text(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = n >= 0 ? malloc((size_t)n + 1) : NULL;
-    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
-        free(buf);
-        buf = NULL;
-    }
-    fclose(f);
-    if (buf) {
-        buf[n] = 0;
-        *len = (size_t)n;
-    }
-    return buf;
-}
 
 /* Compares the ids of one record; prints the first difference. */
 static void check_record(const mx_tokenizer *tok, const mx_json *rec) {
@@ -60,7 +43,7 @@ static void test_golden(const mx_tokenizer *tok) {
     char path[1024];
     snprintf(path, sizeof path, "%s/golden/tokenizer/tokenizer_golden.json", mx_shared_dir());
     size_t len;
-    char *text = read_text(path, &len);
+    char *text = mx_read_file(path, (size_t)1 << 30, &len, NULL);
     CHECK(text != NULL);
     if (!text) return;
     mx_status st = {0};
@@ -85,7 +68,7 @@ static void test_bad_utf8(const mx_tokenizer *tok) {
 /* The tokenizer of a matex weight file: metadata tokenizer.vocab / tokenizer.merges. */
 static void test_weight_file(const char *vocab_path, const char *merges_path) {
     size_t vl, ml;
-    char *v = read_text(vocab_path, &vl), *m = read_text(merges_path, &ml);
+    char *v = mx_read_file(vocab_path, (size_t)1 << 30, &vl, NULL), *m = mx_read_file(merges_path, (size_t)1 << 30, &ml, NULL);
     char path[256];
     snprintf(path, sizeof path, "/tmp/matex_test_tok_%d.mxw", (int)getpid());
     mx_status st = {0};

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "../pipeline/geom/gltf.h"
+#include "../runtime/fileio.h"
 #include "../pipeline/geom/mesh.h"
 #include "../pipeline/io/io.h"
 #include "../pipeline/texture/texture.h"
@@ -49,22 +50,6 @@ static int file_exists(const char *dir, const char *name) {
     return stat(p, &sb) == 0 && S_ISREG(sb.st_mode) && sb.st_size > 0;
 }
 
-static char *read_file(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
-        free(s);
-        s = NULL;
-    }
-    fclose(f);
-    if (s) s[n] = 0;
-    if (len) *len = (size_t)n;
-    return s;
-}
 
 /* texture.png of the right size, GLB and OBJ readable back with the same face count,
  * report.json parseable with a coverage. Returns the reported coverage (-1 on failure). */
@@ -109,7 +94,7 @@ static double check_outputs(const char *dir, int nfaces) {
     }
     snprintf(p, sizeof p, "%s/report.json", dir);
     size_t len;
-    char *text = read_file(p, &len);
+    char *text = mx_read_file(p, (size_t)1 << 30, &len, NULL);
     mx_json *j = text ? mx_json_parse(text, len, p, &st) : NULL;
     double cov = j ? mx_json_get_num(j, "coverage", -1) : -1;
     CHECK(j != NULL && mx_json_len(mx_json_get(j, "views")) >= 2);
@@ -198,7 +183,7 @@ static void test_enhance(const char *weights, const char *tmp) {
 
 static int files_equal(const char *a, const char *b) {
     size_t la, lb;
-    char *x = read_file(a, &la), *y = read_file(b, &lb);
+    char *x = mx_read_file(a, (size_t)1 << 30, &la, NULL), *y = mx_read_file(b, (size_t)1 << 30, &lb, NULL);
     int eq = x && y && la == lb && memcmp(x, y, la) == 0;
     free(x);
     free(y);

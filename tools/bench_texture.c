@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "../pipeline/texture/models.h"
+#include "../runtime/fileio.h"
 #include "../pipeline/texture/texture.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
@@ -16,22 +17,6 @@
 #define STEPS 2
 #define VIEWS 4
 
-static char *read_text(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
-        free(s);
-        s = NULL;
-    }
-    fclose(f);
-    if (s) s[n] = 0;
-    *len = (size_t)n;
-    return s;
-}
 
 /* FLOPs of one denoising step (CFG batch 2) and of one decode, for one image of h x w latents. */
 static void step_flops(const mx_models *m, int h, int w, int n_controlnets, double *step, double *decode) {
@@ -113,7 +98,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     size_t len;
-    char *text = read_text("/tmp/matex_bench_texture_out/report.json", &len);
+    char *text = mx_read_file("/tmp/matex_bench_texture_out/report.json", (size_t)1 << 30, &len, NULL);
     mx_json *rep = text ? mx_json_parse(text, len, "report.json", &st) : NULL;
     if (!rep) {
         fprintf(stderr, "bench_texture: cannot read the report\n");

@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "../ops/ops.h"
+#include "../runtime/fileio.h"
 #include "../pipeline/nn/netcfg.h"
 #include "../pipeline/nn/params.h"
 #include "../runtime/log.h"
@@ -34,26 +35,6 @@ static void usage(FILE *f) {
                "  -h, --help      this help\n");
 }
 
-static char *read_file(const char *path, size_t *len, mx_status *st) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno)), NULL;
-    char *s = NULL;
-    long n = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
-    if (n < 0 || n > (64L << 20) || fseek(f, 0, SEEK_SET) != 0) {
-        mx_fail(st, MX_EINPUT, "%s: not a readable config file (size)", path);
-    } else if (!(s = malloc((size_t)n + 1))) {
-        mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
-    } else if (fread(s, 1, (size_t)n, f) != (size_t)n) {
-        mx_fail(st, MX_EIO, "%s: read error", path);
-        free(s);
-        s = NULL;
-    } else {
-        s[n] = 0;
-        *len = (size_t)n;
-    }
-    fclose(f);
-    return s;
-}
 
 /* The safetensors header for the enumerated list: names are plain dotted identifiers. */
 static char *build_header(const mx_binder *b, int f16, size_t *hlen, mx_status *st) {
@@ -178,7 +159,7 @@ int cmd_gen_weights(int argc, char **argv) {
     size_t len = 0;
     mx_status_clear(&st);
     memset(&b, 0, sizeof b);
-    char *text = read_file(config, &len, &st);
+    char *text = mx_read_file(config, (size_t)64 << 20, &len, &st);
     int rc = !text || mx_binder_enum(&b, &st) || mx_net_enumerate(&b, text, len, config, &st);
     if (!rc) {
         mx_info("gen-weights: %zu tensors, %.1f M parameters", mx_binder_enum_count(&b), mx_binder_enum_bytes(&b) / 4e6);

@@ -10,6 +10,7 @@
  * Symbols are handled as vocabulary ids: every merge of the CLIP vocabulary joins two entries
  * into a third, so a merge is a (left id, right id) -> (rank, merged id) table lookup. */
 #include "tokenizer.h"
+#include "../../runtime/fileio.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -96,28 +97,6 @@ static unsigned byte_symbol(unsigned b) {
     return 256 + n;
 }
 
-static size_t utf8_put(unsigned cp, char *out) {
-    if (cp < 0x80) {
-        out[0] = (char)cp;
-        return 1;
-    }
-    if (cp < 0x800) {
-        out[0] = (char)(0xC0 | (cp >> 6));
-        out[1] = (char)(0x80 | (cp & 0x3F));
-        return 2;
-    }
-    if (cp < 0x10000) {
-        out[0] = (char)(0xE0 | (cp >> 12));
-        out[1] = (char)(0x80 | ((cp >> 6) & 0x3F));
-        out[2] = (char)(0x80 | (cp & 0x3F));
-        return 3;
-    }
-    out[0] = (char)(0xF0 | (cp >> 18));
-    out[1] = (char)(0x80 | ((cp >> 12) & 0x3F));
-    out[2] = (char)(0x80 | ((cp >> 6) & 0x3F));
-    out[3] = (char)(0x80 | (cp & 0x3F));
-    return 4;
-}
 
 /* ---- construction ---- */
 
@@ -168,7 +147,7 @@ done:
 static int find_byte_symbols(mx_tokenizer *t, const char *what, mx_status *st) {
     for (unsigned b = 0; b < 256; b++) {
         char s[16];
-        size_t n = utf8_put(byte_symbol(b), s);
+        size_t n = mx_utf8_encode(byte_symbol(b), s);
         t->byte_id[b] = vocab_find(t, s, n);
         memcpy(s + n, "</w>", 4);
         t->byte_end_id[b] = vocab_find(t, s, n + 4);
@@ -242,34 +221,13 @@ int mx_tok_create(mx_tokenizer **out, const char *vocab_json, size_t vocab_len, 
     return 0;
 }
 
-static char *read_file(const char *path, size_t *len, mx_status *st) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open", path), NULL;
-    char *buf = NULL;
-    long n = -1;
-    if (fseek(f, 0, SEEK_END) == 0) n = ftell(f);
-    if (n < 0 || n > (1L << 30) || fseek(f, 0, SEEK_SET) != 0) {
-        mx_fail(st, MX_EINPUT, "%s: cannot determine size (or larger than 1 GiB)", path);
-    } else if (!(buf = malloc((size_t)n + 1))) {
-        mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
-    } else if (fread(buf, 1, (size_t)n, f) != (size_t)n) {
-        mx_fail(st, MX_EIO, "%s: read error", path);
-        free(buf);
-        buf = NULL;
-    } else {
-        buf[n] = 0;
-        *len = (size_t)n;
-    }
-    fclose(f);
-    return buf;
-}
 
 int mx_tok_load_files(mx_tokenizer **out, const char *vocab_path, const char *merges_path, mx_status *st) {
     size_t vl = 0, ml = 0;
     *out = NULL;
-    char *v = read_file(vocab_path, &vl, st);
+    char *v = mx_read_file(vocab_path, (size_t)1 << 30, &vl, st);
     if (!v) return -1;
-    char *m = read_file(merges_path, &ml, st);
+    char *m = mx_read_file(merges_path, (size_t)1 << 30, &ml, st);
     if (!m) {
         free(v);
         return -1;
@@ -715,11 +673,11 @@ static int encode_piece(const mx_tokenizer *t, const unsigned *cps, size_t n, in
     size_t nb = 0;
     char u[4];
     for (size_t i = 0; i < n; i++) {
-        size_t k = utf8_put(cps[i], u);
+        size_t k = mx_utf8_encode(cps[i], u);
         for (size_t j = 0; j < k; j++) sym[nb++] = t->byte_id[(unsigned char)u[j]];
     }
     if (word_end) {
-        size_t k = utf8_put(cps[n - 1], u);
+        size_t k = mx_utf8_encode(cps[n - 1], u);
         sym[nb - 1] = t->byte_end_id[(unsigned char)u[k - 1]];
     }
     return bpe_word(t, sym, nb, out, st);

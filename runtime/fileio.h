@@ -1,0 +1,14 @@
+/* Reading small whole files (configs, vocabularies, reports) with size limits and errors
+ * that name the file. */
+#ifndef MX_FILEIO_H
+#define MX_FILEIO_H
+
+#include <stddef.h>
+
+#include "status.h"
+
+/* The whole file as a malloc'ed, NUL-terminated buffer; *len (may be NULL) gets its length.
+ * Files larger than max_bytes are refused. NULL with an error in st on failure. */
+char *mx_read_file(const char *path, size_t max_bytes, size_t *len, mx_status *st);
+
+#endif
