@@ -22,8 +22,16 @@ endif
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
 
+# x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones.
+ifneq ($(filter x86_64 i686 i386,$(shell uname -m)),)
+SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c)
+else
+SIMD_SRC    =
+CFLAGS     += -DMX_NO_X86_SIMD
+endif
+
 # Modules: a test links only the modules it needs, so one module's breakage stays local.
-CORE_SRC    = $(wildcard runtime/*.c ops/*.c ops/cpu/*.c)
+CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(wildcard pipeline/geom/*.c)

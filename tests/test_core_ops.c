@@ -381,6 +381,17 @@ static void test_known_layout(const mx_ctx *c) {
     mx_check_close("known transpose_chw_hwc", t, hwc_want, 6, 0);
     mx_transpose_hwc_chw(c, back, t, 1, 2, 3);
     mx_check_close("known transpose_hwc_chw", back, chw, 6, 0);
+    /* several tasks per item: [2, 300, 37] against the index rule, and the round trip */
+    enum { TB = 2, TC = 300, THW = 37, TN = TB * TC * THW };
+    float *big = rnd(TN, 95), *tr = malloc(TN * sizeof *tr), *tr_want = malloc(TN * sizeof *tr), *rt = rnd(TN, 96);
+    for (int bi = 0; bi < TB; bi++)
+        for (int ch = 0; ch < TC; ch++)
+            for (int p = 0; p < THW; p++) tr_want[(bi * THW + p) * TC + ch] = big[(bi * TC + ch) * THW + p];
+    mx_transpose_chw_hwc(c, tr, big, TB, TC, THW);
+    mx_check_close("known transpose_chw_hwc [2, 300, 37]", tr, tr_want, TN, 0);
+    mx_transpose_hwc_chw(c, rt, tr, TB, TC, THW);
+    mx_check_close("known transpose round trip [2, 300, 37]", rt, big, TN, 0);
+    free(big), free(tr), free(tr_want), free(rt);
     /* concat of [2, 1, 2] and [2, 2, 2] along channels */
     const float a[4] = {1, 2, 3, 4}, b[8] = {5, 6, 7, 8, 9, 10, 11, 12};
     const float cat_want[12] = {1, 2, 5, 6, 7, 8, 3, 4, 9, 10, 11, 12};

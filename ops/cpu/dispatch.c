@@ -28,6 +28,7 @@ static const mx_kernels scalar_table = {
     .f32_to_bf16 = mx_f32_to_bf16_ref,
 };
 
+#ifndef MX_NO_X86_SIMD /* non-x86 builds (Makefile) have only the scalar table */
 static const mx_kernels avx2_table = {
     .isa = MX_ISA_AVX2,
     .linear = mx_linear_avx2,
@@ -70,16 +71,23 @@ static const mx_kernels avx512_table = {
     .f32_to_bf16 = mx_f32_to_bf16_avx512,
 };
 
+#endif
+
 const mx_kernels *mx_kernels_scalar(void) { return &scalar_table; }
 
 const mx_kernels *mx_kernels_for(mx_isa isa) {
     mx_isa best = mx_cpu_best_isa();
     if (isa > best) isa = best;
+#ifndef MX_NO_X86_SIMD
     switch (isa) {
     case MX_ISA_AVX512: return &avx512_table;
     case MX_ISA_AVX2: return &avx2_table;
     default: return &scalar_table;
     }
+#else
+    (void)isa;
+    return &scalar_table;
+#endif
 }
 
 const mx_kernels *mx_kernels_best(void) { return mx_kernels_for(mx_cpu_best_isa()); }

@@ -43,28 +43,40 @@ typedef struct {
     int C, HW, to_hwc;
 } transpose_args;
 
-/* One task = one batch item; 32×32 tiles keep both sides in cache. */
-static void transpose_item(void *arg, int b, int thread) {
+#define TRANSPOSE_TILE 32
+#define TRANSPOSE_ROWS_PER_TASK 128
+
+static int transpose_tasks_per_item(const transpose_args *a) {
+    int rows = a->to_hwc ? a->C : a->HW;
+    return (rows + TRANSPOSE_ROWS_PER_TASK - 1) / TRANSPOSE_ROWS_PER_TASK;
+}
+
+/* One task = TRANSPOSE_ROWS_PER_TASK source rows of one batch item, in 32×32 tiles that keep
+ * both sides in cache. */
+static void transpose_task(void *arg, int task, int thread) {
     (void)thread;
     const transpose_args *a = arg;
+    int per = transpose_tasks_per_item(a), b = task / per;
     int rows = a->to_hwc ? a->C : a->HW, cols = a->to_hwc ? a->HW : a->C;
+    int rbeg = task % per * TRANSPOSE_ROWS_PER_TASK;
+    int rend = rbeg + TRANSPOSE_ROWS_PER_TASK < rows ? rbeg + TRANSPOSE_ROWS_PER_TASK : rows;
     const float *x = a->x + (size_t)b * a->C * a->HW;
     float *y = a->y + (size_t)b * a->C * a->HW;
-    for (int r0 = 0; r0 < rows; r0 += 32)
-        for (int c0 = 0; c0 < cols; c0 += 32)
-            for (int r = r0; r < rows && r < r0 + 32; r++)
-                for (int cc = c0; cc < cols && cc < c0 + 32; cc++)
+    for (int r0 = rbeg; r0 < rend; r0 += TRANSPOSE_TILE)
+        for (int c0 = 0; c0 < cols; c0 += TRANSPOSE_TILE)
+            for (int r = r0; r < rend && r < r0 + TRANSPOSE_TILE; r++)
+                for (int cc = c0; cc < cols && cc < c0 + TRANSPOSE_TILE; cc++)
                     y[(size_t)cc * rows + r] = x[(size_t)r * cols + cc];
 }
 
 void mx_transpose_chw_hwc_ref(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
     transpose_args a = {y, x, C, HW, 1};
-    mx_par_for(c, B, transpose_item, &a);
+    mx_par_for(c, B * transpose_tasks_per_item(&a), transpose_task, &a);
 }
 
 void mx_transpose_hwc_chw_ref(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
     transpose_args a = {y, x, C, HW, 0};
-    mx_par_for(c, B, transpose_item, &a);
+    mx_par_for(c, B * transpose_tasks_per_item(&a), transpose_task, &a);
 }
 
 typedef struct {

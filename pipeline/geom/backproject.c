@@ -7,15 +7,17 @@
 #define BAND_ROWS 16  /* texture rows per band task */
 #define CHUNK_ROWS 16 /* image rows per list-building task */
 
+/* Per-view work lists. A view's pixels are binned by the texture band their splat
+ * lands in, and each bin holds full splat records (texels, fractions, colour, quality) in
+ * pixel order: the band tasks then stream through their records instead of gathering
+ * footprints, colours and normals from all over the image. */
 typedef struct bp_scratch {
-    size_t count_cap, list_cap, q_cap;
-    int32_t *counts; /* [nchunks][nbins] then write offsets */
-    int32_t *bin_start; /* [nbins + 1] */
-    size_t bin_cap;
-    int32_t *list;   /* pixel indices grouped by bin, in pixel order */
-    float *view_q;   /* [nlayers][h][w] this view's best |n.v| per texel */
-    struct splat *splats; /* [image pixels] footprint of each used pixel, from the count pass */
-    size_t splat_cap;
+    size_t count_cap, rec_cap, q_cap, bin_cap, splat_cap;
+    int32_t *counts;         /* [nchunks][nbins] then write offsets */
+    int32_t *bin_start;      /* [nbins + 1] */
+    struct splat_rec *recs;  /* records grouped by bin, in pixel order */
+    float *view_q;           /* [nlayers][h][w] this view's best |n.v| per texel */
+    struct splat *splats;    /* [image pixels] footprint of each used pixel, from the count pass */
 } bp_scratch;
 
 int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
@@ -45,7 +47,7 @@ void mx_bake_free(mx_bake *b) {
     if (s) {
         free(s->counts);
         free(s->bin_start);
-        free(s->list);
+        free(s->recs);
         free(s->view_q);
         free(s->splats);
         free(s);
@@ -79,6 +81,8 @@ typedef struct bp_job {
     int flags;
     int nbands, nbins, nchunks;
     bp_scratch *s;
+    const float *normals; /* the view's face normals (mx_gbuffer_face_normals) */
+    float ortho_v[3];     /* orthographic view direction */
 } bp_job;
 
 /* Splat footprint of a pixel: the 2 x 2 texels from (x0, y0) (wrapped to x1, y1), the
@@ -88,6 +92,14 @@ typedef struct splat {
     float fx, fy;
     int32_t layer;
 } splat;
+
+/* What a band task needs of one pixel (32 bytes, written in bin order by the fill pass). */
+typedef struct splat_rec {
+    uint16_t x0, x1, y0, y1;
+    float fx, fy;
+    float col[3];
+    float q; /* |n . v| of the pixel's face */
+} splat_rec;
 
 static splat pixel_splat(const bp_job *j, size_t i) {
     const mx_bake *b = j->b;
@@ -132,33 +144,38 @@ static void count_task(void *ctx, int task, int thread) {
     }
 }
 
-static void fill_task(void *ctx, int task, int thread) {
-    (void)thread;
-    bp_job *j = ctx;
-    int32_t *off = j->s->counts + (size_t)task * j->nbins;
-    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
-    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
-        if (!pixel_used(j, i)) continue;
-        const splat *sp = &j->s->splats[i];
-        int b0 = sp->layer * j->nbands + sp->y0 / BAND_ROWS, b1 = sp->layer * j->nbands + sp->y1 / BAND_ROWS;
-        j->s->list[off[b0]++] = (int32_t)i;
-        if (b1 != b0) j->s->list[off[b1]++] = (int32_t)i;
-    }
-}
-
 static float pixel_quality(const bp_job *j, size_t i) {
     const mx_gbuffer *gb = j->gb;
-    float n[3], p[3] = {0, 0, 0}, v[3];
-    mx_gbuffer_normal(gb, (int64_t)i, n);
+    const float *n = j->normals + 3 * (size_t)gb->face[i];
+    if (gb->cam.ortho) /* one view direction for every pixel */
+        return fabsf(n[0] * j->ortho_v[0] + n[1] * j->ortho_v[1] + n[2] * j->ortho_v[2]);
+    float p[3], v[3];
     int x = (int)(i % (size_t)gb->w), y = (int)(i / (size_t)gb->w);
-    if (!gb->cam.ortho) /* orthographic: one view direction for every pixel */
-        mx_camera_unproject(&gb->cam, (float)x + 0.5f, (float)y + 0.5f, gb->depth[i], gb->w, gb->h, p);
+    mx_camera_unproject(&gb->cam, (float)x + 0.5f, (float)y + 0.5f, gb->depth[i], gb->w, gb->h, p);
     mx_camera_view_dir(&gb->cam, p, v);
     return fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
 }
 
+static void fill_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    int32_t *off = j->s->counts + (size_t)task * j->nbins;
+    int c = j->img->c;
+    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
+    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
+        if (!pixel_used(j, i)) continue;
+        const splat *sp = &j->s->splats[i];
+        const float *col = j->img->data + i * c;
+        splat_rec r = {sp->x0, sp->x1, sp->y0, sp->y1, sp->fx, sp->fy, {col[0], col[1], col[2]},
+                       pixel_quality(j, i)};
+        int b0 = sp->layer * j->nbands + sp->y0 / BAND_ROWS, b1 = sp->layer * j->nbands + sp->y1 / BAND_ROWS;
+        j->s->recs[off[b0]++] = r;
+        if (b1 != b0) j->s->recs[off[b1]++] = r;
+    }
+}
+
 /* The 4 texels and weights of a splat, restricted to rows [r0, r1). */
-static int splat_texels(const splat *sp, int w, int r0, int r1, size_t *tex, float *wt) {
+static int splat_texels(const splat_rec *sp, int w, int r0, int r1, size_t *tex, float *wt) {
     int n = 0;
     int ys[2] = {sp->y0, sp->y1}, xs[2] = {sp->x0, sp->x1};
     float wy[2] = {1 - sp->fy, sp->fy}, wx[2] = {1 - sp->fx, sp->fx};
@@ -181,13 +198,12 @@ static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32
     float *vq = j->s->view_q;
     for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++) vq[t] = 0;
     for (int32_t k = k0; k < k1; k++) {
-        size_t i = (size_t)j->s->list[k];
+        const splat_rec *r = &j->s->recs[k];
         size_t tex[4];
         float wt[4];
-        int n = splat_texels(&j->s->splats[i], b->w, r0, r1, tex, wt);
-        float q = pixel_quality(j, i);
+        int n = splat_texels(r, b->w, r0, r1, tex, wt);
         for (int e = 0; e < n; e++)
-            if (q > vq[plane + tex[e]]) vq[plane + tex[e]] = q;
+            if (r->q > vq[plane + tex[e]]) vq[plane + tex[e]] = r->q;
     }
     for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++)
         if (b->known[t] && vq[t] > b->quality[t] + b->overwrite_margin) {
@@ -210,33 +226,29 @@ static void splat_band_task(void *ctx, int task, int thread) {
     if (j->flags & MX_BACKPROJECT_OVERWRITE) restart_better_texels(j, plane, r0, r1, k0, k1);
     uint8_t *known = b->known + plane;
     float *sw = b->sum_w + plane, *swc = b->sum_wc + 3 * plane, *qual = b->quality + plane;
-    int c = j->img->c;
     for (int32_t k = k0; k < k1; k++) {
-        size_t i = (size_t)j->s->list[k];
+        const splat_rec *r = &j->s->recs[k];
         size_t tex[4];
         float wt[4];
-        int n = splat_texels(&j->s->splats[i], b->w, r0, r1, tex, wt);
-        const float *col = j->img->data + i * c;
-        float q = -1;
+        int n = splat_texels(r, b->w, r0, r1, tex, wt);
         for (int e = 0; e < n; e++) {
             size_t t = tex[e];
             if (known[t]) continue; /* T^B before this view: written by an earlier view */
             sw[t] += wt[e];
-            swc[3 * t] += wt[e] * col[0];
-            swc[3 * t + 1] += wt[e] * col[1];
-            swc[3 * t + 2] += wt[e] * col[2];
-            if (q < 0) q = pixel_quality(j, i);
-            if (q > qual[t]) qual[t] = q;
+            swc[3 * t] += wt[e] * r->col[0];
+            swc[3 * t + 1] += wt[e] * r->col[1];
+            swc[3 * t + 2] += wt[e] * r->col[2];
+            if (r->q > qual[t]) qual[t] = r->q;
         }
     }
-    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++)
-        if (sw[t] > b->eps) known[t] = 1;
+    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++) /* branchless: vectorizes */
+        known[t] = (uint8_t)(known[t] | (sw[t] > b->eps));
 }
 
 static int reserve(bp_job *j, mx_status *st) {
     bp_scratch *s = j->s;
     size_t need_counts = (size_t)j->nchunks * j->nbins;
-    size_t need_list = 2 * (size_t)j->gb->w * j->gb->h;
+    size_t npix = (size_t)j->gb->w * j->gb->h;
     size_t need_q = (size_t)j->b->w * j->b->h * j->b->nlayers;
     if (need_counts > s->count_cap) {
         free(s->counts);
@@ -248,22 +260,17 @@ static int reserve(bp_job *j, mx_status *st) {
         s->bin_start = malloc(((size_t)j->nbins + 1) * sizeof *s->bin_start);
         s->bin_cap = s->bin_start ? (size_t)j->nbins + 1 : 0;
     }
-    if (need_list > s->list_cap) {
-        free(s->list);
-        s->list = malloc(need_list * sizeof *s->list);
-        s->list_cap = s->list ? need_list : 0;
-    }
     if ((j->flags & MX_BACKPROJECT_OVERWRITE) && need_q > s->q_cap) {
         free(s->view_q);
         s->view_q = malloc(need_q * sizeof *s->view_q);
         s->q_cap = s->view_q ? need_q : 0;
     }
-    if (need_list / 2 > s->splat_cap) {
+    if (npix > s->splat_cap) {
         free(s->splats);
-        s->splats = malloc(need_list / 2 * sizeof *s->splats);
-        s->splat_cap = s->splats ? need_list / 2 : 0;
+        s->splats = malloc(npix * sizeof *s->splats);
+        s->splat_cap = s->splats ? npix : 0;
     }
-    if (!s->counts || !s->bin_start || !s->list || !s->splats ||
+    if (!s->counts || !s->bin_start || !s->splats ||
         ((j->flags & MX_BACKPROJECT_OVERWRITE) && !s->view_q))
         return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     return 0;
@@ -275,7 +282,8 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
     if (img->w != gb->w || img->h != gb->h || img->c < 3)
         return mx_fail(st, MX_EINPUT, "backprojection: image %dx%dx%d does not match the %dx%d view",
                        img->w, img->h, img->c, gb->w, gb->h);
-    bp_job j = {b, gb, m, img, mask, flags, 0, 0, 0, b->scratch};
+    bp_job j = {b, gb, m, img, mask, flags, 0, 0, 0, b->scratch, mx_gbuffer_face_normals(gb),
+                {-gb->cam.forward[0], -gb->cam.forward[1], -gb->cam.forward[2]}};
     j.nbands = (b->h + BAND_ROWS - 1) / BAND_ROWS;
     j.nbins = j.nbands * b->nlayers;
     j.nchunks = (gb->h + CHUNK_ROWS - 1) / CHUNK_ROWS;
@@ -292,6 +300,12 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
         }
     }
     j.s->bin_start[j.nbins] = (int32_t)total;
+    if ((size_t)total + 1 > j.s->rec_cap) { /* sized by this view's pixels, not the worst case */
+        free(j.s->recs);
+        j.s->recs = malloc(((size_t)total + 1) * sizeof *j.s->recs);
+        j.s->rec_cap = j.s->recs ? (size_t)total + 1 : 0;
+        if (!j.s->recs) return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
+    }
     mx_pool_for(pool, j.nchunks, fill_task, &j);
     mx_pool_for(pool, j.nbins, splat_band_task, &j);
     return 0;

@@ -59,8 +59,29 @@ void mx_mask_frontal(const mx_gbuffer *gb, int normal_source, float threshold, u
     mx_mask_frontal_rows(gb, normal_source, threshold, 0, gb->h, mask);
 }
 
+/* Orthographic geometric case: one view direction, normals read from the face table. */
+static void frontal_rows_ortho_geometric(const mx_gbuffer *gb, float threshold, int y0, int y1,
+                                         uint8_t *mask) {
+    const float *fn = mx_gbuffer_face_normals(gb);
+    float v[3] = {-gb->cam.forward[0], -gb->cam.forward[1], -gb->cam.forward[2]};
+    for (size_t i = (size_t)y0 * gb->w; i < (size_t)y1 * gb->w; i++) {
+        int f = gb->face[i];
+        if (f < 0) {
+            mask[i] = 0;
+            continue;
+        }
+        const float *n = fn + 3 * (size_t)f;
+        float c = fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
+        mask[i] = c >= threshold;
+    }
+}
+
 void mx_mask_frontal_rows(const mx_gbuffer *gb, int normal_source, float threshold, int y0, int y1,
                           uint8_t *mask) {
+    if (normal_source != MX_NORMAL_FROM_DEPTH && gb->cam.ortho) {
+        frontal_rows_ortho_geometric(gb, threshold, y0, y1, mask);
+        return;
+    }
     for (int y = y0; y < y1; y++)
         for (int x = 0; x < gb->w; x++) {
             float c = normal_source == MX_NORMAL_FROM_DEPTH ? depth_normal_cosine(gb, x, y)

@@ -456,6 +456,11 @@ void mx_gbuffer_normal(const mx_gbuffer *gb, int64_t i, float out[3]) {
     for (int k = 0; k < 3; k++) out[k] = f >= 0 ? s->fnormal[3 * (size_t)f + k] : 0.0f;
 }
 
+const float *mx_gbuffer_face_normals(const mx_gbuffer *gb) {
+    const raster_scratch *s = gb->scratch;
+    return s->fnormal;
+}
+
 void mx_texture_sample(const mx_image *img, float u, float v, float *out) {
     float fx = u * (float)img->w - 0.5f, fy = (1.0f - v) * (float)img->h - 0.5f;
     float flx = floorf(fx), fly = floorf(fy);

@@ -47,6 +47,9 @@ int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int f
 /* Unit geometric normal (counter-clockwise, world space) of the face visible at pixel i;
  * zero vector for background or a degenerate face. */
 void mx_gbuffer_normal(const mx_gbuffer *gb, int64_t i, float out[3]);
+/* The table behind mx_gbuffer_normal: [nfaces][3], valid for the faces that appear in
+ * gb->face (per-pixel loops read it directly instead of calling per pixel). */
+const float *mx_gbuffer_face_normals(const mx_gbuffer *gb);
 
 /* Textured render: out (RGB, w x h, allocated here) gets the bilinear lookup of the face's
  * material texture at the pixel's UV (UVs repeat); `textures` has one image per material
