@@ -7,17 +7,19 @@
 #define BAND_ROWS 16  /* texture rows per band task */
 #define CHUNK_ROWS 16 /* image rows per list-building task */
 
-/* Per-view work lists. A view's pixels are binned by the texture band their splat
- * lands in, and each bin holds full splat records (texels, fractions, colour, quality) in
- * pixel order: the band tasks then stream through their records instead of gathering
- * footprints, colours and normals from all over the image. */
+/* Per-view work lists. Each image chunk first stages a full splat record (texels,
+ * fractions, colour, quality) for each of its used pixels, in pixel order, and counts
+ * them per texture band; the records are then moved into one list grouped by band. The
+ * band tasks stream through their records instead of gathering footprints, colours and
+ * normals from all over the image. */
 typedef struct bp_scratch {
-    size_t count_cap, rec_cap, q_cap, bin_cap, splat_cap;
-    int32_t *counts;         /* [nchunks][nbins] then write offsets */
-    int32_t *bin_start;      /* [nbins + 1] */
-    struct splat_rec *recs;  /* records grouped by bin, in pixel order */
-    float *view_q;           /* [nlayers][h][w] this view's best |n.v| per texel */
-    struct splat *splats;    /* [image pixels] footprint of each used pixel, from the count pass */
+    size_t count_cap, rec_cap, q_cap, bin_cap, staged_cap, nstaged_cap;
+    int32_t *counts;          /* [nchunks][nbins] then write offsets */
+    int32_t *bin_start;       /* [nbins + 1] */
+    struct splat_rec *recs;   /* records grouped by bin, in pixel order */
+    float *view_q;            /* [nlayers][h][w] this view's best |n.v| per texel */
+    struct splat_rec *staged; /* [image pixels]: chunk c's records from its first pixel on */
+    int32_t *nstaged;         /* [nchunks] */
 } bp_scratch;
 
 int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
@@ -49,7 +51,8 @@ void mx_bake_free(mx_bake *b) {
         free(s->bin_start);
         free(s->recs);
         free(s->view_q);
-        free(s->splats);
+        free(s->staged);
+        free(s->nstaged);
         free(s);
     }
     free(b->sum_wc);
@@ -85,63 +88,19 @@ typedef struct bp_job {
     float ortho_v[3];     /* orthographic view direction */
 } bp_job;
 
-/* Splat footprint of a pixel: the 2 x 2 texels from (x0, y0) (wrapped to x1, y1), the
- * fractions, and the material layer. Computed once per view in the count pass. */
-typedef struct splat {
-    uint16_t x0, x1, y0, y1;
-    float fx, fy;
-    int32_t layer;
-} splat;
-
-/* What a band task needs of one pixel (32 bytes, written in bin order by the fill pass). */
+/* A pixel's splat, as the band tasks read it (32 bytes): the 2 x 2 texels from (x0, y0)
+ * (wrapping to column 0 / row 0 at the edge), the fractions, the material layer, the
+ * colour and the quality |n . v| of the pixel's face. */
 typedef struct splat_rec {
-    uint16_t x0, x1, y0, y1;
+    uint16_t x0, y0, layer, unused;
     float fx, fy;
     float col[3];
-    float q; /* |n . v| of the pixel's face */
+    float q;
 } splat_rec;
-
-static splat pixel_splat(const bp_job *j, size_t i) {
-    const mx_bake *b = j->b;
-    float tx = j->gb->uv[2 * i] * (float)b->w - 0.5f;
-    float ty = (1.0f - j->gb->uv[2 * i + 1]) * (float)b->h - 0.5f;
-    float flx = floorf(tx), fly = floorf(ty);
-    splat s;
-    s.fx = tx - flx;
-    s.fy = ty - fly;
-    int x0 = (int)flx, y0 = (int)fly;
-    /* repeat wrapping; fmod only for the rare far-away UV, to keep the int conversion valid */
-    if (x0 < -1 || x0 >= b->w) x0 = (int)fmodf(flx, (float)b->w);
-    if (y0 < -1 || y0 >= b->h) y0 = (int)fmodf(fly, (float)b->h);
-    if (x0 < 0) x0 += b->w;
-    if (y0 < 0) y0 += b->h;
-    s.x0 = (uint16_t)x0;
-    s.y0 = (uint16_t)y0;
-    s.x1 = (uint16_t)(x0 + 1 == b->w ? 0 : x0 + 1);
-    s.y1 = (uint16_t)(y0 + 1 == b->h ? 0 : y0 + 1);
-    s.layer = mx_face_layer(j->m, j->gb->face[i], b->nlayers);
-    return s;
-}
 
 static int pixel_used(const bp_job *j, size_t i) {
     float u = j->gb->uv[2 * i], v = j->gb->uv[2 * i + 1];
     return j->gb->face[i] >= 0 && (!j->mask || j->mask[i]) && isfinite(u) && isfinite(v);
-}
-
-static void count_task(void *ctx, int task, int thread) {
-    (void)thread;
-    bp_job *j = ctx;
-    int32_t *cnt = j->s->counts + (size_t)task * j->nbins;
-    memset(cnt, 0, (size_t)j->nbins * sizeof *cnt);
-    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
-    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
-        if (!pixel_used(j, i)) continue;
-        splat sp = pixel_splat(j, i);
-        j->s->splats[i] = sp;
-        int b0 = sp.layer * j->nbands + sp.y0 / BAND_ROWS, b1 = sp.layer * j->nbands + sp.y1 / BAND_ROWS;
-        cnt[b0]++;
-        if (b1 != b0) cnt[b1]++;
-    }
 }
 
 static float pixel_quality(const bp_job *j, size_t i) {
@@ -156,28 +115,76 @@ static float pixel_quality(const bp_job *j, size_t i) {
     return fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
 }
 
+static splat_rec pixel_splat(const bp_job *j, size_t i) {
+    const mx_bake *b = j->b;
+    float tx = j->gb->uv[2 * i] * (float)b->w - 0.5f;
+    float ty = (1.0f - j->gb->uv[2 * i + 1]) * (float)b->h - 0.5f;
+    float flx = floorf(tx), fly = floorf(ty);
+    splat_rec s;
+    s.fx = tx - flx;
+    s.fy = ty - fly;
+    int x0 = (int)flx, y0 = (int)fly;
+    /* repeat wrapping; fmod only for the rare far-away UV, to keep the int conversion valid */
+    if (x0 < -1 || x0 >= b->w) x0 = (int)fmodf(flx, (float)b->w);
+    if (y0 < -1 || y0 >= b->h) y0 = (int)fmodf(fly, (float)b->h);
+    if (x0 < 0) x0 += b->w;
+    if (y0 < 0) y0 += b->h;
+    s.x0 = (uint16_t)x0;
+    s.y0 = (uint16_t)y0;
+    s.layer = (uint16_t)mx_face_layer(j->m, j->gb->face[i], b->nlayers);
+    s.unused = 0;
+    const float *col = j->img->data + i * (size_t)j->img->c;
+    s.col[0] = col[0];
+    s.col[1] = col[1];
+    s.col[2] = col[2];
+    s.q = pixel_quality(j, i);
+    return s;
+}
+
+/* The bins (layer, band) of a splat's two texel rows; b1 == b0 when both lie in one band. */
+static void splat_bins(const bp_job *j, const splat_rec *r, int *b0, int *b1) {
+    int y1 = r->y0 + 1 == j->b->h ? 0 : r->y0 + 1;
+    *b0 = r->layer * j->nbands + r->y0 / BAND_ROWS;
+    *b1 = r->layer * j->nbands + y1 / BAND_ROWS;
+}
+
+static void stage_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    int32_t *cnt = j->s->counts + (size_t)task * j->nbins;
+    memset(cnt, 0, (size_t)j->nbins * sizeof *cnt);
+    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
+    splat_rec *out = j->s->staged + (size_t)y0 * j->gb->w;
+    int32_t n = 0;
+    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
+        if (!pixel_used(j, i)) continue;
+        out[n] = pixel_splat(j, i);
+        int b0, b1;
+        splat_bins(j, &out[n++], &b0, &b1);
+        cnt[b0]++;
+        if (b1 != b0) cnt[b1]++;
+    }
+    j->s->nstaged[task] = n;
+}
+
 static void fill_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
     int32_t *off = j->s->counts + (size_t)task * j->nbins;
-    int c = j->img->c;
-    int y0 = task * CHUNK_ROWS, y1 = y0 + CHUNK_ROWS < j->gb->h ? y0 + CHUNK_ROWS : j->gb->h;
-    for (size_t i = (size_t)y0 * j->gb->w; i < (size_t)y1 * j->gb->w; i++) {
-        if (!pixel_used(j, i)) continue;
-        const splat *sp = &j->s->splats[i];
-        const float *col = j->img->data + i * c;
-        splat_rec r = {sp->x0, sp->x1, sp->y0, sp->y1, sp->fx, sp->fy, {col[0], col[1], col[2]},
-                       pixel_quality(j, i)};
-        int b0 = sp->layer * j->nbands + sp->y0 / BAND_ROWS, b1 = sp->layer * j->nbands + sp->y1 / BAND_ROWS;
-        j->s->recs[off[b0]++] = r;
-        if (b1 != b0) j->s->recs[off[b1]++] = r;
+    const splat_rec *in = j->s->staged + (size_t)task * CHUNK_ROWS * j->gb->w;
+    for (int32_t k = 0; k < j->s->nstaged[task]; k++) {
+        int b0, b1;
+        splat_bins(j, &in[k], &b0, &b1);
+        j->s->recs[off[b0]++] = in[k];
+        if (b1 != b0) j->s->recs[off[b1]++] = in[k];
     }
 }
 
 /* The 4 texels and weights of a splat, restricted to rows [r0, r1). */
-static int splat_texels(const splat_rec *sp, int w, int r0, int r1, size_t *tex, float *wt) {
+static int splat_texels(const splat_rec *sp, int w, int h, int r0, int r1, size_t *tex, float *wt) {
     int n = 0;
-    int ys[2] = {sp->y0, sp->y1}, xs[2] = {sp->x0, sp->x1};
+    int ys[2] = {sp->y0, sp->y0 + 1 == h ? 0 : sp->y0 + 1};
+    int xs[2] = {sp->x0, sp->x0 + 1 == w ? 0 : sp->x0 + 1};
     float wy[2] = {1 - sp->fy, sp->fy}, wx[2] = {1 - sp->fx, sp->fx};
     for (int a = 0; a < 2; a++) {
         if (ys[a] < r0 || ys[a] >= r1) continue;
@@ -201,7 +208,7 @@ static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32
         const splat_rec *r = &j->s->recs[k];
         size_t tex[4];
         float wt[4];
-        int n = splat_texels(r, b->w, r0, r1, tex, wt);
+        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
         for (int e = 0; e < n; e++)
             if (r->q > vq[plane + tex[e]]) vq[plane + tex[e]] = r->q;
     }
@@ -230,7 +237,7 @@ static void splat_band_task(void *ctx, int task, int thread) {
         const splat_rec *r = &j->s->recs[k];
         size_t tex[4];
         float wt[4];
-        int n = splat_texels(r, b->w, r0, r1, tex, wt);
+        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
         for (int e = 0; e < n; e++) {
             size_t t = tex[e];
             if (known[t]) continue; /* T^B before this view: written by an earlier view */
@@ -265,12 +272,17 @@ static int reserve(bp_job *j, mx_status *st) {
         s->view_q = malloc(need_q * sizeof *s->view_q);
         s->q_cap = s->view_q ? need_q : 0;
     }
-    if (npix > s->splat_cap) {
-        free(s->splats);
-        s->splats = malloc(npix * sizeof *s->splats);
-        s->splat_cap = s->splats ? npix : 0;
+    if (npix > s->staged_cap) {
+        free(s->staged);
+        s->staged = malloc(npix * sizeof *s->staged);
+        s->staged_cap = s->staged ? npix : 0;
     }
-    if (!s->counts || !s->bin_start || !s->splats ||
+    if ((size_t)j->nchunks > s->nstaged_cap) {
+        free(s->nstaged);
+        s->nstaged = malloc((size_t)j->nchunks * sizeof *s->nstaged);
+        s->nstaged_cap = s->nstaged ? (size_t)j->nchunks : 0;
+    }
+    if (!s->counts || !s->bin_start || !s->staged || !s->nstaged ||
         ((j->flags & MX_BACKPROJECT_OVERWRITE) && !s->view_q))
         return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     return 0;
@@ -288,7 +300,7 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
     j.nbins = j.nbands * b->nlayers;
     j.nchunks = (gb->h + CHUNK_ROWS - 1) / CHUNK_ROWS;
     if (reserve(&j, st)) return -1;
-    mx_pool_for(pool, j.nchunks, count_task, &j);
+    mx_pool_for(pool, j.nchunks, stage_task, &j);
     /* counts[chunk][bin] -> write offsets: bins in order, chunks in order inside a bin */
     int64_t total = 0;
     for (int bin = 0; bin < j.nbins; bin++) {

@@ -4,6 +4,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../runtime/backend.h"
+#include "raster_tri.h"
+
 /* Sub-pixel precision of snapped vertices: 8 bits. Vertices farther than GUARD image
  * sizes from the image are not rasterized (their faces are dropped), which keeps the
  * integer edge functions far from overflow; a normalised mesh seen by a fitted camera
@@ -25,9 +28,10 @@ typedef struct face_setup {
     int32_t face;
     int32_t x[3], y[3];
     float z[3]; /* depth (perspective: inverse depth) */
+    int32_t uv_index[3]; /* the mesh's face_uv entries (read in face order, with MX_RASTER_UV) */
     int16_t x0, y0, x1, y1;
-    uint8_t swapped, back;
-} face_setup;
+    uint8_t swapped, back, has_uv;
+} face_setup; /* 64 bytes: one cache line per bin entry */
 
 typedef struct raster_scratch {
     size_t vert_cap, face_cap, count_cap, bin_cap, tile_cap;
@@ -88,6 +92,7 @@ typedef struct raster_job {
     mx_gbuffer *gb;
     raster_scratch *s;
     int tiles_x, tiles_y, nchunks;
+    int simd; /* draw small triangles with the AVX2 kernel */
 } raster_job;
 
 static void project_vertices_task(void *ctx, int task, int thread) {
@@ -159,6 +164,12 @@ static void setup_face(const raster_job *j, int f, face_setup *fs) {
         fs->x[k] = (int32_t)s->vxy[2 * (size_t)v[k]];
         fs->y[k] = (int32_t)s->vxy[2 * (size_t)v[k] + 1];
         fs->z[k] = s->vz[v[k]];
+    }
+    fs->has_uv = 0;
+    if ((j->flags & MX_RASTER_UV) && j->m->face_uv) {
+        const int32_t *fu = j->m->face_uv + 3 * (size_t)f;
+        memcpy(fs->uv_index, fu, sizeof fs->uv_index);
+        fs->has_uv = fu[0] >= 0 && fu[1] >= 0 && fu[2] >= 0; /* a face without UVs: no texel */
     }
     fs->x0 = (int16_t)x0;
     fs->y0 = (int16_t)y0;
@@ -232,79 +243,85 @@ static void fill_bins_task(void *ctx, int task, int thread) {
     }
 }
 
-/* Draws one face into the pixels of the tile [tx0, tx1] x [ty0, ty1]: depth test, then
- * face id and depth (back faces of a culled pass only reach depth_unculled). */
-static void draw_face(const raster_job *j, const face_setup *t, int tx0, int ty0, int tx1, int ty1) {
-    mx_gbuffer *gb = j->gb;
-    int x0 = t->x0 > tx0 ? t->x0 : tx0, y0 = t->y0 > ty0 ? t->y0 : ty0;
-    int x1 = t->x1 < tx1 ? t->x1 : tx1, y1 = t->y1 < ty1 ? t->y1 : ty1;
-    if (x0 > x1 || y0 > y1) return;
-    /* edge k is opposite corner k; w_k(p) = (e.dx)(p.y - e.y) - (e.dy)(p.x - e.x) */
-    static const int ea[3] = {1, 2, 0}, eb[3] = {2, 0, 1};
-    int64_t dx[3], dy[3], row[3], bias[3];
-    int64_t px = (int64_t)x0 * SUBPIX + SUBPIX / 2, py = (int64_t)y0 * SUBPIX + SUBPIX / 2;
-    for (int k = 0; k < 3; k++) {
-        int64_t ax = t->x[ea[k]], ay = t->y[ea[k]];
-        dx[k] = t->x[eb[k]] - ax;
-        dy[k] = t->y[eb[k]] - ay;
-        row[k] = dx[k] * (py - ay) - dy[k] * (px - ax);
-        /* top-left rule: pixel centres exactly on a top or left edge belong to the face */
-        int top_left = dy[k] < 0 || (dy[k] == 0 && dx[k] > 0);
-        bias[k] = top_left ? 0 : 1;
-    }
-    int64_t area = row[0] + row[1] + row[2]; /* the sum of the edge functions is constant */
-    float inv_area = (float)(1.0 / (double)area);
-    float z0 = t->z[0], dz1 = t->z[1] - z0, dz2 = t->z[2] - z0;
-    int persp = !j->cam->ortho, f = t->face, back = t->back;
-    float *depth_all = gb->depth_unculled;
-    for (int y = y0; y <= y1; y++) {
+/* Scalar reference kernel (and the path for large triangles): depth test, then face id
+ * and depth (back faces of a culled pass only reach depth_all). */
+static void draw_tri_scalar(const raster_tri *t, const raster_target *o) {
+    int64_t row[3] = {t->row[0], t->row[1], t->row[2]};
+    for (int y = t->y0; y <= t->y1; y++) {
         int64_t w0 = row[0], w1 = row[1], w2 = row[2];
-        size_t i = (size_t)y * gb->w + x0;
-        for (int x = x0; x <= x1; x++, i++) {
-            if (w0 >= bias[0] && w1 >= bias[1] && w2 >= bias[2]) {
+        size_t i = (size_t)y * o->w + t->x0;
+        for (int x = t->x0; x <= t->x1; x++, i++) {
+            if (w0 >= t->bias[0] && w1 >= t->bias[1] && w2 >= t->bias[2]) {
                 /* orthographic: depth is affine in the image; perspective: its inverse is */
-                float z = z0 + (float)w1 * inv_area * dz1 + (float)w2 * inv_area * dz2;
-                if (persp) z = 1.0f / z;
-                if (depth_all && z < depth_all[i]) depth_all[i] = z;
-                if (!back && z < gb->depth[i]) {
-                    gb->depth[i] = z;
-                    gb->face[i] = f;
+                float z = t->z0 + (float)w1 * t->inv_area * t->dz1 + (float)w2 * t->inv_area * t->dz2;
+                if (t->persp) z = 1.0f / z;
+                if (o->depth_all && z < o->depth_all[i]) o->depth_all[i] = z;
+                if (!t->back && z < o->depth[i]) {
+                    o->depth[i] = z;
+                    o->face[i] = t->face;
                 }
             }
-            w0 -= dy[0] * SUBPIX;
-            w1 -= dy[1] * SUBPIX;
-            w2 -= dy[2] * SUBPIX;
+            w0 += t->step_x[0];
+            w1 += t->step_x[1];
+            w2 += t->step_x[2];
         }
-        row[0] += dx[0] * SUBPIX;
-        row[1] += dx[1] * SUBPIX;
-        row[2] += dx[2] * SUBPIX;
+        for (int k = 0; k < 3; k++) row[k] += t->step_y[k];
     }
 }
 
-static void draw_tile_task(void *ctx, int task, int thread) {
-    (void)thread;
-    raster_job *j = ctx;
-    mx_gbuffer *gb = j->gb;
-    int tx = task % j->tiles_x, ty = task / j->tiles_x;
-    int x0 = tx * TILE, y0 = ty * TILE;
-    int x1 = x0 + TILE - 1 < gb->w - 1 ? x0 + TILE - 1 : gb->w - 1;
-    int y1 = y0 + TILE - 1 < gb->h - 1 ? y0 + TILE - 1 : gb->h - 1;
-    for (int y = y0; y <= y1; y++)
-        for (int x = x0; x <= x1; x++) {
-            size_t i = (size_t)y * gb->w + x;
-            gb->face[i] = -1;
-            gb->depth[i] = INFINITY;
-            if (gb->depth_unculled) gb->depth_unculled[i] = INFINITY;
-        }
-    const raster_scratch *s = j->s;
-    for (int32_t k = s->bin_start[task]; k < s->bin_start[task + 1]; k++)
-        draw_face(j, &s->bins[k], x0, y0, x1, y1);
+/* Sets up one face clipped to the tile [tx0, tx1] x [ty0, ty1]; 0 when nothing is left. */
+static int clip_face(const raster_job *j, const face_setup *f, int tx0, int ty0, int tx1, int ty1,
+                     raster_tri *t) {
+    t->x0 = f->x0 > tx0 ? f->x0 : tx0;
+    t->y0 = f->y0 > ty0 ? f->y0 : ty0;
+    t->x1 = f->x1 < tx1 ? f->x1 : tx1;
+    t->y1 = f->y1 < ty1 ? f->y1 : ty1;
+    if (t->x0 > t->x1 || t->y0 > t->y1) return 0;
+    /* edge k is opposite corner k; w_k(p) = (e.dx)(p.y - e.y) - (e.dy)(p.x - e.x) */
+    static const int ea[3] = {1, 2, 0}, eb[3] = {2, 0, 1};
+    int64_t px = (int64_t)t->x0 * SUBPIX + SUBPIX / 2, py = (int64_t)t->y0 * SUBPIX + SUBPIX / 2;
+    for (int k = 0; k < 3; k++) {
+        int64_t ax = f->x[ea[k]], ay = f->y[ea[k]];
+        int64_t dx = f->x[eb[k]] - ax, dy = f->y[eb[k]] - ay;
+        t->row[k] = dx * (py - ay) - dy * (px - ax);
+        t->step_x[k] = -dy * SUBPIX;
+        t->step_y[k] = dx * SUBPIX;
+        /* top-left rule: pixel centres exactly on a top or left edge belong to the face */
+        t->bias[k] = dy < 0 || (dy == 0 && dx > 0) ? 0 : 1;
+    }
+    int64_t area = t->row[0] + t->row[1] + t->row[2]; /* the sum of the edge functions is constant */
+    t->inv_area = (float)(1.0 / (double)area);
+    t->z0 = f->z[0];
+    t->dz1 = f->z[1] - f->z[0];
+    t->dz2 = f->z[2] - f->z[0];
+    t->persp = !j->cam->ortho;
+    t->back = f->back;
+    return 1;
+}
+
+static int is_small(const face_setup *f) {
+    int64_t w = max3(f->x[0], f->x[1], f->x[2]) - min3(f->x[0], f->x[1], f->x[2]);
+    int64_t h = max3(f->y[0], f->y[1], f->y[2]) - min3(f->y[0], f->y[1], f->y[2]);
+    return w <= RASTER_SMALL_EXTENT && h <= RASTER_SMALL_EXTENT;
+}
+
+/* Draws bin entry `slot` (its index is what the face buffer holds until the tile is
+ * resolved, so that resolving finds the setup in the tile's own, cache-warm bin). */
+static void draw_face(const raster_job *j, int32_t slot, int tx0, int ty0, int tx1, int ty1) {
+    const face_setup *f = &j->s->bins[slot];
+    raster_tri t;
+    if (!clip_face(j, f, tx0, ty0, tx1, ty1, &t)) return;
+    t.face = slot;
+    raster_target o = {j->gb->w, j->gb->face, j->gb->depth, j->gb->depth_unculled};
+    if (j->simd && is_small(f))
+        mx_raster_draw_small_avx2(&t, &o);
+    else
+        draw_tri_scalar(&t, &o);
 }
 
 /* Barycentrics (perspective-correct) of pixel i for its face, in the face's corner order,
  * from the snapped corners: the same numbers the coverage test used. */
-static void resolve_bary(const raster_job *j, size_t i, int f) {
-    const face_setup *fs = j->s->faces + f;
+static void resolve_bary(const raster_job *j, size_t i, const face_setup *fs) {
     mx_gbuffer *gb = j->gb;
     int64_t px = (int64_t)(i % (size_t)gb->w) * SUBPIX + SUBPIX / 2;
     int64_t py = (int64_t)(i / (size_t)gb->w) * SUBPIX + SUBPIX / 2;
@@ -324,37 +341,56 @@ static void resolve_bary(const raster_job *j, size_t i, int f) {
     gb->bary[2 * i + 1] = (float)(fs->swapped ? b1 : b2);
 }
 
-static void resolve_uv(const raster_job *j, size_t i, int f) {
-    const mx_mesh *m = j->m;
+static void resolve_uv(const raster_job *j, size_t i, const face_setup *fs) {
     mx_gbuffer *gb = j->gb;
-    const int32_t *fu = m->face_uv + 3 * (size_t)f;
-    if (fu[0] < 0 || fu[1] < 0 || fu[2] < 0) { /* a face without UVs: no texel */
+    if (!fs->has_uv) {
         gb->uv[2 * i] = gb->uv[2 * i + 1] = NAN;
         return;
     }
+    const float *u0 = j->m->uv + 2 * (size_t)fs->uv_index[0], *u1 = j->m->uv + 2 * (size_t)fs->uv_index[1],
+                *u2 = j->m->uv + 2 * (size_t)fs->uv_index[2];
     float b1 = gb->bary[2 * i], b2 = gb->bary[2 * i + 1], b0 = 1.0f - b1 - b2;
-    const float *u0 = m->uv + 2 * (size_t)fu[0], *u1 = m->uv + 2 * (size_t)fu[1],
-                *u2 = m->uv + 2 * (size_t)fu[2];
     gb->uv[2 * i] = b0 * u0[0] + b1 * u1[0] + b2 * u2[0];
     gb->uv[2 * i + 1] = b0 * u0[1] + b1 * u1[1] + b2 * u2[1];
 }
 
-static void resolve_task(void *ctx, int task, int thread) {
+/* Turns the tile's bin slots into face ids and fills barycentrics (and UVs). */
+static void resolve_tile(const raster_job *j, int x0, int y0, int x1, int y1) {
+    mx_gbuffer *gb = j->gb;
+    int with_uv = (j->flags & MX_RASTER_UV) && j->m->face_uv;
+    for (int y = y0; y <= y1; y++)
+        for (size_t i = (size_t)y * gb->w + x0; i <= (size_t)y * gb->w + x1; i++) {
+            int32_t slot = gb->face[i];
+            if (slot < 0) {
+                gb->bary[2 * i] = gb->bary[2 * i + 1] = 0;
+                if (with_uv) gb->uv[2 * i] = gb->uv[2 * i + 1] = 0;
+                continue;
+            }
+            const face_setup *fs = &j->s->bins[slot];
+            gb->face[i] = fs->face;
+            resolve_bary(j, i, fs);
+            if (with_uv) resolve_uv(j, i, fs);
+        }
+}
+
+static void draw_tile_task(void *ctx, int task, int thread) {
     (void)thread;
     raster_job *j = ctx;
     mx_gbuffer *gb = j->gb;
-    int with_uv = (j->flags & MX_RASTER_UV) && j->m->face_uv;
-    int y0 = task * ROWS_PER_TASK, y1 = y0 + ROWS_PER_TASK < gb->h ? y0 + ROWS_PER_TASK : gb->h;
-    for (size_t i = (size_t)y0 * gb->w; i < (size_t)y1 * gb->w; i++) {
-        int f = gb->face[i];
-        if (f < 0) {
-            gb->bary[2 * i] = gb->bary[2 * i + 1] = 0;
-            if (with_uv) gb->uv[2 * i] = gb->uv[2 * i + 1] = 0;
-            continue;
+    int tx = task % j->tiles_x, ty = task / j->tiles_x;
+    int x0 = tx * TILE, y0 = ty * TILE;
+    int x1 = x0 + TILE - 1 < gb->w - 1 ? x0 + TILE - 1 : gb->w - 1;
+    int y1 = y0 + TILE - 1 < gb->h - 1 ? y0 + TILE - 1 : gb->h - 1;
+    for (int y = y0; y <= y1; y++)
+        for (int x = x0; x <= x1; x++) {
+            size_t i = (size_t)y * gb->w + x;
+            gb->face[i] = -1;
+            gb->depth[i] = INFINITY;
+            if (gb->depth_unculled) gb->depth_unculled[i] = INFINITY;
         }
-        resolve_bary(j, i, f);
-        if (with_uv) resolve_uv(j, i, f);
-    }
+    const raster_scratch *s = j->s;
+    for (int32_t k = s->bin_start[task]; k < s->bin_start[task + 1]; k++) draw_face(j, k, x0, y0, x1, y1);
+    resolve_tile(j, x0, y0, x1, y1);
 }
 
 static int check_mesh(const mx_mesh *m, mx_status *st) {
@@ -428,7 +464,8 @@ static int reserve_outputs(raster_job *j, mx_status *st) {
 int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int flags,
                  mx_pool *pool, mx_gbuffer *gb, mx_status *st) {
     if (check_mesh(m, st)) return -1;
-    raster_job j = {m, pos ? pos : m->pos, cam, flags, gb, gb->scratch, 0, 0, 0};
+    raster_job j = {m, pos ? pos : m->pos, cam, flags, gb, gb->scratch, 0, 0, 0,
+                    mx_cpu_best_isa() >= MX_ISA_AVX2};
     j.tiles_x = (gb->w + TILE - 1) / TILE;
     j.tiles_y = (gb->h + TILE - 1) / TILE;
     j.nchunks = m->nfaces / FACES_PER_CHUNK + 1;
@@ -446,7 +483,6 @@ int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int f
     }
     mx_pool_for(pool, j.nchunks, fill_bins_task, &j);
     mx_pool_for(pool, j.tiles_x * j.tiles_y, draw_tile_task, &j);
-    mx_pool_for(pool, (gb->h + ROWS_PER_TASK - 1) / ROWS_PER_TASK, resolve_task, &j);
     return 0;
 }
 

@@ -45,6 +45,59 @@ static void usable_pixels(const mx_gbuffer *gb, float thr, uint8_t *usable, uint
         usable[i] = usable[i] && !tmp[i] && isfinite(gb->uv[2 * i]) && isfinite(gb->uv[2 * i + 1]);
 }
 
+/* Candidates are rendered in parallel, one per task, each thread with its own buffers,
+ * when the per-thread rasterizer scratch stays modest; otherwise one at a time with the
+ * pool inside the rasterizer. Either way each candidate's list depends only on its camera. */
+#define CACHE_PARALLEL_MAX_FACES (1 << 19)
+
+typedef struct cache_worker {
+    mx_gbuffer gb;
+    uint8_t *usable, *tmp;
+} cache_worker;
+
+typedef struct cache_job {
+    mx_view_cache *vc;
+    const mx_mesh *m;
+    const float *pos;
+    float frontal_threshold;
+    mx_pool *inner_pool; /* pool for the rasterizer: NULL when candidates run in parallel */
+    cache_worker *workers;
+    int *failed;         /* [ncand] */
+    mx_status *status;   /* [ncand] */
+} cache_job;
+
+static void render_candidate_task(void *ctx, int c, int thread) {
+    cache_job *j = ctx;
+    cache_worker *w = &j->workers[thread];
+    mx_view_cache *vc = j->vc;
+    if (mx_rasterize(j->m, j->pos, &vc->cams[c], MX_VIEW_RASTER_FLAGS, j->inner_pool, &w->gb,
+                     &j->status[c])) {
+        j->failed[c] = 1;
+        return;
+    }
+    usable_pixels(&w->gb, j->frontal_threshold, w->usable, w->tmp);
+    j->failed[c] = collect_texels(vc, c, j->m, &w->gb, w->usable, &j->status[c]) != 0;
+}
+
+static int workers_init(cache_worker *w, int n, int size, mx_status *st) {
+    for (int k = 0; k < n; k++) {
+        w[k].usable = malloc((size_t)size * size);
+        w[k].tmp = malloc((size_t)size * size);
+        if (!w[k].usable || !w[k].tmp) return mx_fail(st, MX_ENOMEM, "view selection: out of memory");
+        if (mx_gbuffer_init(&w[k].gb, size, size, st)) return -1;
+    }
+    return 0;
+}
+
+static void workers_free(cache_worker *w, int n) {
+    for (int k = 0; w && k < n; k++) {
+        mx_gbuffer_free(&w[k].gb);
+        free(w[k].usable);
+        free(w[k].tmp);
+    }
+    free(w);
+}
+
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
                         const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
                         int nlayers, float frontal_threshold, mx_pool *pool, mx_status *st) {
@@ -52,29 +105,39 @@ int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
     if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: view selection needs UVs", m->source_path);
     if (ncand <= 0 || (size_t)tex_w * tex_h * nlayers > INT32_MAX)
         return mx_fail(st, MX_EINPUT, "view selection: bad candidate count or texture size");
+    if (size <= 0 || size > 16384) return mx_fail(st, MX_EINPUT, "view selection: bad render size %d", size);
     vc->ncand = ncand;
     vc->size = size;
     vc->tex_w = tex_w;
     vc->tex_h = tex_h;
     vc->nlayers = nlayers;
+    int parallel = m->nfaces <= CACHE_PARALLEL_MAX_FACES && mx_pool_threads(pool) > 1;
+    int nworkers = parallel ? mx_pool_threads(pool) : 1;
+    cache_job j = {vc, m, pos, frontal_threshold, parallel ? NULL : pool, NULL, NULL, NULL};
     vc->cams = malloc((size_t)ncand * sizeof *vc->cams);
     vc->texels = calloc((size_t)ncand, sizeof *vc->texels);
     vc->ntexels = calloc((size_t)ncand, sizeof *vc->ntexels);
-    uint8_t *usable = malloc((size_t)size * size), *tmp = malloc((size_t)size * size);
-    mx_gbuffer gb = {0};
-    int ok = vc->cams && vc->texels && vc->ntexels && usable && tmp;
+    j.workers = calloc((size_t)nworkers, sizeof *j.workers);
+    j.failed = calloc((size_t)ncand, sizeof *j.failed);
+    j.status = calloc((size_t)ncand, sizeof *j.status);
+    int ok = vc->cams && vc->texels && vc->ntexels && j.workers && j.failed && j.status;
     if (!ok) mx_fail(st, MX_ENOMEM, "view selection: out of memory");
-    ok = ok && !mx_gbuffer_init(&gb, size, size, st);
-    for (int c = 0; ok && c < ncand; c++) {
-        vc->cams[c] = cams[c];
-        ok = !mx_rasterize(m, pos, &cams[c], MX_VIEW_RASTER_FLAGS, pool, &gb, st);
-        if (!ok) break;
-        usable_pixels(&gb, frontal_threshold, usable, tmp);
-        ok = !collect_texels(vc, c, m, &gb, usable, st);
+    ok = ok && !workers_init(j.workers, nworkers, size, st);
+    if (ok) {
+        memcpy(vc->cams, cams, (size_t)ncand * sizeof *cams);
+        if (parallel)
+            mx_pool_for(pool, ncand, render_candidate_task, &j);
+        else
+            for (int c = 0; c < ncand; c++) render_candidate_task(&j, c, 0);
+        for (int c = 0; ok && c < ncand; c++) /* the first failure, whatever the thread count */
+            if (j.failed[c]) {
+                *st = j.status[c];
+                ok = 0;
+            }
     }
-    mx_gbuffer_free(&gb);
-    free(usable);
-    free(tmp);
+    workers_free(j.workers, nworkers);
+    free(j.failed);
+    free(j.status);
     if (!ok) {
         mx_view_cache_free(vc);
         return -1;
