@@ -193,7 +193,7 @@ static int files_equal(const char *a, const char *b) {
 static void test_thread_determinism(const char *weights, const char *tmp) {
     char mesh[1024], out1[1024], out2[1024], a[1100], b[1100];
     snprintf(mesh, sizeof mesh, "%s/assets/fedora_hat/fedora.obj", mx_shared_dir());
-    snprintf(out1, sizeof out1, "%s/threads1", tmp);
+    snprintf(out1, sizeof out1, "%s/nested/deeper/threads1", tmp); /* parents are created */
     snprintf(out2, sizeof out2, "%s/threads3", tmp);
     mx_texture_opts o;
     mx_status st;

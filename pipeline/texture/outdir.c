@@ -46,6 +46,24 @@ static int move_files(const char *from, const char *to, mx_status *st) {
     return rc;
 }
 
+/* mkdir -p of the folder that will hold `dir` (its parent). */
+static int make_parents(const char *dir, mx_status *st) {
+    char path[4096];
+    int n = snprintf(path, sizeof path, "%s", dir);
+    if (n < 0 || (size_t)n >= sizeof path) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    char *slash = strrchr(path, '/');
+    if (!slash || slash == path) return 0;
+    *slash = 0;
+    for (char *p = path + 1; *p; p++) {
+        if (*p != '/') continue;
+        *p = 0;
+        if (mkdir(path, 0777) && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", path, strerror(errno));
+        *p = '/';
+    }
+    if (mkdir(path, 0777) && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", path, strerror(errno));
+    return 0;
+}
+
 int mx_outdir_write(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
                     mx_status *st) {
     char stage[4096];
@@ -55,6 +73,7 @@ int mx_outdir_write(const char *dir, const mx_mesh *m, const mx_image *textures,
     struct stat sb;
     if (stat(dir, &sb) == 0 && !S_ISDIR(sb.st_mode))
         return mx_fail(st, MX_EINPUT, "%s: exists and is not a folder", dir);
+    if (make_parents(dir, st)) return -1;
     remove_tree(stage);
     if (mx_write_outputs(stage, m, textures, ntex, report_json, st)) {
         remove_tree(stage);
