@@ -9,7 +9,9 @@ for b in "$BUILD"/tools/bench_*; do
     [ -x "$b" ] || continue
     found=1
     echo "== $(basename "$b")"
-    "$b"
+    # OpenBLAS is the anchor at its best: machines here may set OPENBLAS_CORETYPE/L2_SIZE (to work
+    # around old OpenBLAS bugs), which forces slower kernels; the benchmark unsets both for itself.
+    env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE "$b"
     rc=$?
     if [ $rc -ne 0 ]; then
         echo "$(basename "$b"): failed (exit $rc)"

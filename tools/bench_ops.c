@@ -10,6 +10,7 @@
 #include "../runtime/log.h"
 
 void openblas_set_num_threads(int num_threads);
+char *openblas_get_corename(void);
 
 typedef struct {
     int M, N, K;
@@ -199,7 +200,8 @@ int main(int argc, char **argv) {
         return 1;
     }
     openblas_set_num_threads(threads);
-    printf("bench_ops: %d threads, kernels %s, median of %d\n", threads, mx_isa_name(ctx.k->isa), repeats);
+    printf("bench_ops: %d threads, kernels %s, median of %d; OpenBLAS kernels: %s\n", threads, mx_isa_name(ctx.k->isa),
+           repeats, openblas_get_corename());
     double g = bench_gemms(&ctx, repeats);
     double c = bench_convs(&ctx, repeats);
     double ms = bench_attention(&ctx, repeats < 3 ? repeats : 3);
