@@ -4,15 +4,16 @@
 
 #include <string.h>
 
-/* Largest block of K packed at once: an NR-column B panel of KC_MAX rows (40 KiB for NR=32)
- * stays in L1 while the micro-kernel streams the MC×kc block of A from L2. 320 keeps the
- * K=320 GEMMs of the UNet's first level in one block (on this Zen 5 at least as fast as 256;
- * the shared machine was too noisy to separate them better). */
-#define KC_MAX 320
+/* Largest block of K packed at once. Each thread keeps its MC×kc block of A in L2 (240 KiB at
+ * 640) and streams kc×NR panels of B; a longer block means fewer passes over C and fewer
+ * pack/compute rounds: on this Zen 5, 640 beat 320 on the K = 1280..11520 shapes (K = 5120:
+ * 8 instead of 16 rounds) and was no slower on the K = 320 ones. */
+#define KC_MAX 640
 /* Rows of A per compute task (rounded down to whole MR panels). */
 #define MC_ROWS 96
-/* Compute tasks wanted, so that any thread count up to ~16 stays busy. */
-#define TASKS_WANTED 48
+/* Compute tasks wanted, so that a few threads stay busy; the row blocks of a tall GEMM
+ * (M = 4096: 43 blocks) are then enough on their own and N is not split. */
+#define TASKS_WANTED 32
 
 static int min_int(int a, int b) { return a < b ? a : b; }
 static int max_int(int a, int b) { return a > b ? a : b; }
@@ -94,29 +95,26 @@ void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, fl
     }
 }
 
-/* Outer blocks of C bound the packed buffers (≤ OUTER_MAX rows of A and columns of B per K
- * block, ~5 MiB each), whatever the problem size, e.g. a VAE conv over 512×512 pixels. */
+/* Outer blocks of columns bound the shared B buffer (≤ OUTER_MAX columns per K block, ~5 MiB),
+ * whatever the problem size, e.g. a VAE conv over 512×512 pixels. */
 #define OUTER_MAX 4096
 
 typedef struct {
     const mx_gemm_kernel *g;
     const mx_gemm_problem *p;
-    float *apack, *bpack;
+    float *bpack;
+    /* per-thread A blocks (MC rows × kc, packed by the thread that computes with them, so they
+     * stay in its L2) and the row block each one holds (-1: none yet in this K block) */
+    float *ablock;
+    size_t ablock_stride;
+    int *ablock_mb;
     const float *bias; /* widened, or NULL */
-    int m_off, m_end, n_off, n_end; /* the outer block of C */
+    int n_off, n_end; /* the outer block of columns */
     int k0, kc, first_block, last_block;
     int mpanels, npanels, mc_panels, nc_panels, nmb, nnb;
 } gemm_job;
 
 #define PACK_PANELS_PER_TASK 4
-
-static void pack_a_task(void *arg, int task, int thread) {
-    (void)thread;
-    const gemm_job *j = arg;
-    int mr = j->g->mr;
-    for (int mp = task * PACK_PANELS_PER_TASK; mp < min_int(j->mpanels, (task + 1) * PACK_PANELS_PER_TASK); mp++)
-        j->p->pack_a(j->p, j->g, j->apack + (size_t)mp * j->kc * mr, j->m_off + mp * mr, mr, j->k0, j->kc);
-}
 
 static void pack_b_task(void *arg, int task, int thread) {
     (void)thread;
@@ -124,6 +122,20 @@ static void pack_b_task(void *arg, int task, int thread) {
     int nr = j->g->nr;
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
         j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * j->kc * nr, j->n_off + np * nr, nr, j->k0, j->kc);
+}
+
+/* The packed A panels of row block mb in this thread's buffer; packed only when the thread's
+ * previous task used another block (tasks of one row block are claimed one after the other).
+ * Packing copies values exactly, so who packs never changes a result. */
+static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
+    float *buf = j->ablock + (size_t)thread * j->ablock_stride;
+    if (j->ablock_mb[thread] != mb) {
+        int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
+        for (int mp = mp0; mp < mp1; mp++)
+            j->p->pack_a(j->p, j->g, buf + (size_t)(mp - mp0) * j->kc * mr, mp * mr, mr, j->k0, j->kc);
+        j->ablock_mb[thread] = mb;
+    }
+    return buf;
 }
 
 static void add_bias(const mx_gemm_problem *p, const float *bias, int m0, int m1, int n0, int n1) {
@@ -136,38 +148,40 @@ static void add_bias(const mx_gemm_problem *p, const float *bias, int m0, int m1
     }
 }
 
-/* One MC×NC tile of C: B panels outside (kept in L1), A panels inside (streamed from L2). */
+/* One MC×NC tile of C: B panels outside, the A panels of the thread's block (in L2) inside. */
 static void compute_task(void *arg, int task, int thread) {
-    (void)thread;
     const gemm_job *j = arg;
     const mx_gemm_problem *p = j->p;
     int mr = j->g->mr, nr = j->g->nr;
     int mb = task / j->nnb, nb = task % j->nnb;
     int mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
     int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
+    const float *a = thread_a_block(j, mb, thread);
     for (int np = np0; np < np1; np++) {
         const float *b = j->bpack + (size_t)np * j->kc * nr;
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
         for (int mp = mp0; mp < mp1; mp++) {
-            int m0 = j->m_off + mp * mr, m = min_int(mr, j->m_end - m0);
-            j->g->micro(j->kc, j->apack + (size_t)mp * j->kc * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m, n,
-                        !j->first_block);
+            int m0 = mp * mr, m = min_int(mr, p->M - m0);
+            j->g->micro(j->kc, a + (size_t)(mp - mp0) * j->kc * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m,
+                        n, !j->first_block);
         }
     }
     if (j->last_block && j->bias)
-        add_bias(p, j->bias, j->m_off + mp0 * mr, min_int(j->m_end, j->m_off + mp1 * mr), j->n_off + np0 * nr,
+        add_bias(p, j->bias, mp0 * mr, min_int(p->M, mp1 * mr), j->n_off + np0 * nr,
                  min_int(j->n_end, j->n_off + np1 * nr));
 }
 
 /* Task grid of the current outer block: MC-row blocks × NC-column blocks. */
 static void plan_tiles(gemm_job *j) {
     const mx_gemm_kernel *g = j->g;
-    j->mpanels = ceil_div(j->m_end - j->m_off, g->mr);
+    j->mpanels = ceil_div(j->p->M, g->mr);
     j->npanels = ceil_div(j->n_end - j->n_off, g->nr);
     j->mc_panels = max_int(1, MC_ROWS / g->mr);
     j->nmb = ceil_div(j->mpanels, j->mc_panels);
-    /* narrow the N blocks when there are few M blocks, so that there are enough tasks */
-    j->nc_panels = max_int(1, min_int(8, j->npanels * j->nmb / TASKS_WANTED));
+    /* split N into equal blocks only as far as needed for enough tasks: a thread repacks its
+     * A block whenever it moves to another row block */
+    int nnb = min_int(j->npanels, ceil_div(TASKS_WANTED, j->nmb));
+    j->nc_panels = ceil_div(j->npanels, nnb);
     j->nnb = ceil_div(j->npanels, j->nc_panels);
 }
 
@@ -179,14 +193,11 @@ static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
     return q;
 }
 
-/* One K block of the rows [m_off, m_end): A is packed once, then reused for every batch item
- * and every outer block of columns. */
-static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, int nb_max) {
-    j->p = p;
-    j->n_off = 0;
-    j->n_end = min_int(p->N, nb_max);
-    plan_tiles(j);
-    mx_par_for(c, ceil_div(j->mpanels, PACK_PANELS_PER_TASK), pack_a_task, j);
+/* One K block: for every batch item and outer block of columns, B is packed by all threads,
+ * then the tiles are computed (each thread packing the A blocks it needs; A is the same for
+ * every batch item, so a thread's A block stays valid across items). */
+static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, int nb_max, int nthreads) {
+    for (int t = 0; t < nthreads; t++) j->ablock_mb[t] = -1;
     for (int b = 0; b < p->batch; b++) {
         mx_gemm_problem item = batch_item(p, b);
         j->p = &item;
@@ -203,18 +214,20 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
     if (p->M <= 0 || p->N <= 0 || p->batch <= 0) return 0;
     /* outer blocks end on whole panels */
-    int mb_max = OUTER_MAX / g->mr * g->mr, nb_max = OUTER_MAX / g->nr * g->nr;
-    int mb = min_int(p->M, mb_max), nb = min_int(p->N, nb_max);
+    int nb_max = OUTER_MAX / g->nr * g->nr, nb = min_int(p->N, nb_max);
     int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
+    int nthreads = mx_par_threads(c);
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
-    size_t apack_n = (size_t)ceil_div(mb, g->mr) * g->mr * kc_max;
+    size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * kc_max;
     size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * kc_max;
+    size_t floats = (size_t)nthreads * ablock_n + bpack_n + bias_n;
     mx_scratch s;
-    float *mem = mx_scratch_take(c, (apack_n + bpack_n + bias_n) * sizeof(float), &s);
+    float *mem = mx_scratch_take(c, floats * sizeof(float) + (size_t)nthreads * sizeof(int), &s);
     if (!mem) return -1;
-    gemm_job j = {.g = g, .p = p, .apack = mem, .bpack = mem + apack_n};
+    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .ablock_mb = (int *)(mem + floats)};
+    j.bpack = mem + (size_t)nthreads * ablock_n;
     if (bias_n) {
-        float *bias = mem + apack_n + bpack_n;
+        float *bias = j.bpack + bpack_n;
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
         j.bias = bias;
     }
@@ -223,15 +236,12 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
         for (int m = 0; m < p->M; m++) memset(item.C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
         if (j.bias) add_bias(&item, j.bias, 0, p->M, 0, p->N);
     }
-    for (j.m_off = 0; j.m_off < p->M && p->K > 0; j.m_off += mb_max) {
-        j.m_end = min_int(p->M, j.m_off + mb_max);
-        for (int kb = 0; kb < nkb; kb++) {
-            j.k0 = kb * kc_max;
-            j.kc = min_int(kc_max, p->K - j.k0);
-            j.first_block = kb == 0;
-            j.last_block = kb == nkb - 1;
-            run_k_block(c, &j, p, nb_max);
-        }
+    for (int kb = 0; kb < nkb && p->K > 0; kb++) {
+        j.k0 = kb * kc_max;
+        j.kc = min_int(kc_max, p->K - j.k0);
+        j.first_block = kb == 0;
+        j.last_block = kb == nkb - 1;
+        run_k_block(c, &j, p, nb_max, nthreads);
     }
     mx_scratch_release(c, &s);
     return 0;

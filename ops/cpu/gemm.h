@@ -1,8 +1,9 @@
 /* The blocked GEMM engine behind linear and conv2d on the SIMD levels (Goto/BLIS scheme):
  * C[M,N] (row stride ldc) = A[M,K] · B[K,N] (+ bias). For each block of kc columns of K,
- * A is packed into MR-row panels and B into NR-column panels (both k-major, zero-padded at
- * the edges) in scratch memory, then tasks over MC×NC tiles of C run the register-blocked
- * micro-kernel on every MR×NR sub-tile. Packing is pluggable, so conv2d packs its B panels
+ * B is packed into NR-column panels by all threads, then tasks over MC×NC tiles of C run the
+ * register-blocked micro-kernel on every MR×NR sub-tile; each thread packs the MC-row block
+ * of A it works on into its own buffer (MR-row panels; it stays in the thread's L2). Panels
+ * are k-major and zero-padded at the edges. Packing is pluggable, so conv2d packs its B panels
  * straight from the image (tiled im2col, never a full copy). Every split depends on the
  * problem size only, so results do not depend on the thread count. */
 #ifndef MX_OPS_CPU_GEMM_H
@@ -67,5 +68,63 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                     int M, int N, int K);
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+
+#ifdef __AVX__
+#include <immintrin.h>
+
+#include "transpose_avx.h"
+
+/* The packing transpose for the SIMD files: 8×8 blocks, then a 4- and a 2-row block, so that
+ * MR = 12 (8 + 4) and MR = 6 (4 + 2) panels never fall back to scalar stores. */
+static inline void mx_gemm_transpose_4x8(float *dst, size_t dst_ld, const float *src, size_t src_ld) {
+    __m256 r0 = _mm256_loadu_ps(src), r1 = _mm256_loadu_ps(src + src_ld);
+    __m256 r2 = _mm256_loadu_ps(src + 2 * src_ld), r3 = _mm256_loadu_ps(src + 3 * src_ld);
+    __m256 t0 = _mm256_unpacklo_ps(r0, r1), t1 = _mm256_unpackhi_ps(r0, r1);
+    __m256 t2 = _mm256_unpacklo_ps(r2, r3), t3 = _mm256_unpackhi_ps(r2, r3);
+    /* u_j holds column j in its low lane and column j + 4 in its high lane */
+    __m256 u[4] = {_mm256_shuffle_ps(t0, t2, 0x44), _mm256_shuffle_ps(t0, t2, 0xee), _mm256_shuffle_ps(t1, t3, 0x44),
+                   _mm256_shuffle_ps(t1, t3, 0xee)};
+    for (int j = 0; j < 4; j++) {
+        _mm_storeu_ps(dst + (size_t)j * dst_ld, _mm256_castps256_ps128(u[j]));
+        _mm_storeu_ps(dst + (size_t)(j + 4) * dst_ld, _mm256_extractf128_ps(u[j], 1));
+    }
+}
+
+static inline void mx_gemm_transpose_2x8(float *dst, size_t dst_ld, const float *src, size_t src_ld) {
+    __m256 r0 = _mm256_loadu_ps(src), r1 = _mm256_loadu_ps(src + src_ld);
+    /* pairs (r0[c], r1[c]): t[0] has columns 0, 1 | 4, 5 and t[1] columns 2, 3 | 6, 7 */
+    __m256 t[2] = {_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1)};
+    for (int h = 0; h < 2; h++) {
+        __m128 lo = _mm256_castps256_ps128(t[h]), hi = _mm256_extractf128_ps(t[h], 1);
+        _mm_storel_pi((__m64 *)(dst + (size_t)(2 * h) * dst_ld), lo);
+        _mm_storeh_pi((__m64 *)(dst + (size_t)(2 * h + 1) * dst_ld), lo);
+        _mm_storel_pi((__m64 *)(dst + (size_t)(2 * h + 4) * dst_ld), hi);
+        _mm_storeh_pi((__m64 *)(dst + (size_t)(2 * h + 5) * dst_ld), hi);
+    }
+}
+
+/* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
+static inline void mx_gemm_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
+    int r = rows / 8 * 8;
+    transpose_avx(dst, dst_ld, src, src_ld, r, cols);
+    for (int h = 4; h >= 1; h /= 2) {
+        if (rows - r < h) continue;
+        int c = 0;
+        for (; c + 8 <= cols; c += 8) {
+            float *d = dst + (size_t)c * dst_ld + r;
+            const float *s = src + (size_t)r * src_ld + c;
+            if (h == 4)
+                mx_gemm_transpose_4x8(d, dst_ld, s, src_ld);
+            else if (h == 2)
+                mx_gemm_transpose_2x8(d, dst_ld, s, src_ld);
+            else
+                for (int i = 0; i < 8; i++) d[(size_t)i * dst_ld] = s[i];
+        }
+        for (; c < cols; c++)
+            for (int i = 0; i < h; i++) dst[(size_t)c * dst_ld + r + i] = src[(size_t)(r + i) * src_ld + c];
+        r += h;
+    }
+}
+#endif
 
 #endif

@@ -115,11 +115,20 @@ static float pixel_quality(const bp_job *j, size_t i) {
     return fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
 }
 
+/* floorf without the library call (the build targets plain x86-64); identical results,
+ * signed zeros included. */
+static float floor_fast(float x) {
+    if (!(fabsf(x) < 8388608.0f)) return floorf(x); /* 2^23: larger floats are integers */
+    float t = (float)(int32_t)x;
+    if (t == x) return x;
+    return t > x ? t - 1.0f : t;
+}
+
 static splat_rec pixel_splat(const bp_job *j, size_t i) {
     const mx_bake *b = j->b;
     float tx = j->gb->uv[2 * i] * (float)b->w - 0.5f;
     float ty = (1.0f - j->gb->uv[2 * i + 1]) * (float)b->h - 0.5f;
-    float flx = floorf(tx), fly = floorf(ty);
+    float flx = floor_fast(tx), fly = floor_fast(ty);
     splat_rec s;
     s.fx = tx - flx;
     s.fy = ty - fly;
@@ -221,6 +230,18 @@ static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32
         }
 }
 
+/* Adds one texel's share of a splat (skipping texels in T^B before this view, which were
+ * written by an earlier view). */
+static inline void splat_texel(mx_bake *b, size_t plane, size_t t, float wt, const splat_rec *r) {
+    t += plane;
+    if (wt <= 0 || b->known[t]) return;
+    b->sum_w[t] += wt;
+    b->sum_wc[3 * t] += wt * r->col[0];
+    b->sum_wc[3 * t + 1] += wt * r->col[1];
+    b->sum_wc[3 * t + 2] += wt * r->col[2];
+    if (r->q > b->quality[t]) b->quality[t] = r->q;
+}
+
 static void splat_band_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
@@ -231,24 +252,24 @@ static void splat_band_task(void *ctx, int task, int thread) {
     int32_t k0 = j->s->bin_start[task], k1 = j->s->bin_start[task + 1];
     if (k0 == k1) return;
     if (j->flags & MX_BACKPROJECT_OVERWRITE) restart_better_texels(j, plane, r0, r1, k0, k1);
-    uint8_t *known = b->known + plane;
-    float *sw = b->sum_w + plane, *swc = b->sum_wc + 3 * plane, *qual = b->quality + plane;
+    /* the texels in the order of splat_texels: row y0 (x0, x1), then row y1 (x0, x1) */
     for (int32_t k = k0; k < k1; k++) {
         const splat_rec *r = &j->s->recs[k];
-        size_t tex[4];
-        float wt[4];
-        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
-        for (int e = 0; e < n; e++) {
-            size_t t = tex[e];
-            if (known[t]) continue; /* T^B before this view: written by an earlier view */
-            sw[t] += wt[e];
-            swc[3 * t] += wt[e] * r->col[0];
-            swc[3 * t + 1] += wt[e] * r->col[1];
-            swc[3 * t + 2] += wt[e] * r->col[2];
-            if (r->q > qual[t]) qual[t] = r->q;
+        int x0 = r->x0, x1 = x0 + 1 == b->w ? 0 : x0 + 1;
+        int y0 = r->y0, y1 = y0 + 1 == b->h ? 0 : y0 + 1;
+        float wy0 = 1 - r->fy, wx0 = 1 - r->fx;
+        if (y0 >= r0 && y0 < r1) {
+            splat_texel(b, plane, (size_t)y0 * b->w + x0, wy0 * wx0, r);
+            splat_texel(b, plane, (size_t)y0 * b->w + x1, wy0 * r->fx, r);
+        }
+        if (y1 >= r0 && y1 < r1) {
+            splat_texel(b, plane, (size_t)y1 * b->w + x0, r->fy * wx0, r);
+            splat_texel(b, plane, (size_t)y1 * b->w + x1, r->fy * r->fx, r);
         }
     }
-    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++) /* branchless: vectorizes */
+    uint8_t *known = b->known + plane;
+    const float *sw = b->sum_w + plane;
+    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++)
         known[t] = (uint8_t)(known[t] | (sw[t] > b->eps));
 }
 

@@ -15,8 +15,9 @@
 #define SUBPIX_BITS 8
 #define SUBPIX (1 << SUBPIX_BITS)
 #define GUARD 16
-#define TILE 32
+#define TILE 32 /* a multiple of 8: raster_avx2.c steps stay inside a tile */
 #define FACES_PER_CHUNK 4096
+_Static_assert(TILE % 8 == 0, "AVX2 steps must not cross tiles");
 #define ROWS_PER_TASK 16
 
 /* A face as drawn, with everything drawing and resolving need (so that those passes read
@@ -31,16 +32,20 @@ typedef struct face_setup {
     int32_t uv_index[3]; /* the mesh's face_uv entries (read in face order, with MX_RASTER_UV) */
     int16_t x0, y0, x1, y1;
     uint8_t swapped, back, has_uv;
-} face_setup; /* 64 bytes: one cache line per bin entry */
+    uint8_t small; /* snapped box within RASTER_SMALL_EXTENT: the 32-bit SIMD kernel may draw it */
+} face_setup;
+_Static_assert(sizeof(face_setup) == 64, "a bin entry is one cache line");
 
 typedef struct raster_scratch {
     size_t vert_cap, face_cap, count_cap, bin_cap, tile_cap;
     float *vz;          /* [nverts] depth (perspective: its inverse) */
-    int64_t *vxy;       /* [nverts][2] snapped position */
+    int32_t *vxy;       /* [nverts][2] snapped position (within the guard band: fits) */
     uint8_t *vok;       /* [nverts] projected inside the guard band */
     face_setup *faces;  /* [nfaces] */
     float *fnormal;     /* [nfaces][3] unit geometric normals of drawn faces */
     int32_t *counts;    /* [nchunks][ntiles] */
+    uint8_t *chunk_bad; /* [nchunks] a face of the chunk has an index out of range */
+    size_t chunk_cap;
     int32_t *bin_start; /* [ntiles + 1] */
     face_setup *bins;   /* [total] faces per tile, ascending face id */
 } raster_scratch;
@@ -72,6 +77,7 @@ void mx_gbuffer_free(mx_gbuffer *gb) {
         free(s->faces);
         free(s->fnormal);
         free(s->counts);
+        free(s->chunk_bad);
         free(s->bin_start);
         free(s->bins);
         free(s);
@@ -95,6 +101,14 @@ typedef struct raster_job {
     int simd; /* draw small triangles with the AVX2 kernel */
 } raster_job;
 
+/* llround without the library call, for |v| < 2^52 (the guard band keeps it far below):
+ * truncation and the remainder v - t are exact there. */
+static int64_t round_half_away(double v) {
+    int64_t t = (int64_t)v;
+    double frac = v - (double)t;
+    return t + (frac >= 0.5) - (frac <= -0.5); /* branch-free: the fraction is random */
+}
+
 static void project_vertices_task(void *ctx, int task, int thread) {
     (void)thread;
     raster_job *j = ctx;
@@ -109,8 +123,8 @@ static void project_vertices_task(void *ctx, int task, int thread) {
              fabs(p[1]) < lim;
         s->vok[v] = (uint8_t)ok;
         s->vz[v] = j->cam->ortho ? p[2] : 1.0f / p[2];
-        s->vxy[2 * (size_t)v] = ok ? llround((double)p[0] * SUBPIX) : 0;
-        s->vxy[2 * (size_t)v + 1] = ok ? llround((double)p[1] * SUBPIX) : 0;
+        s->vxy[2 * (size_t)v] = ok ? (int32_t)round_half_away((double)p[0] * SUBPIX) : 0;
+        s->vxy[2 * (size_t)v + 1] = ok ? (int32_t)round_half_away((double)p[1] * SUBPIX) : 0;
     }
 }
 
@@ -127,10 +141,11 @@ static int64_t max3(int64_t a, int64_t b, int64_t c) {
 
 /* Pixel-centre range [p0, p1] covered by the snapped interval [lo, hi]. */
 static void pixel_range(int64_t lo, int64_t hi, int n, int *p0, int *p1) {
-    int64_t a = (lo - SUBPIX / 2 + SUBPIX - 1);
-    a = a >= 0 ? a / SUBPIX : -((-a + SUBPIX - 1) / SUBPIX);
-    int64_t b = hi - SUBPIX / 2;
-    b = b >= 0 ? b / SUBPIX : -((-b + SUBPIX - 1) / SUBPIX);
+    /* floor division by SUBPIX, made branch-free by an offset that keeps the dividend
+     * positive (snapped coordinates stay within the guard band, far below 2^40) */
+    const int64_t off = (int64_t)1 << 40;
+    int64_t a = (lo - SUBPIX / 2 + SUBPIX - 1 + off) / SUBPIX - off / SUBPIX;
+    int64_t b = (hi - SUBPIX / 2 + off) / SUBPIX - off / SUBPIX;
     if (a < 0) a = 0;
     if (b > n - 1) b = n - 1;
     *p0 = (int)a;
@@ -146,23 +161,26 @@ static void setup_face(const raster_job *j, int f, face_setup *fs) {
     fs->x0 = 1;
     fs->x1 = 0;
     if (!s->vok[fv[0]] || !s->vok[fv[1]] || !s->vok[fv[2]]) return;
-    const int64_t *a = s->vxy + 2 * (size_t)fv[0], *b = s->vxy + 2 * (size_t)fv[1],
+    const int32_t *a = s->vxy + 2 * (size_t)fv[0], *b = s->vxy + 2 * (size_t)fv[1],
                   *c = s->vxy + 2 * (size_t)fv[2];
     int64_t area = edge_fn(a[0], a[1], b[0], b[1], c[0], c[1]);
     int keep_back = !(j->flags & MX_RASTER_CULL_BACK) || (j->flags & MX_RASTER_DEPTH_UNCULLED);
     if (area == 0 || (area > 0 && !keep_back)) return;
     int x0, x1, y0, y1;
-    pixel_range(min3(a[0], b[0], c[0]), max3(a[0], b[0], c[0]), j->gb->w, &x0, &x1);
-    pixel_range(min3(a[1], b[1], c[1]), max3(a[1], b[1], c[1]), j->gb->h, &y0, &y1);
+    int64_t lo_x = min3(a[0], b[0], c[0]), hi_x = max3(a[0], b[0], c[0]);
+    int64_t lo_y = min3(a[1], b[1], c[1]), hi_y = max3(a[1], b[1], c[1]);
+    pixel_range(lo_x, hi_x, j->gb->w, &x0, &x1);
+    pixel_range(lo_y, hi_y, j->gb->h, &y0, &y1);
     if (x0 > x1 || y0 > y1) return;
+    fs->small = hi_x - lo_x <= RASTER_SMALL_EXTENT && hi_y - lo_y <= RASTER_SMALL_EXTENT;
     /* make the area positive: swap corners 1 and 2 of front faces */
     fs->face = f;
     fs->swapped = area < 0;
     fs->back = area > 0 && (j->flags & MX_RASTER_CULL_BACK);
     int32_t v[3] = {fv[0], fs->swapped ? fv[2] : fv[1], fs->swapped ? fv[1] : fv[2]};
     for (int k = 0; k < 3; k++) {
-        fs->x[k] = (int32_t)s->vxy[2 * (size_t)v[k]];
-        fs->y[k] = (int32_t)s->vxy[2 * (size_t)v[k] + 1];
+        fs->x[k] = s->vxy[2 * (size_t)v[k]];
+        fs->y[k] = s->vxy[2 * (size_t)v[k] + 1];
         fs->z[k] = s->vz[v[k]];
     }
     fs->has_uv = 0;
@@ -189,6 +207,31 @@ static void face_normal(const raster_job *j, int f, float *out) {
     for (int k = 0; k < 3; k++) out[k] = len > 0 ? n[k] / len : 0.0f;
 }
 
+/* Whether face f's vertex and UV indices are in range: checked here, where the face is
+ * read anyway, instead of in a separate pass over the mesh on every render. */
+static int face_indices_ok(const mx_mesh *m, int f) {
+    const int32_t *fv = m->faces + 3 * (size_t)f;
+    int ok = (uint32_t)fv[0] < (uint32_t)m->nverts && (uint32_t)fv[1] < (uint32_t)m->nverts &&
+             (uint32_t)fv[2] < (uint32_t)m->nverts;
+    if (m->face_uv) { /* -1: corner without UV */
+        const int32_t *fu = m->face_uv + 3 * (size_t)f;
+        ok = ok && fu[0] >= -1 && fu[0] < m->nuv && fu[1] >= -1 && fu[1] < m->nuv && fu[2] >= -1 &&
+             fu[2] < m->nuv;
+    }
+    return ok;
+}
+
+/* Adds a face to the tile counts (most faces touch one tile: no loop for them). */
+static void count_face_tiles(const raster_job *j, const face_setup *fs, int32_t *cnt) {
+    int tx0 = fs->x0 / TILE, tx1 = fs->x1 / TILE, ty0 = fs->y0 / TILE, ty1 = fs->y1 / TILE;
+    if (tx0 == tx1 && ty0 == ty1) {
+        cnt[ty0 * j->tiles_x + tx0]++;
+        return;
+    }
+    for (int ty = ty0; ty <= ty1; ty++)
+        for (int tx = tx0; tx <= tx1; tx++) cnt[ty * j->tiles_x + tx]++;
+}
+
 static void count_bins_task(void *ctx, int task, int thread) {
     (void)thread;
     raster_job *j = ctx;
@@ -198,13 +241,19 @@ static void count_bins_task(void *ctx, int task, int thread) {
     memset(cnt, 0, (size_t)ntiles * sizeof *cnt);
     int f0 = task * FACES_PER_CHUNK, f1 = f0 + FACES_PER_CHUNK;
     if (f1 > j->m->nfaces) f1 = j->m->nfaces;
+    s->chunk_bad[task] = 0;
     for (int f = f0; f < f1; f++) {
         face_setup *fs = s->faces + f;
+        if (!face_indices_ok(j->m, f)) {
+            s->chunk_bad[task] = 1;
+            fs->x0 = 1;
+            fs->x1 = 0;
+            continue;
+        }
         setup_face(j, f, fs);
         if (fs->x0 > fs->x1) continue;
         if (!fs->back) face_normal(j, f, s->fnormal + 3 * (size_t)f); /* culled faces never show */
-        for (int ty = fs->y0 / TILE; ty <= fs->y1 / TILE; ty++)
-            for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) cnt[ty * j->tiles_x + tx]++;
+        count_face_tiles(j, fs, cnt);
     }
 }
 
@@ -238,8 +287,9 @@ static void fill_bins_task(void *ctx, int task, int thread) {
     for (int f = f0; f < f1; f++) {
         const face_setup *fs = faces + f;
         if (fs->x0 > fs->x1) continue;
-        for (int ty = fs->y0 / TILE; ty <= fs->y1 / TILE; ty++)
-            for (int tx = fs->x0 / TILE; tx <= fs->x1 / TILE; tx++) bins[off[ty * tiles_x + tx]++] = *fs;
+        int tx0 = fs->x0 / TILE, tx1 = fs->x1 / TILE, ty0 = fs->y0 / TILE, ty1 = fs->y1 / TILE;
+        for (int ty = ty0; ty <= ty1; ty++)
+            for (int tx = tx0; tx <= tx1; tx++) bins[off[ty * tiles_x + tx]++] = *fs;
     }
 }
 
@@ -272,6 +322,8 @@ static void draw_tri_scalar(const raster_tri *t, const raster_target *o) {
 /* Sets up one face clipped to the tile [tx0, tx1] x [ty0, ty1]; 0 when nothing is left. */
 static int clip_face(const raster_job *j, const face_setup *f, int tx0, int ty0, int tx1, int ty1,
                      raster_tri *t) {
+    t->tile_x0 = tx0;
+    t->tile_x1 = tx1;
     t->x0 = f->x0 > tx0 ? f->x0 : tx0;
     t->y0 = f->y0 > ty0 ? f->y0 : ty0;
     t->x1 = f->x1 < tx1 ? f->x1 : tx1;
@@ -289,6 +341,10 @@ static int clip_face(const raster_job *j, const face_setup *f, int tx0, int ty0,
         /* top-left rule: pixel centres exactly on a top or left edge belong to the face */
         t->bias[k] = dy < 0 || (dy == 0 && dx > 0) ? 0 : 1;
     }
+    /* most faces of a small render cover at most one pixel centre: test it before the setup */
+    if (t->x0 == t->x1 && t->y0 == t->y1 &&
+        (t->row[0] < t->bias[0] || t->row[1] < t->bias[1] || t->row[2] < t->bias[2]))
+        return 0;
     int64_t area = t->row[0] + t->row[1] + t->row[2]; /* the sum of the edge functions is constant */
     t->inv_area = (float)(1.0 / (double)area);
     t->z0 = f->z[0];
@@ -299,12 +355,6 @@ static int clip_face(const raster_job *j, const face_setup *f, int tx0, int ty0,
     return 1;
 }
 
-static int is_small(const face_setup *f) {
-    int64_t w = max3(f->x[0], f->x[1], f->x[2]) - min3(f->x[0], f->x[1], f->x[2]);
-    int64_t h = max3(f->y[0], f->y[1], f->y[2]) - min3(f->y[0], f->y[1], f->y[2]);
-    return w <= RASTER_SMALL_EXTENT && h <= RASTER_SMALL_EXTENT;
-}
-
 /* Draws bin entry `slot` (its index is what the face buffer holds until the tile is
  * resolved, so that resolving finds the setup in the tile's own, cache-warm bin). */
 static void draw_face(const raster_job *j, int32_t slot, int tx0, int ty0, int tx1, int ty1) {
@@ -313,7 +363,8 @@ static void draw_face(const raster_job *j, int32_t slot, int tx0, int ty0, int t
     if (!clip_face(j, f, tx0, ty0, tx1, ty1, &t)) return;
     t.face = slot;
     raster_target o = {j->gb->w, j->gb->face, j->gb->depth, j->gb->depth_unculled};
-    if (j->simd && is_small(f))
+    int one_pixel = t.x0 == t.x1 && t.y0 == t.y1; /* there the vector setup would dominate */
+    if (j->simd && f->small && !one_pixel)
         mx_raster_draw_small_avx2(&t, &o);
     else
         draw_tri_scalar(&t, &o);
@@ -355,22 +406,37 @@ static void resolve_uv(const raster_job *j, size_t i, const face_setup *fs) {
 }
 
 /* Turns the tile's bin slots into face ids and fills barycentrics (and UVs). */
+/* Turns the tile's bin slots into face ids and fills barycentrics (and UVs); background
+ * pixels get zeros, written row by row with memset (0.0f is all zero bytes). */
 static void resolve_tile(const raster_job *j, int x0, int y0, int x1, int y1) {
     mx_gbuffer *gb = j->gb;
     int with_uv = (j->flags & MX_RASTER_UV) && j->m->face_uv;
-    for (int y = y0; y <= y1; y++)
-        for (size_t i = (size_t)y * gb->w + x0; i <= (size_t)y * gb->w + x1; i++) {
+    size_t n = (size_t)(x1 - x0 + 1);
+    for (int y = y0; y <= y1; y++) {
+        size_t row = (size_t)y * gb->w + x0;
+        memset(gb->bary + 2 * row, 0, 2 * n * sizeof *gb->bary);
+        if (with_uv) memset(gb->uv + 2 * row, 0, 2 * n * sizeof *gb->uv);
+        for (size_t i = row; i < row + n; i++) {
             int32_t slot = gb->face[i];
-            if (slot < 0) {
-                gb->bary[2 * i] = gb->bary[2 * i + 1] = 0;
-                if (with_uv) gb->uv[2 * i] = gb->uv[2 * i + 1] = 0;
-                continue;
-            }
+            if (slot < 0) continue;
             const face_setup *fs = &j->s->bins[slot];
             gb->face[i] = fs->face;
             resolve_bary(j, i, fs);
             if (with_uv) resolve_uv(j, i, fs);
         }
+    }
+}
+
+/* Background values for the tile: face -1 (all one bytes), depths INFINITY. */
+static void clear_tile(mx_gbuffer *gb, int x0, int y0, int x1, int y1) {
+    size_t n = (size_t)(x1 - x0 + 1);
+    for (int y = y0; y <= y1; y++) {
+        size_t row = (size_t)y * gb->w + x0;
+        memset(gb->face + row, 0xff, n * sizeof *gb->face);
+        for (size_t i = row; i < row + n; i++) gb->depth[i] = INFINITY;
+        if (gb->depth_unculled)
+            for (size_t i = row; i < row + n; i++) gb->depth_unculled[i] = INFINITY;
+    }
 }
 
 static void draw_tile_task(void *ctx, int task, int thread) {
@@ -381,29 +447,24 @@ static void draw_tile_task(void *ctx, int task, int thread) {
     int x0 = tx * TILE, y0 = ty * TILE;
     int x1 = x0 + TILE - 1 < gb->w - 1 ? x0 + TILE - 1 : gb->w - 1;
     int y1 = y0 + TILE - 1 < gb->h - 1 ? y0 + TILE - 1 : gb->h - 1;
-    for (int y = y0; y <= y1; y++)
-        for (int x = x0; x <= x1; x++) {
-            size_t i = (size_t)y * gb->w + x;
-            gb->face[i] = -1;
-            gb->depth[i] = INFINITY;
-            if (gb->depth_unculled) gb->depth_unculled[i] = INFINITY;
-        }
+    clear_tile(gb, x0, y0, x1, y1);
     const raster_scratch *s = j->s;
     for (int32_t k = s->bin_start[task]; k < s->bin_start[task + 1]; k++) draw_face(j, k, x0, y0, x1, y1);
     resolve_tile(j, x0, y0, x1, y1);
 }
 
-static int check_mesh(const mx_mesh *m, mx_status *st) {
-    for (size_t k = 0; k < 3 * (size_t)m->nfaces; k++)
+/* The message for the first out-of-range index (the count pass found one). */
+static int report_bad_face(const mx_mesh *m, mx_status *st) {
+    size_t n = 3 * (size_t)m->nfaces;
+    for (size_t k = 0; k < n; k++)
         if (m->faces[k] < 0 || m->faces[k] >= m->nverts)
-            return mx_fail(st, MX_EINPUT, "%s: face %zu uses vertex %d of %d", m->source_path,
-                           k / 3, m->faces[k], m->nverts);
-    if (m->face_uv)
-        for (size_t k = 0; k < 3 * (size_t)m->nfaces; k++)
-            if (m->face_uv[k] < -1 || m->face_uv[k] >= m->nuv) /* -1: corner without UV */
-                return mx_fail(st, MX_EINPUT, "%s: face %zu uses UV %d of %d", m->source_path,
-                               k / 3, m->face_uv[k], m->nuv);
-    return 0;
+            return mx_fail(st, MX_EINPUT, "%s: face %zu uses vertex %d of %d", m->source_path, k / 3,
+                           m->faces[k], m->nverts);
+    for (size_t k = 0; m->face_uv && k < n; k++)
+        if (m->face_uv[k] < -1 || m->face_uv[k] >= m->nuv) /* -1: corner without UV */
+            return mx_fail(st, MX_EINPUT, "%s: face %zu uses UV %d of %d", m->source_path, k / 3,
+                           m->face_uv[k], m->nuv);
+    return mx_fail(st, MX_EINPUT, "%s: a face index is out of range", m->source_path);
 }
 
 static int reserve_scratch(raster_job *j, mx_status *st) {
@@ -434,6 +495,12 @@ static int reserve_scratch(raster_job *j, mx_status *st) {
         s->count_cap = s->counts ? ncounts : 0;
         if (!s->counts) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
     }
+    if ((size_t)j->nchunks > s->chunk_cap) {
+        free(s->chunk_bad);
+        s->chunk_bad = malloc((size_t)j->nchunks);
+        s->chunk_cap = s->chunk_bad ? (size_t)j->nchunks : 0;
+        if (!s->chunk_bad) return mx_fail(st, MX_ENOMEM, "rasterizer: out of memory");
+    }
     if (ntiles + 1 > s->tile_cap) {
         free(s->bin_start);
         s->bin_start = malloc((ntiles + 1) * sizeof *s->bin_start);
@@ -463,7 +530,6 @@ static int reserve_outputs(raster_job *j, mx_status *st) {
 
 int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int flags,
                  mx_pool *pool, mx_gbuffer *gb, mx_status *st) {
-    if (check_mesh(m, st)) return -1;
     raster_job j = {m, pos ? pos : m->pos, cam, flags, gb, gb->scratch, 0, 0, 0,
                     mx_cpu_best_isa() >= MX_ISA_AVX2};
     j.tiles_x = (gb->w + TILE - 1) / TILE;
@@ -473,6 +539,8 @@ int mx_rasterize(const mx_mesh *m, const float *pos, const mx_camera *cam, int f
     gb->cam = *cam;
     mx_pool_for(pool, m->nverts / FACES_PER_CHUNK + 1, project_vertices_task, &j);
     mx_pool_for(pool, j.nchunks, count_bins_task, &j);
+    for (int c = 0; c < j.nchunks; c++)
+        if (j.s->chunk_bad[c]) return report_bad_face(m, st);
     int64_t total = prefix_bins(&j);
     if (total < 0) return mx_fail(st, MX_EINPUT, "%s: too many face-tile pairs", m->source_path);
     if ((size_t)total + 1 > j.s->bin_cap) {

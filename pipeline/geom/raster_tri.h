@@ -9,6 +9,7 @@
 
 typedef struct raster_tri {
     int x0, y0, x1, y1;     /* pixel box to scan (inside the tile) */
+    int tile_x0, tile_x1;   /* columns of the tile: the drawing task owns every pixel there */
     int64_t row[3];         /* edge function k at the centre of pixel (x0, y0) */
     int64_t step_x[3];      /* its change per pixel to the right */
     int64_t step_y[3];      /* its change per pixel down */

@@ -46,9 +46,10 @@ static void usable_pixels(const mx_gbuffer *gb, float thr, uint8_t *usable, uint
 }
 
 /* Candidates are rendered in parallel, one per task, each thread with its own buffers,
- * when the per-thread rasterizer scratch stays modest; otherwise one at a time with the
- * pool inside the rasterizer. Either way each candidate's list depends only on its camera. */
-#define CACHE_PARALLEL_MAX_FACES (1 << 19)
+ * when the rasterizer scratch of all threads stays modest (about 150 bytes per face and
+ * thread: faces x threads up to this budget); otherwise one at a time with the pool
+ * inside the rasterizer. Either way each candidate's list depends only on its camera. */
+#define CACHE_PARALLEL_FACE_BUDGET (1 << 20)
 
 typedef struct cache_worker {
     mx_gbuffer gb;
@@ -111,7 +112,8 @@ int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
     vc->tex_w = tex_w;
     vc->tex_h = tex_h;
     vc->nlayers = nlayers;
-    int parallel = m->nfaces <= CACHE_PARALLEL_MAX_FACES && mx_pool_threads(pool) > 1;
+    int parallel = mx_pool_threads(pool) > 1 &&
+                   (int64_t)m->nfaces * mx_pool_threads(pool) <= CACHE_PARALLEL_FACE_BUDGET;
     int nworkers = parallel ? mx_pool_threads(pool) : 1;
     cache_job j = {vc, m, pos, frontal_threshold, parallel ? NULL : pool, NULL, NULL, NULL};
     vc->cams = malloc((size_t)ncand * sizeof *vc->cams);
@@ -209,13 +211,16 @@ int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
     while (plan->n < budget && plan->coverage < coverage_stop) {
         int c = mx_view_pick(vc, sim, used, min_pixels);
         if (c < 0) break;
-        /* overlap with what the current group already claims (untextured at group start) */
-        int overlap = 0;
-        for (int64_t k = 0; k < vc->ntexels[c] && !overlap; k++) {
+        /* overlap with what the current group already claims (untextured at group start); a
+         * sliver of shared texels along silhouettes (MX_VIEW_GROUP_OVERLAP of the view's own
+         * untextured texels) still counts as non-overlapping: the first view of the batch wins there */
+        int64_t overlap = 0, fresh = 0;
+        for (int64_t k = 0; k < vc->ntexels[c]; k++) {
             int32_t t = vc->texels[c][k];
-            overlap = !group_known[t] && claimed[t];
+            fresh += !group_known[t];
+            overlap += !group_known[t] && claimed[t];
         }
-        if (overlap && plan->n > 0) {
+        if ((double)overlap > MX_VIEW_GROUP_OVERLAP * (double)fresh && plan->n > 0) {
             group++;
             memcpy(group_known, sim, n);
             memset(claimed, 0, n);
@@ -265,6 +270,26 @@ typedef struct mask_job {
     float threshold;
 } mask_job;
 
+/* The common case (orthographic camera, geometric normals) in one pass over the pixels:
+ * the same tests as mx_mask_frontal_rows, mx_mask_internal and mx_mask_and_not. */
+static void ortho_geometric_masks(mx_view_buffers *vb, float threshold, size_t i0, size_t i1) {
+    const mx_gbuffer *gb = &vb->gb;
+    const float *fn = mx_gbuffer_face_normals(gb);
+    float v[3] = {-gb->cam.forward[0], -gb->cam.forward[1], -gb->cam.forward[2]};
+    for (size_t i = i0; i < i1; i++) {
+        float a = gb->depth[i], b = gb->depth_unculled[i];
+        uint8_t internal = !isinf(b) && (isinf(a) || a - b > 1e-4f * fabsf(a));
+        uint8_t frontal = 0;
+        int f = gb->face[i];
+        if (f >= 0) {
+            const float *n = fn + 3 * (size_t)f;
+            frontal = fabsf(n[0] * v[0] + n[1] * v[1] + n[2] * v[2]) >= threshold;
+        }
+        vb->tmp[i] = internal;
+        vb->mask[i] = frontal && !internal;
+    }
+}
+
 static void view_mask_task(void *ctx, int task, int thread) {
     (void)thread;
     mask_job *j = ctx;
@@ -272,6 +297,10 @@ static void view_mask_task(void *ctx, int task, int thread) {
     int y0 = task * MASK_ROWS, y1 = y0 + MASK_ROWS < vb->gb.h ? y0 + MASK_ROWS : vb->gb.h;
     size_t o = (size_t)y0 * vb->gb.w;
     int64_t n = (int64_t)(y1 - y0) * vb->gb.w;
+    if (vb->gb.cam.ortho && j->normal_source != MX_NORMAL_FROM_DEPTH) {
+        ortho_geometric_masks(vb, j->threshold, o, o + (size_t)n);
+        return;
+    }
     mx_mask_frontal_rows(&vb->gb, j->normal_source, j->threshold, y0, y1, vb->mask);
     mx_mask_internal(vb->gb.depth + o, vb->gb.depth_unculled + o, n, vb->tmp + o);
     mx_mask_and_not(vb->mask + o, vb->tmp + o, vb->mask + o, n);

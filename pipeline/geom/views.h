@@ -40,6 +40,9 @@ void mx_view_cache_visible(const mx_view_cache *vc, uint8_t *visible);
 int mx_view_pick(const mx_view_cache *vc, const uint8_t *known, const uint8_t *used,
                  int64_t min_pixels);
 
+/* Fraction of a view's untextured texels that may already be claimed by its batch. */
+#define MX_VIEW_GROUP_OVERLAP 0.02
+
 typedef struct mx_view_plan {
     int n;          /* views planned */
     int *cand;      /* [n] candidate index, in generation order */
