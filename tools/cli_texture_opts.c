@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "../pipeline/geom/masks.h"
+#include "../runtime/buf.h"
 #include "../runtime/log.h"
 
 void mx_cli_texture_options_help(FILE *f) {
@@ -166,18 +167,6 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
     return -1;
 }
 
-static void print_json_string(const char *s) {
-    putchar('"');
-    for (; *s; s++) {
-        if (*s == '"' || *s == '\\')
-            printf("\\%c", *s);
-        else if ((unsigned char)*s < 0x20)
-            printf("\\u%04x", *s);
-        else
-            putchar(*s);
-    }
-    putchar('"');
-}
 
 int mx_cli_texture_run(const mx_cli_texture *c, const char *verb,
                        int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *)) {
@@ -191,9 +180,12 @@ int mx_cli_texture_run(const mx_cli_texture *c, const char *verb,
         return st.code == MX_EUSAGE ? 2 : 1;
     }
     if (c->json) {
-        printf("{\"ok\":true,\"out\":");
-        print_json_string(c->o.out_dir);
-        printf(",\"coverage\":%.6f,\"views\":%d,\"seconds\":%.3f}\n", res.coverage, res.views, res.seconds);
+        mx_buf b = {0};
+        mx_buf_printf(&b, "{\"ok\":true,\"out\":");
+        mx_buf_json_str(&b, c->o.out_dir);
+        mx_buf_printf(&b, ",\"coverage\":%.6f,\"views\":%d,\"seconds\":%.3f}", res.coverage, res.views, res.seconds);
+        if (!b.oom) puts(b.p);
+        mx_buf_free(&b);
     }
     return 0;
 }

@@ -10,6 +10,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "../runtime/buf.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "lora.h"
@@ -20,11 +21,7 @@
 #define MAX_TEXT_FILE ((size_t)64 << 20)
 #define MAX_SHARDS 64
 
-typedef struct {
-    char *s;
-    size_t len, cap;
-    int oom;
-} text_buf;
+typedef mx_buf text_buf;
 
 typedef struct {
     const mx_convert_opts *o;
@@ -40,49 +37,8 @@ typedef struct {
 
 /* ---- small helpers ---- */
 
-static void tb_add(text_buf *b, const char *s, size_t n) {
-    if (b->oom) return;
-    if (b->len + n + 1 > b->cap) {
-        size_t cap = b->cap ? b->cap * 2 : 256;
-        while (cap < b->len + n + 1) cap *= 2;
-        char *ns = realloc(b->s, cap);
-        if (!ns) {
-            b->oom = 1;
-            return;
-        }
-        b->s = ns;
-        b->cap = cap;
-    }
-    memcpy(b->s + b->len, s, n);
-    b->len += n;
-    b->s[b->len] = 0;
-}
 
-static void tb_printf(text_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void tb_printf(text_buf *b, const char *fmt, ...) {
-    char tmp[512];
-    va_list ap;
-    va_start(ap, fmt);
-    int n = vsnprintf(tmp, sizeof tmp, fmt, ap);
-    va_end(ap);
-    if (n > 0) tb_add(b, tmp, (size_t)n < sizeof tmp ? (size_t)n : sizeof tmp - 1);
-}
 
-static void tb_json_str(text_buf *b, const char *s) {
-    tb_add(b, "\"", 1);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\') {
-            char e[2] = {'\\', (char)c};
-            tb_add(b, e, 2);
-        } else if (c < 0x20) {
-            tb_printf(b, "\\u%04x", c);
-        } else {
-            tb_add(b, (const char *)&c, 1);
-        }
-    }
-    tb_add(b, "\"", 1);
-}
 
 static int join(char *out, size_t cap, const char *dir, const char *name) {
     return snprintf(out, cap, "%s/%s", dir, name) < (int)cap ? 0 : -1;
@@ -341,17 +297,17 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
     }
     size_t before = cv->res.tensors;
     if (!rc) {
-        tb_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
-        tb_json_str(&cv->sources, resolved_prefix);
-        tb_add(&cv->sources, ", \"files\": [", 12);
+        mx_buf_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
+        mx_buf_json_str(&cv->sources, resolved_prefix);
+        mx_buf_put(&cv->sources, ", \"files\": [", 12);
     }
     for (size_t i = 0; !rc && i < wfs->n; i++) {
         rc = add_weight_file(cv, resolved_prefix, kind, wfs->paths[i], st);
-        if (i) tb_add(&cv->sources, ", ", 2);
-        tb_json_str(&cv->sources, wfs->paths[i]);
+        if (i) mx_buf_put(&cv->sources, ", ", 2);
+        mx_buf_json_str(&cv->sources, wfs->paths[i]);
     }
     if (!rc) {
-        tb_add(&cv->sources, "]}", 2);
+        mx_buf_put(&cv->sources, "]}", 2);
         cv->res.networks++;
         mx_info("convert: %s <- %s (%zu tensors, %zu file%s)", resolved_prefix, dir, cv->res.tensors - before, wfs->n,
                 wfs->n == 1 ? "" : "s");
@@ -456,20 +412,20 @@ static int check_loras_used(converter *cv, mx_status *st) {
 
 static int add_provenance(converter *cv, mx_status *st) {
     text_buf p = {0};
-    tb_printf(&p, "{\"converter\": \"%s\", \"dtype\": \"%s\", \"variant\": \"%s\", \"sources\": [", CONVERTER_VERSION,
+    mx_buf_printf(&p, "{\"converter\": \"%s\", \"dtype\": \"%s\", \"variant\": \"%s\", \"sources\": [", CONVERTER_VERSION,
               mx_dtype_name(cv->o->dtype), cv->o->prefer_fp16 ? "fp16" : "default");
-    tb_add(&p, cv->sources.s ? cv->sources.s : "", cv->sources.len);
-    tb_add(&p, "], \"lora\": [", 12);
+    mx_buf_put(&p, cv->sources.p ? cv->sources.p : "", cv->sources.len);
+    mx_buf_put(&p, "], \"lora\": [", 12);
     for (size_t k = 0; k < cv->o->n_loras; k++) {
-        tb_printf(&p, "%s{\"file\": ", k ? ", " : "");
-        tb_json_str(&p, cv->o->loras[k].path);
-        tb_printf(&p, ", \"scale\": %.9g, \"modules\": %zu}", (double)cv->o->loras[k].scale,
+        mx_buf_printf(&p, "%s{\"file\": ", k ? ", " : "");
+        mx_buf_json_str(&p, cv->o->loras[k].path);
+        mx_buf_printf(&p, ", \"scale\": %.9g, \"modules\": %zu}", (double)cv->o->loras[k].scale,
                   mx_lora_module_count(cv->loras[k]));
     }
-    tb_add(&p, "]}", 2);
+    mx_buf_put(&p, "]}", 2);
     int rc = p.oom || cv->sources.oom ? mx_fail(st, MX_ENOMEM, "convert: out of memory")
-                                      : mx_wf_writer_meta(cv->w, "provenance", p.s, st);
-    free(p.s);
+                                      : mx_wf_writer_meta(cv->w, "provenance", p.p, st);
+    free(p.p);
     return rc;
 }
 
@@ -482,7 +438,7 @@ static void converter_free(converter *cv) {
     for (size_t i = 0; i < cv->n_bufs; i++) free(cv->bufs[i]);
     free(cv->bufs);
     for (size_t k = 0; k < MX_CONVERT_MAX_EXTRA; k++) mx_lora_close(cv->loras[k]);
-    free(cv->sources.s);
+    free(cv->sources.p);
 }
 
 int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) {

@@ -10,57 +10,18 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "../../runtime/buf.h"
 #include "../io/io.h"
 
 /* ---- a growable byte buffer (JSON text and the GLB BIN chunk) ---- */
 
-typedef struct {
-    unsigned char *p;
-    size_t len, cap;
-    int oom;
-} bytes;
+typedef mx_buf bytes;
 
-static void put(bytes *b, const void *data, size_t n) {
-    if (b->oom) return;
-    if (b->len + n > b->cap) {
-        size_t c = b->cap ? b->cap : 4096;
-        while (c < b->len + n) c *= 2;
-        unsigned char *q = realloc(b->p, c);
-        if (!q) {
-            b->oom = 1;
-            return;
-        }
-        b->p = q;
-        b->cap = c;
-    }
-    memcpy(b->p + b->len, data, n);
-    b->len += n;
-}
 
-static void putf(bytes *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void putf(bytes *b, const char *fmt, ...) {
-    char tmp[512];
-    va_list ap;
-    va_start(ap, fmt);
-    int n = vsnprintf(tmp, sizeof tmp, fmt, ap);
-    va_end(ap);
-    if (n > 0) put(b, tmp, (size_t)n < sizeof tmp ? (size_t)n : sizeof tmp - 1);
-}
 
-/* A JSON string literal (names come from input files: quote and escape control characters). */
-static void put_json_str(bytes *b, const char *s) {
-    put(b, "\"", 1);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\') putf(b, "\\%c", c);
-        else if (c < 0x20) putf(b, "\\u%04x", c);
-        else put(b, s, 1);
-    }
-    put(b, "\"", 1);
-}
 
 static void pad4(bytes *b, unsigned char fill) {
-    while (b->len % 4) put(b, &fill, 1);
+    while (b->len % 4) mx_buf_put(b, &fill, 1);
 }
 
 /* ---- writing through a temporary file ---- */
@@ -88,21 +49,21 @@ static int face_has_all(const int32_t *idx, int f) {
 static void obj_corner(bytes *b, const mx_mesh *m, int f, int k) {
     int v = m->faces[3 * f + k] + 1;
     int has_uv = face_has_all(m->face_uv, f), has_n = face_has_all(m->face_nrm, f);
-    if (has_uv && has_n) putf(b, " %d/%d/%d", v, m->face_uv[3 * f + k] + 1, m->face_nrm[3 * f + k] + 1);
-    else if (has_uv) putf(b, " %d/%d", v, m->face_uv[3 * f + k] + 1);
-    else if (has_n) putf(b, " %d//%d", v, m->face_nrm[3 * f + k] + 1);
-    else putf(b, " %d", v);
+    if (has_uv && has_n) mx_buf_printf(b, " %d/%d/%d", v, m->face_uv[3 * f + k] + 1, m->face_nrm[3 * f + k] + 1);
+    else if (has_uv) mx_buf_printf(b, " %d/%d", v, m->face_uv[3 * f + k] + 1);
+    else if (has_n) mx_buf_printf(b, " %d//%d", v, m->face_nrm[3 * f + k] + 1);
+    else mx_buf_printf(b, " %d", v);
 }
 
 static void mtl_text(bytes *b, const mx_mesh *m, const char *const *texture_files, int ntex) {
-    putf(b, "# matex\n");
+    mx_buf_printf(b, "# matex\n");
     for (int i = 0; i < m->nmat; i++) {
-        put(b, "newmtl ", 7);
-        put(b, m->mats[i].name, strlen(m->mats[i].name));
-        putf(b, "\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nillum 1\n");
+        mx_buf_put(b, "newmtl ", 7);
+        mx_buf_put(b, m->mats[i].name, strlen(m->mats[i].name));
+        mx_buf_printf(b, "\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nillum 1\n");
         const char *tex = i < ntex ? texture_files[i] : ntex > 0 ? texture_files[0] : NULL;
-        if (tex) putf(b, "map_Kd %s\n", tex);
-        put(b, "\n", 1);
+        if (tex) mx_buf_printf(b, "map_Kd %s\n", tex);
+        mx_buf_put(b, "\n", 1);
     }
 }
 
@@ -121,23 +82,23 @@ int mx_export_obj(const char *path, const mx_mesh *m, const char *const *texture
     const char *mtl_name;
     mtl_paths(path, mtl_path, sizeof mtl_path, &mtl_name);
     bytes b = {0};
-    putf(&b, "# written by matex: %d vertices, %d triangles\n", m->nverts, m->nfaces);
-    if (texture_files) putf(&b, "mtllib %s\n", mtl_name);
+    mx_buf_printf(&b, "# written by matex: %d vertices, %d triangles\n", m->nverts, m->nfaces);
+    if (texture_files) mx_buf_printf(&b, "mtllib %s\n", mtl_name);
     for (int v = 0; v < m->nverts; v++)
-        putf(&b, "v %.9g %.9g %.9g\n", m->pos[3 * v], m->pos[3 * v + 1], m->pos[3 * v + 2]);
-    for (int t = 0; t < m->nuv; t++) putf(&b, "vt %.9g %.9g\n", m->uv[2 * t], m->uv[2 * t + 1]);
+        mx_buf_printf(&b, "v %.9g %.9g %.9g\n", m->pos[3 * v], m->pos[3 * v + 1], m->pos[3 * v + 2]);
+    for (int t = 0; t < m->nuv; t++) mx_buf_printf(&b, "vt %.9g %.9g\n", m->uv[2 * t], m->uv[2 * t + 1]);
     for (int n = 0; n < m->nnrm; n++)
-        putf(&b, "vn %.9g %.9g %.9g\n", m->nrm[3 * n], m->nrm[3 * n + 1], m->nrm[3 * n + 2]);
+        mx_buf_printf(&b, "vn %.9g %.9g %.9g\n", m->nrm[3 * n], m->nrm[3 * n + 1], m->nrm[3 * n + 2]);
     int cur = -1;
     for (int f = 0; f < m->nfaces; f++) {
         int mat = m->face_mat ? m->face_mat[f] : 0;
         if (mat != cur && m->nmat > 0) {
-            putf(&b, "usemtl %s\n", m->mats[mat].name);
+            mx_buf_printf(&b, "usemtl %s\n", m->mats[mat].name);
             cur = mat;
         }
-        put(&b, "f", 1);
+        mx_buf_put(&b, "f", 1);
         for (int k = 0; k < 3; k++) obj_corner(&b, m, f, k);
-        put(&b, "\n", 1);
+        mx_buf_put(&b, "\n", 1);
     }
     bytes mb = {0};
     if (texture_files) mtl_text(&mb, m, texture_files, ntex);
@@ -243,24 +204,24 @@ typedef struct {
 
 /* A buffer view over bin[off, off + len); target 0 for image data. */
 static void add_view(glb_build *b, size_t off, size_t len, int target) {
-    putf(&b->views, "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu", b->nview ? "," : "", off, len);
-    if (target) putf(&b->views, ",\"target\":%d", target);
-    put(&b->views, "}", 1);
+    mx_buf_printf(&b->views, "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu", b->nview ? "," : "", off, len);
+    if (target) mx_buf_printf(&b->views, ",\"target\":%d", target);
+    mx_buf_put(&b->views, "}", 1);
     b->nview++;
 }
 
 static int add_accessor(glb_build *b, const void *data, size_t count, int ncomp, int ctype, const char *type,
                         int target, const float *minmax) {
     size_t esize = 4 * (size_t)ncomp, off = b->bin.len;
-    put(&b->bin, data, count * esize);
+    mx_buf_put(&b->bin, data, count * esize);
     pad4(&b->bin, 0);
     add_view(b, off, count * esize, target);
-    putf(&b->accs, "%s{\"bufferView\":%d,\"componentType\":%d,\"count\":%zu,\"type\":\"%s\"", b->nacc ? "," : "",
+    mx_buf_printf(&b->accs, "%s{\"bufferView\":%d,\"componentType\":%d,\"count\":%zu,\"type\":\"%s\"", b->nacc ? "," : "",
          b->nview - 1, ctype, count, type);
     if (minmax)
-        putf(&b->accs, ",\"min\":[%.9g,%.9g,%.9g],\"max\":[%.9g,%.9g,%.9g]", minmax[0], minmax[1], minmax[2], minmax[3],
+        mx_buf_printf(&b->accs, ",\"min\":[%.9g,%.9g,%.9g],\"max\":[%.9g,%.9g,%.9g]", minmax[0], minmax[1], minmax[2], minmax[3],
              minmax[4], minmax[5]);
-    put(&b->accs, "}", 1);
+    mx_buf_put(&b->accs, "}", 1);
     return b->nacc++;
 }
 
@@ -287,9 +248,9 @@ static int add_primitives(glb_build *b, const mx_mesh *m, const glb_verts *g, in
                 for (int k = 0; k < 3; k++) idx[n++] = g->corner_vert[3 * f + k];
         if (!n) continue;
         int a_idx = add_accessor(b, idx, n, 1, 5125, "SCALAR", 34963, NULL);
-        putf(&b->prims, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d", nprim ? "," : "", a_pos, a_nrm);
-        if (a_uv >= 0) putf(&b->prims, ",\"TEXCOORD_0\":%d", a_uv);
-        putf(&b->prims, "},\"indices\":%d,\"material\":%d,\"mode\":4}", a_idx, mat);
+        mx_buf_printf(&b->prims, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d", nprim ? "," : "", a_pos, a_nrm);
+        if (a_uv >= 0) mx_buf_printf(&b->prims, ",\"TEXCOORD_0\":%d", a_uv);
+        mx_buf_printf(&b->prims, "},\"indices\":%d,\"material\":%d,\"mode\":4}", a_idx, mat);
         nprim++;
     }
     free(idx);
@@ -301,54 +262,54 @@ static int add_materials(glb_build *b, bytes *mats, bytes *texs, const mx_mesh *
                          mx_status *st) {
     for (int i = 0; i < m->nmat; i++) {
         const mx_image *img = textures && i < ntex && textures[i].data ? &textures[i] : NULL;
-        putf(mats, "%s{\"name\":", i ? "," : "");
-        put_json_str(mats, m->mats[i].name);
-        putf(mats, ",\"doubleSided\":true,\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":1");
+        mx_buf_printf(mats, "%s{\"name\":", i ? "," : "");
+        mx_buf_json_str(mats, m->mats[i].name);
+        mx_buf_printf(mats, ",\"doubleSided\":true,\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":1");
         if (img) {
             unsigned char *png;
             size_t len;
             if (mx_io_encode_png(img, &png, &len, st)) return mx_fail_prefix(st, "material %s", m->mats[i].name);
             size_t off = b->bin.len;
-            put(&b->bin, png, len);
+            mx_buf_put(&b->bin, png, len);
             free(png);
             pad4(&b->bin, 0);
             add_view(b, off, len, 0);
-            putf(&b->images, "%s{\"bufferView\":%d,\"mimeType\":\"image/png\"}", b->nimg ? "," : "", b->nview - 1);
-            putf(texs, "%s{\"sampler\":0,\"source\":%d}", b->nimg ? "," : "", b->nimg);
-            putf(mats, ",\"baseColorTexture\":{\"index\":%d}", b->nimg);
+            mx_buf_printf(&b->images, "%s{\"bufferView\":%d,\"mimeType\":\"image/png\"}", b->nimg ? "," : "", b->nview - 1);
+            mx_buf_printf(texs, "%s{\"sampler\":0,\"source\":%d}", b->nimg ? "," : "", b->nimg);
+            mx_buf_printf(mats, ",\"baseColorTexture\":{\"index\":%d}", b->nimg);
             b->nimg++;
         }
-        put(mats, "}}", 2);
+        mx_buf_put(mats, "}}", 2);
     }
     return 0;
 }
 
 static void glb_json(bytes *j, glb_build *b, bytes *mats, bytes *texs) {
-    putf(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"matex\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],");
-    putf(j, "\"nodes\":[{\"mesh\":0,\"name\":\"mesh\"}],\"meshes\":[{\"name\":\"mesh\",\"primitives\":[");
-    put(j, b->prims.p, b->prims.len);
-    putf(j, "]}],\"materials\":[");
-    put(j, mats->p, mats->len);
-    put(j, "]", 1);
+    mx_buf_printf(j, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"matex\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],");
+    mx_buf_printf(j, "\"nodes\":[{\"mesh\":0,\"name\":\"mesh\"}],\"meshes\":[{\"name\":\"mesh\",\"primitives\":[");
+    mx_buf_put(j, b->prims.p, b->prims.len);
+    mx_buf_printf(j, "]}],\"materials\":[");
+    mx_buf_put(j, mats->p, mats->len);
+    mx_buf_put(j, "]", 1);
     if (b->nimg) {
-        putf(j, ",\"samplers\":[{\"magFilter\":9729,\"minFilter\":9987,\"wrapS\":10497,\"wrapT\":10497}]");
-        putf(j, ",\"textures\":[");
-        put(j, texs->p, texs->len);
-        putf(j, "],\"images\":[");
-        put(j, b->images.p, b->images.len);
-        put(j, "]", 1);
+        mx_buf_printf(j, ",\"samplers\":[{\"magFilter\":9729,\"minFilter\":9987,\"wrapS\":10497,\"wrapT\":10497}]");
+        mx_buf_printf(j, ",\"textures\":[");
+        mx_buf_put(j, texs->p, texs->len);
+        mx_buf_printf(j, "],\"images\":[");
+        mx_buf_put(j, b->images.p, b->images.len);
+        mx_buf_put(j, "]", 1);
     }
-    putf(j, ",\"accessors\":[");
-    put(j, b->accs.p, b->accs.len);
-    putf(j, "],\"bufferViews\":[");
-    put(j, b->views.p, b->views.len);
-    putf(j, "],\"buffers\":[{\"byteLength\":%zu}]}", b->bin.len);
+    mx_buf_printf(j, ",\"accessors\":[");
+    mx_buf_put(j, b->accs.p, b->accs.len);
+    mx_buf_printf(j, "],\"bufferViews\":[");
+    mx_buf_put(j, b->views.p, b->views.len);
+    mx_buf_printf(j, "],\"buffers\":[{\"byteLength\":%zu}]}", b->bin.len);
     pad4(j, ' ');
 }
 
 static void put_u32(bytes *b, uint32_t v) {
     unsigned char p[4] = {(unsigned char)v, (unsigned char)(v >> 8), (unsigned char)(v >> 16), (unsigned char)(v >> 24)};
-    put(b, p, 4);
+    mx_buf_put(b, p, 4);
 }
 
 int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, int ntex, mx_status *st) {
@@ -379,10 +340,10 @@ int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, 
     put_u32(&out, (uint32_t)(12 + 8 + json.len + 8 + b.bin.len));
     put_u32(&out, (uint32_t)json.len);
     put_u32(&out, 0x4E4F534Au); /* JSON */
-    put(&out, json.p, json.len);
+    mx_buf_put(&out, json.p, json.len);
     put_u32(&out, (uint32_t)b.bin.len);
     put_u32(&out, 0x004E4942u); /* BIN */
-    put(&out, b.bin.p, b.bin.len);
+    mx_buf_put(&out, b.bin.p, b.bin.len);
     if (out.oom) mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
     else rc = write_file_atomic(path, out.p, out.len, st);
 done:

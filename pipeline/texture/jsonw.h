@@ -1,14 +1,12 @@
-/* A growing text buffer with JSON helpers, for report.json and --json summaries.
- * Out-of-memory is sticky: the buffer records it and mx_jw_text returns NULL. */
+/* A JSON writer over mx_buf, for report.json: objects, arrays, members with commas placed.
+ * Out-of-memory is sticky: mx_jw_text then returns NULL. */
 #ifndef MX_JSONW_H
 #define MX_JSONW_H
 
-#include <stddef.h>
+#include "../../runtime/buf.h"
 
 typedef struct mx_jw {
-    char *s;
-    size_t len, cap;
-    int oom;
+    mx_buf b;
     int need_comma; /* a value was written at the current nesting level */
 } mx_jw;
 

@@ -1,0 +1,44 @@
+#!/bin/sh
+# matex texture / enhance / render / transfer on the command line: exit codes (0, 1 bad input with
+# a message naming the file and no output, 2 usage), --json summary, outputs. Uses the demo weights
+# that `make test` builds (MATEX_DEMO_WEIGHTS).
+SHARED=${MATEX_SHARED:-../shared}
+A=$SHARED/assets
+M=${MATEX:-./matex}
+W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
+T=$(mktemp -d /tmp/matex_cli_texture.XXXXXX)
+trap 'rm -rf "$T"' EXIT
+fail=0
+check() { # check NAME COMMAND...: the command must succeed
+    name=$1; shift
+    if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
+}
+rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; }
+SMALL="--image-size 64 --steps 1 --texture-size 256 --render-size 256 --candidates 12 --quiet"
+
+check "texture --help exits 0" [ "$(rc_of "$M" texture --help)" = 0 ]
+check "texture --help lists --seed" grep -q -- "--seed" "$T/out"
+check "enhance --help exits 0" [ "$(rc_of "$M" enhance --help)" = 0 ]
+check "missing prompt exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" --weights "$W" -o "$T/a")" = 2 ]
+check "unknown option exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --frob 1)" = 2 ]
+check "bad number exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps ten)" = 2 ]
+check "--device cuda exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --device cuda)" = 2 ]
+check "steps out of range exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps 0)" = 2 ]
+check "missing weights exits 1" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$T/none.mxw" -o "$T/a")" = 1 ]
+check "the message names the weights" grep -q "none.mxw" "$T/err"
+check "missing mesh exits 1" [ "$(rc_of "$M" texture "$T/none.obj" x --weights "$W" -o "$T/a" $SMALL)" = 1 ]
+check "the message names the mesh" grep -q "none.obj" "$T/err"
+check "no output after a failure" [ ! -e "$T/a" ]
+check "texture runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a grey felt hat" --weights "$W" -o "$T/hat" --json $SMALL)" = 0 ]
+check "--json summary" grep -q '"ok":true' "$T/out"
+for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do
+    check "texture wrote $f" [ -s "$T/hat/$f" ]
+done
+check "enhance runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$W" -o "$T/hat2" $SMALL)" = 0 ]
+check "enhance wrote mesh.glb" [ -s "$T/hat2/mesh.glb" ]
+check "bad strength exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" --strength 2 --weights "$W" -o "$T/b")" = 2 ]
+check "render runs" [ "$(rc_of "$M" render "$T/hat/mesh.glb" --views 4 --size 128 -o "$T/render")" = 0 ]
+check "render wrote a contact sheet" [ -s "$T/render/contact_sheet.png" ]
+check "transfer runs" [ "$(rc_of "$M" transfer "$T/hat/mesh.obj" "$A/fedora_hat/fedora.obj" --size 256 -o "$T/tr")" = 0 ]
+check "transfer wrote mesh.glb" [ -s "$T/tr/mesh.glb" ]
+exit $fail
