@@ -133,7 +133,8 @@ static void test_gemm_ops(const levels *lv) {
     test_conv_case(lv, 1, 40, 17, 19, 13, 3, 1, 1, MX_F32);
     test_conv_case(lv, 1, 9, 6, 7, 70, 1, 1, 0, MX_F32);
     test_conv_case(lv, 1, 2, 70, 71, 3, 3, 1, 1, MX_F32); /* 4970 pixels: two outer blocks */
-    test_conv_case(lv, 2, 40, 70, 60, 13, 3, 1, 1, MX_F16); /* batch × K blocks × outer blocks */
+    test_conv_case(lv, 2, 80, 70, 60, 13, 3, 1, 1, MX_F16); /* batch × K blocks (K = 720) × outer blocks */
+    test_linear_case(lv, 40, 37, 1500, MX_F32, 1);          /* three K blocks */
 }
 
 static void test_attention_case(const levels *lv, int B, int H, int Tq, int Tk, int D, int causal) {

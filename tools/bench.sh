@@ -11,7 +11,9 @@ for b in "$BUILD"/tools/bench_*; do
     echo "== $(basename "$b")"
     # OpenBLAS is the anchor at its best: machines here may set OPENBLAS_CORETYPE/L2_SIZE (to work
     # around old OpenBLAS bugs), which forces slower kernels; the benchmark unsets both for itself.
-    env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE "$b"
+    # OPENBLAS_THREAD_TIMEOUT=4: its idle workers stop spinning soon after a call, so they do not
+    # steal a core from the matex run that the benchmark alternates with.
+    env -u OPENBLAS_CORETYPE -u OPENBLAS_L2_SIZE OPENBLAS_THREAD_TIMEOUT=4 "$b"
     rc=$?
     if [ $rc -ne 0 ]; then
         echo "$(basename "$b"): failed (exit $rc)"

@@ -6,8 +6,9 @@
 
 /* Largest block of K packed at once. Each thread keeps its MC×kc block of A in L2 (240 KiB at
  * 640) and streams kc×NR panels of B; a longer block means fewer passes over C and fewer
- * pack/compute rounds: on this Zen 5, 640 beat 320 on the K = 1280..11520 shapes (K = 5120:
- * 8 instead of 16 rounds) and was no slower on the K = 320 ones. */
+ * pack/compute rounds (K = 5120: 8 instead of 16). On this Zen 5 (48 KiB L1, 1 MiB L2) 640
+ * was a little faster than 320 on the K ≥ 1280 shapes and no slower on K = 320; 1024 was no
+ * better (the shared machine is too noisy to separate a few percent). */
 #define KC_MAX 640
 /* Rows of A per compute task (rounded down to whole MR panels). */
 #define MC_ROWS 96
