@@ -12,8 +12,10 @@
  *   normal(index) = (float)(radius * cos(angle))  for even index
  *                   (float)(radius * sin(angle))  for odd index
  * r2 and r3 are unused (kept so the counter layout matches the CUDA kernel).
- * The Box-Muller step is done in double and rounded once to float, so a GPU kernel
- * that uses double log/sqrt/sincos gives the same floats. */
+ * The Box-Muller step is done in double and rounded once to float, so a GPU kernel that
+ * uses double log/sqrt/sincos gives the same floats, except where its double math (within
+ * 1-2 ulp of glibc's) lands on the other side of a float rounding boundary: rare, and not yet
+ * measured on a GPU (ops/cuda/cuda_rng.cu, tests/cuda). */
 #ifndef MX_RNG_H
 #define MX_RNG_H
 
