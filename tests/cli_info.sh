@@ -1,57 +1,50 @@
 #!/bin/sh
 # matex info: usage errors (exit 2), mesh statistics as text and JSON against
 # assets/MANIFEST.md, bad input (exit 1, message naming the file), weight-file dispatch.
-SHARED=${MATEX_SHARED:-../shared}
+NAME=info
+. "$(dirname "$0")/lib_cli.sh"
 A=$SHARED/assets
-T=$(mktemp -d /tmp/matex_cli_info.XXXXXX)
-trap 'rm -rf "$T"' EXIT
-fail=0
-check() { # check NAME COMMAND...: the command must succeed
-    name=$1; shift
-    if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
-}
-rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; }
 
-check "--help exits 0" [ "$(rc_of ./matex info --help)" = 0 ]
+check "--help exits 0" [ "$(rc_of "$M" info --help)" = 0 ]
 check "--help prints usage" grep -q "usage: matex info" "$T/out"
-check "no argument exits 2" [ "$(rc_of ./matex info)" = 2 ]
-check "unknown option exits 2" [ "$(rc_of ./matex info --frobnicate "$A/spot/spot_triangulated.obj")" = 2 ]
+check "no argument exits 2" [ "$(rc_of "$M" info)" = 2 ]
+check "unknown option exits 2" [ "$(rc_of "$M" info --frobnicate "$A/spot/spot_triangulated.obj")" = 2 ]
 
-check "spot loads" [ "$(rc_of ./matex info "$A/spot/spot_triangulated.obj")" = 0 ]
+check "spot loads" [ "$(rc_of "$M" info "$A/spot/spot_triangulated.obj")" = 0 ]
 check "spot triangles" grep -q "^triangles: *5856$" "$T/out"
 check "spot vertices" grep -q "^vertices: *2930$" "$T/out"
 check "spot watertight" grep -q "^watertight: *yes$" "$T/out"
 check "spot has uvs" grep -q "^uvs: *yes" "$T/out"
 
-check "garment loads" [ "$(rc_of ./matex info "$A/garment_female_casual/female_casualsuit01.obj")" = 0 ]
+check "garment loads" [ "$(rc_of "$M" info "$A/garment_female_casual/female_casualsuit01.obj")" = 0 ]
 check "garment boundary edges" grep -q "^boundary edges: *164$" "$T/out"
 check "garment components" grep -q "^components: *2$" "$T/out"
 check "garment open" grep -q "^watertight: *no$" "$T/out"
 
-check "truck --json" [ "$(rc_of ./matex info --json "$A/cesium_milk_truck/CesiumMilkTruck.glb")" = 0 ]
+check "truck --json" [ "$(rc_of "$M" info --json "$A/cesium_milk_truck/CesiumMilkTruck.glb")" = 0 ]
 check "truck json counts" grep -q '"vertices":3564,"triangles":3624' "$T/out"
 check "truck json partial uvs" grep -q '"uvs":"partial"' "$T/out"
 check "truck json topology" grep -q '"boundary_edges":8,"nonmanifold_edges":0,"components":13' "$T/out"
 check "truck json materials" grep -q '"name":"wheels"' "$T/out"
 check "json is one line" [ "$(wc -l < "$T/out")" = 1 ]
 
-check "ply without uvs" [ "$(rc_of ./matex info "$A/spot_ply/spot.ply")" = 0 ]
+check "ply without uvs" [ "$(rc_of "$M" info "$A/spot_ply/spot.ply")" = 0 ]
 check "ply uvs no" grep -q "^uvs: *no" "$T/out"
 
-check "missing file exits 1" [ "$(rc_of ./matex info "$T/nowhere.obj")" = 1 ]
+check "missing file exits 1" [ "$(rc_of "$M" info "$T/nowhere.obj")" = 1 ]
 check "missing file named" grep -q "nowhere.obj" "$T/err"
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n' > "$T/bad.obj"
-check "bad index exits 1" [ "$(rc_of ./matex info "$T/bad.obj")" = 1 ]
+check "bad index exits 1" [ "$(rc_of "$M" info "$T/bad.obj")" = 1 ]
 check "bad index message" grep -q "bad.obj: face 0: vertex index 7 out of range" "$T/err"
 check "bad index no stdout" [ ! -s "$T/out" ]
 printf 'glTF\002\000\000\000\377\377\000\000' > "$T/trunc.glb"
-check "truncated glb exits 1" [ "$(rc_of ./matex info "$T/trunc.glb")" = 1 ]
+check "truncated glb exits 1" [ "$(rc_of "$M" info "$T/trunc.glb")" = 1 ]
 check "truncated glb message" grep -q "trunc.glb: truncated GLB" "$T/err"
 
 # A file with the weight-file magic goes to the weight-file reader, which must reject this one.
 printf 'MATEXWF\000garbage' > "$T/w.mxw"
-check "weight file dispatch exits 1" [ "$(rc_of ./matex info "$T/w.mxw")" = 1 ]
+check "weight file dispatch exits 1" [ "$(rc_of "$M" info "$T/w.mxw")" = 1 ]
 check "weight file error names it" grep -q "w.mxw" "$T/err"
-check "weight file --json exits 2" [ "$(rc_of ./matex info --json "$T/w.mxw")" = 2 ]
+check "weight file --json exits 2" [ "$(rc_of "$M" info --json "$T/w.mxw")" = 2 ]
 
 exit $fail

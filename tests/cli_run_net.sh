@@ -2,42 +2,35 @@
 # matex run-net / gen-weights: usage errors (exit 2), bad input (exit 1, one message naming the
 # file and tensor, no output file), a clip run, gen-weights -> convert -> run-net round trip.
 # Numerical parity of run-net is checked by tests/test_nn_run_net.c.
-SHARED=${MATEX_SHARED:-../shared}
+NAME=run_net
+. "$(dirname "$0")/lib_cli.sh"
 G=$SHARED/golden
-T=$(mktemp -d /tmp/matex_cli_run_net.XXXXXX)
-trap 'rm -rf "$T"' EXIT
-fail=0
-check() { # check NAME COMMAND...: the command must succeed
-    name=$1; shift
-    if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
-}
-rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; }
 
-check "run-net --help exits 0" [ "$(rc_of ./matex run-net --help)" = 0 ]
+check "run-net --help exits 0" [ "$(rc_of "$M" run-net --help)" = 0 ]
 check "run-net --help prints usage" grep -q "usage: matex run-net" "$T/out"
-check "run-net without arguments exits 2" [ "$(rc_of ./matex run-net)" = 2 ]
-check "run-net unknown NET exits 2" [ "$(rc_of ./matex run-net resnet --weights a --inputs b --out c)" = 2 ]
-check "gen-weights --help exits 0" [ "$(rc_of ./matex gen-weights --help)" = 0 ]
-check "gen-weights bad dtype exits 2" [ "$(rc_of ./matex gen-weights "$G/unet_tiny/config.json" -o "$T/x" --dtype f8)" = 2 ]
+check "run-net without arguments exits 2" [ "$(rc_of "$M" run-net)" = 2 ]
+check "run-net unknown NET exits 2" [ "$(rc_of "$M" run-net resnet --weights a --inputs b --out c)" = 2 ]
+check "gen-weights --help exits 0" [ "$(rc_of "$M" gen-weights --help)" = 0 ]
+check "gen-weights bad dtype exits 2" [ "$(rc_of "$M" gen-weights "$G/unet_tiny/config.json" -o "$T/x" --dtype f8)" = 2 ]
 
-check "convert unet_tiny" [ "$(rc_of ./matex convert "$G/unet_tiny" -o "$T/u.mxw" --dtype f32 --quiet)" = 0 ]
+check "convert unet_tiny" [ "$(rc_of "$M" convert "$G/unet_tiny" -o "$T/u.mxw" --dtype f32 --quiet)" = 0 ]
 # inputs of another network: the missing tensor is named, no output is written
-check "missing tensor exits 1" [ "$(rc_of ./matex run-net unet --weights "$T/u.mxw" --inputs "$G/vae_tiny/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
+check "missing tensor exits 1" [ "$(rc_of "$M" run-net unet --weights "$T/u.mxw" --inputs "$G/vae_tiny/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
 check "missing tensor is named" grep -q "missing input tensor sample" "$T/err"
 check "no output after an error" [ ! -e "$T/o.safetensors" ]
 # VAE inputs to the VAE prefix of a UNet-only file: no config under that prefix
-check "absent prefix exits 1" [ "$(rc_of ./matex run-net vae-decode --weights "$T/u.mxw" --inputs "$G/vae_tiny/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
+check "absent prefix exits 1" [ "$(rc_of "$M" run-net vae-decode --weights "$T/u.mxw" --inputs "$G/vae_tiny/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
 check "absent prefix is named" grep -q "vae.config" "$T/err"
 # wrong shape: unet_mini's text states are 48 wide, unet_tiny takes 32
-check "wrong shape exits 1" [ "$(rc_of ./matex run-net unet --weights "$T/u.mxw" --inputs "$G/unet_mini/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
+check "wrong shape exits 1" [ "$(rc_of "$M" run-net unet --weights "$T/u.mxw" --inputs "$G/unet_mini/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
 check "wrong shape is named" grep -q "encoder_hidden_states has shape \[2, 77, 48\]" "$T/err"
-check "hostile inputs file exits 1" [ "$(printf 'garbage' > "$T/bad.safetensors"; rc_of ./matex run-net unet --weights "$T/u.mxw" --inputs "$T/bad.safetensors" --out "$T/o.safetensors")" = 1 ]
-check "hostile weight file exits 1" [ "$(rc_of ./matex run-net unet --weights "$T/bad.safetensors" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
+check "hostile inputs file exits 1" [ "$(printf 'garbage' > "$T/bad.safetensors"; rc_of "$M" run-net unet --weights "$T/u.mxw" --inputs "$T/bad.safetensors" --out "$T/o.safetensors")" = 1 ]
+check "hostile weight file exits 1" [ "$(rc_of "$M" run-net unet --weights "$T/bad.safetensors" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/o.safetensors")" = 1 ]
 check "still no output" [ ! -e "$T/o.safetensors" ]
 
 # clip through run-net
-if [ "$(rc_of ./matex convert "$G/clip_tiny" -o "$T/c.mxw" --dtype f32 --quiet)" = 0 ]; then
-    check "run-net clip" [ "$(rc_of ./matex run-net clip --weights "$T/c.mxw" --inputs "$G/clip_tiny/inputs.safetensors" --out "$T/c.safetensors")" = 0 ]
+if [ "$(rc_of "$M" convert "$G/clip_tiny" -o "$T/c.mxw" --dtype f32 --quiet)" = 0 ]; then
+    check "run-net clip" [ "$(rc_of "$M" run-net clip --weights "$T/c.mxw" --inputs "$G/clip_tiny/inputs.safetensors" --out "$T/c.safetensors")" = 0 ]
     check "clip output written" [ -s "$T/c.safetensors" ]
 else
     echo "FAIL convert clip_tiny"; cat "$T/err"; fail=1
@@ -46,10 +39,10 @@ fi
 # gen-weights -> convert -> run-net: a diffusers folder made from a config alone
 mkdir -p "$T/gen"
 cp "$G/unet_tiny/config.json" "$T/gen/config.json"
-check "gen-weights f16" [ "$(rc_of ./matex gen-weights "$T/gen/config.json" --seed 3 -o "$T/gen/diffusion_pytorch_model.safetensors" --dtype f16)" = 0 ]
-check "convert generated" [ "$(rc_of ./matex convert "$T/gen" -o "$T/g.mxw" --quiet)" = 0 ]
-check "run-net on generated" [ "$(rc_of ./matex run-net unet --weights "$T/g.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/g.safetensors")" = 0 ]
-check "gen-weights is deterministic" sh -c "./matex gen-weights '$T/gen/config.json' --seed 3 -o '$T/again.safetensors' --dtype f16 2>/dev/null && cmp -s '$T/again.safetensors' '$T/gen/diffusion_pytorch_model.safetensors'"
-check "gen-weights bad config exits 1" [ "$(rc_of ./matex gen-weights "$G/README.md" -o "$T/x.safetensors")" = 1 ]
+check "gen-weights f16" [ "$(rc_of "$M" gen-weights "$T/gen/config.json" --seed 3 -o "$T/gen/diffusion_pytorch_model.safetensors" --dtype f16)" = 0 ]
+check "convert generated" [ "$(rc_of "$M" convert "$T/gen" -o "$T/g.mxw" --quiet)" = 0 ]
+check "run-net on generated" [ "$(rc_of "$M" run-net unet --weights "$T/g.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/g.safetensors")" = 0 ]
+check "gen-weights is deterministic" sh -c ""$M" gen-weights '$T/gen/config.json' --seed 3 -o '$T/again.safetensors' --dtype f16 2>/dev/null && cmp -s '$T/again.safetensors' '$T/gen/diffusion_pytorch_model.safetensors'"
+check "gen-weights bad config exits 1" [ "$(rc_of "$M" gen-weights "$G/README.md" -o "$T/x.safetensors")" = 1 ]
 check "no output for a bad config" [ ! -e "$T/x.safetensors" ]
 exit $fail

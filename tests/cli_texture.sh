@@ -2,18 +2,10 @@
 # matex texture / enhance / render / transfer on the command line: exit codes (0, 1 bad input with
 # a message naming the file and no output, 2 usage), --json summary, outputs. Uses the demo weights
 # that `make test` builds (MATEX_DEMO_WEIGHTS).
-SHARED=${MATEX_SHARED:-../shared}
+NAME=texture
+. "$(dirname "$0")/lib_cli.sh"
 A=$SHARED/assets
-M=${MATEX:-./matex}
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
-T=$(mktemp -d /tmp/matex_cli_texture.XXXXXX)
-trap 'rm -rf "$T"' EXIT
-fail=0
-check() { # check NAME COMMAND...: the command must succeed
-    name=$1; shift
-    if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
-}
-rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; }
 SMALL="--image-size 64 --steps 1 --texture-size 256 --render-size 256 --candidates 12 --quiet"
 
 check "texture --help exits 0" [ "$(rc_of "$M" texture --help)" = 0 ]

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "../ops/ops.h"
+#include "../runtime/fileio.h"
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
@@ -19,22 +20,7 @@ static inline void golden_path(char *buf, size_t cap, const char *net, const cha
 static inline char *golden_text(const char *net, const char *file, size_t *len) {
     char path[1024];
     golden_path(path, sizeof path, net, file);
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = n >= 0 ? malloc((size_t)n + 1) : NULL;
-    if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
-        free(s);
-        s = NULL;
-    }
-    fclose(f);
-    if (s) {
-        s[n] = 0;
-        *len = (size_t)n;
-    }
-    return s;
+    return mx_read_file(path, (size_t)1 << 30, len, NULL);
 }
 
 static inline int golden_open(mx_safetensors *f, const char *net, const char *file) {
