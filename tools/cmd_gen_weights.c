@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "../ops/ops.h"
+#include "../runtime/atomic_file.h"
 #include "../runtime/fileio.h"
 #include "../pipeline/nn/netcfg.h"
 #include "../pipeline/nn/params.h"
@@ -85,34 +86,19 @@ static int write_file(const char *path, const mx_binder *b, uint64_t seed, int f
     size_t hlen;
     char *hdr = build_header(b, f16, &hlen, st);
     if (!hdr) return -1;
-    size_t plen = strlen(path);
-    char *tmp = malloc(plen + 16);
     float *buf = malloc(CHUNK * sizeof *buf);
     uint16_t *hbuf = malloc(CHUNK * sizeof *hbuf);
-    int rc = -1, fd = -1;
-    if (tmp && buf && hbuf) {
-        snprintf(tmp, plen + 16, "%s.tmp.XXXXXX", path);
-        fd = mkstemp(tmp);
-    }
-    FILE *fp = fd >= 0 ? fdopen(fd, "wb") : NULL;
-    if (!fp) {
-        if (fd >= 0) close(fd);
-        mx_fail(st, MX_EIO, "%s: cannot create a temporary file: %s", path, strerror(errno));
-    } else {
-        fchmod(fd, 0644);
+    mx_atomic_file af;
+    int rc = -1;
+    if (!buf || !hbuf) {
+        mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
+    } else if (!mx_atomic_open(&af, path, st)) {
         unsigned char len8[8];
         for (int i = 0; i < 8; i++) len8[i] = (unsigned char)((uint64_t)hlen >> (8 * i));
-        int bad = fwrite(len8, 1, 8, fp) != 8 || fwrite(hdr, 1, hlen, fp) != hlen ||
-                  write_tensors(fp, b, seed, f16, buf, hbuf);
-        bad |= fclose(fp) != 0;
-        if (bad || rename(tmp, path) != 0) {
-            mx_fail(st, MX_EIO, "%s: write failed: %s", path, strerror(errno));
-            unlink(tmp);
-        } else {
-            rc = 0;
-        }
+        int ok = fwrite(len8, 1, 8, af.fp) == 8 && fwrite(hdr, 1, hlen, af.fp) == hlen &&
+                 write_tensors(af.fp, b, seed, f16, buf, hbuf) == 0;
+        rc = mx_atomic_close(&af, ok, st);
     }
-    free(tmp);
     free(buf);
     free(hbuf);
     free(hdr);

@@ -13,6 +13,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "../runtime/atomic_file.h"
+#include "../runtime/buf.h"
 #include "../runtime/json.h"
 #include "halfbits.h"
 
@@ -306,52 +308,10 @@ float *mx_st_to_f32(const mx_safetensors *f, const mx_st_tensor *t, mx_status *s
 
 /* ---- writer ---- */
 
-typedef struct {
-    char *s;
-    size_t len, cap;
-    int oom;
-} strbuf;
-
-static void sb_add(strbuf *b, const char *s, size_t n) {
-    if (b->oom) return;
-    if (b->len + n + 1 > b->cap) {
-        size_t cap = b->cap ? b->cap : 1024;
-        while (cap < b->len + n + 1) cap *= 2;
-        char *ns = realloc(b->s, cap);
-        if (!ns) {
-            b->oom = 1;
-            return;
-        }
-        b->s = ns;
-        b->cap = cap;
-    }
-    memcpy(b->s + b->len, s, n);
-    b->len += n;
-    b->s[b->len] = 0;
-}
-
-static void sb_printf_str(strbuf *b, const char *s) {
-    sb_add(b, "\"", 1);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        char esc[8];
-        if (c == '"' || c == '\\') {
-            esc[0] = '\\', esc[1] = (char)c;
-            sb_add(b, esc, 2);
-        } else if (c < 0x20) {
-            snprintf(esc, sizeof esc, "\\u%04x", c);
-            sb_add(b, esc, 6);
-        } else {
-            sb_add(b, (const char *)&c, 1);
-        }
-    }
-    sb_add(b, "\"", 1);
-}
-
-static int build_write_header(strbuf *b, const mx_st_out *t, size_t n, uint64_t *data_len, const char *path,
+static int build_write_header(mx_buf *b, const mx_st_out *t, size_t n, uint64_t *data_len, const char *path,
                               mx_status *st) {
     uint64_t off = 0;
-    sb_add(b, "{", 1);
+    mx_buf_put(b, "{", 1);
     for (size_t i = 0; i < n; i++) {
         if (t[i].dtype != MX_ST_F32 && t[i].dtype != MX_ST_I64)
             return mx_fail(st, MX_EINTERNAL, "%s: tensor '%s': only F32 and I64 are written", path, t[i].name);
@@ -362,22 +322,16 @@ static int build_write_header(strbuf *b, const mx_st_out *t, size_t n, uint64_t 
         if (numel < 0 || (uint64_t)numel > (UINT64_MAX - off) / es)
             return mx_fail(st, MX_EINTERNAL, "%s: tensor '%s': bad shape", path, t[i].name);
         uint64_t bytes = (uint64_t)numel * es;
-        char tmp[128];
-        if (i) sb_add(b, ",", 1);
-        sb_printf_str(b, t[i].name);
-        snprintf(tmp, sizeof tmp, ":{\"dtype\":\"%s\",\"shape\":[", st_dtype_name(t[i].dtype));
-        sb_add(b, tmp, strlen(tmp));
-        for (int d = 0; d < t[i].ndim; d++) {
-            snprintf(tmp, sizeof tmp, d ? ",%lld" : "%lld", (long long)t[i].shape[d]);
-            sb_add(b, tmp, strlen(tmp));
-        }
-        snprintf(tmp, sizeof tmp, "],\"data_offsets\":[%llu,%llu]}", (unsigned long long)off,
-                 (unsigned long long)(off + bytes));
-        sb_add(b, tmp, strlen(tmp));
+        if (i) mx_buf_put(b, ",", 1);
+        mx_buf_json_str(b, t[i].name);
+        mx_buf_printf(b, ":{\"dtype\":\"%s\",\"shape\":[", st_dtype_name(t[i].dtype));
+        for (int d = 0; d < t[i].ndim; d++) mx_buf_printf(b, d ? ",%lld" : "%lld", (long long)t[i].shape[d]);
+        mx_buf_printf(b, "],\"data_offsets\":[%llu,%llu]}", (unsigned long long)off,
+                      (unsigned long long)(off + bytes));
         off += bytes;
     }
-    sb_add(b, "}", 1);
-    while (b->len % 8) sb_add(b, " ", 1); /* data starts 8-byte aligned */
+    mx_buf_put(b, "}", 1);
+    while (b->len % 8) mx_buf_put(b, " ", 1); /* data starts 8-byte aligned */
     if (b->oom) return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
     *data_len = off;
     return 0;
@@ -385,10 +339,10 @@ static int build_write_header(strbuf *b, const mx_st_out *t, size_t n, uint64_t 
 
 static int write_all(FILE *fp, const void *p, size_t n) { return n == 0 || fwrite(p, 1, n, fp) == n ? 0 : -1; }
 
-static int write_body(FILE *fp, const strbuf *hdr, const mx_st_out *t, size_t n) {
+static int write_body(FILE *fp, const mx_buf *hdr, const mx_st_out *t, size_t n) {
     uint8_t len8[8];
     for (int i = 0; i < 8; i++) len8[i] = (uint8_t)((uint64_t)hdr->len >> (8 * i));
-    if (write_all(fp, len8, 8) || write_all(fp, hdr->s, hdr->len)) return -1;
+    if (write_all(fp, len8, 8) || write_all(fp, hdr->p, hdr->len)) return -1;
     for (size_t i = 0; i < n; i++) {
         size_t bytes = (size_t)mx_shape_numel(t[i].ndim, t[i].shape) * st_dtype_size(t[i].dtype);
         if (write_all(fp, t[i].data, bytes)) return -1;
@@ -397,37 +351,12 @@ static int write_body(FILE *fp, const strbuf *hdr, const mx_st_out *t, size_t n)
 }
 
 int mx_st_write(const char *path, const mx_st_out *tensors, size_t n, mx_status *st) {
-    strbuf hdr = {0};
+    mx_buf hdr = {0};
     uint64_t data_len;
-    if (build_write_header(&hdr, tensors, n, &data_len, path, st)) {
-        free(hdr.s);
-        return -1;
-    }
-    size_t plen = strlen(path);
-    char *tmp = malloc(plen + 16);
-    if (!tmp) {
-        free(hdr.s);
-        return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
-    }
-    snprintf(tmp, plen + 16, "%s.tmp.XXXXXX", path);
-    int fd = mkstemp(tmp);
-    if (fd >= 0) fchmod(fd, 0644); /* mkstemp makes 0600; outputs are ordinary files */
-    FILE *fp = fd >= 0 ? fdopen(fd, "wb") : NULL;
+    mx_atomic_file af;
     int rc = -1;
-    if (!fp) {
-        if (fd >= 0) close(fd);
-        mx_fail(st, MX_EIO, "%s: cannot create temporary file: %s", path, strerror(errno));
-    } else {
-        int bad = write_body(fp, &hdr, tensors, n);
-        bad |= fclose(fp) != 0;
-        if (bad || rename(tmp, path) != 0) {
-            mx_fail(st, MX_EIO, "%s: write failed: %s", path, strerror(errno));
-            unlink(tmp);
-        } else {
-            rc = 0;
-        }
-    }
-    free(tmp);
-    free(hdr.s);
+    if (!build_write_header(&hdr, tensors, n, &data_len, path, st) && !mx_atomic_open(&af, path, st))
+        rc = mx_atomic_close(&af, write_body(af.fp, &hdr, tensors, n) == 0, st);
+    mx_buf_free(&hdr);
     return rc;
 }

@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "../runtime/atomic_file.h"
 #include "halfbits.h"
 #include "weights.h"
 
@@ -542,34 +543,12 @@ int mx_wf_writer_finish(mx_wf_writer *w, const char *path, mx_status *st) {
     uint8_t *front = build_front(w, &h);
     if (!front) return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
 
-    size_t plen = strlen(path);
-    char *tmp = malloc(plen + 16);
-    int fd = -1;
-    if (tmp) {
-        snprintf(tmp, plen + 16, "%s.tmp.XXXXXX", path);
-        fd = mkstemp(tmp);
-    }
-    if (fd < 0) {
+    mx_atomic_file af;
+    if (mx_atomic_open(&af, path, st)) {
         free(front);
-        free(tmp);
-        return mx_fail(st, MX_EIO, "%s: cannot create a temporary file next to it: %s", path, strerror(errno));
+        return -1;
     }
-    fchmod(fd, 0644); /* mkstemp makes 0600; a weight file is an ordinary shared file */
-    FILE *fp = fdopen(fd, "wb");
-    int bad = !fp;
-    if (fp) {
-        setvbuf(fp, NULL, _IOFBF, 1 << 20);
-        bad = fwrite(front, 1, h.data_off, fp) != h.data_off || write_data(fp, w, 0);
-        bad |= fclose(fp) != 0;
-    } else {
-        close(fd);
-    }
+    int ok = fwrite(front, 1, h.data_off, af.fp) == h.data_off && write_data(af.fp, w, 0) == 0;
     free(front);
-    int rc = 0;
-    if (bad || rename(tmp, path) != 0) {
-        rc = mx_fail(st, MX_EIO, "%s: write failed: %s", path, strerror(errno));
-        unlink(tmp);
-    }
-    free(tmp);
-    return rc;
+    return mx_atomic_close(&af, ok, st);
 }

@@ -10,6 +10,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "../../runtime/atomic_file.h"
 #include "../../runtime/buf.h"
 #include "../io/io.h"
 
@@ -17,27 +18,8 @@
 
 typedef mx_buf bytes;
 
-
-
-
 static void pad4(bytes *b, unsigned char fill) {
     while (b->len % 4) mx_buf_put(b, &fill, 1);
-}
-
-/* ---- writing through a temporary file ---- */
-
-static int write_file_atomic(const char *path, const void *data, size_t len, mx_status *st) {
-    char tmp[1100];
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    FILE *f = fopen(tmp, "wb");
-    if (!f) return mx_fail(st, MX_EIO, "%s: cannot create: %s", tmp, strerror(errno));
-    int ok = fwrite(data, 1, len, f) == len;
-    ok &= fclose(f) == 0;
-    if (!ok || rename(tmp, path) != 0) {
-        remove(tmp);
-        return mx_fail(st, MX_EIO, "%s: write failed", path);
-    }
-    return 0;
 }
 
 /* ---- OBJ + MTL ---- */
@@ -104,7 +86,7 @@ int mx_export_obj(const char *path, const mx_mesh *m, const char *const *texture
     if (texture_files) mtl_text(&mb, m, texture_files, ntex);
     int rc;
     if (b.oom || mb.oom) rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
-    else rc = (texture_files ? write_file_atomic(mtl_path, mb.p, mb.len, st) : 0) || write_file_atomic(path, b.p, b.len, st) ? -1 : 0;
+    else rc = (texture_files ? mx_atomic_write(mtl_path, mb.p, mb.len, st) : 0) || mx_atomic_write(path, b.p, b.len, st) ? -1 : 0;
     free(b.p);
     free(mb.p);
     return rc;
@@ -345,7 +327,7 @@ int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, 
     put_u32(&out, 0x004E4942u); /* BIN */
     mx_buf_put(&out, b.bin.p, b.bin.len);
     if (out.oom) mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
-    else rc = write_file_atomic(path, out.p, out.len, st);
+    else rc = mx_atomic_write(path, out.p, out.len, st);
 done:
     glb_verts_free(&g);
     bytes *all[] = {&b.bin, &b.views, &b.accs, &b.prims, &b.images, &mats, &texs, &json, &out};
@@ -423,7 +405,7 @@ int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures
     if (join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
     if (join(path, sizeof path, dir, "mesh.glb", st) || mx_export_glb(path, &one, textures, ntex, st)) goto done;
     const char *report = report_json ? report_json : "{}";
-    if (join(path, sizeof path, dir, "report.json", st) || write_file_atomic(path, report, strlen(report), st)) goto done;
+    if (join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st)) goto done;
     rc = 0;
 done:
     free(names);
