@@ -6,6 +6,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/* Exit code of a test that did not run (tests/run.sh reports it as skipped, not passed). */
+#define MX_TEST_SKIP 77
+
 extern int mx_test_failures;
 
 #define CHECK(cond)                                                                               \

@@ -13,8 +13,6 @@
 #include "job.h"
 #include "texture.h"
 
-#define MIN_UNTEXTURED_PIXELS 16
-
 /* The original textures resampled to the bake's size, one per layer (grey where missing). */
 static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
     int T = j->o->tex_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
@@ -41,13 +39,13 @@ static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
 
 /* Cameras: front, back, then the plan of Algorithm 1 from an empty T^B. */
 static int enhance_cameras(mx_job *j, mx_camera *cams, int *n, mx_status *st) {
-    mx_camera_ortho(&cams[0], 0.0f, 0.0f, 3.0f, 1.02f);
-    mx_camera_ortho(&cams[1], 180.0f, 0.0f, 3.0f, 1.02f);
+    mx_job_camera(&cams[0], 0.0f, 0.0f);
+    mx_job_camera(&cams[1], 180.0f, 0.0f);
     *n = 2;
     if (j->o->views <= 2) return 0;
     mx_view_plan plan;
-    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->views - 2, j->o->coverage_stop, MIN_UNTEXTURED_PIXELS, &plan,
-                          st))
+    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->views - 2, j->o->coverage_stop,
+                          MX_JOB_MIN_UNTEXTURED_PIXELS, &plan, st))
         return -1;
     for (int i = 0; i < plan.n && *n < j->o->views; i++) cams[(*n)++] = j->vc.cams[plan.cand[i]];
     mx_view_plan_free(&plan);
@@ -68,7 +66,7 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
         goto done;
     }
     snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->prompt);
-    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, depth, NULL, S, 0, st) ||
+    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, depth, NULL, NULL, S, 0, st) ||
         mx_render_textured(&v->vb.gb, &j->mesh, orig, j->nlayers, grey, j->ctx.pool, &rgb, st) ||
         mx_crop_resize(&rgb, v->crop, S, &small, st))
         goto done;

@@ -55,11 +55,15 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     return 0;
 }
 
+void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
+    mx_camera_ortho(cam, azimuth, elevation, CAMERA_RADIUS, CAMERA_HALF_EXTENT);
+}
+
 static int build_candidates(mx_job *j, mx_status *st) {
     int n = j->o->candidates;
     mx_camera tmpl, *cams = calloc((size_t)n, sizeof *cams);
     if (!cams) return mx_fail(st, MX_ENOMEM, "candidate cameras: out of memory");
-    mx_camera_ortho(&tmpl, 0, 0, CAMERA_RADIUS, CAMERA_HALF_EXTENT);
+    mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
     int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
                                  j->o->tex_size, j->nlayers, j->o->frontal_threshold, j->ctx.pool, st);
@@ -290,6 +294,7 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     if (!fg) return mx_fail(st, MX_ENOMEM, "view mask: out of memory");
     mx_mask_foreground(&v->vb.gb, fg);
     v->crop = mx_crop_from_mask(fg, R, R, CROP_MARGIN);
+    v->untextured_pixels = mx_mask_count(fg, (int64_t)R * R);
     free(fg);
     return 0;
 }
@@ -318,15 +323,12 @@ static int place_control(const mx_image *full, mx_crop crop, int S, float *plane
     return 0;
 }
 
-static int inpaint_control(mx_job *j, mx_job_view *v, float *planes, int plane_w, int x0, mx_status *st) {
+static int inpaint_control(mx_job *j, mx_job_view *v, const mx_image *tex, float *planes, int plane_w, int x0,
+                           mx_status *st) {
     int R = j->o->render_size, S = j->o->image_size, rc = -1;
-    mx_image tex[j->nlayers], rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, ctl = {0};
+    mx_image rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, ctl = {0};
     uint8_t *mask = malloc((size_t)R * R);
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
-    if (mx_job_current_textures(j, tex, st)) {
-        free(mask);
-        return -1;
-    }
     mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, j->bake.known, j->o->tex_size, j->o->tex_size, mask);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx.pool, &rgb, st) &&
@@ -335,7 +337,6 @@ static int inpaint_control(mx_job *j, mx_job_view *v, float *planes, int plane_w
         mx_image_to_planes(&ctl, planes, plane_w, x0);
         rc = 0;
     }
-    for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
     mx_image_free(&rgb);
     mx_image_free(&mask_img);
     mx_image_free(&rgb_s);
@@ -345,14 +346,14 @@ static int inpaint_control(mx_job *j, mx_job_view *v, float *planes, int plane_w
     return rc;
 }
 
-int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes, int plane_w,
-                         int x0, mx_status *st) {
+int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes,
+                         const mx_image *current, int plane_w, int x0, mx_status *st) {
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
     int rc = place_control(&depth, v->crop, j->o->image_size, depth_planes, plane_w, x0, st);
     mx_image_free(&depth);
     if (rc || !inpaint_planes) return rc;
-    return inpaint_control(j, v, inpaint_planes, plane_w, x0, st);
+    return inpaint_control(j, v, current, inpaint_planes, plane_w, x0, st);
 }
 
 int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st) {
@@ -412,7 +413,8 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     int rc = 0;
     for (int l = 0; l < j->nlayers && !rc; l++) {
         const uint8_t *known = j->bake.known + (size_t)l * T * T;
-        rc = mx_uv_chart_mask(&j->mesh, l, j->nlayers, T, T, chart, st) || mx_uv_fill(&tex[l], known, chart, UV_GUTTER, st);
+        rc = mx_uv_chart_mask(&j->mesh, l, j->nlayers, T, T, chart, st) ||
+             mx_uv_fill(&tex[l], known, chart, UV_GUTTER, st);
     }
     free(chart);
     return rc ? -1 : 0;

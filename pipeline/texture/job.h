@@ -15,6 +15,8 @@
 #include "texture.h"
 
 #define MX_JOB_MAX_PROMPTS 16
+/* A candidate with fewer untextured pixels (at the candidate render size) is not worth a view. */
+#define MX_JOB_MIN_UNTEXTURED_PIXELS 16
 
 typedef struct mx_prompt_cache {
     int n;
@@ -58,7 +60,7 @@ typedef struct mx_job_view {
     mx_view_buffers vb;
     int vb_ready;
     mx_crop crop;
-    int64_t untextured_pixels;
+    int64_t untextured_pixels; /* visible pixels still to paint (all foreground pixels before any paint) */
 } mx_job_view;
 
 /* What one diffusion call generates: n items of image_h x image_w, with their control
@@ -86,11 +88,13 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
 /* Renders the view (culled + unculled, backprojection mask) and its object crop. */
 int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st);
 void mx_job_view_free(mx_job_view *v);
+/* The orthographic camera every view uses, at (azimuth, elevation) degrees. */
+void mx_job_camera(mx_camera *cam, float azimuth, float elevation);
 /* Control planes of a view at the model image size S, written at column x0 of planes with
- * row width plane_w: depth into depth_planes, and (when inpaint_planes is not NULL) the current
- * texture's render with the untextured pixels set to -1. */
-int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes, int plane_w,
-                         int x0, mx_status *st);
+ * row width plane_w: depth into depth_planes, and (when inpaint_planes is not NULL) the render
+ * of `current` (mx_job_current_textures, one per layer) with the untextured pixels set to -1. */
+int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes,
+                         const mx_image *current, int plane_w, int x0, mx_status *st);
 /* The current textures (one per layer), unknown texels mid grey. Free each with mx_image_free. */
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Pastes a generated image (planes [3][S][plane_w] from column x0) back into the view's crop

@@ -46,6 +46,12 @@ static int move_files(const char *from, const char *to, mx_status *st) {
     return rc;
 }
 
+static int make_folder(const char *path, mx_status *st) {
+    if (mkdir(path, 0777) && errno != EEXIST)
+        return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", path, strerror(errno));
+    return 0;
+}
+
 /* mkdir -p of the folder that will hold `dir` (its parent). */
 static int make_parents(const char *dir, mx_status *st) {
     char path[4096];
@@ -57,11 +63,10 @@ static int make_parents(const char *dir, mx_status *st) {
     for (char *p = path + 1; *p; p++) {
         if (*p != '/') continue;
         *p = 0;
-        if (mkdir(path, 0777) && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", path, strerror(errno));
+        if (make_folder(path, st)) return -1;
         *p = '/';
     }
-    if (mkdir(path, 0777) && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", path, strerror(errno));
-    return 0;
+    return make_folder(path, st);
 }
 
 int mx_outdir_write(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
@@ -81,10 +86,9 @@ int mx_outdir_write(const char *dir, const mx_mesh *m, const mx_image *textures,
     }
     if (stat(dir, &sb) != 0) {
         if (rename(stage, dir) == 0) return 0;
-        if (mkdir(dir, 0777) && errno != EEXIST) {
-            int err = errno;
+        if (make_folder(dir, st)) {
             remove_tree(stage);
-            return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", dir, strerror(err));
+            return -1;
         }
     }
     int rc = move_files(stage, dir, st);

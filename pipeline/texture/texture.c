@@ -8,8 +8,6 @@
 #include "../geom/masks.h"
 #include "job.h"
 
-#define MIN_UNTEXTURED_PIXELS 16 /* at the candidate render size */
-
 void mx_texture_opts_default(mx_texture_opts *o) {
     memset(o, 0, sizeof *o);
     o->negative_prompt = "";
@@ -45,8 +43,8 @@ static int grid_stage(mx_job *j, mx_status *st) {
     int S = o->image_size, W = 2 * S, rc = -1;
     mx_job_view v[2];
     memset(v, 0, sizeof v);
-    mx_camera_ortho(&v[0].cam, 0.0f, 0.0f, 3.0f, 1.02f);
-    mx_camera_ortho(&v[1].cam, 180.0f, 0.0f, 3.0f, 1.02f);
+    mx_job_camera(&v[0].cam, 0.0f, 0.0f);
+    mx_job_camera(&v[1].cam, 180.0f, 0.0f);
     float *planes = malloc(sizeof(float) * 3 * S * W), *image = malloc(sizeof(float) * 3 * S * W);
     const char *prompts[1];
     if (!planes || !image) {
@@ -55,7 +53,7 @@ static int grid_stage(mx_job *j, mx_status *st) {
     }
     for (int i = 0; i < 2; i++) {
         snprintf(v[i].prompt, sizeof v[i].prompt, "%s %s", o->grid_word, o->prompt);
-        if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], planes, NULL, W, i * S, st))
+        if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], planes, NULL, NULL, W, i * S, st))
             goto done;
     }
     prompts[0] = v[0].prompt;
@@ -99,16 +97,21 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     float *depth = malloc(sizeof(float) * per * n), *inpaint = malloc(sizeof(float) * per * n);
     float *image = malloc(sizeof(float) * per * n);
     const char **prompts = calloc((size_t)n, sizeof *prompts);
-    if (!v || !depth || !inpaint || !image || !prompts) {
+    mx_image *current = calloc((size_t)j->nlayers, sizeof *current);
+    int have_current = 0;
+    if (!v || !depth || !inpaint || !image || !prompts || !current) {
         mx_fail(st, MX_ENOMEM, "views: out of memory");
         goto done;
     }
+    /* the views of a batch all see T as it is before the batch */
+    if (mx_job_current_textures(j, current, st)) goto done;
+    have_current = 1;
     for (int i = 0; i < n; i++) {
         v[i].cam = j->vc.cams[cand[i]];
         snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->prompt);
         prompts[i] = v[i].prompt;
         if (mx_job_view_prepare(j, &v[i], st) ||
-            mx_job_view_controls(j, &v[i], depth + i * per, inpaint + i * per, S, 0, st))
+            mx_job_view_controls(j, &v[i], depth + i * per, inpaint + i * per, current, S, 0, st))
             goto done;
         mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->views,
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
@@ -125,6 +128,8 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     rc = 0;
 done:
     if (v) free_views(v, n);
+    for (int l = 0; have_current && l < j->nlayers; l++) mx_image_free(&current[l]);
+    free(current);
     free(v);
     free(depth);
     free(inpaint);
@@ -142,8 +147,8 @@ static int view_stage(mx_job *j, mx_status *st) {
     if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
     while (k < n_later) {
         mx_view_plan plan;
-        if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->coverage_stop, MIN_UNTEXTURED_PIXELS, &plan,
-                              st)) {
+        if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
+                              &plan, st)) {
             free(cand);
             return -1;
         }
