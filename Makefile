@@ -111,7 +111,10 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 	@mkdir -p $(dir $@)
 	sh tools/make_demo_weights.sh $(BUILD)/matex $@
 
-TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
+# The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
+# activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
+MX_TEST_DEVICE ?= cpu-strict
+TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw
 test: all $(TEST_BINS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS)

@@ -215,6 +215,8 @@ const mx_ctx *mx_run_ctx(const mx_ctx *c, const mx_arena *a);
 /* n activation floats from the arena; in a measuring arena a placeholder handle (never NULL:
  * the arena only counts), so forward code needs no special case. NULL only on failure. */
 float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st);
+/* A placeholder handle for the outputs of a dry run (ops on a measuring context ignore it). */
+float *mx_act_placeholder(void);
 
 /* A ready-to-use context: best kernels, a pool of nthreads (<=0: all CPUs) and a scratch
  * arena of scratch_bytes. Free with mx_ctx_destroy. */

@@ -227,7 +227,7 @@ static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *l
     for (int i = 0; i < b->n; i++)
         mx_rng_fill_normal(lat + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
-        mx_scale(&j->ctx, lat, lat, mx_sched_init_noise_sigma(s), numel);
+        mx_sched_scale_initial(s, lat, numel);
         return 0;
     }
     if (mx_sched_set_strength(s, b->strength, st)) return -1;
@@ -257,7 +257,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, &j->ctx, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     if (start_latents(j, b, &s, lat, per_item, h, w, st)) goto done;
     mx_sd_control controls[2];
