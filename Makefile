@@ -19,6 +19,12 @@ CXXFLAGS += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-r
 LDFLAGS  += -fsanitize=address,undefined
 endif
 
+# CUDA=1 (set by `make cuda`): the C code knows the CUDA backend; programs link libmx_cuda.a.
+ifeq ($(CUDA),1)
+CFLAGS  += -DMX_WITH_CUDA
+LDLIBS  += $(BUILD)/libmx_cuda.a $(BUILD)/libmx_core.a $(CUDA_LIBS)
+endif
+
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
 
@@ -152,25 +158,39 @@ clean:
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 
-# ---- CUDA backend: `make cuda` builds $(BUILD)/libmx_cuda.a and its test, `make test-cuda` runs the test
-# (it skips when no GPU is present). Not part of `make` / `make test`. Fat binary for sm_80 and sm_90.
+# ---- CUDA backend: `make cuda` builds, in $(CUDA_BUILD), the CUDA kernels (libmx_cuda.a), their op
+# test, the network tests and a matex whose --device accepts cuda (C sources with -DMX_WITH_CUDA).
+# `make test-cuda` runs the op test, then every network golden and the tiny pipeline on the GPU
+# against the CPU goldens (bound 1e-2); without a GPU it prints one skip line. Not part of `make` /
+# `make test`. Fat binary for sm_80 and sm_90.
 NVCC       ?= /usr/local/cuda/bin/nvcc
 CUDA_HOME  ?= /usr/local/cuda
+CUDA_BUILD ?= build-cuda
 NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
 NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
 CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
-CUDA_LDLIBS = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -lm -lpthread
+CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
+CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
 	@mkdir -p $(dir $@)
 	$(NVCC) $(NVCCFLAGS) -c -o $@ $<
 $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB_CORE)
-	$(NVCC) $(NVCC_ARCH) -o $@ $^ $(CUDA_LDLIBS)
+	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
-.PHONY: test-cuda
-cuda: $(LIB_CUDA) $(CUDA_TEST)
+ifeq ($(CUDA),1)
+$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): | $(LIB_CUDA)
+endif
+
+.PHONY: test-cuda cuda-all cuda-run-tests
+cuda:
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
+cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 test-cuda: cuda
-	$(CUDA_TEST)
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-run-tests
+cuda-run-tests:
+	$(TEST_ENV) MX_TEST_DEVICE=cuda MX_TEST_MIN_BOUND=1e-2 MATEX_FULL=1 sh tests/cuda/run.sh $(CUDA_TEST) \
+	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))

@@ -219,10 +219,10 @@ void mx_timestep_embedding(const mx_ctx *c, float *y, const float *t, int B, int
         RUN_OP(c, timestep_embedding(c, y, t, B, dim, flip_sin_to_cos, downscale_freq_shift, max_period));
 }
 
-void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, f16_to_f32(y, x, n)); }
-void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_f16(y, x, n)); }
-void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, bf16_to_f32(y, x, n)); }
-void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_bf16(y, x, n)); }
+void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, f16_to_f32(c, y, x, n)); }
+void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_f16(c, y, x, n)); }
+void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, bf16_to_f32(c, y, x, n)); }
+void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_bf16(c, y, x, n)); }
 
 /* ---- the edges ---- */
 

@@ -97,10 +97,10 @@ struct mx_kernels {
                                float downscale_freq_shift, float max_period);
     void (*embed_tokens)(const mx_ctx *, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
                          mx_wptr positions);
-    void (*f16_to_f32)(float *y, const uint16_t *x, size_t n);
-    void (*f32_to_f16)(uint16_t *y, const float *x, size_t n);
-    void (*bf16_to_f32)(float *y, const uint16_t *x, size_t n);
-    void (*f32_to_bf16)(uint16_t *y, const float *x, size_t n);
+    void (*f16_to_f32)(const mx_ctx *, float *y, const uint16_t *x, size_t n);
+    void (*f32_to_f16)(const mx_ctx *, uint16_t *y, const float *x, size_t n);
+    void (*bf16_to_f32)(const mx_ctx *, float *y, const uint16_t *x, size_t n);
+    void (*f32_to_bf16)(const mx_ctx *, uint16_t *y, const float *x, size_t n);
 };
 
 /* The table for an ISA level (clamped to what this CPU supports). */

@@ -31,7 +31,8 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --front-back-words TEXT  prompt prefix of the grid (default \"front and back view of\")\n"
             "  --up y|z                 up axis of the mesh (default y)\n"
             "  --threads N              CPU threads (default: all)\n"
-            "  --device cpu|cuda        compute device (default cpu)\n"
+            "  --device D               cpu (default), cpu-strict (activations guarded, for tests) or cuda\n"
+            "                           (in binaries built by `make cuda`)\n"
             "  --quiet                  no progress on stderr\n"
             "  --json                   print a JSON summary on stdout\n"
             "  -h, --help               this help\n");
@@ -116,7 +117,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
         if (!strcmp(val, "z")) return o->up = MX_UP_Z, 1;
         return -1;
     }
-    if (!strcmp(arg, "--device")) return !strcmp(val, "cpu") ? 1 : -2;
+    if (!strcmp(arg, "--device")) return mx_backend_parse(val, &o->device, NULL) ? -1 : mx_backend_compiled(o->device) ? 1 : -2;
     return 0;
 }
 
@@ -144,8 +145,8 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             int r = parse_valued(&c->o, arg, argv[++i]);
             if (r == 0) return usage_error(verb, "unknown option", arg);
             if (r == -2)
-                return usage_error(verb, "this build has no CUDA device support (make cuda builds the kernels only);"
-                                         " --device must be cpu, not", argv[i]);
+                return usage_error(verb, "this matex was built without that backend (`make cuda` builds one with"
+                                         " cuda); --device", argv[i]);
             if (r < 0) return usage_error(verb, "bad value for", arg);
             continue;
         }

@@ -129,9 +129,9 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     memset(j, 0, sizeof *j);
     j->o = o;
     j->t0 = mx_now();
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_ctx_create_on(&j->ctx, o->device, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
-    if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
+    if (mx_models_load(&j->models, &j->ctx, o->weights_path, model_needs, st)) return -1;
     j->models_ready = 1;
     mx_job_progress(j, "loaded weights %s", o->weights_path);
     if (mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
