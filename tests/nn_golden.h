@@ -14,8 +14,17 @@
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
-static inline void golden_path(char *buf, size_t cap, const char *net, const char *file) {
-    snprintf(buf, cap, "%s/golden/%s/%s", mx_shared_dir(), net, file);
+/* Path of golden/NET/FILE in the test data (util_test.h); -1 when absent. */
+static inline int golden_path(char *buf, size_t cap, const char *net, const char *file) {
+    char rel[512];
+    snprintf(rel, sizeof rel, "golden/%s/%s", net, file);
+    return mx_test_path(buf, cap, rel);
+}
+
+/* 1 when golden/NET/FILE is there; otherwise reports the case skipped (util_test.h), returns 0. */
+static inline int golden_have(const char *net, const char *file) {
+    char path[1024];
+    return mx_test_need(path, sizeof path, "golden/%s/%s", net, file);
 }
 
 /* Whole file as a NUL-terminated string (caller frees), or NULL. */
