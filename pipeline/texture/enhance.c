@@ -115,6 +115,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
     double t = mx_now();
     for (int i = 0; !rc && i < ncam && i < o->views; i++) {
+        if ((rc = mx_job_check_cancel(&j, st))) break;
         mx_job_view v;
         memset(&v, 0, sizeof v);
         v.cam = cams[i];

@@ -146,6 +146,10 @@ static int view_stage(mx_job *j, mx_status *st) {
     int *cand = malloc(sizeof(int) * (o->max_batch > 0 ? o->max_batch : 1));
     if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
     while (k < n_later) {
+        if (mx_job_check_cancel(j, st)) {
+            free(cand);
+            return -1;
+        }
         mx_view_plan plan;
         if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
                               &plan, st)) {
@@ -174,7 +178,7 @@ int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_TEXTURE, st)) return -1;
     mx_job j;
     int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
-    if (!rc) rc = grid_stage(&j, st);
+    if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
     if (!rc) {
         mx_image tex[j.nlayers];
