@@ -99,8 +99,8 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "--texture-size")) return parse_int(val, &o->tex_size) ? -1 : 1;
     if (!strcmp(arg, "--render-size")) return parse_int(val, &o->render_size) ? -1 : 1;
     if (!strcmp(arg, "--image-size")) return parse_int(val, &o->image_size) ? -1 : 1;
-    if (!strcmp(arg, "--batch")) return parse_int(val, &o->max_batch) || o->max_batch < 1 ? -1 : 1;
-    if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) || o->threads < 0 ? -1 : 1;
+    if (!strcmp(arg, "--batch")) return parse_int(val, &o->max_batch) ? -1 : 1;
+    if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) ? -1 : 1;
     if (!strcmp(arg, "--guidance")) return parse_float(val, &o->guidance) ? -1 : 1;
     if (!strcmp(arg, "--strength")) return parse_float(val, &o->strength) ? -1 : 1;
     if (!strcmp(arg, "--grid-depth-weight")) return parse_float(val, &o->grid_depth_weight) ? -1 : 1;
