@@ -36,6 +36,8 @@ static void usage(FILE *f) {
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
             "  --device D      cpu (default), cpu-strict (activations guarded: tests) or cuda (`make cuda` builds)\n"
+            "  --precision P   fp32 (default) or bf16: bf16 products with fp32 sums where the CPU has\n"
+            "                  AVX512_BF16 (linear, conv, attention); elsewhere fp32 with a warning\n"
             "  -h, --help      this help\n");
 }
 
@@ -386,10 +388,12 @@ static const char *default_prefix(const char *net) {
     return NULL;
 }
 
-static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads,
+static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
                mx_backend_kind device, mx_status *st) {
-    if (mx_ctx_create_on(&io->ctx, device, threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_ctx_create_on(&io->ctx, device, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
     io->ctx_ok = 1;
+    if (device != MX_BACKEND_CUDA && mx_isa_precision(io->ctx.k->isa) != prec)
+        mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
     if (mx_wf_open(&io->wf, weights, st)) return -1;
@@ -407,6 +411,7 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
 int cmd_run_net(int argc, char **argv) {
     const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu";
     int threads = 0;
+    mx_precision prec = MX_PREC_FP32;
     run_io io;
     memset(&io, 0, sizeof io);
     for (int i = 1; i < argc; i++) {
@@ -422,6 +427,12 @@ int cmd_run_net(int argc, char **argv) {
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
         else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
         else if (!strcmp(a, "--device") && has_val) device = argv[++i];
+        else if (!strcmp(a, "--precision") && has_val) {
+            if (mx_precision_parse(argv[++i], &prec)) {
+                fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", argv[i]);
+                return 2;
+            }
+        }
         else if (a[0] != '-' && !net) net = a;
         else {
             fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
@@ -450,7 +461,7 @@ int cmd_run_net(int argc, char **argv) {
         fprintf(stderr, "matex run-net: --device: %s\n", st.msg);
         return 2;
     }
-    int rc = run(&io, net, weights, pfx, threads, kind, &st);
+    int rc = run(&io, net, weights, pfx, threads, prec, kind, &st);
     io_free(&io);
     if (rc) {
         fprintf(stderr, "matex run-net: %s\n", st.msg);
