@@ -126,5 +126,5 @@ int main(void) {
     compare("enc.safetensors", "logvar", "vae_tiny", "outputs.safetensors", "encode.logvar");
 
     sh("rm -rf %s%s", tmpdir, "");
-    return mx_test_finish("test_nn_run_net");
+    return mx_test_finish("test_tools_run_net");
 }
