@@ -1,5 +1,5 @@
 /* bench_nets: the full SD1.5 set (UNet, 2 ControlNets, VAE, CLIP text encoder; configs from
- * ../shared/golden/sd15_*) with golden-v1 rule weights in one fp16 matex weight file under /tmp
+ * tests/data/golden/sd15_*) with golden-v1 rule weights in one fp16 matex weight file under /tmp
  * (generated once by a child process, reused when present). Reports load time, peak RSS, and
  * the time, FLOPs and GFLOP/s of one UNet call (64×64 latent, batch 2, 77 tokens), one
  * ControlNet call, one VAE decode (64×64 latent, batch 1) and one CLIP call (batch 2).
@@ -25,7 +25,7 @@
 #define DEFAULT_WEIGHTS "/tmp/matex_bench_sd15_f16.mxw"
 
 typedef struct net_spec {
-    const char *golden;  /* folder under ../shared/golden */
+    const char *golden;  /* folder under tests/data/golden */
     const char *prefix;  /* in the weight file */
     uint64_t seed;
 } net_spec;
@@ -41,8 +41,7 @@ static const net_spec nets[] = {
 
 static char *read_config(const char *golden) {
     char path[1024];
-    const char *sh = getenv("MATEX_SHARED") ? getenv("MATEX_SHARED") : "../shared";
-    snprintf(path, sizeof path, "%s/golden/%s/config.json", sh, golden);
+    snprintf(path, sizeof path, "tests/data/golden/%s/config.json", golden); /* shipped with the sources */
     FILE *f = fopen(path, "rb");
     if (!f) {
         fprintf(stderr, "bench_nets: cannot open %s\n", path);
