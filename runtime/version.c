@@ -38,14 +38,6 @@ int mx_build_has_isa(mx_isa isa) {
 #endif
 }
 
-const char *mx_build_backends(void) {
-#ifdef MX_WITH_CUDA
-    return "cpu cuda";
-#else
-    return "cpu";
-#endif
-}
-
 void mx_build_report(FILE *f) {
     fprintf(f, "matex %s\n", MX_VERSION);
     fprintf(f, "compiler: %s\n", mx_build_compiler());
@@ -55,7 +47,7 @@ void mx_build_report(FILE *f) {
     /* the levels are numbered from 0 up; mx_isa_name names each and says "?" past the last */
     for (int i = 0; strcmp(mx_isa_name((mx_isa)i), "?") != 0; i++)
         if (mx_build_has_isa((mx_isa)i)) fprintf(f, " %s", mx_isa_name((mx_isa)i));
-    fprintf(f, "\ncpu kernels used on this CPU: %s%s\n", mx_isa_name(mx_cpu_best_isa()),
-            getenv("MATEX_ISA") ? " (MATEX_ISA lowers it)" : "");
-    fprintf(f, "backends: %s\n", mx_build_backends());
+    fprintf(f, "\ncpu kernels used on this CPU: fp32 %s, bf16 %s%s\n", mx_isa_name(mx_cpu_isa_for(MX_PREC_FP32)),
+            mx_isa_name(mx_cpu_isa_for(MX_PREC_BF16)), getenv("MATEX_ISA") ? " (MATEX_ISA lowers them)" : "");
+    fprintf(f, "backends: %s\n", mx_backends_compiled());
 }

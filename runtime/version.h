@@ -18,9 +18,7 @@ const char *mx_build_flags(void);
 const char *mx_build_sanitizers(void);
 /* 1 when the kernels of this ISA level are compiled in (all levels on x86-64, scalar elsewhere). */
 int mx_build_has_isa(mx_isa isa);
-/* Backends compiled in, space separated: "cpu", or "cpu cuda" in a build with the CUDA backend. */
-const char *mx_build_backends(void);
-/* The whole report, one fact per line. */
+/* The whole report, one fact per line (backends: mx_backends_compiled of backend.h). */
 void mx_build_report(FILE *f);
 
 #endif

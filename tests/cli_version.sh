@@ -10,11 +10,13 @@ check "compiler line" grep -q "^compiler: \(gcc\|clang\) [0-9]" "$T/out"
 check "flags line" grep -q "^flags: -O[0-3s].* -ffp-contract=off" "$T/out"
 check "sanitizers line" grep -q "^sanitizers: \(none\|address,undefined\)$" "$T/out"
 check "scalar kernels compiled in" grep -q "^cpu kernels compiled in: scalar" "$T/out"
-used=$(sed -n 's/^cpu kernels used on this CPU: \([a-z0-9_]*\).*/\1/p' "$T/out")
-check "the level used is compiled in" grep -q "^cpu kernels compiled in:.* $used\( \|$\)" "$T/out"
-check "backends line" grep -q "^backends: cpu" "$T/out"
+fp32=$(sed -n 's/^cpu kernels used on this CPU: fp32 \([a-z0-9_]*\), bf16 .*/\1/p' "$T/out")
+bf16=$(sed -n 's/^cpu kernels used on this CPU: fp32 [a-z0-9_]*, bf16 \([a-z0-9_]*\).*/\1/p' "$T/out")
+check "the fp32 level is compiled in" grep -q "^cpu kernels compiled in:.* $fp32\( \|$\)" "$T/out"
+check "the bf16 level is compiled in" grep -q "^cpu kernels compiled in:.* $bf16\( \|$\)" "$T/out"
+check "backends line" grep -q "^backends: cpu cpu-strict" "$T/out"
 check "MATEX_ISA=scalar exits 0" [ "$(rc_of env MATEX_ISA=scalar "$M" --version)" = 0 ]
-check "MATEX_ISA=scalar is used" grep -q "^cpu kernels used on this CPU: scalar (MATEX_ISA lowers it)$" "$T/out"
+check "MATEX_ISA=scalar is used" grep -q "^cpu kernels used on this CPU: fp32 scalar, bf16 scalar (MATEX_ISA lowers them)$" "$T/out"
 check "-V is --version" [ "$(rc_of "$M" -V)" = 0 ]
 check "-V prints the version" grep -q "^matex [0-9]" "$T/out"
 exit $fail
