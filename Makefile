@@ -13,10 +13,11 @@ CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR
 LDLIBS   = -lm -lpthread
 IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lstdc++
 
+SANITIZERS = address,undefined
 ifeq ($(SAN),1)
-CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-CXXFLAGS += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-LDFLAGS  += -fsanitize=address,undefined
+CFLAGS   += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+CXXFLAGS += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDFLAGS  += -fsanitize=$(SANITIZERS)
 endif
 
 # CUDA=1 (set by `make cuda`): the C code knows the CUDA backend; programs link libmx_cuda.a.
@@ -58,7 +59,7 @@ LIBMATEX    = $(BUILD)/libmatex.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install
+.PHONY: all test asan bench clean cuda test-full demo install deps
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -80,6 +81,10 @@ $(BUILD)/%.a: | $(BUILD)/empty.o
 	@mkdir -p $(dir $@)
 	rm -f $@
 	ar rcs $@ $^ $(if $^,,$(BUILD)/empty.o)
+
+# What `matex --version` says of the build (runtime/version.c).
+$(BUILD)/runtime/version.o: CFLAGS += -DMX_BUILD_FLAGS='"$(OPT) -ffp-contract=off"' \
+                                      -DMX_BUILD_SAN='"$(if $(filter 1,$(SAN)),$(SANITIZERS),none)"'
 
 $(BUILD)/empty.o:
 	@mkdir -p $(dir $@)
@@ -147,6 +152,10 @@ demo: all $(DEMO_WEIGHTS)
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
+
+# The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
+deps:
+	sh tools/deps.sh
 
 # ---- benchmarks: OpenBLAS is linked into the benchmark only ----
 BENCH_SRC  = $(wildcard tools/bench_*.c)

@@ -98,7 +98,7 @@ static inline int golden_bf16_ctx(mx_ctx *c, const char *test) {
     return golden_ctx_precision(c, MX_PREC_BF16);
 }
 
-/* Relative L2 bound against the fp32 goldens (../shared/golden/README.md): 1e-4 for fp32
+/* Relative L2 bound against the fp32 goldens (tests/data/golden/README.md): 1e-4 for fp32
  * arithmetic, 1e-2 for bf16. */
 static inline double golden_bound(const mx_ctx *c) {
     return mx_isa_precision(c->k->isa) == MX_PREC_BF16 ? 1e-2 : 1e-4;
