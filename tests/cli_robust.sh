@@ -36,6 +36,47 @@ check "transfer onto a quad" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/q
 check "transfer onto a quad: mesh.glb" [ -s "$T/tq/mesh.glb" ]
 check "transfer onto a single triangle" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/tri.obj" --size 128 -o "$T/tt")" = 0 ]
 
+# ---- several materials, one without UVs: one PNG + EXR per material, an atlas for the bare one ----
+cat > "$T/box.mtl" << 'EOF2'
+newmtl wood
+Kd 1 1 1
+newmtl metal
+Kd 1 1 1
+EOF2
+cat > "$T/box.obj" << 'EOF2'
+mtllib box.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+usemtl wood
+f 4/4 3/3 2/2 1/1
+f 6/2 7/3 8/4 5/1
+usemtl metal
+f 2 6 5 1
+f 3 7 6 2
+f 4 8 7 3
+f 1 5 8 4
+EOF2
+LOUD=$(echo "$SMALL" | sed 's/--quiet//')
+check "two materials, one without UVs" [ "$(rc_of "$M" texture "$T/box.obj" "a box" --weights "$W" -o "$T/box" $LOUD)" = 0 ]
+check "the material without UVs is named in a warning" grep -q "material 'metal' have no UVs" "$T/err"
+for f in texture_wood.png texture_wood.exr texture_metal.png texture_metal.exr mesh.obj mesh.mtl mesh.glb report.json; do
+    check "two materials: $f" [ -s "$T/box/$f" ]
+done
+check "two materials: no texture.png copy of one of them" [ ! -e "$T/box/texture.png" ] && [ ! -e "$T/box/texture.exr" ]
+check "two materials: mesh.mtl maps both" grep -q "map_Kd texture_metal.png" "$T/box/mesh.mtl"
+# a uniform grey 128x128 PNG compresses to a few hundred bytes; a painted one does not
+check "the atlas material is painted, not grey" [ "$(wc -c < "$T/box/texture_metal.png")" -gt 4000 ]
+
 # ---- impossible options: exit 2, the valid range in the message, nothing written ----
 bad_option() { # bad_option EXPECTED_TEXT OPTIONS...
     want=$1; shift

@@ -34,16 +34,21 @@ void mx_job_progress(const mx_job *j, const char *fmt, ...) {
     fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
 }
 
+/* A mesh with UVs keeps them (faces without get an atlas and a texture of their own: one
+ * layer per material); a mesh without gets one atlas and one texture. */
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_mesh *m = &j->mesh;
-    if (m->nuv > 0) {
+    mx_uvatlas_opts ao = mx_uvatlas_defaults();
+    ao.texture_size = j->o->tex_size;
+    if (m->nuv > 0 && m->face_uv) {
+        int atlas_faces = 0;
+        if (mx_uvatlas_complete(m, &ao, &j->atlas, &atlas_faces, st)) return -1;
+        j->atlas_built = atlas_faces > 0;
         j->nlayers = m->nmat > 1 && m->face_mat ? m->nmat : 1;
         return 0;
     }
     if (need_uvs)
         return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
-    mx_uvatlas_opts ao = mx_uvatlas_defaults();
-    ao.texture_size = j->o->tex_size;
     if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
     j->atlas_built = 1;
     /* one atlas for the whole mesh: every face renders and exports with material 0 */
