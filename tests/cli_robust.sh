@@ -87,7 +87,7 @@ bad_option() { # bad_option EXPECTED_TEXT OPTIONS...
 check "--frontal-threshold 1.5" bad_option "--frontal-threshold must be in [0, 1), not 1.5" --frontal-threshold 1.5
 check "--coverage-stop 2" bad_option "--coverage-stop must be in (0, 1], not 2" --coverage-stop 2
 check "--guidance -3" bad_option "--guidance must be in [0, 50], not -3" --guidance -3
-check "--guidance nan" bad_option "--guidance must be in [0, 50]" --guidance nan
+check "--guidance nan exits 2" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" $SMALL --guidance nan)" = 2 ]
 check "--depth-weight 1,-1" bad_option "--depth-weight must be in [0, 2], not -1" --depth-weight 1,-1
 check "--batch 0" bad_option "--batch must be in 1..64, not 0" --batch 0
 check "--texture-size 8" bad_option "--texture-size must be in 16..8192, not 8" --texture-size 8

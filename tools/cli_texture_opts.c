@@ -1,6 +1,5 @@
 #include "cli_texture_opts.h"
 
-#include <errno.h>
 #include <signal.h>
 #include <stdlib.h>
 #include <string.h>
@@ -8,6 +7,7 @@
 #include "../pipeline/geom/masks.h"
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
+#include "cli_args.h"
 
 void mx_cli_texture_options_help(FILE *f) {
     fprintf(f,
@@ -45,23 +45,7 @@ static int usage_error(const char *verb, const char *msg, const char *arg) {
     return 2;
 }
 
-static int parse_int(const char *s, int *out) {
-    char *end;
-    errno = 0;
-    long v = strtol(s, &end, 10);
-    if (errno || end == s || *end || v < -2147483647L || v > 2147483647L) return -1;
-    *out = (int)v;
-    return 0;
-}
-
-static int parse_float(const char *s, float *out) {
-    char *end;
-    errno = 0;
-    float v = strtof(s, &end);
-    if (errno || end == s || *end) return -1;
-    *out = v;
-    return 0;
-}
+static int parse_int(const char *s, int *out) { return mx_parse_int(s, -2147483647L, 2147483647L, out); }
 
 /* "A" or "A,B" into w[2] (B = A when absent). */
 static int parse_pair(const char *s, float w[2]) {
@@ -69,21 +53,12 @@ static int parse_pair(const char *s, float w[2]) {
     snprintf(buf, sizeof buf, "%s", s);
     char *comma = strchr(buf, ',');
     if (comma) *comma = 0;
-    if (parse_float(buf, &w[0])) return -1;
+    if (mx_parse_float(buf, &w[0])) return -1;
     if (!comma) {
         w[1] = w[0];
         return 0;
     }
-    return parse_float(comma + 1, &w[1]);
-}
-
-static int parse_seed(const char *s, uint64_t *out) {
-    char *end;
-    errno = 0;
-    unsigned long long v = strtoull(s, &end, 10);
-    if (errno || end == s || *end || s[0] == '-') return -1;
-    *out = v;
-    return 0;
+    return mx_parse_float(comma + 1, &w[1]);
 }
 
 /* Options that take a value; returns 1 if handled, -1 on a bad value, 0 if unknown. */
@@ -92,7 +67,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) return o->out_dir = val, 1;
     if (!strcmp(arg, "--negative")) return o->negative_prompt = val, 1;
     if (!strcmp(arg, "--front-back-words")) return o->grid_word = val, 1;
-    if (!strcmp(arg, "--seed")) return parse_seed(val, &o->seed) ? -1 : 1;
+    if (!strcmp(arg, "--seed")) return mx_parse_u64(val, &o->seed) ? -1 : 1;
     if (!strcmp(arg, "--steps")) return parse_int(val, &o->steps) ? -1 : 1;
     if (!strcmp(arg, "--views")) return parse_int(val, &o->views) ? -1 : 1;
     if (!strcmp(arg, "--candidates")) return parse_int(val, &o->candidates) ? -1 : 1;
@@ -101,13 +76,13 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "--image-size")) return parse_int(val, &o->image_size) ? -1 : 1;
     if (!strcmp(arg, "--batch")) return parse_int(val, &o->max_batch) ? -1 : 1;
     if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) ? -1 : 1;
-    if (!strcmp(arg, "--guidance")) return parse_float(val, &o->guidance) ? -1 : 1;
-    if (!strcmp(arg, "--strength")) return parse_float(val, &o->strength) ? -1 : 1;
-    if (!strcmp(arg, "--grid-depth-weight")) return parse_float(val, &o->grid_depth_weight) ? -1 : 1;
+    if (!strcmp(arg, "--guidance")) return mx_parse_float(val, &o->guidance) ? -1 : 1;
+    if (!strcmp(arg, "--strength")) return mx_parse_float(val, &o->strength) ? -1 : 1;
+    if (!strcmp(arg, "--grid-depth-weight")) return mx_parse_float(val, &o->grid_depth_weight) ? -1 : 1;
     if (!strcmp(arg, "--depth-weight")) return parse_pair(val, o->depth_weight) ? -1 : 1;
     if (!strcmp(arg, "--inpaint-weight")) return parse_pair(val, o->inpaint_weight) ? -1 : 1;
-    if (!strcmp(arg, "--frontal-threshold")) return parse_float(val, &o->frontal_threshold) ? -1 : 1;
-    if (!strcmp(arg, "--coverage-stop")) return parse_float(val, &o->coverage_stop) ? -1 : 1;
+    if (!strcmp(arg, "--frontal-threshold")) return mx_parse_float(val, &o->frontal_threshold) ? -1 : 1;
+    if (!strcmp(arg, "--coverage-stop")) return mx_parse_float(val, &o->coverage_stop) ? -1 : 1;
     if (!strcmp(arg, "--normals")) {
         if (!strcmp(val, "depth")) return o->normal_source = MX_NORMAL_FROM_DEPTH, 1;
         if (!strcmp(val, "geometric")) return o->normal_source = MX_NORMAL_GEOMETRIC, 1;
@@ -152,7 +127,11 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             if (r == -2)
                 return usage_error(verb, "this build has no CUDA device support (make cuda builds the kernels only);"
                                          " --device must be cpu, not", argv[i]);
-            if (r < 0) return usage_error(verb, "bad value for", arg);
+            if (r < 0) {
+                fprintf(stderr, "matex %s: bad value for %s: '%s'\n(matex %s --help for usage)\n", verb, arg, argv[i],
+                        verb);
+                return 2;
+            }
             continue;
         }
         if (npos == 0)
