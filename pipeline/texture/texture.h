@@ -1,4 +1,4 @@
-/* The Make-A-Texture method (paper §3, DESIGN.md §2) as one call: `matex texture` and
+/* The Make-A-Texture method (paper §3, docs/DESIGN.md §2) as one call: `matex texture` and
  * `matex enhance`.
  *
  * texture: load mesh (atlas if it has no UVs) -> front+back grid with depth control ->
