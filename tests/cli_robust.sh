@@ -4,7 +4,7 @@
 # --json failures with the message; SIGINT/SIGTERM at many moments leave no partial output.
 NAME=robust
 . "$(dirname "$0")/lib_cli.sh"
-A=$SHARED/assets
+A=$(data assets)
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
 SMALL="--image-size 64 --steps 1 --texture-size 128 --render-size 128 --candidates 8 --quiet"
 FILES="texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json"
@@ -34,6 +34,15 @@ check "zero-area mesh: no output" [ ! -e "$T/o_zero" ]
 check "zero-area mesh: no staging folder" no_staging "$T/o_zero"
 check "transfer onto a quad" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/quad.obj" --size 128 -o "$T/tq")" = 0 ]
 check "transfer onto a quad: mesh.glb" [ -s "$T/tq/mesh.glb" ]
+S=$A/cesium_milk_truck/CesiumMilkTruck.glb # 4 materials, some faces without UVs
+check "transfer onto its own mesh" [ "$(rc_of "$M" transfer "$S" "$S" --size 256 --json -o "$T/ts")" = 0 ]
+check "transfer: --json summary" grep -q '"ok":true' "$T/out"
+check "transfer onto its own mesh: PSNR above 20 dB (22.5 measured)" \
+    awk -F'"psnr_db":' 'NF > 1 { split($2, v, /[,}]/); ok = v[1] > 20 } END { exit !ok }' "$T/ts/report.json"
+check "transfer without a texture on the source exits 1" \
+    [ "$(rc_of "$M" transfer "$T/quad.obj" "$T/quad.obj" -o "$T/tx")" = 1 ] && [ ! -e "$T/tx" ]
+check "transfer --views 1 exits 2" [ "$(rc_of "$M" transfer "$S" "$T/quad.obj" --views 1 -o "$T/tx")" = 2 ]
+check "transfer --size 12x exits 2" [ "$(rc_of "$M" transfer "$S" "$T/quad.obj" --size 12x -o "$T/tx")" = 2 ]
 check "transfer onto a single triangle" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/tri.obj" --size 128 -o "$T/tt")" = 0 ]
 
 # ---- several materials, one without UVs: one PNG + EXR per material, an atlas for the bare one ----
