@@ -107,7 +107,8 @@ struct mx_kernels {
 const mx_kernels *mx_kernels_for(mx_isa isa);
 /* The scalar reference table (the test oracle). */
 const mx_kernels *mx_kernels_scalar(void);
-/* The best table for this CPU (mx_cpu_best_isa). */
+/* The best fp32 table for this CPU (mx_cpu_isa_for(MX_PREC_FP32)): what a context without a
+ * table gets. */
 const mx_kernels *mx_kernels_best(void);
 
 /* ---- wrappers: the op semantics ---- */

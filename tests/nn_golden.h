@@ -71,15 +71,39 @@ static inline mx_backend_kind golden_device(void) {
     return kind;
 }
 
-static inline int golden_ctx(mx_ctx *c) {
+/* An ops context computing in precision p (the parity tests default to fp32). */
+static inline int golden_ctx_precision(mx_ctx *c, mx_precision p) {
     mx_status st;
     int threads = getenv("MX_TEST_THREADS") ? atoi(getenv("MX_TEST_THREADS")) : 0;
-    if (mx_ctx_create_on(c, golden_device(), threads, mx_cpu_best_isa(), (size_t)64 << 20, &st)) {
+    if (mx_ctx_create_on(c, golden_device(), threads, mx_cpu_isa_for(p), (size_t)64 << 20, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return -1;
     }
     printf("device %s\n", mx_backend_name(c->be->kind));
     return 0;
+}
+
+static inline int golden_ctx(mx_ctx *c) { return golden_ctx_precision(c, MX_PREC_FP32); }
+
+/* A bf16 context when this CPU has bf16 arithmetic (0); else prints that the bf16 parity was
+ * not tested and returns 1 (-1 on error). */
+static inline int golden_bf16_ctx(mx_ctx *c, const char *test) {
+    if (mx_isa_precision(mx_cpu_isa_for(MX_PREC_BF16)) != MX_PREC_BF16) {
+        printf("%s: bf16 arithmetic NOT TESTED (no AVX512_BF16 on this CPU, or lowered by MATEX_ISA)\n", test);
+        return 1;
+    }
+    return golden_ctx_precision(c, MX_PREC_BF16);
+}
+
+/* Relative L2 bound against the fp32 goldens (../shared/golden/README.md): 1e-4 for fp32
+ * arithmetic, 1e-2 for bf16. */
+static inline double golden_bound(const mx_ctx *c) {
+    return mx_isa_precision(c->k->isa) == MX_PREC_BF16 ? 1e-2 : 1e-4;
+}
+
+/* "net" or "net [bf16]": the label of a parity line. */
+static inline void golden_label(char *buf, size_t cap, const mx_ctx *c, const char *net) {
+    snprintf(buf, cap, "%s%s", net, mx_isa_precision(c->k->isa) == MX_PREC_BF16 ? " [bf16]" : "");
 }
 
 /* Backend copy of n host floats (NULL stays NULL); exits on failure. */

@@ -268,7 +268,7 @@ int main(void) {
     mx_ctx scalar, best;
     mx_status st = {0};
     if (mx_ctx_create(&scalar, 1, MX_ISA_SCALAR, 16 << 20, &st) ||
-        mx_ctx_create(&best, 2, mx_cpu_best_isa(), 16 << 20, &st)) {
+        mx_ctx_create(&best, 2, mx_cpu_isa_for(MX_PREC_FP32), 16 << 20, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return 1;
     }

@@ -121,8 +121,10 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
         float *want = golden_f32(&out, oname, &nw);
         CHECK(want != NULL);
         CHECK(run_unet(c, k.u, &ui, got) == 0);
-        snprintf(label, sizeof label, "%s %s %s", net, outfile, oname);
-        if (want) mx_check_close(label, got, want, nw, 1e-4);
+        char tag[64];
+        golden_label(tag, sizeof tag, c, net);
+        snprintf(label, sizeof label, "%s %s %s", tag, outfile, oname);
+        if (want) mx_check_close(label, got, want, nw, golden_bound(c));
         free(want);
         for (int i = 0; i <= nres; i++) free(res[i]);
     }
@@ -231,5 +233,10 @@ int main(void) {
     check_batch_independence(&c);
     check_linear_projection(&c);
     mx_ctx_destroy(&c);
+    if (golden_bf16_ctx(&c, "test_nn_unet") == 0) { /* bf16 arithmetic against the fp32 goldens */
+        check_golden(&c, "unet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors", 1);
+        check_golden(&c, "unet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors", 1);
+        mx_ctx_destroy(&c);
+    }
     return mx_test_finish("test_nn_unet");
 }

@@ -32,6 +32,8 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --front-back-words TEXT  prompt prefix of the grid (default \"front and back view of\")\n"
             "  --up y|z                 up axis of the mesh (default y)\n"
             "  --threads N              CPU threads (default: all)\n"
+            "  --precision fp32|bf16    arithmetic of the networks (default bf16 where the CPU has AVX512_BF16,\n"
+            "                           else fp32): bf16 products with fp32 sums, about 2x faster\n"
             "  --device cpu|cuda        compute device (default cpu)\n"
             "  --force                  replace an existing non-empty output folder (atomically)\n"
             "  --quiet                  no progress on stderr\n"
@@ -76,6 +78,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "--image-size")) return parse_int(val, &o->image_size) ? -1 : 1;
     if (!strcmp(arg, "--batch")) return parse_int(val, &o->max_batch) ? -1 : 1;
     if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) ? -1 : 1;
+    if (!strcmp(arg, "--precision")) return mx_precision_parse(val, &o->precision) ? -1 : 1;
     if (!strcmp(arg, "--guidance")) return mx_parse_float(val, &o->guidance) ? -1 : 1;
     if (!strcmp(arg, "--strength")) return mx_parse_float(val, &o->strength) ? -1 : 1;
     if (!strcmp(arg, "--grid-depth-weight")) return mx_parse_float(val, &o->grid_depth_weight) ? -1 : 1;

@@ -116,6 +116,8 @@ static void report_header(mx_job *j) {
     mx_jw_int(w, "render_size", o->render_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
     if (j->models_ready) {
+        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
+        mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
         mx_jw_str(w, "weights", o->weights_path);
         char digest[32];
         mx_file_digest_hex(o->weights_path, digest);
@@ -143,10 +145,13 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->o = o;
     j->t0 = mx_now();
     if (mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
     j->psnr_db = NAN;
     if (model_needs != MX_JOB_NO_MODELS) {
+        mx_job_progress(j, "networks in %s arithmetic (kernels %s)%s",
+                        mx_precision_name(mx_isa_precision(j->ctx.k->isa)), mx_isa_name(j->ctx.k->isa),
+                        mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
         if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
         j->models_ready = 1;
         mx_job_progress(j, "loaded weights %s", o->weights_path);

@@ -20,6 +20,7 @@
 #include <signal.h>
 #include <stdint.h>
 
+#include "../../runtime/backend.h"
 #include "../../runtime/status.h"
 #include "../geom/mesh.h"
 
@@ -46,6 +47,7 @@ typedef struct mx_texture_opts {
     float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted: 0.995 */
     mx_up_axis up;
     int threads;             /* 0: all CPUs */
+    mx_precision precision;  /* of the networks' matrix products: bf16 (used where the CPU has it) */
     int quiet;
     float strength;          /* enhance: SDEdit strength in (0, 1]: 0.5 */
     const char *grid_word;   /* "front and back view of" */
