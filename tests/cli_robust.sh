@@ -100,6 +100,9 @@ check "--guidance nan exits 2" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --
 check "--depth-weight 1,-1" bad_option "--depth-weight must be in [0, 2], not -1" --depth-weight 1,-1
 check "--batch 0" bad_option "--batch must be in 1..64, not 0" --batch 0
 check "--texture-size 8" bad_option "--texture-size must be in 16..8192, not 8" --texture-size 8
+check "a bad number with --json: the message in the JSON" \
+    [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" --steps ten --json)" = 2 ]
+check "... names the option and value" grep -q '"error":"bad value for --steps: .ten."' "$T/out"
 check "empty prompt" [ "$(rc_of "$M" texture "$T/quad.obj" " " --weights "$W" -o "$T/bad" $SMALL)" = 2 ]
 check "empty prompt: message" grep -q "prompt is empty" "$T/err"
 check "enhance --strength 0" [ "$(rc_of "$M" enhance "$T/o_quad/mesh.obj" --strength 0 --weights "$W" -o "$T/bad")" = 2 ]

@@ -1,6 +1,7 @@
 #include "cli_texture_opts.h"
 
 #include <signal.h>
+#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -41,10 +42,28 @@ void mx_cli_texture_options_help(FILE *f) {
             "  -h, --help               this help\n");
 }
 
-static int usage_error(const char *verb, const char *msg, const char *arg) {
-    fprintf(stderr, "matex %s: %s%s%s\n(matex %s --help for usage)\n", verb, msg, arg ? " " : "", arg ? arg : "",
-            verb);
+static void print_json_error(const char *msg) {
+    mx_buf b = {0};
+    mx_buf_printf(&b, "{\"ok\":false,\"error\":");
+    mx_buf_json_str(&b, msg);
+    mx_buf_printf(&b, "}");
+    puts(b.oom ? "{\"ok\":false,\"error\":\"out of memory\"}" : b.p);
+    mx_buf_free(&b);
+}
+
+int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
+    char msg[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "matex %s: %s\n(matex %s --help for usage)\n", verb, msg, verb);
+    if (json) print_json_error(msg);
     return 2;
+}
+
+static int usage_error(const mx_cli_texture *c, const char *verb, const char *msg, const char *arg) {
+    return mx_cli_usage_error(verb, c->json, "%s%s%s", msg, arg ? " " : "", arg ? arg : "");
 }
 
 static int parse_int(const char *s, int *out) { return mx_parse_int(s, -2147483647L, 2147483647L, out); }
@@ -104,6 +123,7 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
     const char *verb = argv[0];
     memset(c, 0, sizeof *c);
     mx_texture_opts_default(&c->o);
+    for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
     int npos = 0;
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
@@ -124,17 +144,13 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             continue;
         }
         if (arg[0] == '-' && arg[1]) {
-            if (i + 1 >= argc) return usage_error(verb, "missing value after", arg);
+            if (i + 1 >= argc) return usage_error(c, verb, "missing value after", arg);
             int r = parse_valued(&c->o, arg, argv[++i]);
-            if (r == 0) return usage_error(verb, "unknown option", arg);
+            if (r == 0) return usage_error(c, verb, "unknown option", arg);
             if (r == -2)
-                return usage_error(verb, "this build has no CUDA device support (make cuda builds the kernels only);"
+                return usage_error(c, verb, "this build has no CUDA device support (make cuda builds the kernels only);"
                                          " --device must be cpu, not", argv[i]);
-            if (r < 0) {
-                fprintf(stderr, "matex %s: bad value for %s: '%s'\n(matex %s --help for usage)\n", verb, arg, argv[i],
-                        verb);
-                return 2;
-            }
+            if (r < 0) return mx_cli_usage_error(verb, c->json, "bad value for %s: '%s'", arg, argv[i]);
             continue;
         }
         if (npos == 0)
@@ -142,16 +158,16 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
         else if (npos == 1)
             c->o.prompt = arg;
         else
-            return usage_error(verb, "unexpected argument", arg);
+            return usage_error(c, verb, "unexpected argument", arg);
         npos++;
     }
-    if (!c->o.mesh_path) return usage_error(verb, "missing MESH", NULL);
+    if (!c->o.mesh_path) return usage_error(c, verb, "missing MESH", NULL);
     if (!c->o.prompt) {
-        if (!prompt_optional) return usage_error(verb, "missing PROMPT", NULL);
+        if (!prompt_optional) return usage_error(c, verb, "missing PROMPT", NULL);
         c->o.prompt = "";
     }
-    if (!c->o.weights_path) return usage_error(verb, "missing --weights FILE", NULL);
-    if (!c->o.out_dir) return usage_error(verb, "missing -o OUT_DIR", NULL);
+    if (!c->o.weights_path) return usage_error(c, verb, "missing --weights FILE", NULL);
+    if (!c->o.out_dir) return usage_error(c, verb, "missing -o OUT_DIR", NULL);
     return -1;
 }
 
@@ -175,14 +191,6 @@ static void catch_signals(void) {
     sigaction(SIGTERM, &sa, NULL);
 }
 
-static void print_json_error(const char *msg) {
-    mx_buf b = {0};
-    mx_buf_printf(&b, "{\"ok\":false,\"error\":");
-    mx_buf_json_str(&b, msg);
-    mx_buf_printf(&b, "}");
-    puts(b.oom ? "{\"ok\":false,\"error\":\"out of memory\"}" : b.p);
-    mx_buf_free(&b);
-}
 
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
                        int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *)) {
@@ -201,10 +209,10 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
         rc = run(&c->o, &res, &st);
     }
     if (rc) {
+        if (st.code == MX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", st.msg);
         fprintf(stderr, "matex %s: %s\n", verb, st.msg);
-        if (st.code == MX_EUSAGE) fprintf(stderr, "(matex %s --help for usage)\n", verb);
         if (c->json) print_json_error(st.msg);
-        return st.code == MX_EUSAGE ? 2 : st.code == MX_ECANCEL ? 130 : 1;
+        return st.code == MX_ECANCEL ? 130 : 1;
     }
     if (c->json) {
         mx_buf b = {0};

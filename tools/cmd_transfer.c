@@ -19,7 +19,7 @@ static void usage(FILE *f) {
                "  -o, --output DIR         output folder (required)\n"
                "  --views N                views, front and back included (default 6)\n"
                "  --candidates N           candidate cameras on a Fibonacci sphere (default 40)\n"
-               "  --size S                 texture side and render side (default 1024)\n"
+               "  --size S                 texture side and render side, 16..8192 (default 1024)\n"
                "  --frontal-threshold T    min |n.v| of a backprojected pixel (default 0.3)\n"
                "  --normals depth|geometric  normal used by the frontal mask (default depth)\n"
                "  --up y|z                 up axis of the meshes (default y)\n"
@@ -30,34 +30,39 @@ static void usage(FILE *f) {
                "  -h, --help               this help\n");
 }
 
-static int usage_error(const char *msg, const char *arg) {
-    fprintf(stderr, "matex transfer: %s %s\n(matex transfer --help for usage)\n", msg, arg ? arg : "");
-    return 2;
-}
+static int parse_int(const char *s, int *out) { return mx_parse_int(s, -2147483647L, 2147483647L, out); }
 
-/* Options with a value; 0 handled, 2 bad value (printed), 1 unknown. */
+/* Options with a value: 1 handled, 0 unknown, -1 bad value. Ranges are checked after parsing
+ * (mx_texture_opts_check), except --size, which sets two sizes. */
 static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
-    if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) return o->out_dir = val, 0;
-    if (!strcmp(arg, "--views")) return mx_arg_int("transfer", arg, val, 2, 64, &o->views);
-    if (!strcmp(arg, "--candidates")) return mx_arg_int("transfer", arg, val, 1, 4096, &o->candidates);
-    if (!strcmp(arg, "--threads")) return mx_arg_int("transfer", arg, val, 0, 1024, &o->threads);
-    if (!strcmp(arg, "--frontal-threshold")) return mx_arg_float("transfer", arg, val, &o->frontal_threshold);
+    if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) return o->out_dir = val, 1;
+    if (!strcmp(arg, "--views")) return parse_int(val, &o->views) ? -1 : 1;
+    if (!strcmp(arg, "--candidates")) return parse_int(val, &o->candidates) ? -1 : 1;
+    if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) ? -1 : 1;
+    if (!strcmp(arg, "--frontal-threshold")) return mx_parse_float(val, &o->frontal_threshold) ? -1 : 1;
     if (!strcmp(arg, "--size")) {
-        int rc = mx_arg_int("transfer", arg, val, 16, 8192, &o->tex_size);
+        if (mx_parse_int(val, 16, 8192, &o->tex_size)) return -1;
         o->render_size = o->tex_size;
-        return rc;
+        return 1;
     }
-    if (!strcmp(arg, "--normals") && (!strcmp(val, "depth") || !strcmp(val, "geometric")))
-        return o->normal_source = val[0] == 'd' ? MX_NORMAL_FROM_DEPTH : MX_NORMAL_GEOMETRIC, 0;
-    if (!strcmp(arg, "--up") && (!strcmp(val, "y") || !strcmp(val, "z"))) return o->up = val[0] == 'z', 0;
-    if (!strcmp(arg, "--normals") || !strcmp(arg, "--up")) return usage_error("bad value for", arg);
-    return 1;
+    if (!strcmp(arg, "--normals")) {
+        if (!strcmp(val, "depth")) return o->normal_source = MX_NORMAL_FROM_DEPTH, 1;
+        if (!strcmp(val, "geometric")) return o->normal_source = MX_NORMAL_GEOMETRIC, 1;
+        return -1;
+    }
+    if (!strcmp(arg, "--up")) {
+        if (!strcmp(val, "y")) return o->up = MX_UP_Y, 1;
+        if (!strcmp(val, "z")) return o->up = MX_UP_Z, 1;
+        return -1;
+    }
+    return 0;
 }
 
 /* -1 to go on, else the exit code. */
 static int parse(mx_cli_texture *c, int argc, char **argv) {
     memset(c, 0, sizeof *c);
     mx_texture_opts_default(&c->o);
+    for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) return usage(stdout), 0;
@@ -65,16 +70,17 @@ static int parse(mx_cli_texture *c, int argc, char **argv) {
         else if (!strcmp(arg, "--json")) c->json = 1;
         else if (!strcmp(arg, "--force")) c->o.force = 1;
         else if (arg[0] == '-' && arg[1]) {
-            if (i + 1 >= argc) return usage_error("missing value after", arg);
-            int rc = parse_valued(&c->o, arg, argv[++i]);
-            if (rc == 1) return usage_error("unknown option", arg);
-            if (rc) return rc;
+            if (i + 1 >= argc) return mx_cli_usage_error("transfer", c->json, "missing value after %s", arg);
+            int r = parse_valued(&c->o, arg, argv[++i]);
+            if (r == 0) return mx_cli_usage_error("transfer", c->json, "unknown option %s", arg);
+            if (r < 0) return mx_cli_usage_error("transfer", c->json, "bad value for %s: '%s'", arg, argv[i]);
         } else if (!c->o.source_path) c->o.source_path = arg;
         else if (!c->o.mesh_path) c->o.mesh_path = arg;
-        else return usage_error("unexpected argument", arg);
+        else return mx_cli_usage_error("transfer", c->json, "unexpected argument %s", arg);
     }
-    if (!c->o.source_path || !c->o.mesh_path) return usage_error("needs SRC_TEXTURED and DST_MESH", NULL);
-    if (!c->o.out_dir) return usage_error("missing -o OUT_DIR", NULL);
+    if (!c->o.source_path || !c->o.mesh_path)
+        return mx_cli_usage_error("transfer", c->json, "needs SRC_TEXTURED and DST_MESH");
+    if (!c->o.out_dir) return mx_cli_usage_error("transfer", c->json, "missing -o OUT_DIR");
     return -1;
 }
 
