@@ -81,6 +81,7 @@ int main(int argc, char **argv) {
     o.prompt = "a black-and-white dairy cow";
     o.weights_path = weights;
     o.out_dir = "/tmp/matex_bench_texture_out";
+    o.force = 1; /* the previous run's folder */
     o.steps = STEPS;
     o.views = VIEWS;
     o.max_batch = 1;

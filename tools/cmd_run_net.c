@@ -13,6 +13,7 @@
 #include "../weights/safetensors.h"
 #include "../weights/weights.h"
 #include "cli.h"
+#include "cli_args.h"
 
 #define MAX_OUTS (MX_UNET_MAX_RES + 4)
 #define SCRATCH_BYTES ((size_t)256 << 20)
@@ -425,15 +426,16 @@ int cmd_run_net(int argc, char **argv) {
         else if (!strcmp(a, "--inputs") && has_val) io.in_path = argv[++i];
         else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
-        else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
-        else if (!strcmp(a, "--device") && has_val) device = argv[++i];
-        else if (!strcmp(a, "--precision") && has_val) {
+        else if (!strcmp(a, "--threads") && has_val) {
+            if (mx_arg_int("run-net", a, argv[++i], 0, 1024, &threads)) return 2;
+        } else if (!strcmp(a, "--device") && has_val) {
+            device = argv[++i];
+        } else if (!strcmp(a, "--precision") && has_val) {
             if (mx_precision_parse(argv[++i], &prec)) {
                 fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", argv[i]);
                 return 2;
             }
-        }
-        else if (a[0] != '-' && !net) net = a;
+        } else if (a[0] != '-' && !net) net = a;
         else {
             fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
             usage(stderr);
