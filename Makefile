@@ -112,7 +112,8 @@ $(BUILD)/tests/test_tex_%: $(BUILD)/tests/test_tex_%.o $(TEST_UTIL) $(LIB_TEX) $
 
 # Tiny random networks of the SD1.5 family for the pipeline tests and `make demo`.
 DEMO_WEIGHTS = $(BUILD)/demo/demo.mxw
-$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*)
+$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*) \
+                 tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt
 	@mkdir -p $(dir $@)
 	sh tools/make_demo_weights.sh $(BUILD)/matex $@
 
@@ -156,11 +157,16 @@ test: all $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 test-full: all $(TEST_BINS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS)
 
-# End to end in seconds with tiny random weights (they paint noise: see README).
+# End to end in seconds with tiny random weights (they paint noise: see README): the shipped
+# Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
+DEMO_OUT = demo/spot
 demo: all $(DEMO_WEIGHTS)
-	$(BUILD)/matex texture ../shared/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
-	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 -o demo/spot
-	@echo "demo: textured mesh in demo/spot (mesh.glb, mesh.obj, texture.png, report.json)"
+	rm -rf $(DEMO_OUT)
+	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
+	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
+	$(BUILD)/matex render $(DEMO_OUT)/mesh.glb --views 8 --size 256 -o $(DEMO_OUT)/views
+	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, report.json)"
+	@echo "demo: contact sheet of 8 views in $(CURDIR)/$(DEMO_OUT)/views/contact_sheet.png"
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test

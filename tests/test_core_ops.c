@@ -55,7 +55,7 @@ static void test_known_group_norm(const mx_ctx *c) {
 
 static void test_known_timestep_embedding(void) {
     float t[1] = {10}, y[4];
-    mx_timestep_embedding(y, t, 1, 4, 1, 0, 10000);
+    mx_timestep_embedding(NULL, y, t, 1, 4, 1, 0, 10000);
     /* half = 2: freqs 1 and 10000^-0.5 = 0.01; flip: [cos | sin] */
     const float want[4] = {cosf(10), cosf(0.1f), sinf(10), sinf(0.1f)};
     mx_check_close("known timestep embedding", y, want, 4, 1e-6);
@@ -336,14 +336,14 @@ static void test_simd_levels(void) {
     mx_arena scratch;
     CHECK(pool != NULL);
     CHECK(mx_arena_create(&scratch, (size_t)8 << 20, &st) == 0);
-    mx_ctx ref = {pool, mx_kernels_scalar(), NULL};
+    mx_ctx ref = {.pool = pool, .k = mx_kernels_scalar()};
     for (mx_isa isa = MX_ISA_AVX2; isa <= MX_ISA_AVX512; isa++) {
         const mx_kernels *k = mx_kernels_for(isa);
         if (k->isa != isa) {
             printf("%s: not available (CPU or MATEX_ISA), skipped\n", mx_isa_name(isa));
             continue;
         }
-        mx_ctx simd = {pool, k, &scratch};
+        mx_ctx simd = {.pool = pool, .k = k, .scratch = &scratch};
         levels lv = {&ref, &simd, mx_isa_name(isa)};
         test_gemm_ops(&lv);
         test_attention_ops(&lv);
@@ -402,7 +402,7 @@ static void test_known_layout(const mx_ctx *c) {
 }
 
 int main(void) {
-    mx_ctx c = {NULL, mx_kernels_scalar(), NULL};
+    mx_ctx c = {.k = mx_kernels_scalar()};
     test_simd_levels();
     test_known_linear(&c);
     test_known_conversions();

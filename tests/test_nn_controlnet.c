@@ -203,10 +203,12 @@ int main(void) {
     if (golden_ctx(&c)) return 1;
     check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
     check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
-    check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
-    check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
     check_unet_fp16w_chain(&c, "controlnet_tiny", "unet_tiny");
-    check_unet_fp16w_chain(&c, "controlnet_mini", "unet_mini");
+    if (golden_have("controlnet_mini", "inputs.safetensors")) {
+        check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+        check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
+        if (golden_have("unet_mini", "inputs.safetensors")) check_unet_fp16w_chain(&c, "controlnet_mini", "unet_mini");
+    }
     mx_ctx_destroy(&c);
     return mx_test_finish("test_nn_controlnet");
 }

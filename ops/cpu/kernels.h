@@ -70,6 +70,21 @@ void mx_transpose_hwc_chw_ref(const mx_ctx *, float *y, const float *x, int B, i
 void mx_resize_bilinear_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
 
+/* The seam ops (pad, copy, fill, vector combinations, embeddings): memory-bound or tiny,
+ * one reference for every level. */
+void mx_pad2d_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+                  int right);
+void mx_copy_ref(const mx_ctx *, float *y, const float *x, size_t n);
+void mx_fill_ref(const mx_ctx *, float *y, float v, size_t n);
+void mx_axpy_ref(const mx_ctx *, float *y, const float *x, float s, size_t n);
+void mx_lincomb_ref(const mx_ctx *, float *y, int k, const float *coef, const float *const *x, size_t n);
+void mx_clamp_ref(const mx_ctx *, float *y, const float *x, float lo, float hi, size_t n);
+void mx_affine_ref(const mx_ctx *, float *y, const float *x, float a, float b, size_t n);
+void mx_timestep_embedding_ref(const mx_ctx *, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
+                               float downscale_freq_shift, float max_period);
+void mx_embed_tokens_ref(const mx_ctx *, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
+                         mx_wptr positions);
+
 /* Elements per task of the element-wise kernels: fixed, so the split never depends on threads. */
 #define MX_EW_CHUNK 16384
 
