@@ -9,7 +9,7 @@ NAME=faults
 . "$(dirname "$0")/lib_cli.sh"
 F=${MATEX_FAULTS:-build/tests/faults/matex_faults}
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
-MESH=$SHARED/assets/fedora_hat/fedora.obj
+MESH=$(data assets/fedora_hat/fedora.obj)
 SAMPLES=${MATEX_FAULTS_SAMPLES:-12}
 OUTPUTS="texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json"
 

@@ -1,5 +1,5 @@
 /* The CLIP tokenizer (pipeline/nn/tokenizer.c). First byte even: the rest is a prompt,
- * encoded with the real SD1.5 vocabulary (../shared/golden/tokenizer, loaded once; a built-in
+ * encoded with the real SD1.5 vocabulary (tests/data/golden/tokenizer, loaded once; a built-in
  * small one when absent). Odd: the rest is "vocab.json FUZZ_SEP merges.txt FUZZ_SEP prompt", a hostile
  * vocabulary and merge list built into a tokenizer that then encodes the prompt. */
 #include <stdlib.h>
@@ -15,7 +15,7 @@ static const char small_merges[] = "#version: 0.2\na b</w>\n";
 static mx_tokenizer *real_tokenizer(void) {
     static mx_tokenizer *tok; /* harness-side cache: one vocabulary load per process */
     mx_status st;
-    if (!tok && mx_tok_load_files(&tok, "../shared/golden/tokenizer/vocab.json", "../shared/golden/tokenizer/merges.txt",
+    if (!tok && mx_tok_load_files(&tok, "tests/data/golden/tokenizer/vocab.json", "tests/data/golden/tokenizer/merges.txt",
                                   &st) &&
         mx_tok_create(&tok, small_vocab, strlen(small_vocab), small_merges, strlen(small_merges), "small", &st))
         abort();
