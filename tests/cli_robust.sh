@@ -4,7 +4,7 @@
 # --json failures with the message; SIGINT/SIGTERM at many moments leave no partial output.
 NAME=robust
 . "$(dirname "$0")/lib_cli.sh"
-A=$SHARED/assets
+A=$(data assets)
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
 SMALL="--image-size 64 --steps 1 --texture-size 128 --render-size 128 --candidates 8 --quiet"
 FILES="texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json"
