@@ -66,6 +66,9 @@ struct mx_kernels {
     void (*gelu)(const mx_ctx *, float *x, size_t n);
     void (*quick_gelu)(const mx_ctx *, float *x, size_t n);
     void (*silu)(const mx_ctx *, float *x, size_t n);
+    void (*relu)(const mx_ctx *, float *x, size_t n);
+    void (*tanh)(const mx_ctx *, float *x, size_t n);
+    void (*affine)(const mx_ctx *, float *y, const float *x, float s, float t, size_t n);
     void (*geglu)(const mx_ctx *, float *y, const float *x, int M, int N);
     void (*binary)(const mx_ctx *, mx_binop op, float *y, const float *a, const int64_t *ashape,
                    const float *b, const int64_t *bshape, int ndim);
@@ -117,6 +120,11 @@ void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, c
 void mx_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_quick_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_silu(const mx_ctx *c, float *x, size_t n);
+/* In place: ReLU max(x, 0) and tanh (TAESD). */
+void mx_relu(const mx_ctx *c, float *x, size_t n);
+void mx_tanh(const mx_ctx *c, float *x, size_t n);
+/* y = s * x + t, in float (one rounding after the product, one after the sum); y may equal x. */
+void mx_affine(const mx_ctx *c, float *y, const float *x, float s, float t, size_t n);
 /* GEGLU (diffusers): x[M, 2N] = [h | g]; y[M, N] = h * gelu(g). */
 void mx_geglu(const mx_ctx *c, float *y, const float *x, int M, int N);
 /* y = a op b with numpy broadcasting over ndim (1..5) dims; y has the broadcast shape.

@@ -6,6 +6,8 @@
     .upsample_nearest2x = mx_upsample_nearest2x_ref, .concat_channels = mx_concat_channels_ref,              \
     .transpose_chw_hwc = mx_transpose_chw_hwc_ref, .transpose_hwc_chw = mx_transpose_hwc_chw_ref,            \
     .resize_bilinear = mx_resize_bilinear_ref
+/* Element-wise ops with only a reference (kernels.h). */
+#define MX_POINTWISE_REF .relu = mx_relu_ref, .tanh = mx_tanh_ref, .affine = mx_affine_ref
 
 static const mx_kernels scalar_table = {
     .isa = MX_ISA_SCALAR,
@@ -22,6 +24,7 @@ static const mx_kernels scalar_table = {
     .binary = mx_binary_ref,
     .scale = mx_scale_ref,
     MX_LAYOUT_REF,
+    MX_POINTWISE_REF,
     .f16_to_f32 = mx_f16_to_f32_ref,
     .f32_to_f16 = mx_f32_to_f16_ref,
     .bf16_to_f32 = mx_bf16_to_f32_ref,
@@ -44,6 +47,7 @@ static const mx_kernels avx2_table = {
     .binary = mx_binary_avx2,
     .scale = mx_scale_avx2,
     MX_LAYOUT_REF,
+    MX_POINTWISE_REF,
     .f16_to_f32 = mx_f16_to_f32_avx2,
     .f32_to_f16 = mx_f32_to_f16_avx2,
     .bf16_to_f32 = mx_bf16_to_f32_avx2,
@@ -65,6 +69,7 @@ static const mx_kernels avx512_table = {
     .binary = mx_binary_avx512,
     .scale = mx_scale_avx512,
     MX_LAYOUT_REF,
+    MX_POINTWISE_REF,
     .f16_to_f32 = mx_f16_to_f32_avx512,
     .f32_to_f16 = mx_f32_to_f16_avx512,
     .bf16_to_f32 = mx_bf16_to_f32_avx512,
