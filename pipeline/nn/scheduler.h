@@ -5,6 +5,8 @@
  * torch does (betas = linspace(sqrt(b0), sqrt(b1))^2, cumulative product in float32), so
  * the integer timesteps equal the reference exactly.
  *
+ * LCMScheduler (scheduler_lcm.c) shares the schedule and this state.
+ *
  * Use: mx_sched_init(&s, &cfg, steps, numel); for i in 0..mx_sched_steps(&s): run the model at
  * timestep mx_sched_timestep(&s, i), then mx_sched_step(&s, eps, latents). */
 #ifndef MX_SCHEDULER_H
@@ -18,7 +20,7 @@
 #define MX_SCHED_MAX_TRAIN 4000
 #define MX_SCHED_MAX_STEPS 1000
 
-typedef enum { MX_SCHED_DPMPP = 0, MX_SCHED_DDIM = 1 } mx_sched_kind;
+typedef enum { MX_SCHED_DPMPP = 0, MX_SCHED_DDIM = 1, MX_SCHED_LCM = 2 } mx_sched_kind;
 typedef enum { MX_BETA_SCALED_LINEAR = 0, MX_BETA_LINEAR = 1 } mx_beta_schedule;
 typedef enum { MX_PRED_EPSILON = 0, MX_PRED_V = 1, MX_PRED_SAMPLE = 2 } mx_prediction;
 typedef enum { MX_SOLVER_MIDPOINT = 0, MX_SOLVER_HEUN = 1 } mx_solver_type;
@@ -45,14 +47,20 @@ typedef struct mx_sched_config {
     int set_alpha_to_one;     /* SD1.5 scheduler_config: 0 */
     int clip_sample;          /* SD1.5: 0 */
     double clip_sample_range; /* 1.0 */
+    /* LCM (scheduler_lcm.c) */
+    int original_inference_steps; /* 50 */
+    double timestep_scaling;      /* 10.0 */
 } mx_sched_config;
 
 /* DPM-Solver++ (2M) with the SD1.5 schedule: the matex default. */
 void mx_sched_config_sd15(mx_sched_config *cfg);
 /* DDIM (eta 0) with the SD1.5 schedule. */
 void mx_sched_config_sd15_ddim(mx_sched_config *cfg);
+/* LCMScheduler (the few-step sampler of an LCM-LoRA) over the training schedule of base
+ * (betas, train steps, offset): original_inference_steps 50, timestep_scaling 10, epsilon. */
+void mx_sched_config_lcm(mx_sched_config *cfg, const mx_sched_config *base);
 /* Parses a diffusers scheduler_config.json text over the SD1.5 defaults; "_class_name"
- * DDIMScheduler selects DDIM, anything else DPM-Solver++. Unsupported options (another
+ * DDIMScheduler selects DDIM, LCMScheduler LCM, anything else DPM-Solver++. Unsupported options (another
  * algorithm_type, thresholding, other sigma kinds) are errors naming `what` and the key. */
 int mx_sched_config_parse(mx_sched_config *cfg, const char *json_text, size_t len, const char *what,
                           mx_status *st);
@@ -93,8 +101,19 @@ int64_t mx_sched_timestep(const mx_sched *s, int i);
 float mx_sched_init_noise_sigma(const mx_sched *s);
 
 /* One step: sample (numel floats) is replaced by the previous sample given the model output
- * (epsilon, v or x0 per prediction_type) at the current timestep. */
+ * (epsilon, v or x0 per prediction_type) at the current timestep. Not for LCM (below). */
 int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st);
+
+/* LCM (diffusers LCMScheduler, pipeline/nn/scheduler_lcm.c): every step but the last draws fresh
+ * noise, which the caller supplies (numel floats; NULL when mx_sched_needs_noise is 0), so the
+ * noise comes from matex's seeded generator. The step runs on ops (c), and leaves the step's
+ * denoised prediction in s->work. */
+struct mx_ctx;
+int mx_sched_needs_noise(const mx_sched *s);
+int mx_sched_lcm_step(const struct mx_ctx *c, mx_sched *s, const float *model_output, float *sample,
+                      const float *noise, mx_status *st);
+/* LCM timesteps (LCMScheduler.set_timesteps, strength 1) into ts; returns the count or -1. */
+int mx_sched_lcm_timesteps(const mx_sched_config *cfg, int steps, int64_t *ts, mx_status *st);
 
 /* Noising for the first timestep still to run (SDEdit): y = a·x0 + b·noise with
  * a = sqrt(acp[t]), b = sqrt(1-acp[t]) for DDIM and a = 1/sqrt(sigma^2+1), b = sigma·a
