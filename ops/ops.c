@@ -115,7 +115,7 @@ void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, c
 void mx_gelu(const mx_ctx *c, float *x, size_t n) { kern(c)->gelu(c, x, n); }
 void mx_quick_gelu(const mx_ctx *c, float *x, size_t n) { kern(c)->quick_gelu(c, x, n); }
 void mx_silu(const mx_ctx *c, float *x, size_t n) { kern(c)->silu(c, x, n); }
-void mx_relu(const mx_ctx *c, float *x, size_t n) { kern(c)->relu(c, x, n); }
+void mx_clamp(const mx_ctx *c, float *x, float lo, float hi, size_t n) { kern(c)->clamp(c, x, lo, hi, n); }
 void mx_tanh(const mx_ctx *c, float *x, size_t n) { kern(c)->tanh(c, x, n); }
 void mx_affine(const mx_ctx *c, float *y, const float *x, float s, float t, size_t n) {
     kern(c)->affine(c, y, x, s, t, n);

@@ -66,7 +66,7 @@ struct mx_kernels {
     void (*gelu)(const mx_ctx *, float *x, size_t n);
     void (*quick_gelu)(const mx_ctx *, float *x, size_t n);
     void (*silu)(const mx_ctx *, float *x, size_t n);
-    void (*relu)(const mx_ctx *, float *x, size_t n);
+    void (*clamp)(const mx_ctx *, float *x, float lo, float hi, size_t n);
     void (*tanh)(const mx_ctx *, float *x, size_t n);
     void (*affine)(const mx_ctx *, float *y, const float *x, float s, float t, size_t n);
     void (*geglu)(const mx_ctx *, float *y, const float *x, int M, int N);
@@ -120,8 +120,8 @@ void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, c
 void mx_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_quick_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_silu(const mx_ctx *c, float *x, size_t n);
-/* In place: ReLU max(x, 0) and tanh (TAESD). */
-void mx_relu(const mx_ctx *c, float *x, size_t n);
+/* In place: clamp to [lo, hi] (NaN stays NaN; ReLU is lo = 0, hi = INFINITY) and tanh. */
+void mx_clamp(const mx_ctx *c, float *x, float lo, float hi, size_t n);
 void mx_tanh(const mx_ctx *c, float *x, size_t n);
 /* y = s * x + t, in float (one rounding after the product, one after the sum); y may equal x. */
 void mx_affine(const mx_ctx *c, float *y, const float *x, float s, float t, size_t n);

@@ -401,8 +401,33 @@ static void test_known_layout(const mx_ctx *c) {
     mx_check_close("known concat_channels", cat, cat_want, 12, 0);
 }
 
+/* clamp (NaN kept), tanh and the affine map; the chunked split (3 tasks) must not matter. */
+static void test_known_pointwise(const mx_ctx *c) {
+    float x[5] = {-2.0f, -0.0f, 0.5f, 3.0f, NAN}, y[5];
+    mx_clamp(c, x, 0.0f, 1.0f, 5);
+    CHECK(x[0] == 0.0f && x[1] == 0.0f && x[2] == 0.5f && x[3] == 1.0f && isnan(x[4]));
+    float r[2] = {-1.0f, 2.0f};
+    mx_clamp(c, r, 0.0f, INFINITY, 2);
+    CHECK(r[0] == 0.0f && r[1] == 2.0f);
+    float t[3] = {0.0f, 1.0f, -20.0f};
+    mx_tanh(c, t, 3);
+    CHECK(t[0] == 0.0f && fabsf(t[1] - 0.76159416f) < 1e-7f && t[2] == -1.0f);
+    const float a[4] = {-1.0f, 0.0f, 0.25f, 1.0f}, want[4] = {0.0f, 0.5f, 0.625f, 1.0f};
+    mx_affine(c, y, a, 0.5f, 0.5f, 4);
+    mx_check_close("known affine 0.5x+0.5", y, want, 4, 0);
+    enum { N = 40000 };
+    float *big = malloc(N * sizeof *big), *ref = malloc(N * sizeof *ref);
+    mx_fill_random(big, N, 7, -3.0f, 3.0f);
+    for (int i = 0; i < N; i++) ref[i] = big[i] < -1.0f ? -1.0f : big[i] > 2.0f ? 2.0f : big[i];
+    mx_clamp(c, big, -1.0f, 2.0f, N);
+    mx_check_close("known clamp [-1, 2] over 3 chunks", big, ref, N, 0);
+    free(big);
+    free(ref);
+}
+
 int main(void) {
     mx_ctx c = {NULL, mx_kernels_scalar(), NULL};
+    test_known_pointwise(&c);
     test_simd_levels();
     test_known_linear(&c);
     test_known_conversions();

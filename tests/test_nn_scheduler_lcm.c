@@ -82,7 +82,7 @@ static void test_config_and_errors(const mx_ctx *c) {
     CHECK(mx_sched_init(&s, &cfg, 4, 16, &st) == 0);
     float mo[16] = {0}, x[16] = {0};
     CHECK(mx_sched_step(&s, mo, x, &st) == -1 && strstr(st.msg, "mx_sched_lcm_step"));
-    CHECK(mx_sched_lcm_step(c, &s, mo, x, NULL, &st) == -1 && strstr(st.msg, "needs its noise"));
+    CHECK(mx_sched_lcm_step(c, &s, mo, x, NULL, &st) == -1 && strstr(st.msg, "noise source"));
     CHECK(mx_sched_set_strength(&s, 0.5f, &st) == -1 && strstr(st.msg, "strength"));
     mx_sched_free(&s);
 }

@@ -7,7 +7,7 @@
     .transpose_chw_hwc = mx_transpose_chw_hwc_ref, .transpose_hwc_chw = mx_transpose_hwc_chw_ref,            \
     .resize_bilinear = mx_resize_bilinear_ref
 /* Element-wise ops with only a reference (kernels.h). */
-#define MX_POINTWISE_REF .relu = mx_relu_ref, .tanh = mx_tanh_ref, .affine = mx_affine_ref
+#define MX_POINTWISE_REF .clamp = mx_clamp_ref, .tanh = mx_tanh_ref, .affine = mx_affine_ref
 
 static const mx_kernels scalar_table = {
     .isa = MX_ISA_SCALAR,

@@ -70,8 +70,8 @@ void mx_transpose_hwc_chw_ref(const mx_ctx *, float *y, const float *x, int B, i
 void mx_resize_bilinear_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
 
-/* ReLU, tanh and y = s·x + t have only a reference: memory-bound, vectorised by the compiler. */
-void mx_relu_ref(const mx_ctx *, float *x, size_t n);
+/* Clamp, tanh and y = s·x + t have only a reference: memory-bound, vectorised by the compiler. */
+void mx_clamp_ref(const mx_ctx *, float *x, float lo, float hi, size_t n);
 void mx_tanh_ref(const mx_ctx *, float *x, size_t n);
 void mx_affine_ref(const mx_ctx *, float *y, const float *x, float s, float t, size_t n);
 

@@ -316,6 +316,7 @@ static int parse_taesd(const cfg_reader *r, void *out) {
         require_str(r, "upsample_fn", "nearest"))
         return -1;
     if (c->nlevels < 2) return mx_fail(r->st, MX_EINPUT, "%s: TAESD needs at least 2 levels", r->what);
+    if (c->scaling_factor == 0.0f) return mx_fail(r->st, MX_EINPUT, "%s: \"scaling_factor\" must not be 0", r->what);
     return 0;
 }
 

@@ -68,6 +68,10 @@ int mx_sched_config_parse(mx_sched_config *cfg, const char *json_text, size_t le
 struct mx_json;
 int mx_sched_config_from_json(mx_sched_config *cfg, const struct mx_json *obj, const char *what, mx_status *st);
 
+/* Fills noise[0..numel) with the fresh noise of step `step` (0-based among the steps run);
+ * returns non-zero on failure. */
+typedef int (*mx_sched_noise_fn)(void *user, int step, float *noise, size_t numel);
+
 typedef struct mx_sched {
     mx_sched_config cfg;
     int num_inference_steps;
@@ -82,6 +86,8 @@ typedef struct mx_sched {
     float *model_outputs[3];              /* DPM history of converted outputs (x0), newest last */
     float *buf;                           /* owns model_outputs and a work buffer */
     float *work;
+    mx_sched_noise_fn noise_fn;           /* LCM: where a step's fresh noise comes from (set after init) */
+    void *noise_user;
 } mx_sched;
 
 /* Computes the schedule for num_inference_steps and allocates history for latents of numel
@@ -105,9 +111,8 @@ float mx_sched_init_noise_sigma(const mx_sched *s);
 int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st);
 
 /* LCM (diffusers LCMScheduler, pipeline/nn/scheduler_lcm.c): every step but the last draws fresh
- * noise, which the caller supplies (numel floats; NULL when mx_sched_needs_noise is 0), so the
- * noise comes from matex's seeded generator. The step runs on ops (c), and leaves the step's
- * denoised prediction in s->work. */
+ * noise (numel floats), so that it comes from matex's seeded generator: `noise` when not NULL,
+ * else s->noise_fn. The step runs on ops (c) and leaves its denoised prediction in s->work. */
 struct mx_ctx;
 int mx_sched_needs_noise(const mx_sched *s);
 int mx_sched_lcm_step(const struct mx_ctx *c, mx_sched *s, const float *model_output, float *sample,

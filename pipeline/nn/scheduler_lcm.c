@@ -48,8 +48,13 @@ int mx_sched_lcm_step(const mx_ctx *c, mx_sched *s, const float *mo, float *x, c
     if (s->cfg.kind != MX_SCHED_LCM) return mx_fail(st, MX_EINTERNAL, "scheduler: not an LCM scheduler");
     if (s->step_index >= s->n_steps)
         return mx_fail(st, MX_EUSAGE, "scheduler: step %d past the last of %d", s->step_index, s->n_steps);
-    if (mx_sched_needs_noise(s) && !noise)
-        return mx_fail(st, MX_EINTERNAL, "LCM scheduler: step %d needs its noise", s->step_index);
+    if (mx_sched_needs_noise(s) && !noise) {
+        float *z = s->model_outputs[1];
+        if (!s->noise_fn) return mx_fail(st, MX_EUSAGE, "LCM scheduler: step %d needs a noise source", s->step_index);
+        if (s->noise_fn(s->noise_user, s->step_index - s->begin, z, s->numel))
+            return mx_fail(st, MX_EINTERNAL, "LCM scheduler: no noise for step %d", s->step_index - s->begin + 1);
+        noise = z;
+    }
     int64_t t = s->timesteps[s->step_index];
     int64_t prev = s->step_index + 1 < s->n_steps ? s->timesteps[s->step_index + 1] : t;
     if (t < 0 || t >= s->cfg.num_train_timesteps || prev >= s->cfg.num_train_timesteps)

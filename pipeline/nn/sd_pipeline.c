@@ -146,7 +146,8 @@ static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_di
     return ran;
 }
 
-/* One step: networks on the batch, CFG, scheduler update of latents. */
+/* One step: networks on the batch, CFG, scheduler update of latents (LCM: through ops, its noise
+ * from the scheduler's noise source). */
 static int denoise_step(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int64_t t,
                         float *latents, mx_status *st) {
     for (int r = 0; r < d->B / d->n; r++) memcpy(wk->x_in + (size_t)r * d->lat, latents, d->lat * sizeof(float));
@@ -161,6 +162,7 @@ static int denoise_step(const mx_sd_request *rq, const mx_ctx *c, const sd_dims 
         mx_cfg_combine(wk->guided, wk->eps, wk->eps + d->lat, rq->guidance, d->lat);
         eps = wk->guided;
     }
+    if (rq->sched->cfg.kind == MX_SCHED_LCM) return mx_sched_lcm_step(c, rq->sched, eps, latents, NULL, st);
     return mx_sched_step(rq->sched, eps, latents, st);
 }
 

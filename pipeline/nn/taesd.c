@@ -2,6 +2,7 @@
  * parameters, so the loaders count them exactly as EncoderTiny / DecoderTiny build the list. */
 #include "taesd.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -105,7 +106,7 @@ void mx_taesd_free(mx_taesd *t) { free(t); }
 /* ---- forward ---- */
 
 static void run_relu(mx_run *r, float *x, size_t n) {
-    if (!r->dry) mx_relu(r->c, x, n);
+    if (!r->dry) mx_clamp(r->c, x, 0.0f, INFINITY, n);
 }
 
 /* y = block(x); y must not alias x. One temporary from the arena. */
@@ -234,6 +235,29 @@ int mx_taesd_decode_arena_bytes(const mx_taesd *t, int B, int h, int w, size_t *
     if (mx_taesd_decode(NULL, t, NULL, B, h, w, NULL, &a, st)) return -1;
     *bytes = a.peak + 4 * MX_ARENA_ALIGN;
     return 0;
+}
+
+int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *latents, int n, int h, int w,
+                          float *image, mx_status *st) {
+    const mx_taesd_config *cfg = &t->cfg;
+    size_t bytes, nl = (size_t)n * cfg->latent_channels * h * w;
+    size_t ni = (size_t)n * cfg->out_channels * h * w * mx_taesd_factor(t) * mx_taesd_factor(t);
+    mx_arena a = {0};
+    if (mx_taesd_decode_arena_bytes(t, n, h, w, &bytes, st) ||
+        mx_arena_create(&a, bytes + nl * sizeof(float) + MX_ARENA_ALIGN, st))
+        return -1;
+    float *scaled = mx_arena_floats(&a, nl, st);
+    int rc = -1;
+    if (scaled) {
+        mx_scale(c, scaled, latents, 1.0f / cfg->scaling_factor, nl);
+        rc = mx_taesd_decode(c, t, scaled, n, h, w, image, &a, st);
+    }
+    if (!rc) {
+        mx_affine(c, image, image, 0.5f, 0.5f, ni);
+        mx_clamp(c, image, 0.0f, 1.0f, ni);
+    }
+    mx_arena_destroy(&a);
+    return rc;
 }
 
 double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w) {
