@@ -8,6 +8,7 @@
 #include "../../runtime/json.h"
 #include "clip.h"
 #include "controlnet.h"
+#include "taesd.h"
 #include "unet.h"
 #include "vae.h"
 
@@ -363,6 +364,14 @@ int mx_net_enumerate(mx_binder *b, const char *text, size_t len, const char *wha
         mx_vae_free(v);
         return rc;
     }
+    if (!strcmp(cls, "AutoencoderTiny")) {
+        mx_taesd_config c;
+        mx_taesd *t = NULL;
+        if (mx_taesd_config_parse(&c, text, len, what, st)) return -1;
+        int rc = mx_taesd_load(&t, &c, b, st);
+        mx_taesd_free(t);
+        return rc;
+    }
     if (!strcmp(cls, "CLIPTextModel")) {
         mx_clip_config c;
         mx_clip m;
@@ -373,5 +382,5 @@ int mx_net_enumerate(mx_binder *b, const char *text, size_t len, const char *wha
         return rc;
     }
     return mx_fail(st, MX_EINPUT, "%s: \"_class_name\" \"%s\" is not one of UNet2DConditionModel, ControlNetModel, "
-                   "AutoencoderKL, CLIPTextModel", what, cls);
+                   "AutoencoderKL, AutoencoderTiny, CLIPTextModel", what, cls);
 }
