@@ -104,6 +104,8 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (!(o->strength > 0.0f && o->strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "--strength must be in (0, 1], not %g", (double)o->strength);
     if (o->views < 1 || o->views > 64) return mx_fail(st, MX_EUSAGE, "--views must be in 1..64, not %d", o->views);
+    if (o->fast)
+        return mx_fail(st, MX_EUSAGE, "enhance: --fast is not supported (the LCM scheduler has no img2img strength yet)");
     mx_job j;
     int rc = mx_job_open(&j, o, 0, 1, st);
     mx_image *orig = NULL, *out = NULL;

@@ -48,6 +48,8 @@ typedef struct mx_texture_opts {
     int quiet;
     float strength;          /* enhance: SDEdit strength in (0, 1]: 0.5 */
     const char *grid_word;   /* "front and back view of" */
+    int fast;                /* few-step path: LCM scheduler + TAESD decoder; the weight file must hold
+                                a merged LCM-LoRA (unet.lcm_lora) and taesd.* (texture only) */
 } mx_texture_opts;
 
 void mx_texture_opts_default(mx_texture_opts *o);
