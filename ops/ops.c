@@ -159,6 +159,11 @@ void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int 
     kern(c)->transpose_hwc_chw(c, y, x, B, C, HW);
 }
 
+void mx_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
+                  int sx0, int BC, int h, int w) {
+    if (BC > 0 && h > 0 && w > 0) kern(c)->copy_rect(c, y, Hy, Wy, y0, x0, x, Hx, Wx, sy0, sx0, BC, h, w);
+}
+
 void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                         int align_corners) {
     kern(c)->resize_bilinear(c, y, x, BC, H, W, Ho, Wo, align_corners);

@@ -80,6 +80,8 @@ struct mx_kernels {
     void (*transpose_hwc_chw)(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
     void (*resize_bilinear)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+    void (*copy_rect)(const mx_ctx *, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w);
     void (*f16_to_f32)(float *y, const uint16_t *x, size_t n);
     void (*f32_to_f16)(uint16_t *y, const float *x, size_t n);
     void (*bf16_to_f32)(float *y, const uint16_t *x, size_t n);
@@ -147,6 +149,10 @@ void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int 
  * (0: half-pixel centres, no antialias). */
 void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                         int align_corners);
+/* Rectangle copy over BC planes: y[p, y0 + r, x0 + q] = x[p, sy0 + r, sx0 + q] for r < h, q < w, with
+ * y planes Hy×Wy and x planes Hx×Wx (the rectangle must lie inside both). Crops, pastes, tiles. */
+void mx_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
+                  int sx0, int BC, int h, int w);
 /* Sinusoidal timestep embedding exactly as diffusers' get_timestep_embedding:
  * half = dim/2, exponent_k = -ln(max_period) * k / (half - downscale_freq_shift),
  * emb = t * exp(exponent); out = [sin | cos] (or [cos | sin] when flip_sin_to_cos); zero pad if dim odd.

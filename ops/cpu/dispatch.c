@@ -5,7 +5,7 @@
 #define MX_LAYOUT_REF                                                                                        \
     .upsample_nearest2x = mx_upsample_nearest2x_ref, .concat_channels = mx_concat_channels_ref,              \
     .transpose_chw_hwc = mx_transpose_chw_hwc_ref, .transpose_hwc_chw = mx_transpose_hwc_chw_ref,            \
-    .resize_bilinear = mx_resize_bilinear_ref
+    .resize_bilinear = mx_resize_bilinear_ref, .copy_rect = mx_copy_rect_ref
 /* Element-wise ops with only a reference (kernels.h). */
 #define MX_POINTWISE_REF .clamp = mx_clamp_ref, .tanh = mx_tanh_ref, .affine = mx_affine_ref
 

@@ -69,6 +69,8 @@ void mx_transpose_chw_hwc_ref(const mx_ctx *, float *y, const float *x, int B, i
 void mx_transpose_hwc_chw_ref(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
 void mx_resize_bilinear_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+void mx_copy_rect_ref(const mx_ctx *, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w);
 
 /* Clamp, tanh and y = s·x + t have only a reference: memory-bound, vectorised by the compiler. */
 void mx_clamp_ref(const mx_ctx *, float *x, float lo, float hi, size_t n);

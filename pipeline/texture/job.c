@@ -12,6 +12,7 @@
 #include "../geom/masks.h"
 #include "../geom/uvfill.h"
 #include "../nn/sd_pipeline.h"
+#include "../nn/vae_tiled.h"
 #include "condition.h"
 #include "digest.h"
 #include "outdir.h"
@@ -22,6 +23,10 @@
 #define CAMERA_HALF_EXTENT 1.02f /* the normalised mesh lies in the unit sphere */
 #define CROP_MARGIN 0.05f
 #define UV_GUTTER 4
+/* VAE decode in tiles of this many latents (384 pixels), one image at a time: bounds the decode's
+ * memory (SD1.5: ~0.5 GB instead of ~0.94 GB per 512x512 image and ~1.9 GB for the 1024x512
+ * grid) at ~1.4x its work; blend as diffusers' tiled_decode (pipeline/nn/vae_tiled.h). */
+#define VAE_TILE 48
 static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 
 void mx_job_progress(const mx_job *j, const char *fmt, ...) {
@@ -274,7 +279,7 @@ static int fill_lcm_noise(void *user, int step, float *noise, size_t numel) {
 
 static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float *images, mx_status *st) {
     if (j->o->fast) return mx_taesd_decode_image(&j->ctx, j->models.taesd, lat, n, h, w, images, st);
-    return mx_sd_decode_latents(&j->ctx, j->models.vae, lat, n, h, w, images, st);
+    return mx_vae_decode_image_tiled(&j->ctx, j->models.vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
