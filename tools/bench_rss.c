@@ -5,8 +5,9 @@
  * peak of anonymous memory: arenas, buffers), against the weight file's size.
  * Stages: the VAE decode of one 512x512 view and of the 1024x512 front+back grid, untiled
  * (mx_sd_decode_latents, the old path) and tiled (the texture path); one guided step (UNet + the
- * two ControlNets, CFG) for 1 and for 4 views.
- * Usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--skip-steps] */
+ * two ControlNets, CFG) over N views (default 1; the loop runs the networks one view at a time, so
+ * N views peak as one). On 2 busy cores the whole run takes many minutes.
+ * Usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--views N] [--skip-steps] [--skip-untiled] */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,14 +17,14 @@
 
 #include "../pipeline/nn/sd_pipeline.h"
 #include "../pipeline/nn/vae_tiled.h"
-#include "../pipeline/texture/models.h"
+#include "../weights/weights.h"
 #include "../runtime/log.h"
 
 #define DEFAULT_WEIGHTS "/tmp/matex_bench_sd15_f16.mxw"
 
 typedef struct bench_cfg {
     const char *weights;
-    int threads, tile, skip_steps;
+    int threads, tile, views, skip_steps, skip_untiled;
 } bench_cfg;
 
 /* kB value of a /proc/self/status field. */
@@ -138,14 +139,17 @@ static int run_stage(const bench_cfg *o, const stage *sg) {
 }
 
 int main(int argc, char **argv) {
-    bench_cfg o = {DEFAULT_WEIGHTS, 0, 48, 0};
+    bench_cfg o = {DEFAULT_WEIGHTS, 0, 48, 1, 0, 0};
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--tile") && i + 1 < argc) o.tile = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--views") && i + 1 < argc) o.views = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--skip-steps")) o.skip_steps = 1;
+        else if (!strcmp(argv[i], "--skip-untiled")) o.skip_untiled = 1;
         else {
-            fprintf(stderr, "usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--skip-steps]\n");
+            fprintf(stderr, "usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--views N] [--skip-steps] "
+                            "[--skip-untiled]\n");
             return 2;
         }
     }
@@ -156,18 +160,20 @@ int main(int argc, char **argv) {
     }
     mx_log_set_level(MX_LOG_WARN);
     printf("weight file %s: %.0f MB; VAE tile %d latents\n", o.weights, sb.st_size / 1048576.0, o.tile);
-    char tiled_view[64], tiled_grid[64];
+    fflush(stdout); /* before the children inherit the buffer */
+    char tiled_view[64], tiled_grid[64], step[64];
     snprintf(tiled_view, sizeof tiled_view, "vae decode 512x512, tiles of %d", o.tile);
     snprintf(tiled_grid, sizeof tiled_grid, "vae decode 1024x512, tiles of %d", o.tile);
+    snprintf(step, sizeof step, "guided step, %d view(s), UNet + 2 CN", o.views);
     const stage stages[] = {
-        {"vae decode 512x512, untiled", 0, 1, 64, 64, 0},   {tiled_view, 0, 1, 64, 64, 1},
+        {"vae decode 512x512, untiled", 0, 1, 64, 64, 0}, {tiled_view, 0, 1, 64, 64, 1},
         {"vae decode 1024x512, untiled", 0, 1, 64, 128, 0}, {tiled_grid, 0, 1, 64, 128, 1},
-        {"vae decode 4 x 512x512, tiled", 0, 4, 64, 64, 1}, {"guided step, 1 view (UNet + 2 CN, CFG)", 1, 1, 0, 0, 0},
-        {"guided step, 4 views (UNet + 2 CN, CFG)", 1, 4, 0, 0, 0},
+        {step, 1, o.views, 0, 0, 0},
     };
     int fails = 0;
     for (size_t i = 0; i < sizeof stages / sizeof stages[0]; i++) {
-        if (stages[i].kind == 1 && o.skip_steps) continue;
+        if ((stages[i].kind == 1 && o.skip_steps) || (stages[i].kind == 0 && !stages[i].tiled && o.skip_untiled))
+            continue;
         pid_t pid = fork();
         if (pid == 0) _exit(run_stage(&o, &stages[i]));
         int status = 0;
