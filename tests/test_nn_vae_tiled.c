@@ -31,16 +31,21 @@ static int load(mx_binder *b, mx_safetensors *wf) {
     return rc ? -1 : 0;
 }
 
+/* On the test device: latents uploaded, arena on the backend, image fetched; tile 0 = untiled. */
 static int decode(const mx_ctx *c, const float *lat, int B, int h, int w, int tile, float *img) {
     mx_status st;
-    size_t bytes;
+    size_t bytes, nl = (size_t)B * 4 * h * w, ni = (size_t)B * 3 * 64 * h * w;
     mx_arena a;
     int rc = tile ? mx_vae_decode_tiled_arena_bytes(vae, h, w, tile, &bytes, &st)
                   : mx_vae_decode_arena_bytes(vae, B, h, w, &bytes, &st);
-    if (rc || mx_arena_create(&a, bytes, &st)) return fprintf(stderr, "%s\n", st.msg), -1;
-    rc = tile ? mx_vae_decode_tiled(c, vae, lat, B, h, w, tile, img, &a, &st)
-              : mx_vae_decode(c, vae, lat, B, h, w, img, &a, &st);
+    if (rc) return fprintf(stderr, "%s\n", st.msg), -1;
+    golden_arena(c, &a, bytes);
+    float *dl = golden_dev(c, lat, nl), *di = golden_dev_alloc(c, ni);
+    rc = tile ? mx_vae_decode_tiled(c, vae, dl, B, h, w, tile, di, &a, &st)
+              : mx_vae_decode(c, vae, dl, B, h, w, di, &a, &st);
     if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, img, di, ni)) rc = -1;
+    mx_dev_free(c, dl);
     mx_arena_destroy(&a);
     return rc;
 }

@@ -1,5 +1,4 @@
-/* Scalar references of GELU (erf), quick-GELU (CLIP), SiLU, GEGLU and tanh (computed in double),
- * clamp and the affine map y = s·x + t. */
+/* Scalar references of GELU (erf), quick-GELU (CLIP), SiLU, GEGLU and tanh, computed in double. */
 #include <math.h>
 
 #include "kernels.h"
@@ -55,41 +54,3 @@ void mx_geglu_ref(const mx_ctx *c, float *y, const float *x, int M, int N) {
 static float tanh_one(float v) { return (float)tanh((double)v); }
 
 void mx_tanh_ref(const mx_ctx *c, float *x, size_t n) { unary_run(c, x, n, tanh_one); }
-
-/* y = s·x + t (affine) or clamp(x, s, t) in place (y == x). */
-typedef struct {
-    float *y;
-    const float *x;
-    float s, t;
-    size_t n;
-} affine_args;
-
-static void clamp_chunk(void *arg, int task, int thread) {
-    (void)thread;
-    const affine_args *a = arg;
-    size_t i0 = (size_t)task * MX_EW_CHUNK, i1 = i0 + MX_EW_CHUNK < a->n ? i0 + MX_EW_CHUNK : a->n;
-    for (size_t i = i0; i < i1; i++) {
-        float v = a->y[i];
-        a->y[i] = v < a->s ? a->s : v > a->t ? a->t : v; /* NaN compares false: stays NaN */
-    }
-}
-
-void mx_clamp_ref(const mx_ctx *c, float *x, float lo, float hi, size_t n) {
-    affine_args a = {x, x, lo, hi, n};
-    mx_par_for(c, (int)((n + MX_EW_CHUNK - 1) / MX_EW_CHUNK), clamp_chunk, &a);
-}
-
-static void affine_chunk(void *arg, int task, int thread) {
-    (void)thread;
-    const affine_args *a = arg;
-    size_t i0 = (size_t)task * MX_EW_CHUNK, i1 = i0 + MX_EW_CHUNK < a->n ? i0 + MX_EW_CHUNK : a->n;
-    for (size_t i = i0; i < i1; i++) {
-        float p = a->s * a->x[i]; /* rounded before the sum, as torch's x.mul(s).add(t) */
-        a->y[i] = p + a->t;
-    }
-}
-
-void mx_affine_ref(const mx_ctx *c, float *y, const float *x, float s, float t, size_t n) {
-    affine_args a = {y, x, s, t, n};
-    mx_par_for(c, (int)((n + MX_EW_CHUNK - 1) / MX_EW_CHUNK), affine_chunk, &a);
-}

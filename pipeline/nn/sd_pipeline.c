@@ -120,21 +120,18 @@ static int work_alloc(const mx_sd_request *rq, const sd_dims *d, sd_work *wk, mx
     return 0;
 }
 
-/* y = x (n floats) through an op: scaling by 1 is exact. */
-static void copy_floats(const mx_ctx *c, float *y, const float *x, size_t n) { mx_scale(c, y, x, 1.0f, n); }
-
 /* The inputs of one network call over latents k0..k0+mk: each repeated for both halves with CFG,
  * the text [uncond; cond] (or cond alone), the control images, the timestep. */
 static void fill_call_inputs(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int k0, int mk,
                              const float *latents, int64_t t) {
     size_t per = d->lat / (size_t)d->n, lat = (size_t)mk * per, txt = (size_t)mk * d->text;
     int halves = d->cfg ? 2 : 1;
-    for (int r = 0; r < halves; r++) copy_floats(c, wk->x_in + r * lat, latents + (size_t)k0 * per, lat);
-    if (d->cfg) copy_floats(c, wk->text, rq->uncond_text + (size_t)k0 * d->text, txt);
-    copy_floats(c, wk->text + (halves - 1) * txt, rq->cond_text + (size_t)k0 * d->text, txt);
+    for (int r = 0; r < halves; r++) mx_copy(c, wk->x_in + r * lat, latents + (size_t)k0 * per, lat);
+    if (d->cfg) mx_copy(c, wk->text, rq->uncond_text + (size_t)k0 * d->text, txt);
+    mx_copy(c, wk->text + (halves - 1) * txt, rq->cond_text + (size_t)k0 * d->text, txt);
     for (int k = 0; k < rq->n_controls; k++) {
         size_t one = control_numel(rq->controls[k].net, d->h, d->w), cn = (size_t)mk * one;
-        for (int r = 0; r < halves; r++) copy_floats(c, wk->cond[k] + r * cn, rq->controls[k].image + (size_t)k0 * one, cn);
+        for (int r = 0; r < halves; r++) mx_copy(c, wk->cond[k] + r * cn, rq->controls[k].image + (size_t)k0 * one, cn);
     }
     for (int b = 0; b < halves * mk; b++) wk->timesteps[b] = (float)t; /* a host-side scalar per item */
 }
@@ -169,7 +166,7 @@ static int predict_call(const mx_sd_request *rq, const mx_ctx *c, const sd_dims 
     if (mx_unet_forward(c, rq->unet, &in, wk->eps, &wk->arena, st)) return mx_fail_prefix(st, "UNet: ");
     float *out = wk->guided + (size_t)k0 * per;
     if (d->cfg) mx_cfg_combine(out, wk->eps, wk->eps + lat, rq->guidance, lat);
-    else copy_floats(c, out, wk->eps, lat);
+    else mx_copy(c, out, wk->eps, lat);
     return 0;
 }
 

@@ -105,9 +105,7 @@ void mx_taesd_free(mx_taesd *t) { free(t); }
 
 /* ---- forward ---- */
 
-static void run_relu(mx_run *r, float *x, size_t n) {
-    if (!r->dry) mx_clamp(r->c, x, 0.0f, INFINITY, n);
-}
+static void run_relu(mx_run *r, float *x, size_t n) { mx_clamp(r->c, x, x, 0.0f, INFINITY, n); }
 
 /* y = block(x); y must not alias x. One temporary from the arena. */
 static int block_run(mx_run *r, const tiny_block *k, float *y, const float *x, int B, int H, int W) {
@@ -119,7 +117,7 @@ static int block_run(mx_run *r, const tiny_block *k, float *y, const float *x, i
     mx_conv_run(r, &k->c2, y, t, B, H, W);
     run_relu(r, y, n);
     mx_conv_run(r, &k->c4, t, y, B, H, W);
-    if (!r->dry) mx_add(r->c, y, t, x, n);
+    mx_add(r->c, y, t, x, n);
     run_relu(r, y, n);
     mx_arena_reset(r->a, mark);
     return 0;
@@ -143,7 +141,7 @@ static int encode_run(mx_run *r, const mx_taesd *t, const float *image, int B, i
     if (!p[0] || !p[1]) return -1;
     float *h = p[0];
     /* [-1, 1] -> [0, 1]: (x + 1) / 2, which 0.5 x + 0.5 equals bit for bit */
-    if (!r->dry) mx_affine(r->c, p[1], image, 0.5f, 0.5f, (size_t)B * c->in_channels * H * W);
+    mx_affine(r->c, p[1], image, 0.5f, 0.5f, (size_t)B * c->in_channels * H * W);
     for (int i = 0; i < c->nlevels; i++) {
         const tiny_level *lv = &t->enc[i];
         mx_conv_run(r, &lv->conv, h, other(p, h), B, H, W);
@@ -164,25 +162,24 @@ static int decode_run(mx_run *r, const mx_taesd *t, const float *latents, int B,
     float *p[2] = {mx_run_alloc(r, n), mx_run_alloc(r, n)};
     if (!p[0] || !p[1]) return -1;
     float *h = p[0];
-    if (!r->dry) { /* "clamp": 3 tanh(x / 3) */
-        mx_affine(r->c, p[1], latents, 1.0f / 3.0f, 0.0f, nl);
-        mx_tanh(r->c, p[1], nl);
-        mx_scale(r->c, p[1], p[1], 3.0f, nl);
-    }
+    /* "clamp": 3 tanh(x / 3) */
+    mx_affine(r->c, p[1], latents, 1.0f / 3.0f, 0.0f, nl);
+    mx_tanh(r->c, p[1], nl);
+    mx_scale(r->c, p[1], p[1], 3.0f, nl);
     mx_conv_run(r, &t->dec_in, h, p[1], B, H, W);
     run_relu(r, h, (size_t)B * c->channels * H * W);
     for (int i = 0; i < c->nlevels; i++) {
         const tiny_level *lv = &t->dec[i];
         if (!(h = blocks_run(r, lv, p, h, B, H, W))) return -1;
         if (!lv->has_conv) break;
-        if (!r->dry) mx_upsample_nearest2x(r->c, other(p, h), h, B * c->channels, H, W);
+        mx_upsample_nearest2x(r->c, other(p, h), h, B * c->channels, H, W);
         H *= 2;
         W *= 2;
         mx_conv_run(r, &lv->conv, h, other(p, h), B, H, W);
     }
     mx_conv_run(r, &t->dec_out, image, h, B, H, W);
     /* [0, 1] -> [-1, 1]: x * 2 - 1 */
-    if (!r->dry) mx_affine(r->c, image, image, 2.0f, -1.0f, (size_t)B * c->out_channels * H * W);
+    mx_affine(r->c, image, image, 2.0f, -1.0f, (size_t)B * c->out_channels * H * W);
     return 0;
 }
 
@@ -244,9 +241,9 @@ int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *laten
     size_t ni = (size_t)n * cfg->out_channels * h * w * mx_taesd_factor(t) * mx_taesd_factor(t);
     mx_arena a = {0};
     if (mx_taesd_decode_arena_bytes(t, n, h, w, &bytes, st) ||
-        mx_arena_create(&a, bytes + nl * sizeof(float) + MX_ARENA_ALIGN, st))
+        mx_arena_create_on(&a, c->be, bytes + nl * sizeof(float) + MX_ARENA_ALIGN, st))
         return -1;
-    float *scaled = mx_arena_floats(&a, nl, st);
+    float *scaled = mx_act_alloc(&a, nl, st);
     int rc = -1;
     if (scaled) {
         mx_scale(c, scaled, latents, 1.0f / cfg->scaling_factor, nl);
@@ -254,7 +251,7 @@ int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *laten
     }
     if (!rc) {
         mx_affine(c, image, image, 0.5f, 0.5f, ni);
-        mx_clamp(c, image, 0.0f, 1.0f, ni);
+        mx_clamp(c, image, image, 0.0f, 1.0f, ni);
     }
     mx_arena_destroy(&a);
     return rc;

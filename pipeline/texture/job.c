@@ -80,6 +80,9 @@ static int build_candidates(mx_job *j, mx_status *st) {
     if (!j->visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
     mx_view_cache_visible(&j->vc, j->visible);
     j->n_visible = mx_mask_count(j->visible, (int64_t)texels);
+    if (j->n_visible == 0)
+        return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
+                       j->o->mesh_path);
     return 0;
 }
 
@@ -110,6 +113,8 @@ static void report_header(mx_job *j) {
     mx_jw_int(w, "render_size", o->render_size);
     mx_jw_int(w, "image_size", o->image_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
+    mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
+    mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
     mx_jw_str(w, "weights", o->weights_path);
     char digest[32];
     mx_file_digest_hex(o->weights_path, digest);
@@ -148,18 +153,22 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     memset(j, 0, sizeof *j);
     j->o = o;
     j->t0 = mx_now();
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
+    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
+    mx_job_progress(j, "networks in %s arithmetic (kernels %s)%s", mx_precision_name(mx_isa_precision(j->ctx.k->isa)),
+                    mx_isa_name(j->ctx.k->isa),
+                    mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
     if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
     j->models_ready = 1;
     if (o->fast && check_fast_models(j, st)) return -1;
     mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
-    if (mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
-    if (prepare_uvs(j, need_uvs, st)) return -1;
+    if (mx_job_check_cancel(j, st) || mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
+    if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
     if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || encode_negative(j, st)) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || encode_negative(j, st)) return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -167,7 +176,13 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     return 0;
 }
 
+int mx_job_check_cancel(const mx_job *j, mx_status *st) {
+    if (j->o->cancel && *j->o->cancel) return mx_fail(st, MX_ECANCEL, "interrupted");
+    return 0;
+}
+
 void mx_job_close(mx_job *j) {
+    mx_outdir_discard(&j->out);
     for (int i = 0; i < j->prompts.n; i++) {
         free(j->prompts.text[i]);
         free(j->prompts.emb[i]);
@@ -225,7 +240,7 @@ static int report_step(void *user, int step, int n_steps, int64_t timestep, cons
     (void)numel;
     const progress_ctx *p = user;
     mx_job_progress(p->job, "%s: step %d/%d (t=%lld)", p->stage, step + 1, n_steps, (long long)timestep);
-    return 0;
+    return p->job->o->cancel && *p->job->o->cancel; /* non-zero stops the denoising loop */
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
@@ -317,7 +332,10 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
                         report_step, &pc};
     double t = mx_now();
-    if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) goto done;
+    if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) {
+        mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
+        goto done;
+    }
     j->last_denoise_s = mx_now() - t;
     t = mx_now();
     rc = decode_images(j, lat, b->n, h, w, images, st);
@@ -469,7 +487,7 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    if (fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
@@ -482,7 +500,9 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
-    if (mx_outdir_write(j->o->out_dir, &j->mesh, tex, j->nlayers, text, st)) return -1;
+    if (mx_job_check_cancel(j, st) ||
+        mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st))
+        return -1;
     mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
     return 0;
 }
