@@ -98,7 +98,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
     mx_sched_config_sd15(&base);
     mx_sched_config_lcm(&scfg, &base);
     int ok = lat && ctl && cond && noises && ts && after && img_want && nlat == 2 * 4 * 8 * 8 && nts == 4 &&
-             nnoise == 3 * nlat && nafter == 4 * nlat && mx_sched_init(&s, &scfg, 4, nlat, &st) == 0;
+             nnoise == 3 * nlat && nafter == 4 * nlat && mx_sched_init(&s, c, &scfg, 4, nlat, &st) == 0;
     if (!ok) fprintf(stderr, "fast pipeline setup: %s\n", st.msg);
     CHECK(ok);
     if (ok) {
@@ -122,7 +122,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         free(img);
         mx_sched_free(&s);
         /* the LCM scheduler without a noise source is refused at its first step */
-        CHECK(mx_sched_init(&s, &scfg, 4, nlat, &st) == 0);
+        CHECK(mx_sched_init(&s, c, &scfg, 4, nlat, &st) == 0);
         rq.progress = NULL;
         CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) != 0 && strstr(st.msg, "noise source"));
         mx_sched_free(&s);

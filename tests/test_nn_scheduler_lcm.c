@@ -14,7 +14,14 @@ static void sd15_lcm(mx_sched_config *cfg) {
     mx_sched_config_lcm(cfg, &base);
 }
 
-static void run_case(const mx_ctx *c, const mx_safetensors *f, const char *name, int steps) {
+/* The noise source of a case: noises[step]. */
+static int give_noise(void *user, int step, float *noise, size_t numel) {
+    memcpy(noise, (const float *)user + (size_t)step * numel, numel * sizeof *noise);
+    return 0;
+}
+
+/* Host-memory scheduler (context NULL), as test_nn_scheduler. */
+static void run_case(const mx_safetensors *f, const char *name, int steps) {
     char key[64], label[128];
     mx_status st;
     size_t n_lat, n_mo, n_noise, n_after, n_den, n_ts;
@@ -31,7 +38,7 @@ static void run_case(const mx_ctx *c, const mx_safetensors *f, const char *name,
     mx_sched s;
     sd15_lcm(&cfg);
     int ok = ts && x && mo && noise && after && den && n_ts == (size_t)steps && n_mo == steps * n_lat &&
-             n_noise == (steps - 1) * n_lat && n_after == n_mo && n_den == n_mo && !mx_sched_init(&s, &cfg, steps, n_lat, &st);
+             n_noise == (steps - 1) * n_lat && n_after == n_mo && n_den == n_mo && !mx_sched_init(&s, NULL, &cfg, steps, n_lat, &st);
     CHECK(ok);
     if (ok) {
         int equal = mx_sched_steps(&s) == steps;
@@ -39,15 +46,16 @@ static void run_case(const mx_ctx *c, const mx_safetensors *f, const char *name,
         printf("%-40s %s\n", name, equal ? "timesteps equal" : "timesteps DIFFER");
         CHECK(equal);
         double worst_x = 0, worst_d = 0;
+        s.noise_fn = give_noise;
+        s.noise_user = noise;
         for (int i = 0; equal && i < steps; i++) {
             CHECK(mx_sched_needs_noise(&s) == (i < steps - 1));
-            const float *z = i < steps - 1 ? noise + (size_t)i * n_lat : NULL;
-            if (mx_sched_lcm_step(c, &s, mo + (size_t)i * n_lat, x, z, &st)) {
+            if (mx_sched_step(&s, mo + (size_t)i * n_lat, x, &st)) {
                 fprintf(stderr, "%s\n", st.msg);
                 CHECK(0);
                 break;
             }
-            double ex = mx_rel_l2(x, after + (size_t)i * n_lat, n_lat), ed = mx_rel_l2(s.work, den + (size_t)i * n_lat, n_lat);
+            double ex = mx_rel_l2(x, after + (size_t)i * n_lat, n_lat), ed = mx_rel_l2(s.work[0], den + (size_t)i * n_lat, n_lat);
             if (!(ex <= worst_x)) worst_x = ex;
             if (!(ed <= worst_d)) worst_d = ed;
         }
@@ -56,7 +64,7 @@ static void run_case(const mx_ctx *c, const mx_safetensors *f, const char *name,
         snprintf(label, sizeof label, "%s denoised (worst step)", name);
         printf("%-40s rel_l2=%.3e (bound 1e-05) %s\n", label, worst_d, worst_d <= 1e-5 ? "ok" : "FAIL");
         CHECK(worst_x <= 1e-5 && worst_d <= 1e-5);
-        CHECK(mx_sched_lcm_step(c, &s, mo, x, NULL, &st) == -1 && strstr(st.msg, "past the last"));
+        CHECK(mx_sched_step(&s, mo, x, &st) == -1 && strstr(st.msg, "past the last"));
         mx_sched_free(&s);
     }
     free(ts);
@@ -67,7 +75,7 @@ static void run_case(const mx_ctx *c, const mx_safetensors *f, const char *name,
     free(den);
 }
 
-static void test_config_and_errors(const mx_ctx *c) {
+static void test_config_and_errors(void) {
     mx_sched_config cfg;
     mx_status st;
     const char *json = "{\"_class_name\": \"LCMScheduler\", \"beta_start\": 0.00085, \"beta_end\": 0.012, "
@@ -78,24 +86,20 @@ static void test_config_and_errors(const mx_ctx *c) {
     CHECK(mx_sched_lcm_timesteps(&cfg, 4, ts, &st) == 4 && ts[0] == 999 && ts[1] == 749); /* k = 25 */
     sd15_lcm(&cfg);
     mx_sched s;
-    CHECK(mx_sched_init(&s, &cfg, 51, 16, &st) == -1 && strstr(st.msg, "original_inference_steps"));
-    CHECK(mx_sched_init(&s, &cfg, 4, 16, &st) == 0);
+    CHECK(mx_sched_init(&s, NULL, &cfg, 51, 16, &st) == -1 && strstr(st.msg, "original_inference_steps"));
+    CHECK(mx_sched_init(&s, NULL, &cfg, 4, 16, &st) == 0);
     float mo[16] = {0}, x[16] = {0};
-    CHECK(mx_sched_step(&s, mo, x, &st) == -1 && strstr(st.msg, "mx_sched_lcm_step"));
-    CHECK(mx_sched_lcm_step(c, &s, mo, x, NULL, &st) == -1 && strstr(st.msg, "noise source"));
+    CHECK(mx_sched_step(&s, mo, x, &st) == -1 && strstr(st.msg, "noise source"));
     CHECK(mx_sched_set_strength(&s, 0.5f, &st) == -1 && strstr(st.msg, "strength"));
     mx_sched_free(&s);
 }
 
 int main(void) {
-    mx_ctx c;
     mx_safetensors f;
-    if (golden_ctx(&c)) return 1;
     CHECK(golden_open(&f, "scheduler_lcm", "cases.safetensors") == 0);
-    run_case(&c, &f, "steps4", 4);
-    run_case(&c, &f, "steps6", 6);
+    run_case(&f, "steps4", 4);
+    run_case(&f, "steps6", 6);
     mx_st_close(&f);
-    test_config_and_errors(&c);
-    mx_ctx_destroy(&c);
+    test_config_and_errors();
     return mx_test_finish("test_nn_scheduler_lcm");
 }

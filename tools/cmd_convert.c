@@ -7,6 +7,7 @@
 #include "../runtime/log.h"
 #include "../weights/convert.h"
 #include "cli.h"
+#include "cli_args.h"
 
 static void convert_usage(FILE *f) {
     fprintf(f,
@@ -31,8 +32,11 @@ static void convert_usage(FILE *f) {
             "  --quiet                  no progress lines\n"
             "  -h, --help               this help\n"
             "\n"
-            "example: matex convert ../shared/golden/unet_tiny -o unet_tiny.mxw --dtype f32\n"
-            "fast path: matex convert SD15_DIR --controlnet ... --lcm-lora lcm-lora-sdv1-5.safetensors --taesd TAESD_DIR -o W\n");
+            "examples:\n"
+            "  matex convert stable-diffusion-v1-5 --controlnet depth=control_v11f1p_sd15_depth \\\n"
+            "      --controlnet inpaint=control_v11p_sd15_inpaint -o sd15.mxw\n"
+            "  matex convert tests/data/golden/unet_tiny -o unet_tiny.mxw --dtype f32   (in the source tree)\n"
+            "  fast path: ... --lcm-lora pytorch_lora_weights.safetensors --taesd taesd (then texture --fast)\n");
 }
 
 static int parse_dtype(const char *s, mx_dtype *dt) {
@@ -87,11 +91,9 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         } else if (!strcmp(arg, "--taesd")) {
             a->o.taesd = val;
         } else if (!strcmp(arg, "--lora-scale")) {
-            char *end;
-            double s = strtod(val, &end);
             if (a->o.n_loras == 0) return usage_error("--lora-scale must follow a --lora or --lcm-lora", NULL);
-            if (end == val || *end || s != s) return usage_error("--lora-scale wants a number, not", val);
-            a->o.loras[a->o.n_loras - 1].scale = (float)s;
+            if (mx_parse_float(val, &a->o.loras[a->o.n_loras - 1].scale))
+                return usage_error("--lora-scale wants a finite number, not", val);
         } else if (!strcmp(arg, "--json")) {
             a->json = 1;
         } else if (!strcmp(arg, "--quiet")) {

@@ -5,7 +5,8 @@
  *              T = t * timestep_scaling, s = sigma_data = 0.5
  *   x_prev  = sqrt(a_prev) denoised + sqrt(1 - a_prev) noise          (denoised at the last step)
  * with a_prev the alpha product of the next timestep in the list (of t itself at the last step).
- * Coefficients in float32 as torch computes them; the latent updates go through ops. */
+ * Coefficients in float32 as torch computes them; the latent updates go through ops on s->c, the
+ * fresh noise comes from s->noise_fn on the host and is uploaded (the edge). */
 #include <math.h>
 #include <string.h>
 
@@ -44,17 +45,22 @@ int mx_sched_needs_noise(const mx_sched *s) {
     return s->cfg.kind == MX_SCHED_LCM && s->step_index < s->n_steps - 1;
 }
 
-int mx_sched_lcm_step(const mx_ctx *c, mx_sched *s, const float *mo, float *x, const float *noise, mx_status *st) {
+/* The fresh noise of the current step, on the device (model_outputs[1], unused by LCM). */
+static const float *step_noise(mx_sched *s, mx_status *st) {
+    float *z = s->model_outputs[1];
+    if (!s->noise_fn) return mx_fail(st, MX_EUSAGE, "LCM scheduler: step %d needs a noise source", s->step_index), NULL;
+    if (s->noise_fn(s->noise_user, s->step_index - s->begin, s->noise_host, s->numel))
+        return mx_fail(st, MX_EINTERNAL, "LCM scheduler: no noise for step %d", s->step_index - s->begin + 1), NULL;
+    return mx_upload(s->c, z, s->noise_host, s->numel, st) ? NULL : z;
+}
+
+int mx_sched_lcm_step(mx_sched *s, const float *mo, float *x, mx_status *st) {
+    const mx_ctx *c = s->c;
     if (s->cfg.kind != MX_SCHED_LCM) return mx_fail(st, MX_EINTERNAL, "scheduler: not an LCM scheduler");
     if (s->step_index >= s->n_steps)
         return mx_fail(st, MX_EUSAGE, "scheduler: step %d past the last of %d", s->step_index, s->n_steps);
-    if (mx_sched_needs_noise(s) && !noise) {
-        float *z = s->model_outputs[1];
-        if (!s->noise_fn) return mx_fail(st, MX_EUSAGE, "LCM scheduler: step %d needs a noise source", s->step_index);
-        if (s->noise_fn(s->noise_user, s->step_index - s->begin, z, s->numel))
-            return mx_fail(st, MX_EINTERNAL, "LCM scheduler: no noise for step %d", s->step_index - s->begin + 1);
-        noise = z;
-    }
+    const float *noise = NULL;
+    if (mx_sched_needs_noise(s) && !(noise = step_noise(s, st))) return -1;
     int64_t t = s->timesteps[s->step_index];
     int64_t prev = s->step_index + 1 < s->n_steps ? s->timesteps[s->step_index + 1] : t;
     if (t < 0 || t >= s->cfg.num_train_timesteps || prev >= s->cfg.num_train_timesteps)
@@ -64,7 +70,7 @@ int mx_sched_lcm_step(const mx_ctx *c, mx_sched *s, const float *mo, float *x, c
     float T = (float)t * (float)s->cfg.timestep_scaling, s2 = LCM_SIGMA_DATA * LCM_SIGMA_DATA;
     float c_skip = s2 / (T * T + s2), c_out = T / sqrtf(T * T + s2);
     size_t n = s->numel;
-    float *den = s->work, *tmp = s->model_outputs[0];
+    float *den = s->work[0], *tmp = s->model_outputs[0];
     /* x0 = (x - sqrt(1 - a_t) eps) / sqrt(a_t) */
     mx_scale(c, den, mo, -sqrtf(1.0f - at), n);
     mx_add(c, den, den, x, n);
@@ -73,12 +79,12 @@ int mx_sched_lcm_step(const mx_ctx *c, mx_sched *s, const float *mo, float *x, c
     mx_scale(c, den, den, c_out, n);
     mx_scale(c, tmp, x, c_skip, n);
     mx_add(c, den, den, tmp, n);
-    if (mx_sched_needs_noise(s)) {
+    if (noise) {
         mx_scale(c, x, den, sqrtf(ap), n);
         mx_scale(c, tmp, noise, sqrtf(1.0f - ap), n);
         mx_add(c, x, x, tmp, n);
     } else {
-        mx_scale(c, x, den, 1.0f, n);
+        mx_copy(c, x, den, n);
     }
     s->step_index++;
     return 0;

@@ -239,21 +239,21 @@ int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *laten
     const mx_taesd_config *cfg = &t->cfg;
     size_t bytes, nl = (size_t)n * cfg->latent_channels * h * w;
     size_t ni = (size_t)n * cfg->out_channels * h * w * mx_taesd_factor(t) * mx_taesd_factor(t);
+    if (mx_taesd_decode_arena_bytes(t, n, h, w, &bytes, st)) return -1;
     mx_arena a = {0};
-    if (mx_taesd_decode_arena_bytes(t, n, h, w, &bytes, st) ||
-        mx_arena_create_on(&a, c->be, bytes + nl * sizeof(float) + MX_ARENA_ALIGN, st))
-        return -1;
-    float *scaled = mx_act_alloc(&a, nl, st);
+    float *din = mx_dev_alloc(c, nl, st), *dout = din ? mx_dev_alloc(c, ni, st) : NULL;
     int rc = -1;
-    if (scaled) {
-        mx_scale(c, scaled, latents, 1.0f / cfg->scaling_factor, nl);
-        rc = mx_taesd_decode(c, t, scaled, n, h, w, image, &a, st);
-    }
-    if (!rc) {
-        mx_affine(c, image, image, 0.5f, 0.5f, ni);
-        mx_clamp(c, image, image, 0.0f, 1.0f, ni);
+    if (dout && !mx_upload(c, din, latents, nl, st) && !mx_arena_create_on(&a, c->be, bytes, st)) {
+        mx_scale(c, din, din, 1.0f / cfg->scaling_factor, nl);
+        if (!mx_taesd_decode(c, t, din, n, h, w, dout, &a, st)) {
+            mx_affine(c, dout, dout, 0.5f, 0.5f, ni);
+            mx_clamp(c, dout, dout, 0.0f, 1.0f, ni);
+            rc = mx_download(c, image, dout, ni, st);
+        }
     }
     mx_arena_destroy(&a);
+    mx_dev_free(c, din);
+    mx_dev_free(c, dout);
     return rc;
 }
 

@@ -35,8 +35,8 @@ int mx_taesd_encode(const mx_ctx *c, const mx_taesd *t, const float *image, int 
 int mx_taesd_decode_arena_bytes(const mx_taesd *t, int B, int h, int w, size_t *bytes, mx_status *st);
 int mx_taesd_decode(const mx_ctx *c, const mx_taesd *t, const float *latents, int B, int h, int w, float *image,
                     mx_arena *a, mx_status *st);
-/* As the SD pipelines post-process it: image [n, 3, h*f, w*f] in [0, 1] =
- * clamp(decode(latents / scaling_factor) / 2 + 0.5, 0, 1), with an arena of its own. */
+/* As the SD pipelines post-process it, on HOST arrays (uploaded and downloaded here): image
+ * [n, 3, h*f, w*f] in [0, 1] = clamp(decode(latents / scaling_factor) / 2 + 0.5, 0, 1). */
 int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *latents, int n, int h, int w,
                           float *image, mx_status *st);
 double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w);

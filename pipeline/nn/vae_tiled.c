@@ -156,21 +156,21 @@ int mx_vae_decode_image_tiled(const mx_ctx *c, const mx_vae *v, const float *lat
     const mx_vae_config *cfg = mx_vae_cfg(v);
     size_t bytes, nl = (size_t)n * cfg->latent_channels * h * w;
     size_t ni = (size_t)n * cfg->out_channels * h * w * mx_vae_factor(v) * mx_vae_factor(v);
-    mx_arena a = {0};
     if (cfg->scaling_factor == 0.0f) return mx_fail(st, MX_EINPUT, "VAE: scaling_factor is 0");
-    if (mx_vae_decode_tiled_arena_bytes(v, h, w, tile, &bytes, st) ||
-        mx_arena_create_on(&a, c->be, bytes + nl * sizeof(float) + MX_ARENA_ALIGN, st))
-        return -1;
-    float *scaled = mx_act_alloc(&a, nl, st);
+    if (mx_vae_decode_tiled_arena_bytes(v, h, w, tile, &bytes, st)) return -1;
+    mx_arena a = {0};
+    float *din = mx_dev_alloc(c, nl, st), *dout = din ? mx_dev_alloc(c, ni, st) : NULL;
     int rc = -1;
-    if (scaled) {
-        mx_scale(c, scaled, latents, 1.0f / cfg->scaling_factor, nl);
-        rc = mx_vae_decode_tiled(c, v, scaled, n, h, w, tile, image, &a, st);
-    }
-    if (!rc) {
-        mx_affine(c, image, image, 0.5f, 0.5f, ni);
-        mx_clamp(c, image, image, 0.0f, 1.0f, ni);
+    if (dout && !mx_upload(c, din, latents, nl, st) && !mx_arena_create_on(&a, c->be, bytes, st)) {
+        mx_scale(c, din, din, 1.0f / cfg->scaling_factor, nl);
+        if (!mx_vae_decode_tiled(c, v, din, n, h, w, tile, dout, &a, st)) {
+            mx_affine(c, dout, dout, 0.5f, 0.5f, ni);
+            mx_clamp(c, dout, dout, 0.0f, 1.0f, ni);
+            rc = mx_download(c, image, dout, ni, st);
+        }
     }
     mx_arena_destroy(&a);
+    mx_dev_free(c, din);
+    mx_dev_free(c, dout);
     return rc;
 }

@@ -19,8 +19,8 @@ int mx_vae_decode_tiled_arena_bytes(const mx_vae *v, int h, int w, int tile, siz
 int mx_vae_decode_tiled(const mx_ctx *c, const mx_vae *v, const float *latents, int B, int h, int w, int tile,
                         float *image, mx_arena *a, mx_status *st);
 
-/* The SD pipelines' post-processing on the tiled decode, with an arena of its own:
- * image [n, 3, 8h, 8w] in [0, 1] = clamp(tiled_decode(latents / scaling_factor) / 2 + 0.5, 0, 1). */
+/* The SD pipelines' post-processing on the tiled decode, on HOST arrays (uploaded and downloaded
+ * here): image [n, 3, 8h, 8w] in [0, 1] = clamp(tiled_decode(latents / scaling_factor) / 2 + 0.5, 0, 1). */
 int mx_vae_decode_image_tiled(const mx_ctx *c, const mx_vae *v, const float *latents, int n, int h, int w, int tile,
                               float *image, mx_status *st);
 

@@ -39,16 +39,21 @@ void mx_job_progress(const mx_job *j, const char *fmt, ...) {
     fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
 }
 
+/* A mesh with UVs keeps them (faces without get an atlas and a texture of their own: one
+ * layer per material); a mesh without gets one atlas and one texture. */
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_mesh *m = &j->mesh;
-    if (m->nuv > 0) {
+    mx_uvatlas_opts ao = mx_uvatlas_defaults();
+    ao.texture_size = j->o->tex_size;
+    if (m->nuv > 0 && m->face_uv) {
+        int atlas_faces = 0;
+        if (mx_uvatlas_complete(m, &ao, &j->atlas, &atlas_faces, st)) return -1;
+        j->atlas_built = atlas_faces > 0;
         j->nlayers = m->nmat > 1 && m->face_mat ? m->nmat : 1;
         return 0;
     }
     if (need_uvs)
         return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
-    mx_uvatlas_opts ao = mx_uvatlas_defaults();
-    ao.texture_size = j->o->tex_size;
     if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
     j->atlas_built = 1;
     /* one atlas for the whole mesh: every face renders and exports with material 0 */
@@ -103,22 +108,27 @@ static void report_header(mx_job *j) {
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", "0.1");
     mx_jw_str(w, "mesh", o->mesh_path);
-    mx_jw_str(w, "prompt", o->prompt);
-    mx_jw_str(w, "negative_prompt", o->negative_prompt);
-    mx_jw_int(w, "seed", (long long)o->seed);
-    mx_jw_int(w, "steps", o->steps);
-    mx_jw_bool(w, "fast", o->fast);
-    mx_jw_num(w, "guidance", o->guidance);
+    if (o->source_path) mx_jw_str(w, "source", o->source_path);
+    if (j->models_ready) {
+        mx_jw_str(w, "prompt", o->prompt);
+        mx_jw_str(w, "negative_prompt", o->negative_prompt);
+        mx_jw_int(w, "seed", (long long)o->seed);
+        mx_jw_int(w, "steps", o->steps);
+        mx_jw_bool(w, "fast", o->fast);
+        mx_jw_num(w, "guidance", o->guidance);
+        mx_jw_int(w, "image_size", o->image_size);
+    }
     mx_jw_int(w, "texture_size", o->tex_size);
     mx_jw_int(w, "render_size", o->render_size);
-    mx_jw_int(w, "image_size", o->image_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
-    mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
-    mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
-    mx_jw_str(w, "weights", o->weights_path);
-    char digest[32];
-    mx_file_digest_hex(o->weights_path, digest);
-    mx_jw_str(w, "weights_digest", digest);
+    if (j->models_ready) {
+        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
+        mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
+        mx_jw_str(w, "weights", o->weights_path);
+        char digest[32];
+        mx_file_digest_hex(o->weights_path, digest);
+        mx_jw_str(w, "weights_digest", digest);
+    }
     mx_jw_int(w, "faces", j->mesh.nfaces);
     mx_jw_int(w, "vertices", j->mesh.nverts);
     mx_jw_int(w, "textures", j->nlayers);
@@ -154,21 +164,25 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->o = o;
     j->t0 = mx_now();
     if (mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
+    if (mx_ctx_create_on(&j->ctx, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
-    mx_job_progress(j, "networks in %s arithmetic (kernels %s)%s", mx_precision_name(mx_isa_precision(j->ctx.k->isa)),
-                    mx_isa_name(j->ctx.k->isa),
-                    mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
-    if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
-    j->models_ready = 1;
-    if (o->fast && check_fast_models(j, st)) return -1;
-    mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
+    j->psnr_db = NAN;
+    if (model_needs != MX_JOB_NO_MODELS) {
+        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s",
+                        mx_backend_name(o->device), mx_precision_name(mx_isa_precision(j->ctx.k->isa)), mx_isa_name(j->ctx.k->isa),
+                        mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+        if (mx_models_load(&j->models, &j->ctx, o->weights_path, model_needs, st)) return -1;
+        j->models_ready = 1;
+        if (o->fast && check_fast_models(j, st)) return -1;
+        mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
+    }
     if (mx_job_check_cancel(j, st) || mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
     if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
-    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
+    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || encode_negative(j, st)) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models_ready && encode_negative(j, st)))
+        return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -262,7 +276,7 @@ static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *l
     for (int i = 0; i < b->n; i++)
         mx_rng_fill_normal(lat + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
-        mx_scale(&j->ctx, lat, lat, mx_sched_init_noise_sigma(s), numel);
+        mx_sched_scale_initial(s, lat, numel);
         return 0;
     }
     if (mx_sched_set_strength(s, b->strength, st)) return -1;
@@ -317,7 +331,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &scfg, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, &j->ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     s.noise_fn = fill_lcm_noise;
     s.noise_user = &noise;
@@ -470,8 +484,7 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_end_obj(w);
 }
 
-/* Push-pull fill of every layer's unreached chart texels. */
-static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
+int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     int T = j->o->tex_size;
     uint8_t *chart = malloc((size_t)T * T);
     if (!chart) return mx_fail(st, MX_ENOMEM, "UV fill: out of memory");
@@ -487,11 +500,12 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || mx_job_fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
     mx_jw_int(w, "views_generated", j->views_done);
+    if (!isnan(j->psnr_db)) mx_jw_num(w, "psnr_db", j->psnr_db);
     mx_job_stage_done(j, "uv_fill", mx_now() - t);
     mx_jw_begin_obj(w, "stages_s");
     for (int i = 0; i < j->nstages; i++) mx_jw_num(w, j->stage_name[i], j->stage_s[i]);
