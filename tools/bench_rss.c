@@ -7,7 +7,8 @@
  * (mx_sd_decode_latents, the old path) and tiled (the texture path); one guided step (UNet + the
  * two ControlNets, CFG) over N views (default 1; the loop runs the networks one view at a time, so
  * N views peak as one). On 2 busy cores the whole run takes many minutes.
- * Usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--views N] [--skip-steps] [--skip-untiled] */
+ * Usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--views N] [--skip-steps] [--skip-untiled]
+ *                  [--skip-decodes] */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,7 +25,7 @@
 
 typedef struct bench_cfg {
     const char *weights;
-    int threads, tile, views, skip_steps, skip_untiled;
+    int threads, tile, views, skip_steps, skip_untiled, skip_decodes;
 } bench_cfg;
 
 /* kB value of a /proc/self/status field. */
@@ -104,7 +105,7 @@ static int stage_step(stage_env *e, int n, mx_status *st) {
     mx_sched_config cfg;
     mx_sched s;
     mx_sched_config_sd15(&cfg);
-    int rc = !x || !c || !u || !d || !p ? mx_fail(st, MX_ENOMEM, "out of memory") : mx_sched_init(&s, &cfg, 1, lat, st);
+    int rc = !x || !c || !u || !d || !p ? mx_fail(st, MX_ENOMEM, "out of memory") : mx_sched_init(&s, &e->ctx, &cfg, 1, lat, st);
     if (!rc) {
         mx_sd_control controls[2] = {{e->cn[0], d, 1.0f}, {e->cn[1], p, 0.8f}};
         mx_sd_request rq = {e->unet, controls, 2, c, u, 77, 7.5f, &s, NULL, NULL};
@@ -139,7 +140,7 @@ static int run_stage(const bench_cfg *o, const stage *sg) {
 }
 
 int main(int argc, char **argv) {
-    bench_cfg o = {DEFAULT_WEIGHTS, 0, 48, 1, 0, 0};
+    bench_cfg o = {DEFAULT_WEIGHTS, 0, 48, 1, 0, 0, 0};
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
@@ -147,9 +148,10 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--views") && i + 1 < argc) o.views = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--skip-steps")) o.skip_steps = 1;
         else if (!strcmp(argv[i], "--skip-untiled")) o.skip_untiled = 1;
+        else if (!strcmp(argv[i], "--skip-decodes")) o.skip_decodes = 1;
         else {
             fprintf(stderr, "usage: bench_rss [--weights PATH] [--threads N] [--tile T] [--views N] [--skip-steps] "
-                            "[--skip-untiled]\n");
+                            "[--skip-untiled] [--skip-decodes]\n");
             return 2;
         }
     }
@@ -172,7 +174,7 @@ int main(int argc, char **argv) {
     };
     int fails = 0;
     for (size_t i = 0; i < sizeof stages / sizeof stages[0]; i++) {
-        if ((stages[i].kind == 1 && o.skip_steps) || (stages[i].kind == 0 && !stages[i].tiled && o.skip_untiled))
+        if ((stages[i].kind == 1 && o.skip_steps) || (stages[i].kind == 0 && (o.skip_decodes || (!stages[i].tiled && o.skip_untiled))))
             continue;
         pid_t pid = fork();
         if (pid == 0) _exit(run_stage(&o, &stages[i]));
