@@ -46,7 +46,9 @@ static void compare(const mx_ctx *c, const mx_safetensors *out, const char *net,
     CHECK(want != NULL);
     golden_label(tag, sizeof tag, c, net);
     snprintf(label, sizeof label, "%s %s %s", tag, outfile, name);
-    if (want) mx_check_close(label, got, want, n, golden_bound(c));
+    if (want)
+        mx_check_close(label, got, want, n,
+                       golden_bound(c, strcmp(name, "decode_of_encode_mean") ? GOLDEN_BF16_DEEP : GOLDEN_BF16_CHAIN));
     free(want);
 }
 
@@ -128,7 +130,8 @@ int main(void) {
     if (golden_ctx(&c)) return 1;
     check_golden(&c, "vae_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
     check_golden(&c, "vae_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
-    if (golden_have("vae_mini", "inputs.safetensors")) {
+    int mini = golden_have("vae_mini", "inputs.safetensors"); /* outside the repository */
+    if (mini) {
         check_golden(&c, "vae_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
         check_golden(&c, "vae_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
     }
@@ -136,7 +139,7 @@ int main(void) {
     mx_ctx_destroy(&c);
     if (golden_bf16_ctx(&c, "test_nn_vae") == 0) { /* bf16 arithmetic against the fp32 goldens */
         check_golden(&c, "vae_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
-        check_golden(&c, "vae_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+        if (mini) check_golden(&c, "vae_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
         mx_ctx_destroy(&c);
     }
     return mx_test_finish("test_nn_vae");
