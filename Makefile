@@ -169,7 +169,8 @@ faults-run: $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 # activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
 MX_TEST_DEVICE ?= cpu-strict
 TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
-           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS)
+           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
+           MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw
 test: all $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
@@ -229,7 +230,8 @@ CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
 CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
-CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15
+CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
+                test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
