@@ -280,18 +280,6 @@ template <class T> T *copy_array(const std::vector<T> &v) {
     return p;
 }
 
-void free_arrays(mx_mesh *m) {
-    free(m->pos);
-    free(m->faces);
-    free(m->uv);
-    free(m->face_uv);
-    free(m->nrm);
-    free(m->face_nrm);
-    free(m->mats);
-    free(m->face_mat);
-    *m = mx_mesh{};
-}
-
 int check_indices(const std::vector<int32_t> &idx, size_t count, bool allow_missing, const char *what,
                   const char *path, mx_status *st) {
     for (size_t i = 0; i < idx.size(); i++) {
@@ -483,7 +471,7 @@ extern "C" int mx_io_read_mesh(const char *path, mx_mesh *out, mx_status *st) {
         rc = mx_fail(st, MX_EINPUT, "%s: cannot read mesh: %s", path, e.what());
     }
     if (rc) {
-        free_arrays(out);
+        mx_mesh_free(out);
         return -1;
     }
     copy_name(out->source_path, sizeof out->source_path, path);

@@ -135,5 +135,5 @@ int main(void) {
     compare("tenc.safetensors", "latents", "taesd", "outputs.safetensors", "latents_enc");
 
     sh("rm -rf %s%s", tmpdir, "");
-    return mx_test_finish("test_nn_run_net");
+    return mx_test_finish("test_tools_run_net");
 }
