@@ -147,7 +147,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         CHECK(ts_equal);
         mx_sd_control control = {n->cnet, ctl, 0.8f};
         step_check sc = {after, 0, -1};
-        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc};
+        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc, NULL, NULL};
         CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) == 0);
         CHECK(sc.steps_seen == 6);
         float *img = malloc(sizeof(float) * nimg);

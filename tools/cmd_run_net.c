@@ -7,6 +7,8 @@
 #include "../ops/ops.h"
 #include "../pipeline/nn/clip.h"
 #include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/sd_edit.h"
+#include "../pipeline/texture/models.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
 #include "../runtime/log.h"
@@ -30,11 +32,20 @@ static void usage(FILE *f) {
             "  vae-encode  image [B,3,H,W] in [-1,1]                  -> mean, logvar\n"
             "  vae-decode  latents [B,4,h,w] (unscaled)               -> image\n"
             "  clip        input_ids [B,T] (I64 or I32)               -> last_hidden_state, pooler_output, hidden_states.{i}\n"
+            "  inpaint-pipeline  (W: a model set with controlnet_depth and controlnet_inpaint; --steps N [--guidance G])\n"
+            "              prompt_embeds, negative_prompt_embeds [B,T,D], image [B,3,H,W] in [0,1], mask [B,1,H,W]\n"
+            "              (1 = paint), control_depth, control_inpaint [B,3,H,W], noise [B,4,H/8,W/8],\n"
+            "              conditioning_scales [2] (depth, inpaint)  -> timesteps, latents_after_step, image\n"
+            "  img2img-pipeline  (W: a model set with a depth ControlNet; --steps N [--guidance G])\n"
+            "              prompt_embeds, negative_prompt_embeds, image, control_depth, noise, strength [1],\n"
+            "              optional conditioning_scales [1] (default 1)  -> timesteps, latents_after_step, image\n"
             "\n"
             "options:\n"
             "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., text_encoder.;\n"
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
+            "  --steps N       pipelines: scheduler steps before strength (required)\n"
+            "  --guidance G    pipelines: classifier-free guidance scale (default 7.5)\n"
             "  -h, --help      this help\n");
 }
 
@@ -309,6 +320,95 @@ done:
     return rc;
 }
 
+/* ---- inpaint-pipeline / img2img-pipeline: the view step and the enhancement step on tensors ---- */
+typedef struct pipe_opts {
+    int inpaint, steps;
+    float guidance;
+} pipe_opts;
+
+typedef struct step_record {
+    float *after; /* [steps, numel] */
+    int64_t *timesteps;
+} step_record;
+
+static int record_step(void *user, int step, int n_steps, int64_t t, const float *lat, size_t numel) {
+    (void)n_steps;
+    step_record *r = user;
+    memcpy(r->after + (size_t)step * numel, lat, numel * sizeof *lat);
+    r->timesteps[step] = t;
+    return 0;
+}
+
+/* The pipeline's tensors, shapes checked against each other and the networks. */
+typedef struct pipe_inputs {
+    float *cond, *uncond, *image, *mask, *depth, *inpaint, *noise, *scales, *strength;
+    int B, T, H, W;
+} pipe_inputs;
+
+static int pipe_read_inputs(run_io *io, const mx_models *m, const pipe_opts *po, pipe_inputs *p, mx_status *st) {
+    int D = mx_unet_cfg(m->unet)->cross_attention_dim, f = mx_vae_factor(m->vae);
+    int64_t es[3] = {-1, -1, D}, is[4] = {-1, 3, -1, -1}, one[1] = {1}, two[1] = {2};
+    if (!(p->cond = input(io, "prompt_embeds", 3, es, 1, st)) ||
+        !(p->uncond = input(io, "negative_prompt_embeds", 3, es, 1, st)))
+        return -1;
+    is[0] = es[0];
+    if (!(p->image = input(io, "image", 4, is, 1, st))) return -1;
+    p->B = (int)is[0], p->T = (int)es[1], p->H = (int)is[2], p->W = (int)is[3];
+    if (p->H % f || p->W % f)
+        return mx_fail(st, MX_EINPUT, "%s: image is %dx%d, not a multiple of the VAE factor %d", io->in_path, p->W,
+                       p->H, f);
+    int64_t ms[4] = {p->B, 1, p->H, p->W}, cs[4] = {p->B, 3, p->H, p->W}, ns[4] = {p->B, 4, p->H / f, p->W / f};
+    if (!(p->depth = input(io, "control_depth", 4, cs, 1, st)) || !(p->noise = input(io, "noise", 4, ns, 1, st)))
+        return -1;
+    if (po->inpaint)
+        return !(p->mask = input(io, "mask", 4, ms, 1, st)) || !(p->inpaint = input(io, "control_inpaint", 4, cs, 1, st)) ||
+                       !(p->scales = input(io, "conditioning_scales", 1, two, 1, st))
+                   ? -1
+                   : 0;
+    if (!(p->strength = input(io, "strength", 1, one, 1, st))) return -1;
+    if (mx_st_find(&io->in, "conditioning_scales") && !(p->scales = input(io, "conditioning_scales", 1, one, 1, st)))
+        return -1;
+    return 0;
+}
+
+static int pipe_denoise(run_io *io, const mx_models *m, const pipe_opts *po, const pipe_inputs *p, mx_status *st) {
+    int f = mx_vae_factor(m->vae), h = p->H / f, w = p->W / f, rc = -1;
+    size_t numel = (size_t)p->B * 4 * h * w;
+    mx_sched s;
+    if (mx_unet_check_sizes(mx_unet_cfg(m->unet), 2 * p->B, h, w, p->T, st) ||
+        mx_sched_init(&s, &m->sched, po->steps, numel, st))
+        return -1;
+    mx_sd_control ctl[2] = {{m->cn_depth, p->depth, p->scales ? p->scales[0] : 1.0f},
+                            {m->cn_inpaint, p->inpaint, po->inpaint ? p->scales[1] : 0.0f}};
+    float *lat = new_floats(io, numel, st), *image = new_floats(io, (size_t)p->B * 3 * p->H * p->W, st);
+    step_record r = {new_floats(io, (size_t)po->steps * numel, st), (int64_t *)new_floats(io, 2 * (size_t)po->steps, st)};
+    mx_sd_request rq = {m->unet, ctl, po->inpaint ? 2 : 1, p->cond, p->uncond, p->T, po->guidance, &s,
+                        record_step, &r, NULL, NULL};
+    mx_sd_edit e = {m->vae, p->image, p->mask, p->noise, po->inpaint ? 1.0f : p->strength[0]};
+    if (lat && image && r.after && r.timesteps && mx_sd_edit_run(&rq, &e, &io->ctx, p->B, h, w, lat, st) == 0 &&
+        mx_sd_decode_latents(&io->ctx, m->vae, lat, p->B, h, w, image, st) == 0) {
+        int n = mx_sched_steps(&s);
+        int64_t ts[1] = {n}, as[5] = {n, p->B, 4, h, w}, is[4] = {p->B, 3, p->H, p->W};
+        rc = add_output(io, "timesteps", 1, ts, (const float *)r.timesteps, st) ||
+                     add_output(io, "latents_after_step", 5, as, r.after, st) || add_output(io, "image", 4, is, image, st)
+                 ? -1
+                 : 0;
+        io->outs[0].dtype = MX_ST_I64;
+    }
+    mx_sched_free(&s);
+    return rc;
+}
+
+static int run_pipeline(run_io *io, const char *weights, const pipe_opts *po, mx_status *st) {
+    mx_models m;
+    pipe_inputs p;
+    memset(&p, 0, sizeof p);
+    if (mx_models_load(&m, weights, MX_MODELS_NEED_DEPTH | (po->inpaint ? MX_MODELS_NEED_INPAINT : 0), st)) return -1;
+    int rc = pipe_read_inputs(io, &m, po, &p, st) || pipe_denoise(io, &m, po, &p, st) ? -1 : 0;
+    mx_models_free(&m);
+    return rc;
+}
+
 static void io_free(run_io *io) {
     if (io->arena_ok) mx_arena_destroy(&io->arena);
     if (io->ctx_ok) mx_ctx_destroy(&io->ctx);
@@ -323,17 +423,21 @@ static const char *default_prefix(const char *net) {
     if (!strcmp(net, "controlnet")) return "controlnet.";
     if (!strcmp(net, "vae-encode") || !strcmp(net, "vae-decode")) return "vae.";
     if (!strcmp(net, "clip")) return "text_encoder.";
+    if (!strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline")) return "";
     return NULL;
 }
 
-static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_status *st) {
+static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads,
+               const pipe_opts *po, mx_status *st) {
+    int pipeline = !*default_prefix(net);
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
-    if (mx_wf_open(&io->wf, weights, st)) return -1;
+    if (!pipeline && mx_wf_open(&io->wf, weights, st)) return -1;
     if (mx_ctx_create(&io->ctx, threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
     io->ctx_ok = 1;
     double t0 = mx_now();
-    int rc = !strcmp(net, "unet")         ? run_unet(io, prefix, st)
+    int rc = pipeline                     ? run_pipeline(io, weights, po, st)
+             : !strcmp(net, "unet")       ? run_unet(io, prefix, st)
              : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
              : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
              : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
@@ -346,6 +450,7 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
 int cmd_run_net(int argc, char **argv) {
     const char *net = NULL, *weights = NULL, *prefix = NULL;
     int threads = 0;
+    pipe_opts po = {0, 0, 7.5f};
     run_io io;
     memset(&io, 0, sizeof io);
     for (int i = 1; i < argc; i++) {
@@ -360,6 +465,8 @@ int cmd_run_net(int argc, char **argv) {
         else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
         else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
+        else if (!strcmp(a, "--steps") && has_val) po.steps = atoi(argv[++i]);
+        else if (!strcmp(a, "--guidance") && has_val) po.guidance = (float)atof(argv[++i]);
         else if (a[0] != '-' && !net) net = a;
         else {
             fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
@@ -369,8 +476,13 @@ int cmd_run_net(int argc, char **argv) {
     }
     if (!net || !weights || !io.in_path || !io.out_path || !default_prefix(net)) {
         fprintf(stderr, "matex run-net: %s\n", !net || default_prefix(net) ? "NET, --weights, --inputs and --out are required"
-                                                                         : "NET must be clip, unet, controlnet, vae-encode or vae-decode");
+                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, inpaint-pipeline or img2img-pipeline");
         usage(stderr);
+        return 2;
+    }
+    po.inpaint = !strcmp(net, "inpaint-pipeline");
+    if (!*default_prefix(net) && (po.steps < 1 || po.steps > MX_SCHED_MAX_STEPS || !(po.guidance >= 0.0f))) {
+        fprintf(stderr, "matex run-net: %s needs --steps in 1..%d and a guidance >= 0\n", net, MX_SCHED_MAX_STEPS);
         return 2;
     }
     char pfx[80];
@@ -383,7 +495,7 @@ int cmd_run_net(int argc, char **argv) {
     snprintf(pfx, sizeof pfx, "%s%s", prefix, *prefix && prefix[strlen(prefix) - 1] != '.' ? "." : "");
     mx_status st;
     mx_status_clear(&st);
-    int rc = run(&io, net, weights, pfx, threads, &st);
+    int rc = run(&io, net, weights, pfx, threads, &po, &st);
     io_free(&io);
     if (rc) {
         fprintf(stderr, "matex run-net: %s\n", st.msg);

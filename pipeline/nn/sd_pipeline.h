@@ -36,6 +36,11 @@ typedef struct mx_sd_control {
  * fails with "cancelled"). */
 typedef int (*mx_sd_progress)(void *user, int step, int n_steps, int64_t timestep, const float *latents,
                               size_t numel);
+/* Called after each scheduler step (before progress) and may change the latents [n, 4, h, w]
+ * in place through ops (the inpaint pipeline puts the known region back here); non-zero is an
+ * error already recorded in st. */
+typedef int (*mx_sd_after_step)(void *user, const mx_ctx *c, int step, int n_steps, float *latents,
+                                mx_status *st);
 
 typedef struct mx_sd_request {
     const mx_unet *unet;
@@ -48,6 +53,8 @@ typedef struct mx_sd_request {
     mx_sched *sched;          /* initialised for numel = n*4*h*w, strength applied, not yet stepped */
     mx_sd_progress progress;  /* may be NULL */
     void *progress_user;
+    mx_sd_after_step after_step; /* may be NULL */
+    void *after_step_user;
 } mx_sd_request;
 
 /* Runs every remaining scheduler step in place on latents [n, C, h, w] (C = the UNet's

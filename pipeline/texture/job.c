@@ -268,7 +268,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         controls[nc++] = (mx_sd_control){j->models.cn_inpaint, b->inpaint_planes, b->w_inpaint};
     progress_ctx pc = {j, b->stage};
     mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
-                        report_step, &pc};
+                        report_step, &pc, NULL, NULL};
     double t = mx_now();
     if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) goto done;
     j->last_denoise_s = mx_now() - t;
