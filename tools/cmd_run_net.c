@@ -378,8 +378,8 @@ static int pipe_denoise(run_io *io, const mx_models *m, const pipe_opts *po, con
     if (mx_unet_check_sizes(mx_unet_cfg(m->unet), 2 * p->B, h, w, p->T, st) ||
         mx_sched_init(&s, &m->sched, po->steps, numel, st))
         return -1;
-    mx_sd_control ctl[2] = {{m->cn_depth, p->depth, p->scales ? p->scales[0] : 1.0f},
-                            {m->cn_inpaint, p->inpaint, po->inpaint ? p->scales[1] : 0.0f}};
+    mx_sd_control ctl[2] = {{m->cn_depth, p->depth, p->scales ? p->scales[0] : 1.0f, NULL},
+                            {m->cn_inpaint, p->inpaint, po->inpaint ? p->scales[1] : 0.0f, NULL}};
     float *lat = new_floats(io, numel, st), *image = new_floats(io, (size_t)p->B * 3 * p->H * p->W, st);
     step_record r = {new_floats(io, (size_t)po->steps * numel, st), (int64_t *)new_floats(io, 2 * (size_t)po->steps, st)};
     mx_sd_request rq = {m->unet, ctl, po->inpaint ? 2 : 1, p->cond, p->uncond, p->T, po->guidance, &s,

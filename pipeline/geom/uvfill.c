@@ -197,3 +197,17 @@ int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gu
     free(colour), free(valid), free(next);
     return rc;
 }
+
+int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st) {
+    if (tex->c != 3) return mx_fail(st, MX_EINPUT, "uv dilate: texture must be RGB (has %d channels)", tex->c);
+    size_t n = (size_t)tex->w * tex->h;
+    uint8_t *valid = malloc(n), *next = malloc(n);
+    if (!valid || !next) {
+        free(valid), free(next);
+        return mx_fail(st, MX_ENOMEM, "uv dilate: out of memory");
+    }
+    memcpy(valid, known, n);
+    for (int r = 0; r < rings; r++) dilate_once(tex, valid, next);
+    free(valid), free(next);
+    return 0;
+}

@@ -21,4 +21,9 @@ int mx_uv_chart_mask(const mx_mesh *m, int layer, int nlayers, int w, int h, uin
  * When nothing is known, chart texels are left unchanged. */
 int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gutter, mx_status *st);
 
+/* Spreads the colour of known texels `rings` texels into the unknown ones around them (each
+ * ring: an unknown texel takes the mean of its already filled 8-neighbours), so that bilinear
+ * sampling at the border of the known region does not mix in the colour of unknown texels. */
+int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st);
+
 #endif

@@ -19,6 +19,7 @@ typedef struct sd_work {
     float *block;
     float *x_in, *text, *timesteps, *eps, *guided;
     float *res[MX_UNET_MAX_RES + 1];
+    float *item_res[MX_UNET_MAX_RES + 1]; /* unscaled residuals of a ControlNet with item weights */
     float *cond[MX_SD_MAX_CONTROLNETS];
     mx_arena arena;
 } sd_work;
@@ -84,14 +85,17 @@ static void work_free(sd_work *wk) {
 
 static int work_alloc(const mx_sd_request *rq, const sd_dims *d, sd_work *wk, mx_status *st) {
     memset(wk, 0, sizeof *wk);
-    size_t sizes[4 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
-    float **ptrs[4 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    size_t sizes[4 + 2 * (MX_UNET_MAX_RES + 1) + MX_SD_MAX_CONTROLNETS];
+    float **ptrs[4 + 2 * (MX_UNET_MAX_RES + 1) + MX_SD_MAX_CONTROLNETS];
     size_t per_b = d->lat / (size_t)d->n, np = 0, total = 0;
     sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->x_in;
     sizes[np] = (size_t)d->B * d->text, ptrs[np++] = &wk->text;
     sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->eps;
     sizes[np] = d->lat, ptrs[np++] = &wk->guided;
     for (int i = 0; i <= d->n_res; i++) sizes[np] = d->res_numel[i], ptrs[np++] = &wk->res[i];
+    int item_weights = 0;
+    for (int k = 0; k < rq->n_controls; k++) item_weights |= rq->controls[k].item_weights != NULL;
+    for (int i = 0; item_weights && i <= d->n_res; i++) sizes[np] = d->res_numel[i], ptrs[np++] = &wk->item_res[i];
     for (int k = 0; k < rq->n_controls; k++)
         sizes[np] = (size_t)d->B * control_numel(rq->controls[k].net, d->h, d->w), ptrs[np++] = &wk->cond[k];
     for (size_t i = 0; i < np; i++) total += (sizes[i] + 15) & ~(size_t)15; /* keep 64-byte alignment */
@@ -130,17 +134,41 @@ static void fill_constant_inputs(const mx_sd_request *rq, const sd_dims *d, sd_w
     }
 }
 
+static int control_active(const mx_sd_control *ctl, int n) {
+    if (!ctl->item_weights) return ctl->weight != 0.0f;
+    for (int i = 0; i < n; i++)
+        if (ctl->item_weights[i] != 0.0f) return 1;
+    return 0;
+}
+
+/* Per-item scales: the residuals at scale 1, each batch item's slice scaled by its latent's
+ * weight (diffusers scales the finished residuals, so this is the same arithmetic), added to
+ * (or, first, copied into) wk->res. */
+static void add_item_scaled(const mx_sd_control *ctl, const mx_ctx *c, const sd_dims *d, sd_work *wk, int ran) {
+    for (int i = 0; i <= d->n_res; i++) {
+        size_t per = d->res_numel[i] / (size_t)d->B;
+        for (int b = 0; b < d->B; b++) {
+            float *dst = wk->res[i] + (size_t)b * per, *src = wk->item_res[i] + (size_t)b * per;
+            mx_scale(c, ran ? src : dst, src, ctl->item_weights[b % d->n], per);
+            if (ran) mx_add(c, dst, dst, src, per);
+        }
+    }
+}
+
 /* Sum over the ControlNets of their scaled residuals into wk->res; returns 1 when any ran. */
 static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk,
                            mx_status *st) {
     int ran = 0;
     for (int k = 0; k < rq->n_controls; k++) {
         const mx_sd_control *ctl = &rq->controls[k];
-        if (ctl->weight == 0.0f) continue;
+        if (!control_active(ctl, d->n)) continue;
+        int per_item = ctl->item_weights != NULL;
+        float **out = per_item ? wk->item_res : wk->res;
         mx_controlnet_input in = {wk->x_in, wk->timesteps, wk->text, wk->cond[k], d->B, d->h, d->w, d->T,
-                                  ctl->weight};
-        if (mx_controlnet_forward(c, ctl->net, &in, wk->res, wk->res[d->n_res], ran, &wk->arena, st))
+                                  per_item ? 1.0f : ctl->weight};
+        if (mx_controlnet_forward(c, ctl->net, &in, out, out[d->n_res], ran && !per_item, &wk->arena, st))
             return mx_fail_prefix(st, "ControlNet %d: ", k), -1;
+        if (per_item) add_item_scaled(ctl, c, d, wk, ran);
         ran = 1;
     }
     return ran;

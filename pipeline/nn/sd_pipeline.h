@@ -29,6 +29,7 @@ typedef struct mx_sd_control {
     const mx_controlnet *net;
     const float *image; /* [n, cond_ch, 8h, 8w] in the range the ControlNet expects, one per latent */
     float weight;       /* conditioning scale (w_D, w_I); 0 skips the ControlNet */
+    const float *item_weights; /* [n] one scale per latent (both CFG halves), or NULL: weight for all */
 } mx_sd_control;
 
 /* Called after each step with the step index (0-based), the number of steps, the timestep

@@ -66,7 +66,8 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
         goto done;
     }
     snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->prompt);
-    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, depth, NULL, NULL, S, 0, st) ||
+    mx_view_planes vp = {depth, NULL, NULL, NULL, S, 0};
+    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, &vp, NULL, st) ||
         mx_render_textured(&v->vb.gb, &j->mesh, orig, j->nlayers, grey, j->ctx.pool, &rgb, st) ||
         mx_crop_resize(&rgb, v->crop, S, &small, st))
         goto done;
@@ -74,8 +75,8 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
     const char *prompts[1] = {v->prompt};
     char stage[32];
     snprintf(stage, sizeof stage, "enhance view %d", index + 1);
-    mx_gen_batch b = {1, S, S, prompts, depth, NULL, o->depth_weight[0], 0.0f, init, o->strength, (uint64_t)index,
-                      stage};
+    mx_gen_batch b = {1,    S,    S,           prompts, depth, NULL, o->depth_weight[0], 0.0f, NULL, NULL, init,
+                      NULL, o->strength, (uint64_t)index, stage};
     if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
     mx_job_report_view(j, v, "enhance", index, j->models.cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
     rc = 0;
