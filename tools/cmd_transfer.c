@@ -24,36 +24,59 @@
 #define GUTTER 4
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex transfer SRC_TEXTURED DST_MESH -o OUT [--views K] [--candidates N] [--size S]\n\n"
+    fprintf(f, "usage: matex transfer SRC_TEXTURED DST_MESH -o OUT [--views K] [--candidates N] [--size S]\n"
+               "       [--image-size M] [--background R,G,B] [--frontal-threshold T] [--write first-wins|angle-aware]\n\n"
                "Renders the source's texture from K views (default 6: front, back, then automatic view\n"
                "selection over N candidates, default 40, on the destination) at S x S (default 1024),\n"
                "backprojects them onto the destination's UVs (an atlas is made if it has none) into an\n"
                "S x S texture, fills the texels no view reached, and writes OUT/texture.png, texture.exr,\n"
                "mesh.obj + mesh.mtl, mesh.glb and report.json. Prints the coverage, and the PSNR against\n"
-               "the source texture when SRC and DST are the same file. Both meshes must share pose and units.\n");
+               "the source texture when SRC and DST are the same file. Both meshes must share pose and units.\n"
+               "--image-size M sends each render through the texture job's model image (crop to the object,\n"
+               "M x M, back; 0 = off), --background the colour behind the source (default 0,0,0),\n"
+               "--frontal-threshold the |n.v| a pixel needs (default 0.3), --write the texel policy (default\n"
+               "angle-aware: a later view that sees a texel clearly more frontally replaces it).\n");
 }
 
 typedef struct transfer_args {
     const char *src, *dst, *out;
-    int views, candidates, size;
+    int views, candidates, size, image_size, write_flags;
+    float background[3], frontal_threshold;
 } transfer_args;
+
+static int parse_write(const char *s, int *flags) {
+    if (!strcmp(s, "first-wins")) *flags = 0;
+    else if (!strcmp(s, "angle-aware")) *flags = MX_BACKPROJECT_OVERWRITE;
+    else return -1;
+    return 0;
+}
 
 static int parse_args(int argc, char **argv, transfer_args *a) {
     memset(a, 0, sizeof *a);
     a->views = 6;
     a->candidates = 40;
     a->size = 1024;
+    a->frontal_threshold = MX_FRONTAL_THRESHOLD_DEFAULT;
+    a->write_flags = MX_BACKPROJECT_OVERWRITE;
     for (int i = 1; i < argc; i++) {
         const char *o = argv[i];
-        int has = i + 1 < argc;
+        int has = i + 1 < argc, bad = 0;
         if (!strcmp(o, "--views") && has) a->views = atoi(argv[++i]);
+        else if (!strcmp(o, "--image-size") && has) a->image_size = atoi(argv[++i]);
+        else if (!strcmp(o, "--frontal-threshold") && has) a->frontal_threshold = (float)atof(argv[++i]);
+        else if (!strcmp(o, "--write") && has) bad = parse_write(argv[++i], &a->write_flags);
+        else if (!strcmp(o, "--background") && has)
+            bad = sscanf(argv[++i], "%f,%f,%f", &a->background[0], &a->background[1], &a->background[2]) != 3;
         else if (!strcmp(o, "--candidates") && has) a->candidates = atoi(argv[++i]);
         else if (!strcmp(o, "--size") && has) a->size = atoi(argv[++i]);
         else if (!strcmp(o, "-o") && has) a->out = argv[++i];
-        else if (o[0] == '-' || (a->src && a->dst)) {
+        else if (o[0] == '-' || (a->src && a->dst)) bad = 1;
+        if (bad) {
             fprintf(stderr, "matex transfer: unexpected argument '%s'\n", o);
             return 2;
-        } else if (!a->src) a->src = o;
+        }
+        if (o[0] == '-') continue;
+        if (!a->src) a->src = o;
         else a->dst = o;
     }
     if (!a->src || !a->dst || !a->out) {
@@ -61,8 +84,10 @@ static int parse_args(int argc, char **argv, transfer_args *a) {
         return 2;
     }
     if (a->views < 2 || a->views > 64 || a->candidates < 1 || a->candidates > 1000 || a->size < 64 ||
-        a->size > 8192) {
-        fprintf(stderr, "matex transfer: --views must be 2..64, --candidates 1..1000, --size 64..8192\n");
+        a->size > 8192 || a->image_size < 0 || a->image_size > 2048 || !(a->frontal_threshold >= 0) ||
+        a->frontal_threshold >= 1) {
+        fprintf(stderr, "matex transfer: --views must be 2..64, --candidates 1..1000, --size 64..8192, --image-size\n"
+                        "0..2048, --frontal-threshold in [0, 1)\n");
         return 2;
     }
     return 0;
@@ -131,17 +156,36 @@ static int load_inputs(const transfer_args *a, transfer_state *t, mx_status *st)
     return 0;
 }
 
-/* Renders the source from cam and backprojects it where the destination is visible,
- * frontal, not internal, and the source has a surface. */
-static int transfer_view(transfer_state *t, const mx_camera *cam, mx_status *st) {
-    const float bg[3] = {0, 0, 0};
+/* The render through the texture job's model image: crop to the destination's object, resize
+ * to image_size, paste back bilinearly (what happens to every generated image). */
+static int through_model_image(const transfer_state *t, int image_size, mx_image *img, mx_status *st) {
+    size_t n = (size_t)img->w * img->h;
+    uint8_t *fg = malloc(n);
+    mx_image small = {0};
+    if (!fg) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
+    mx_mask_foreground(&t->vb.gb, fg);
+    mx_crop crop = mx_crop_from_mask(fg, img->w, img->h, 0.05f);
+    free(fg);
+    if (mx_crop_resize(img, crop, image_size, &small, st)) return -1;
+    memset(img->data, 0, n * (size_t)img->c * sizeof *img->data);
+    mx_crop_paste(&small, crop, img);
+    mx_image_free(&small);
+    return 0;
+}
+
+/* Renders the source from cam (over the background colour) and backprojects it where the
+ * destination is visible, frontal, not internal, away from edges, and the source has a surface. */
+static int transfer_view(const transfer_args *a, transfer_state *t, const mx_camera *cam, mx_status *st) {
     mx_image img = {0};
-    int rc = mx_view_prepare(&t->vb, &t->dst, t->dst_pos, cam, MX_NORMAL_GEOMETRIC, 0.1f, t->pool, st) ||
+    int rc = mx_view_prepare(&t->vb, &t->dst, t->dst_pos, cam, MX_NORMAL_GEOMETRIC, a->frontal_threshold, t->pool,
+                             st) ||
+             mx_view_erode_edges(&t->vb, mx_view_erode_radius(a->size, a->image_size), st) ||
              mx_rasterize(&t->src, t->src_pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, t->pool, &t->src_gb, st) ||
-             mx_render_textured(&t->src_gb, &t->src, t->src_tex, t->src_ntex, bg, t->pool, &img, st);
+             mx_render_textured(&t->src_gb, &t->src, t->src_tex, t->src_ntex, a->background, t->pool, &img, st) ||
+             (a->image_size > 0 && through_model_image(t, a->image_size, &img, st));
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) t->vb.mask[i] &= t->src_gb.face[i] >= 0;
-        rc = mx_backproject(&t->bake, &t->vb.gb, &t->dst, &img, t->vb.mask, 0, t->pool, st);
+        rc = mx_backproject(&t->bake, &t->vb.gb, &t->dst, &img, t->vb.mask, a->write_flags, t->pool, st);
     }
     mx_image_free(&img);
     return rc;
@@ -156,19 +200,19 @@ static int select_and_bake(const transfer_args *a, transfer_state *t, double *co
     mx_camera_ortho(&t->cams[1], 180, 0, 3, 1.05f);
     mx_camera_fibonacci(t->cams + 2, a->candidates, &t->cams[0]);
     if (mx_view_cache_build(&t->vc, &t->dst, t->dst_pos, t->cams, ncams, SELECT_SIZE, a->size, a->size,
-                            t->nlayers, 0.1f, t->pool, st) ||
+                            t->nlayers, MX_NORMAL_GEOMETRIC, a->frontal_threshold, t->pool, st) ||
         mx_view_buffers_init(&t->vb, a->size, st) || mx_gbuffer_init(&t->src_gb, a->size, a->size, st) ||
         mx_bake_init(&t->bake, a->size, a->size, t->nlayers, st))
         return -1;
     for (int k = 0; k < 2; k++) {
-        if (transfer_view(t, &t->cams[k], st)) return -1;
+        if (transfer_view(a, t, &t->cams[k], st)) return -1;
         t->chosen[t->nchosen++] = k;
     }
     mx_view_plan plan;
     if (mx_view_plan_make(&t->vc, t->bake.known, a->views - 2, 0.995, 16, &plan, st)) return -1;
     int rc = 0;
     for (int k = 0; k < plan.n && !rc; k++) {
-        rc = transfer_view(t, &t->cams[plan.cand[k]], st);
+        rc = transfer_view(a, t, &t->cams[plan.cand[k]], st);
         t->chosen[t->nchosen++] = plan.cand[k];
     }
     mx_view_plan_free(&plan);

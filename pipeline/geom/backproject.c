@@ -30,7 +30,7 @@ int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
     b->w = w;
     b->h = h;
     b->nlayers = nlayers;
-    b->eps = 1e-3f;
+    b->eps = MX_BAKE_KNOWN_WEIGHT;
     b->overwrite_margin = 0.15f;
     b->sum_wc = calloc(3 * n, sizeof *b->sum_wc);
     b->sum_w = calloc(n, sizeof *b->sum_w);

@@ -21,9 +21,14 @@
 
 enum { MX_BACKPROJECT_OVERWRITE = 1 };
 
+/* A texel enters T^B (is "known") only with at least this much splat weight: a quarter of one
+ * pixel's full weight. A texel grazed by the corner of a single pixel (typically at a
+ * silhouette or a seam) stays open for a view that sees it properly. */
+#define MX_BAKE_KNOWN_WEIGHT 0.25f
+
 typedef struct mx_bake {
     int w, h, nlayers;
-    float eps;       /* T^B threshold on sum(w); 1e-3 by default */
+    float eps;       /* T^B threshold on sum(w); MX_BAKE_KNOWN_WEIGHT by default */
     float overwrite_margin; /* |n.v| gain needed to restart a texel (OVERWRITE); 0.15 */
     float *sum_wc;   /* [nlayers][h][w][3] */
     float *sum_w;    /* [nlayers][h][w] */

@@ -73,7 +73,8 @@ static int build_candidates(mx_job *j, mx_status *st) {
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
     int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
-                                 j->o->tex_size, j->nlayers, j->o->frontal_threshold, j->ctx.pool, st);
+                                 j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold, j->ctx.pool,
+                                 st);
     free(cams);
     if (rc) return -1;
     j->vc_ready = 1;
@@ -288,7 +289,8 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
     if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx.pool,
-                        st))
+                        st) ||
+        mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->image_size), st))
         return -1;
     uint8_t *fg = malloc((size_t)R * R);
     if (!fg) return mx_fail(st, MX_ENOMEM, "view mask: out of memory");

@@ -24,7 +24,7 @@ void mx_texture_opts_default(mx_texture_opts *o) {
     o->depth_weight[1] = 0.7f;
     o->inpaint_weight[0] = 0.8f;
     o->inpaint_weight[1] = 1.0f;
-    o->frontal_threshold = 0.3f;
+    o->frontal_threshold = MX_FRONTAL_THRESHOLD_DEFAULT;
     o->normal_source = MX_NORMAL_FROM_DEPTH;
     o->coverage_stop = 0.995f;
     o->up = MX_UP_Y;
