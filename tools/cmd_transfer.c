@@ -200,7 +200,9 @@ static int select_and_bake(const transfer_args *a, transfer_state *t, double *co
     mx_camera_ortho(&t->cams[1], 180, 0, 3, 1.05f);
     mx_camera_fibonacci(t->cams + 2, a->candidates, &t->cams[0]);
     if (mx_view_cache_build(&t->vc, &t->dst, t->dst_pos, t->cams, ncams, SELECT_SIZE, a->size, a->size,
-                            t->nlayers, MX_NORMAL_GEOMETRIC, a->frontal_threshold, t->pool, st) ||
+                            t->nlayers, MX_NORMAL_GEOMETRIC, a->frontal_threshold,
+                            mx_view_scale_radius(mx_view_erode_radius(a->size, a->image_size), a->size, SELECT_SIZE),
+                            t->pool, st) ||
         mx_view_buffers_init(&t->vb, a->size, st) || mx_gbuffer_init(&t->src_gb, a->size, a->size, st) ||
         mx_bake_init(&t->bake, a->size, a->size, t->nlayers, st))
         return -1;

@@ -36,6 +36,8 @@ static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_g
     return 0;
 }
 
+static int erode_mask(const mx_gbuffer *gb, uint8_t *mask, uint8_t *tmp, int radius, mx_status *st);
+
 /* usable = foreground, finite UV, not internal, frontal. */
 static void usable_pixels(const mx_gbuffer *gb, int normal_source, float thr, uint8_t *usable, uint8_t *tmp) {
     size_t n = (size_t)gb->w * gb->h;
@@ -62,6 +64,7 @@ typedef struct cache_job {
     const float *pos;
     int normal_source;
     float frontal_threshold;
+    int erode_radius;
     mx_pool *inner_pool; /* pool for the rasterizer: NULL when candidates run in parallel */
     cache_worker *workers;
     int *failed;         /* [ncand] */
@@ -78,6 +81,10 @@ static void render_candidate_task(void *ctx, int c, int thread) {
         return;
     }
     usable_pixels(&w->gb, j->normal_source, j->frontal_threshold, w->usable, w->tmp);
+    if (j->erode_radius > 0 && erode_mask(&w->gb, w->usable, w->tmp, j->erode_radius, &j->status[c])) {
+        j->failed[c] = 1;
+        return;
+    }
     j->failed[c] = collect_texels(vc, c, j->m, &w->gb, w->usable, &j->status[c]) != 0;
 }
 
@@ -102,7 +109,8 @@ static void workers_free(cache_worker *w, int n) {
 
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
                         const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
-                        int nlayers, int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st) {
+                        int nlayers, int normal_source, float frontal_threshold, int erode_radius, mx_pool *pool,
+                        mx_status *st) {
     memset(vc, 0, sizeof *vc);
     if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: view selection needs UVs", m->source_path);
     if (ncand <= 0 || (size_t)tex_w * tex_h * nlayers > INT32_MAX)
@@ -116,7 +124,7 @@ int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
     int parallel = mx_pool_threads(pool) > 1 &&
                    (int64_t)m->nfaces * mx_pool_threads(pool) <= CACHE_PARALLEL_FACE_BUDGET;
     int nworkers = parallel ? mx_pool_threads(pool) : 1;
-    cache_job j = {vc, m, pos, normal_source, frontal_threshold, parallel ? NULL : pool, NULL, NULL, NULL};
+    cache_job j = {vc, m, pos, normal_source, frontal_threshold, erode_radius, parallel ? NULL : pool, NULL, NULL, NULL};
     vc->cams = malloc((size_t)ncand * sizeof *vc->cams);
     vc->texels = calloc((size_t)ncand, sizeof *vc->texels);
     vc->ntexels = calloc((size_t)ncand, sizeof *vc->ntexels);
@@ -364,15 +372,26 @@ static void dilate_lines(const uint8_t *in, uint8_t *out, int n, int lines, size
     }
 }
 
-int mx_view_erode_edges(mx_view_buffers *vb, int radius, mx_status *st) {
-    int w = vb->gb.w, h = vb->gb.h;
+/* mask &= not within radius of an edge pixel of gb; tmp: scratch of the image size. */
+static int erode_mask(const mx_gbuffer *gb, uint8_t *mask, uint8_t *tmp, int radius, mx_status *st) {
+    int w = gb->w, h = gb->h;
     size_t n = (size_t)w * h;
     uint8_t *edge = malloc(n);
     if (!edge) return mx_fail(st, MX_ENOMEM, "edge erosion: out of memory");
-    mark_edges(&vb->gb, edge);
-    dilate_lines(edge, vb->tmp, w, h, 1, (size_t)w, radius);
-    dilate_lines(vb->tmp, edge, h, w, (size_t)w, 1, radius);
-    for (size_t i = 0; i < n; i++) vb->mask[i] = vb->mask[i] && !edge[i];
+    mark_edges(gb, edge);
+    dilate_lines(edge, tmp, w, h, 1, (size_t)w, radius);
+    dilate_lines(tmp, edge, h, w, (size_t)w, 1, radius);
+    for (size_t i = 0; i < n; i++) mask[i] = mask[i] && !edge[i];
     free(edge);
     return 0;
+}
+
+int mx_view_erode_edges(mx_view_buffers *vb, int radius, mx_status *st) {
+    return erode_mask(&vb->gb, vb->mask, vb->tmp, radius, st);
+}
+
+int mx_view_scale_radius(int radius, int from, int to) {
+    if (radius <= 0 || from <= 0) return 0;
+    int r = (int)lroundf((float)radius * (float)to / (float)from);
+    return r < 1 ? 1 : r;
 }

@@ -24,10 +24,16 @@ typedef struct mx_view_cache {
 
 /* Renders every candidate at size x size (culled, with the unculled depth for the
  * internal-face mask; normals of normal_source (MX_NORMAL_*, the same as the backprojection
- * of the chosen views uses) against frontal_threshold, 0 keeps every visible pixel). */
+ * of the chosen views uses) against frontal_threshold, 0 keeps every visible pixel; edges
+ * eroded by erode_radius pixels of this size as mx_view_erode_edges, 0 = none), so that
+ * selection counts the pixels backprojection will use. */
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
                         const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
-                        int nlayers, int normal_source, float frontal_threshold, mx_pool *pool, mx_status *st);
+                        int nlayers, int normal_source, float frontal_threshold, int erode_radius, mx_pool *pool,
+                        mx_status *st);
+/* An erosion radius of `radius` pixels at render size `from`, at render size `to` (0 stays 0,
+ * otherwise at least 1). */
+int mx_view_scale_radius(int radius, int from, int to);
 void mx_view_cache_free(mx_view_cache *vc);
 
 /* Pixels of candidate c whose texel is not in `known` ([nlayers][tex_h][tex_w]). */

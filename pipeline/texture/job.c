@@ -73,8 +73,10 @@ static int build_candidates(mx_job *j, mx_status *st) {
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
     int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
-                                 j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold, j->ctx.pool,
-                                 st);
+                                 j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold,
+                                 mx_view_scale_radius(mx_view_erode_radius(j->o->render_size, j->o->image_size),
+                                                      j->o->render_size, CANDIDATE_RENDER_SIZE),
+                                 j->ctx.pool, st);
     free(cams);
     if (rc) return -1;
     j->vc_ready = 1;
