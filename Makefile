@@ -13,25 +13,33 @@ CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR
 LDLIBS   = -lm -lpthread
 IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lstdc++
 
+SANITIZERS = address,undefined
 ifeq ($(SAN),1)
-CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-CXXFLAGS += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-LDFLAGS  += -fsanitize=address,undefined
+CFLAGS   += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+CXXFLAGS += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDFLAGS  += -fsanitize=$(SANITIZERS)
+endif
+
+# CUDA=1 (set by `make cuda`): the C code knows the CUDA backend; programs link libmx_cuda.a.
+ifeq ($(CUDA),1)
+CFLAGS  += -DMX_WITH_CUDA
+LDLIBS  += $(BUILD)/libmx_cuda.a $(BUILD)/libmx_core.a $(CUDA_LIBS)
 endif
 
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
+AVX512BF16_FLAGS = $(AVX512_FLAGS) -mavx512bf16
 
 # x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones.
 ifneq ($(filter x86_64 i686 i386,$(shell uname -m)),)
-SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c)
+SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c)
 else
 SIMD_SRC    =
 CFLAGS     += -DMX_NO_X86_SIMD
 endif
 
 # Modules: a test links only the modules it needs, so one module's breakage stays local.
-CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
+CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(wildcard pipeline/geom/*.c)
@@ -51,7 +59,7 @@ LIBMATEX    = $(BUILD)/libmatex.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install
+.PHONY: all test asan bench clean cuda test-full demo install deps
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -74,6 +82,10 @@ $(BUILD)/%.a: | $(BUILD)/empty.o
 	rm -f $@
 	ar rcs $@ $^ $(if $^,,$(BUILD)/empty.o)
 
+# What `matex --version` says of the build (runtime/version.c).
+$(BUILD)/runtime/version.o: CFLAGS += -DMX_BUILD_FLAGS='"$(OPT) -ffp-contract=off"' \
+                                      -DMX_BUILD_SAN='"$(if $(filter 1,$(SAN)),$(SANITIZERS),none)"'
+
 $(BUILD)/empty.o:
 	@mkdir -p $(dir $@)
 	echo 'typedef int mx_empty_unit;' | $(CC) -x c -c -o $@ -
@@ -84,6 +96,9 @@ $(BUILD)/%_avx2.o: %_avx2.c
 $(BUILD)/%_avx512.o: %_avx512.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512_FLAGS) -c -o $@ $<
+$(BUILD)/%_avx512bf16.o: %_avx512bf16.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c -o $@ $<
@@ -107,11 +122,15 @@ $(BUILD)/tests/test_tex_%: $(BUILD)/tests/test_tex_%.o $(TEST_UTIL) $(LIB_TEX) $
 
 # Tiny random networks of the SD1.5 family for the pipeline tests and `make demo`.
 DEMO_WEIGHTS = $(BUILD)/demo/demo.mxw
-$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*)
+$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*) \
+                 tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt
 	@mkdir -p $(dir $@)
 	sh tools/make_demo_weights.sh $(BUILD)/matex $@
 
-TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
+# The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
+# activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
+MX_TEST_DEVICE ?= cpu-strict
+TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw
 test: all $(TEST_BINS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS)
@@ -120,14 +139,23 @@ test: all $(TEST_BINS) $(DEMO_WEIGHTS)
 test-full: all $(TEST_BINS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS)
 
-# End to end in seconds with tiny random weights (they paint noise: see README).
+# End to end in seconds with tiny random weights (they paint noise: see README): the shipped
+# Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
+DEMO_OUT = demo/spot
 demo: all $(DEMO_WEIGHTS)
-	$(BUILD)/matex texture ../shared/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
-	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 -o demo/spot
-	@echo "demo: textured mesh in demo/spot (mesh.glb, mesh.obj, texture.png, report.json)"
+	rm -rf $(DEMO_OUT)
+	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
+	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
+	$(BUILD)/matex render $(DEMO_OUT)/mesh.glb --views 8 --size 256 -o $(DEMO_OUT)/views
+	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, report.json)"
+	@echo "demo: contact sheet of 8 views in $(CURDIR)/$(DEMO_OUT)/views/contact_sheet.png"
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
+
+# The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
+deps:
+	sh tools/deps.sh
 
 # ---- benchmarks: OpenBLAS is linked into the benchmark only ----
 BENCH_SRC  = $(wildcard tools/bench_*.c)
@@ -149,25 +177,39 @@ clean:
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 
-# ---- CUDA backend: `make cuda` builds $(BUILD)/libmx_cuda.a and its test, `make test-cuda` runs the test
-# (it skips when no GPU is present). Not part of `make` / `make test`. Fat binary for sm_80 and sm_90.
+# ---- CUDA backend: `make cuda` builds, in $(CUDA_BUILD), the CUDA kernels (libmx_cuda.a), their op
+# test, the network tests and a matex whose --device accepts cuda (C sources with -DMX_WITH_CUDA).
+# `make test-cuda` runs the op test, then every network golden and the tiny pipeline on the GPU
+# against the CPU goldens (bound 1e-2); without a GPU it prints one skip line. Not part of `make` /
+# `make test`. Fat binary for sm_80 and sm_90.
 NVCC       ?= /usr/local/cuda/bin/nvcc
 CUDA_HOME  ?= /usr/local/cuda
+CUDA_BUILD ?= build-cuda
 NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
 NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
 CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
-CUDA_LDLIBS = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -lm -lpthread
+CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
+CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
 	@mkdir -p $(dir $@)
 	$(NVCC) $(NVCCFLAGS) -c -o $@ $<
 $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB_CORE)
-	$(NVCC) $(NVCC_ARCH) -o $@ $^ $(CUDA_LDLIBS)
+	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
-.PHONY: test-cuda
-cuda: $(LIB_CUDA) $(CUDA_TEST)
+ifeq ($(CUDA),1)
+$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): | $(LIB_CUDA)
+endif
+
+.PHONY: test-cuda cuda-all cuda-run-tests
+cuda:
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
+cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 test-cuda: cuda
-	$(CUDA_TEST)
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-run-tests
+cuda-run-tests:
+	$(TEST_ENV) MX_TEST_DEVICE=cuda MX_TEST_MIN_BOUND=1e-2 MATEX_FULL=1 sh tests/cuda/run.sh $(CUDA_TEST) \
+	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))

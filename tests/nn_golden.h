@@ -1,5 +1,7 @@
-/* Helpers for the network parity tests (test_nn_unet/controlnet/vae): golden folder paths,
- * config text, fp32 copies of golden tensors, a ready ops context. Header-only (static). */
+/* Helpers for the network parity tests (test_nn_unet/controlnet/vae/clip/pipeline): golden
+ * folder paths, config text, fp32 copies of golden tensors, a ready ops context on the device
+ * named by MX_TEST_DEVICE (cpu, cpu-strict, cuda; default cpu) and the host <-> device copies
+ * at the edges of a network call. Header-only (static). */
 #ifndef MX_NN_GOLDEN_H
 #define MX_NN_GOLDEN_H
 
@@ -8,12 +10,24 @@
 #include <string.h>
 
 #include "../ops/ops.h"
+#include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/unet.h"
+#include "../pipeline/nn/vae.h"
 #include "../runtime/fileio.h"
 #include "../weights/safetensors.h"
 #include "util_test.h"
 
-static inline void golden_path(char *buf, size_t cap, const char *net, const char *file) {
-    snprintf(buf, cap, "%s/golden/%s/%s", mx_shared_dir(), net, file);
+/* Path of golden/NET/FILE in the test data (util_test.h); -1 when absent. */
+static inline int golden_path(char *buf, size_t cap, const char *net, const char *file) {
+    char rel[512];
+    snprintf(rel, sizeof rel, "golden/%s/%s", net, file);
+    return mx_test_path(buf, cap, rel);
+}
+
+/* 1 when golden/NET/FILE is there; otherwise reports the case skipped (util_test.h), returns 0. */
+static inline int golden_have(const char *net, const char *file) {
+    char path[1024];
+    return mx_test_need(path, sizeof path, "golden/%s/%s", net, file);
 }
 
 /* Whole file as a NUL-terminated string (caller frees), or NULL. */
@@ -48,14 +62,208 @@ static inline float *golden_f32(const mx_safetensors *f, const char *name, size_
     return x;
 }
 
-static inline int golden_ctx(mx_ctx *c) {
+/* The device of the network tests: MX_TEST_DEVICE, default cpu. */
+static inline mx_backend_kind golden_device(void) {
+    mx_backend_kind kind = MX_BACKEND_CPU;
+    mx_status st;
+    const char *name = getenv("MX_TEST_DEVICE");
+    if (name && *name && mx_backend_parse(name, &kind, &st)) {
+        fprintf(stderr, "MX_TEST_DEVICE: %s\n", st.msg);
+        exit(2);
+    }
+    return kind;
+}
+
+/* An ops context computing in precision p (the parity tests default to fp32). */
+static inline int golden_ctx_precision(mx_ctx *c, mx_precision p) {
     mx_status st;
     int threads = getenv("MX_TEST_THREADS") ? atoi(getenv("MX_TEST_THREADS")) : 0;
-    if (mx_ctx_create(c, threads, mx_cpu_best_isa(), (size_t)64 << 20, &st)) {
+    if (mx_ctx_create_on(c, golden_device(), threads, mx_cpu_isa_for(p), (size_t)64 << 20, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return -1;
     }
+    printf("device %s\n", mx_backend_name(c->be->kind));
     return 0;
+}
+
+static inline int golden_ctx(mx_ctx *c) { return golden_ctx_precision(c, MX_PREC_FP32); }
+
+/* A bf16 context when this CPU has bf16 arithmetic (0); else prints that the bf16 parity was
+ * not tested and returns 1 (-1 on error). */
+static inline int golden_bf16_ctx(mx_ctx *c, const char *test) {
+    if (mx_isa_precision(mx_cpu_isa_for(MX_PREC_BF16)) != MX_PREC_BF16) {
+        printf("%s: bf16 arithmetic NOT TESTED (no AVX512_BF16 on this CPU, or lowered by MATEX_ISA)\n", test);
+        return 1;
+    }
+    return golden_ctx_precision(c, MX_PREC_BF16);
+}
+
+/* Relative L2 bound against the fp32 goldens (tests/data/golden/README.md): 1e-4 for fp32
+ * arithmetic, 1e-2 for bf16. */
+static inline double golden_bound(const mx_ctx *c) {
+    return mx_isa_precision(c->k->isa) == MX_PREC_BF16 ? 1e-2 : 1e-4;
+}
+
+/* "net" or "net [bf16]": the label of a parity line. */
+static inline void golden_label(char *buf, size_t cap, const mx_ctx *c, const char *net) {
+    snprintf(buf, cap, "%s%s", net, mx_isa_precision(c->k->isa) == MX_PREC_BF16 ? " [bf16]" : "");
+}
+
+/* Backend copy of n host floats (NULL stays NULL); exits on failure. */
+static inline float *golden_dev(const mx_ctx *c, const float *host, size_t n) {
+    mx_status st;
+    if (!host) return NULL;
+    float *d = mx_dev_from_host(c, host, n, &st);
+    if (!d) {
+        fprintf(stderr, "%s\n", st.msg);
+        exit(1);
+    }
+    return d;
+}
+
+/* Backend memory for n floats; exits on failure. */
+static inline float *golden_dev_alloc(const mx_ctx *c, size_t n) {
+    mx_status st;
+    float *d = mx_dev_alloc(c, n, &st);
+    if (!d) {
+        fprintf(stderr, "%s\n", st.msg);
+        exit(1);
+    }
+    return d;
+}
+
+/* host[0..n) = dev[0..n), then frees dev; returns 0 or -1 (message printed). */
+static inline int golden_fetch(const mx_ctx *c, float *host, float *dev, size_t n) {
+    mx_status st;
+    int rc = mx_download(c, host, dev, n, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    mx_dev_free(c, dev);
+    return rc;
+}
+
+/* An arena on the context's backend of exactly `bytes`; exits on failure. */
+static inline void golden_arena(const mx_ctx *c, mx_arena *a, size_t bytes) {
+    mx_status st;
+    if (mx_arena_create_on(a, c->be, bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        exit(1);
+    }
+}
+
+/* Runs one call on the context's device in an arena of exactly the measured size: the host
+ * inputs are copied to the device, the output back. */
+static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_unet_arena_bytes(u, in->B, in->H, in->W, in->T, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_unet_config *cfg = mx_unet_cfg(u);
+    int n = mx_unet_num_residuals(cfg), C, h, w;
+    mx_unet_input d = *in;
+    float *res[MX_UNET_MAX_RES + 1] = {0};
+    d.sample = golden_dev(c, in->sample, (size_t)in->B * cfg->in_channels * in->H * in->W);
+    d.timesteps = golden_dev(c, in->timesteps, (size_t)in->B);
+    d.encoder_hidden_states = golden_dev(c, in->encoder_hidden_states, (size_t)in->B * in->T * cfg->cross_attention_dim);
+    for (int i = 0; i <= n && in->down_residuals; i++) {
+        mx_unet_residual_shape(cfg, i, in->H, in->W, &C, &h, &w);
+        res[i] = golden_dev(c, i < n ? in->down_residuals[i] : in->mid_residual, (size_t)in->B * C * h * w);
+    }
+    d.down_residuals = in->down_residuals ? (const float *const *)res : NULL;
+    d.mid_residual = in->down_residuals ? res[n] : NULL;
+    size_t no = (size_t)in->B * cfg->out_channels * in->H * in->W;
+    float *dout = golden_dev_alloc(c, no);
+    int rc = mx_unet_forward(c, u, &d, dout, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, out, dout, no)) rc = -1;
+    mx_dev_free(c, (void *)d.sample);
+    mx_dev_free(c, (void *)d.timesteps);
+    mx_dev_free(c, (void *)d.encoder_hidden_states);
+    for (int i = 0; i <= n; i++) mx_dev_free(c, res[i]);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+/* The same for a ControlNet: down[0..n) and mid are host buffers (read too when accumulating). */
+static inline int golden_run_controlnet(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
+                                        float **down, float *mid, int accumulate) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_controlnet_arena_bytes(m, in->B, in->H, in->W, in->T, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_unet_config *cfg = mx_controlnet_cfg(m);
+    int n = mx_unet_num_residuals(cfg), C, h, w, f = 1 << (cfg->n_cond_emb - 1);
+    mx_controlnet_input d = *in;
+    float *res[MX_UNET_MAX_RES + 1];
+    size_t cnt[MX_UNET_MAX_RES + 1];
+    d.sample = golden_dev(c, in->sample, (size_t)in->B * cfg->in_channels * in->H * in->W);
+    d.timesteps = golden_dev(c, in->timesteps, (size_t)in->B);
+    d.encoder_hidden_states = golden_dev(c, in->encoder_hidden_states, (size_t)in->B * in->T * cfg->cross_attention_dim);
+    d.cond = golden_dev(c, in->cond, (size_t)in->B * cfg->conditioning_channels * in->H * f * in->W * f);
+    for (int i = 0; i <= n; i++) {
+        mx_unet_residual_shape(cfg, i, in->H, in->W, &C, &h, &w);
+        cnt[i] = (size_t)in->B * C * h * w;
+        res[i] = golden_dev(c, i < n ? down[i] : mid, cnt[i]);
+    }
+    int rc = mx_controlnet_forward(c, m, &d, res, res[n], accumulate, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    for (int i = 0; i <= n; i++)
+        if (golden_fetch(c, i < n ? down[i] : mid, res[i], cnt[i])) rc = -1;
+    mx_dev_free(c, (void *)d.sample);
+    mx_dev_free(c, (void *)d.timesteps);
+    mx_dev_free(c, (void *)d.encoder_hidden_states);
+    mx_dev_free(c, (void *)d.cond);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+/* Encode / decode on the context's device: host in, host out. */
+static inline int golden_vae_encode(const mx_ctx *c, const mx_vae *v, const float *img, int B, int H, int W, float *mean, float *logvar) {
+    mx_status st;
+    size_t bytes, f = (size_t)mx_vae_factor(v);
+    mx_arena a;
+    if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_vae_config *cfg = mx_vae_cfg(v);
+    size_t nl = (size_t)B * cfg->latent_channels * (H / f) * (W / f);
+    float *dimg = golden_dev(c, img, (size_t)B * cfg->in_channels * H * W), *dmean = golden_dev_alloc(c, nl);
+    float *dlogvar = logvar ? golden_dev_alloc(c, nl) : NULL;
+    int rc = mx_vae_encode(c, v, dimg, B, H, W, dmean, dlogvar, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, mean, dmean, nl) || (logvar && golden_fetch(c, logvar, dlogvar, nl))) rc = -1;
+    mx_dev_free(c, dimg);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+static inline int golden_vae_decode(const mx_ctx *c, const mx_vae *v, const float *lat, int B, int h, int w, float *img) {
+    mx_status st;
+    size_t bytes, f = (size_t)mx_vae_factor(v);
+    mx_arena a;
+    if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_vae_config *cfg = mx_vae_cfg(v);
+    size_t ni = (size_t)B * cfg->out_channels * (h * f) * (w * f);
+    float *dlat = golden_dev(c, lat, (size_t)B * cfg->latent_channels * h * w), *dimg = golden_dev_alloc(c, ni);
+    int rc = mx_vae_decode(c, v, dlat, B, h, w, dimg, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, img, dimg, ni)) rc = -1;
+    mx_dev_free(c, dlat);
+    mx_arena_destroy(&a);
+    return rc;
 }
 
 #endif

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <limits.h>
 #include <unistd.h>
 
 #include "nn_golden.h"
@@ -20,22 +21,26 @@ static int sh(const char *cmd) {
     return rc;
 }
 
+/* Absolute path of golden folder NET (tests/data/golden or $MATEX_TESTDATA/golden). */
+static int golden_dir(char *buf, size_t cap, const char *net) {
+    char rel[1024];
+    golden_path(rel, sizeof rel, net, "");
+    if (!realpath(rel, buf) || strlen(buf) >= cap) return -1;
+    return 0;
+}
+
 /* tmpdir/set.mxw: a diffusers model folder of symlinks to the golden networks, converted. */
 static int make_model_set(void) {
-    char cmd[16384], g[1024];
-    snprintf(g, sizeof g, "%s/golden", mx_shared_dir());
-    if (g[0] != '/') {
-        char cwd[512];
-        if (!getcwd(cwd, sizeof cwd)) return -1;
-        snprintf(g, sizeof g, "%s/%s/golden", cwd, mx_shared_dir());
-    }
+    static const char *nets[7] = {"unet_tiny", "vae_tiny", "clip_tiny", "tokenizer", "pipeline_controlnet_inpaint_tiny",
+                                  "controlnet_tiny", "controlnet_tiny_inpaint"};
+    char g[7][PATH_MAX], cmd[8 * PATH_MAX + 1024];
+    for (int i = 0; i < 7; i++)
+        if (golden_dir(g[i], sizeof g[i], nets[i])) return fprintf(stderr, "golden/%s not found\n", nets[i]), -1;
     snprintf(cmd, sizeof cmd,
-             "set -e; D=%s/set; mkdir -p $D/scheduler; ln -s %s/unet_tiny $D/unet; ln -s %s/vae_tiny $D/vae; "
-             "ln -s %s/clip_tiny $D/text_encoder; ln -s %s/tokenizer $D/tokenizer; "
-             "cp %s/pipeline_controlnet_inpaint_tiny/scheduler_config.json $D/scheduler/; "
-             "./matex convert $D --controlnet depth=%s/controlnet_tiny --controlnet inpaint=%s/controlnet_tiny_inpaint "
-             "--dtype f32 --quiet -o %s/set.mxw",
-             tmpdir, g, g, g, g, g, g, g, tmpdir);
+             "set -e; D=%s/set; mkdir -p $D/scheduler; ln -s %s $D/unet; ln -s %s $D/vae; ln -s %s $D/text_encoder; "
+             "ln -s %s $D/tokenizer; cp %s/scheduler_config.json $D/scheduler/; "
+             "./matex convert $D --controlnet depth=%s --controlnet inpaint=%s --dtype f32 --quiet -o %s/set.mxw",
+             tmpdir, g[0], g[1], g[2], g[3], g[4], g[5], g[6], tmpdir);
     return sh(cmd);
 }
 
@@ -43,8 +48,10 @@ static void compare_case(const char *verb, const char *gcase, int steps) {
     char cmd[2048], gin[1024], out[512], label[128];
     golden_path(gin, sizeof gin, gcase, "inputs.safetensors");
     snprintf(out, sizeof out, "%s/%s.safetensors", tmpdir, verb);
-    snprintf(cmd, sizeof cmd, "./matex run-net %s --weights %s/set.mxw --inputs %s --out %s --steps %d --guidance 7.5 2>/dev/null",
-             verb, tmpdir, gin, out, steps);
+    const char *dev = getenv("MX_TEST_DEVICE");
+    snprintf(cmd, sizeof cmd,
+             "./matex run-net %s --weights %s/set.mxw --inputs %s --out %s --steps %d --guidance 7.5 --device %s 2>/dev/null",
+             verb, tmpdir, gin, out, steps, dev && *dev ? dev : "cpu");
     CHECK(sh(cmd) == 0);
     mx_safetensors got, want;
     mx_status st;

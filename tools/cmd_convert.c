@@ -29,7 +29,10 @@ static void convert_usage(FILE *f) {
             "  --quiet                  no progress lines\n"
             "  -h, --help               this help\n"
             "\n"
-            "example: matex convert ../shared/golden/unet_tiny -o unet_tiny.mxw --dtype f32\n");
+            "examples:\n"
+            "  matex convert stable-diffusion-v1-5 --controlnet depth=control_v11f1p_sd15_depth \\\n"
+            "      --controlnet inpaint=control_v11p_sd15_inpaint -o sd15.mxw\n"
+            "  matex convert tests/data/golden/unet_tiny -o unet_tiny.mxw --dtype f32   (in the source tree)\n");
 }
 
 static int parse_dtype(const char *s, mx_dtype *dt) {

@@ -38,8 +38,8 @@ typedef struct mx_sd_control {
 typedef int (*mx_sd_progress)(void *user, int step, int n_steps, int64_t timestep, const float *latents,
                               size_t numel);
 /* Called after each scheduler step (before progress) and may change the latents [n, 4, h, w]
- * in place through ops (the inpaint pipeline puts the known region back here); non-zero is an
- * error already recorded in st. */
+ * (memory of c's backend) in place through ops (the inpaint pipeline puts the known region
+ * back here); non-zero is an error already recorded in st. */
 typedef int (*mx_sd_after_step)(void *user, const mx_ctx *c, int step, int n_steps, float *latents,
                                 mx_status *st);
 

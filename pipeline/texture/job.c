@@ -85,6 +85,9 @@ static int build_candidates(mx_job *j, mx_status *st) {
     if (!j->visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
     mx_view_cache_visible(&j->vc, j->visible);
     j->n_visible = mx_mask_count(j->visible, (int64_t)texels);
+    if (j->n_visible == 0)
+        return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
+                       j->o->mesh_path);
     return 0;
 }
 
@@ -114,6 +117,8 @@ static void report_header(mx_job *j) {
     mx_jw_int(w, "render_size", o->render_size);
     mx_jw_int(w, "image_size", o->image_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
+    mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
+    mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
     mx_jw_str(w, "weights", o->weights_path);
     char digest[32];
     mx_file_digest_hex(o->weights_path, digest);
@@ -139,17 +144,21 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     memset(j, 0, sizeof *j);
     j->o = o;
     j->t0 = mx_now();
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
+    if (mx_ctx_create_on(&j->ctx, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
-    if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
+    mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_backend_name(o->device),
+                    mx_precision_name(mx_isa_precision(j->ctx.k->isa)), mx_isa_name(j->ctx.k->isa),
+                    mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+    if (mx_models_load(&j->models, &j->ctx, o->weights_path, model_needs, st)) return -1;
     j->models_ready = 1;
     mx_job_progress(j, "loaded weights %s", o->weights_path);
-    if (mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
-    if (prepare_uvs(j, need_uvs, st)) return -1;
+    if (mx_job_check_cancel(j, st) || mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
+    if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
     if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || encode_negative(j, st)) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || encode_negative(j, st)) return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -157,7 +166,13 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     return 0;
 }
 
+int mx_job_check_cancel(const mx_job *j, mx_status *st) {
+    if (j->o->cancel && *j->o->cancel) return mx_fail(st, MX_ECANCEL, "interrupted");
+    return 0;
+}
+
 void mx_job_close(mx_job *j) {
+    mx_outdir_discard(&j->out);
     for (int i = 0; i < j->prompts.n; i++) {
         free(j->prompts.text[i]);
         free(j->prompts.emb[i]);
@@ -215,7 +230,7 @@ static int report_step(void *user, int step, int n_steps, int64_t timestep, cons
     (void)numel;
     const progress_ctx *p = user;
     mx_job_progress(p->job, "%s: step %d/%d (t=%lld)", p->stage, step + 1, n_steps, (long long)timestep);
-    return 0;
+    return p->job->o->cancel && *p->job->o->cancel; /* non-zero stops the denoising loop */
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
@@ -237,7 +252,8 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
     for (int i = 0; i < b->n; i++)
         mx_rng_fill_normal(noise + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
-        mx_scale(&j->ctx, lat, noise, mx_sched_init_noise_sigma(rq->sched), per_item * b->n);
+        memcpy(lat, noise, per_item * b->n * sizeof *lat);
+        mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
         return mx_sd_denoise(rq, &j->ctx, lat, b->n, h, w, st);
     }
     mx_sd_edit e = {j->models.vae, b->init_images, b->paint_masks, noise, b->paint_masks ? 1.0f : b->strength};
@@ -261,7 +277,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, &j->ctx, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     mx_sd_control controls[2];
     int nc = 0;
@@ -273,7 +289,10 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
                         report_step, &pc, NULL, NULL};
     double t = mx_now();
-    if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) goto done;
+    if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
+        mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
+        goto done;
+    }
     j->last_denoise_s = mx_now() - t;
     t = mx_now();
     rc = mx_sd_decode_latents(&j->ctx, j->models.vae, lat, b->n, h, w, images, st);
@@ -435,7 +454,7 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    if (fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
@@ -448,7 +467,9 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
-    if (mx_outdir_write(j->o->out_dir, &j->mesh, tex, j->nlayers, text, st)) return -1;
+    if (mx_job_check_cancel(j, st) ||
+        mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st))
+        return -1;
     mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
     return 0;
 }

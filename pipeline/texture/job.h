@@ -12,6 +12,7 @@
 #include "../geom/views.h"
 #include "jsonw.h"
 #include "models.h"
+#include "outdir.h"
 #include "texture.h"
 
 #define MX_JOB_MAX_PROMPTS 16
@@ -26,6 +27,7 @@ typedef struct mx_prompt_cache {
 
 typedef struct mx_job {
     const mx_texture_opts *o;
+    mx_outdir out; /* opened (checked, staging folder created) before anything else */
     mx_ctx ctx;
     int ctx_ready;
     mx_models models;
@@ -81,8 +83,10 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Context, models (needs: MX_MODELS_NEED_*), mesh and its normalised copy, bake sized
- * tex_size with nlayers layers, candidate cache and the report's header. */
+/* Output folder (checked, staging folder created), context, models (needs:
+ * MX_MODELS_NEED_*), mesh and its normalised copy, bake sized tex_size with nlayers layers,
+ * candidate cache and the report's header. mx_job_close removes the staging folder of a run
+ * that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
 void mx_job_close(mx_job *j);
 
@@ -121,6 +125,8 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
 double mx_job_coverage(const mx_job *j);
 /* Fills unreached texels, writes the output folder (staged, then moved into place). */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
+/* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set, else 0. */
+int mx_job_check_cancel(const mx_job *j, mx_status *st);
 /* Records the time of a finished stage (name: a string literal). */
 void mx_job_stage_done(mx_job *j, const char *name, double seconds);
 /* Progress line on stderr (unless quiet). */
