@@ -232,18 +232,16 @@ static int select_and_bake(const transfer_args *a, transfer_state *t, double *co
     return 0;
 }
 
-/* Textures from the bake, filled inside charts and dilated across their borders. */
+/* Textures from the bake, filled inside charts (harmonic, across seams) and dilated across
+ * their borders. */
 static int finish_textures(const transfer_args *a, transfer_state *t, mx_status *st) {
     const float grey[3] = {0.5f, 0.5f, 0.5f};
     size_t plane = (size_t)a->size * a->size;
     t->out_tex = calloc((size_t)t->nlayers, sizeof *t->out_tex);
-    uint8_t *chart = malloc(plane);
-    int rc = !t->out_tex || !chart ? mx_fail(st, MX_ENOMEM, "transfer: out of memory") : 0;
+    int rc = !t->out_tex ? mx_fail(st, MX_ENOMEM, "transfer: out of memory") : 0;
     for (int l = 0; l < t->nlayers && !rc; l++)
         rc = mx_bake_texture(&t->bake, l, grey, &t->out_tex[l], st) ||
-             mx_uv_chart_mask(&t->dst, l, t->nlayers, a->size, a->size, chart, st) ||
-             mx_uv_fill(&t->out_tex[l], t->bake.known + l * plane, chart, GUTTER, st);
-    free(chart);
+             mx_uv_fill_harmonic(&t->out_tex[l], t->bake.known + l * plane, &t->dst, l, t->nlayers, GUTTER, st);
     return rc;
 }
 

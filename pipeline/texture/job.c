@@ -437,19 +437,12 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_end_obj(w);
 }
 
-/* Push-pull fill of every layer's unreached chart texels. */
+/* Harmonic fill across UV seams of every layer's unreached chart texels. */
 static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
-    int T = j->o->tex_size;
-    uint8_t *chart = malloc((size_t)T * T);
-    if (!chart) return mx_fail(st, MX_ENOMEM, "UV fill: out of memory");
-    int rc = 0;
-    for (int l = 0; l < j->nlayers && !rc; l++) {
-        const uint8_t *known = j->bake.known + (size_t)l * T * T;
-        rc = mx_uv_chart_mask(&j->mesh, l, j->nlayers, T, T, chart, st) ||
-             mx_uv_fill(&tex[l], known, chart, UV_GUTTER, st);
-    }
-    free(chart);
-    return rc ? -1 : 0;
+    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    for (int l = 0; l < j->nlayers; l++)
+        if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, st)) return -1;
+    return 0;
 }
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
