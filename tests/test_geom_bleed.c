@@ -103,18 +103,6 @@ static int transfer(const char *src, const char *out, const char *bg) {
 }
 
 int main(void) {
-    static const char *assets[] = {
-        "spot/spot_triangulated.obj",   "spot_ply/spot.ply",
-        "bob/bob_tri.obj",              "blub/blub_triangulated.obj",
-        "garment_female_casual/female_casualsuit01.obj",
-        "garment_female_elegant/female_elegantsuit01.obj",
-        "shoes_pair/shoes03.obj",       "fedora_hat/fedora.obj",
-        "boot/boot.obj",                "koala/koala.obj",
-        "mountain/mountain.obj",        "hammer/hammer.obj",
-        "wooden_stool/painted_wooden_stool_1k.gltf",
-        "flight_helmet/FlightHelmet.gltf",
-        "cesium_milk_truck/CesiumMilkTruck.glb",
-    };
     if (access("./matex", X_OK) != 0) {
         fprintf(stderr, "./matex not found: run from the repository root after `make`\n");
         return 1;
@@ -122,24 +110,24 @@ int main(void) {
     mx_log_set_level(MX_LOG_ERROR);
     snprintf(tmpdir, sizeof tmpdir, "/tmp/matex_bleed_XXXXXX");
     if (!mkdtemp(tmpdir)) return 1;
-    for (size_t k = 0; k < sizeof assets / sizeof *assets; k++) {
+    for (size_t k = 0; k < MX_TEST_NASSETS; k++) {
         char src[512], a[512], b[512];
         snprintf(src, sizeof src, "%s/src%zu", tmpdir, k);
         snprintf(a, sizeof a, "%s/magenta%zu", tmpdir, k);
         snprintf(b, sizeof b, "%s/green%zu", tmpdir, k);
         char rel[256], path[2048];
-        snprintf(rel, sizeof rel, "assets/%s", assets[k]);
+        snprintf(rel, sizeof rel, "assets/%s", mx_test_assets[k]);
         if (!mx_test_need(path, sizeof path, "%s", rel)) continue;
         mx_status st;
         int ok = write_source(rel, src, &st) == 0;
-        if (!ok) fprintf(stderr, "%s: %s\n", assets[k], st.msg);
+        if (!ok) fprintf(stderr, "%s: %s\n", mx_test_assets[k], st.msg);
         CHECK(ok);
         if (!ok || transfer(src, a, "1,0,1") || transfer(src, b, "0,1,0")) {
             CHECK(0);
             continue;
         }
         int64_t total = 0, diff = differing_texels(a, b, &total);
-        printf("%-48s %lld of %lld texels depend on the background\n", assets[k], (long long)diff, (long long)total);
+        printf("%-48s %lld of %lld texels depend on the background\n", mx_test_assets[k], (long long)diff, (long long)total);
         CHECK(diff == 0 && total > 0);
     }
     char cmd[512];

@@ -126,33 +126,21 @@ static int measure(const char *rel, fill_result *r, mx_status *st) {
 }
 
 int main(void) {
-    static const char *assets[] = {
-        "spot/spot_triangulated.obj",   "spot_ply/spot.ply",
-        "bob/bob_tri.obj",              "blub/blub_triangulated.obj",
-        "garment_female_casual/female_casualsuit01.obj",
-        "garment_female_elegant/female_elegantsuit01.obj",
-        "shoes_pair/shoes03.obj",       "fedora_hat/fedora.obj",
-        "boot/boot.obj",                "koala/koala.obj",
-        "mountain/mountain.obj",        "hammer/hammer.obj",
-        "wooden_stool/painted_wooden_stool_1k.gltf",
-        "flight_helmet/FlightHelmet.gltf",
-        "cesium_milk_truck/CesiumMilkTruck.glb",
-    };
     mx_log_set_level(MX_LOG_ERROR);
     double ta = 0, tb = 0;
     int measured = 0;
     printf("%-48s %10s %10s\n", "asset (20% of chart texels hidden in discs)", "push-pull", "harmonic");
-    for (size_t k = 0; k < sizeof assets / sizeof *assets; k++) {
+    for (size_t k = 0; k < MX_TEST_NASSETS; k++) {
         char rel[256], path[2048];
-        snprintf(rel, sizeof rel, "assets/%s", assets[k]);
+        snprintf(rel, sizeof rel, "assets/%s", mx_test_assets[k]);
         if (!mx_test_need(path, sizeof path, "%s", rel)) continue;
         fill_result r;
         mx_status st;
         int ok = measure(rel, &r, &st) == 0;
-        if (!ok) fprintf(stderr, "%s: %s\n", assets[k], st.msg);
+        if (!ok) fprintf(stderr, "%s: %s\n", mx_test_assets[k], st.msg);
         CHECK(ok);
         if (!ok) continue;
-        printf("%-48s %7.2f dB %7.2f dB\n", assets[k], r.pushpull, r.harmonic);
+        printf("%-48s %7.2f dB %7.2f dB\n", mx_test_assets[k], r.pushpull, r.harmonic);
         CHECK(r.harmonic >= r.pushpull - 0.5);
         ta += r.pushpull;
         tb += r.harmonic;
