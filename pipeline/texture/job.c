@@ -256,7 +256,7 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
         return mx_sd_denoise(rq, &j->ctx, lat, b->n, h, w, st);
     }
-    mx_sd_edit e = {j->models.vae, b->init_images, b->paint_masks, noise, b->paint_masks ? 1.0f : b->strength};
+    mx_sd_edit e = {j->models.vae, b->init_images, b->paint_masks, noise, b->strength};
     return mx_sd_edit_run(rq, &e, &j->ctx, b->n, h, w, lat, st);
 }
 
@@ -447,7 +447,7 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || (!j->keep_unreached && fill_textures(j, tex, st))) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));

@@ -35,6 +35,7 @@ typedef struct mx_job {
     mx_mesh mesh;
     float *pos;  /* normalised positions for rendering */
     int nlayers; /* textures: one per material keeping its own UVs, else 1 */
+    int keep_unreached; /* enhance: texels no view reached keep their colour (mx_job_finish does not fill) */
     mx_bake bake;
     int bake_ready;
     mx_view_cache vc;
@@ -67,8 +68,9 @@ typedef struct mx_job_view {
 
 /* What one diffusion call generates: n items of image_h x image_w, with their control
  * planes [n][3][image_h][image_w] (NULL: that ControlNet is off) and prompts. With
- * init_images it is the inpaint pipeline (paint_masks given, latent blending of the rest,
- * strength 1) or the img2img pipeline (paint_masks NULL, SDEdit at `strength`), sd_edit.h. */
+ * init_images it is the inpaint pipeline (paint_masks given, latent blending of the rest; the
+ * view step at strength 1, enhance below 1) or the img2img pipeline (paint_masks NULL, SDEdit
+ * at `strength`), sd_edit.h. */
 typedef struct mx_gen_batch {
     int n, image_h, image_w;
     const char *const *prompts;
@@ -123,7 +125,7 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
                         float w_inpaint);
 /* Fraction of candidate-visible texels in T^B. */
 double mx_job_coverage(const mx_job *j);
-/* Fills unreached texels, writes the output folder (staged, then moved into place). */
+/* Fills unreached texels (unless keep_unreached), writes the output folder (staged, then moved into place). */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
 /* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set, else 0. */
 int mx_job_check_cancel(const mx_job *j, mx_status *st);
