@@ -354,9 +354,19 @@ static int place_control(const mx_image *full, mx_crop crop, int S, float *plane
 static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const mx_view_planes *p, mx_status *st) {
     int R = j->o->render_size, S = j->o->image_size, rc = -1;
     mx_image rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, paint = {0}, ctl = {0};
-    uint8_t *mask = malloc((size_t)R * R);
+    uint8_t *mask = malloc((size_t)R * R), *open = NULL;
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
-    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, j->bake.known, j->o->tex_size, j->o->tex_size, mask);
+    const uint8_t *known = j->bake.known;
+    if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will restart are repainted */
+        if (!(open = malloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size))) {
+            free(mask);
+            return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
+        }
+        mx_bake_open_texels(&j->bake, &v->vb.gb, &j->mesh, v->vb.mask, open);
+        known = open;
+    }
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->tex_size, j->o->tex_size, mask);
+    free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx.pool, &rgb, st) &&
         !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
@@ -397,7 +407,7 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         return -1;
     }
     mx_crop_paste(&gen, v->crop, &canvas);
-    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, 0, j->ctx.pool, st);
+    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, j->write_flags, j->ctx.pool, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
     j->views_done++;

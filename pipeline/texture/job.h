@@ -36,6 +36,7 @@ typedef struct mx_job {
     float *pos;  /* normalised positions for rendering */
     int nlayers; /* textures: one per material keeping its own UVs, else 1 */
     int keep_unreached; /* enhance: texels no view reached keep their colour (mx_job_finish does not fill) */
+    int write_flags;    /* backprojection policy: MX_BACKPROJECT_OVERWRITE (angle-aware, texture) or 0 */
     mx_bake bake;
     int bake_ready;
     mx_view_cache vc;
