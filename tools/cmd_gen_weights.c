@@ -18,6 +18,7 @@
 #include "../runtime/log.h"
 #include "../weights/golden_rule.h"
 #include "cli.h"
+#include "cli_args.h"
 
 #define CHUNK ((size_t)1 << 20)
 
@@ -115,13 +116,8 @@ int cmd_gen_weights(int argc, char **argv) {
             return 0;
         }
         int has_val = i + 1 < argc;
-        char *end = NULL;
         if (!strcmp(a, "--seed") && has_val) {
-            seed = strtoull(argv[++i], &end, 10);
-            if (!*argv[i] || *end) {
-                fprintf(stderr, "matex gen-weights: --seed needs a non-negative integer\n");
-                return 2;
-            }
+            if (mx_arg_u64("gen-weights", a, argv[++i], &seed)) return 2;
         } else if ((!strcmp(a, "-o") || !strcmp(a, "--output")) && has_val) {
             out = argv[++i];
         } else if (!strcmp(a, "--dtype") && has_val) {

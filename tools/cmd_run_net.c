@@ -9,12 +9,14 @@
 #include "../pipeline/nn/controlnet.h"
 #include "../pipeline/nn/sd_edit.h"
 #include "../pipeline/texture/models.h"
+#include "../pipeline/nn/taesd.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
 #include "../runtime/log.h"
 #include "../weights/safetensors.h"
 #include "../weights/weights.h"
 #include "cli.h"
+#include "cli_args.h"
 
 #define MAX_OUTS (MX_UNET_MAX_RES + 4)
 #define SCRATCH_BYTES ((size_t)256 << 20)
@@ -32,6 +34,8 @@ static void usage(FILE *f) {
             "  vae-encode  image [B,3,H,W] in [-1,1]                  -> mean, logvar\n"
             "  vae-decode  latents [B,4,h,w] (unscaled)               -> image\n"
             "  clip        input_ids [B,T] (I64 or I32)               -> last_hidden_state, pooler_output, hidden_states.{i}\n"
+            "  taesd-encode  image [B,3,H,W] in [-1,1]                -> latents (SD latents, scaling factor 1)\n"
+            "  taesd-decode  latents [B,4,h,w]                        -> image (in about [-1,1], unclamped)\n"
             "  inpaint-pipeline  (W: a model set with controlnet_depth and controlnet_inpaint; --steps N [--guidance G])\n"
             "              prompt_embeds, negative_prompt_embeds [B,T,D], image [B,3,H,W] in [0,1], mask [B,1,H,W]\n"
             "              (1 = paint), control_depth, control_inpaint [B,3,H,W], noise [B,4,H/8,W/8],\n"
@@ -41,7 +45,7 @@ static void usage(FILE *f) {
             "              optional conditioning_scales [1] (default 1)  -> timesteps, latents_after_step, image\n"
             "\n"
             "options:\n"
-            "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., text_encoder.;\n"
+            "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., taesd., text_encoder.;\n"
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
             "  --steps N       pipelines: scheduler steps before strength (required)\n"
@@ -334,6 +338,34 @@ done:
     return rc;
 }
 
+/* TAESD: image -> latents (encode) or latents -> image (decode), one input and one output. */
+static int run_taesd(run_io *io, const char *prefix, int decode, mx_status *st) {
+    char key[96];
+    mx_taesd_config cfg;
+    mx_taesd *t = NULL;
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_taesd_config_parse(&cfg, text, strlen(text), key, st)) return -1;
+    if (bind_weights(io, prefix, st) || mx_taesd_load(&t, &cfg, &io->b, st)) return -1;
+    int rc = -1, f = mx_taesd_factor(t), cin = decode ? cfg.latent_channels : cfg.in_channels;
+    int cout = decode ? cfg.out_channels : cfg.latent_channels;
+    int64_t is[4] = {-1, cin, -1, -1};
+    float *x = input(io, decode ? "latents" : "image", 4, is, 1, st), *y;
+    size_t bytes;
+    if (!x) goto done;
+    int B = (int)is[0], H = (int)is[2], W = (int)is[3], Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
+    int64_t os[4] = {B, cout, Ho, Wo};
+    if ((decode ? mx_taesd_decode_arena_bytes(t, B, H, W, &bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, &bytes, st)) ||
+        make_arena(io, bytes, st) || !(x = on_device(io, x, (size_t)B * cin * H * W, st)) ||
+        !(y = dev_output(io, decode ? "image" : "latents", 4, os, st)) ||
+        (decode ? mx_taesd_decode(&io->ctx, t, x, B, H, W, y, &io->arena, st)
+                : mx_taesd_encode(&io->ctx, t, x, B, H, W, y, &io->arena, st)))
+        goto done;
+    rc = 0;
+done:
+    mx_taesd_free(t);
+    return rc;
+}
+
 static int run_clip(run_io *io, const char *prefix, mx_status *st) {
     char key[96];
     mx_clip_config cfg;
@@ -485,6 +517,7 @@ static const char *default_prefix(const char *net) {
     if (!strcmp(net, "controlnet")) return "controlnet.";
     if (!strcmp(net, "vae-encode") || !strcmp(net, "vae-decode")) return "vae.";
     if (!strcmp(net, "clip")) return "text_encoder.";
+    if (!strcmp(net, "taesd-encode") || !strcmp(net, "taesd-decode")) return "taesd.";
     if (!strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline")) return "";
     return NULL;
 }
@@ -505,6 +538,8 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
              : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
              : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
              : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
+             : !strcmp(net, "taesd-encode") ? run_taesd(io, prefix, 0, st)
+             : !strcmp(net, "taesd-decode") ? run_taesd(io, prefix, 1, st)
                                           : run_clip(io, prefix, st);
     if (rc || fetch_outputs(io, st)) return -1;
     mx_info("run-net %s on %s: %.3f s", net, mx_backend_name(device), mx_now() - t0);
@@ -529,17 +564,23 @@ int cmd_run_net(int argc, char **argv) {
         else if (!strcmp(a, "--inputs") && has_val) io.in_path = argv[++i];
         else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
-        else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
-        else if (!strcmp(a, "--steps") && has_val) po.steps = atoi(argv[++i]);
-        else if (!strcmp(a, "--guidance") && has_val) po.guidance = (float)atof(argv[++i]);
-        else if (!strcmp(a, "--device") && has_val) device = argv[++i];
-        else if (!strcmp(a, "--precision") && has_val) {
+        else if (!strcmp(a, "--threads") && has_val) {
+            if (mx_arg_int("run-net", a, argv[++i], 0, 1024, &threads)) return 2;
+        } else if (!strcmp(a, "--steps") && has_val) {
+            if (mx_arg_int("run-net", a, argv[++i], 1, MX_SCHED_MAX_STEPS, &po.steps)) return 2;
+        } else if (!strcmp(a, "--guidance") && has_val) {
+            if (mx_parse_float(argv[++i], &po.guidance)) {
+                fprintf(stderr, "matex run-net: bad value for --guidance: '%s'\n", argv[i]);
+                return 2;
+            }
+        } else if (!strcmp(a, "--device") && has_val) {
+            device = argv[++i];
+        } else if (!strcmp(a, "--precision") && has_val) {
             if (mx_precision_parse(argv[++i], &prec)) {
                 fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", argv[i]);
                 return 2;
             }
-        }
-        else if (a[0] != '-' && !net) net = a;
+        } else if (a[0] != '-' && !net) net = a;
         else {
             fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
             usage(stderr);
@@ -548,7 +589,7 @@ int cmd_run_net(int argc, char **argv) {
     }
     if (!net || !weights || !io.in_path || !io.out_path || !default_prefix(net)) {
         fprintf(stderr, "matex run-net: %s\n", !net || default_prefix(net) ? "NET, --weights, --inputs and --out are required"
-                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, inpaint-pipeline or img2img-pipeline");
+                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, taesd-encode, taesd-decode, inpaint-pipeline or img2img-pipeline");
         usage(stderr);
         return 2;
     }

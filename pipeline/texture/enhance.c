@@ -130,6 +130,8 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
 
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_ENHANCE, st)) return -1;
+    if (o->fast)
+        return mx_fail(st, MX_EUSAGE, "enhance: --fast is not supported (the LCM scheduler has no img2img strength yet)");
     mx_job j;
     int rc = mx_job_open(&j, o, 0, 1, st);
     mx_image *orig = NULL, *out = NULL;
@@ -142,6 +144,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         if (!orig || !out || !cams) rc = mx_fail(st, MX_ENOMEM, "enhance: out of memory");
     }
     j.keep_unreached = 1;
+    j.write_flags = 0; /* the first enhanced view of a texel keeps it: later views blend it in */
     if (!rc) rc = original_textures(&j, orig, st);
     if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
     double t = mx_now();

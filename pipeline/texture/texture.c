@@ -208,7 +208,6 @@ int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_TEXTURE, st)) return -1;
     mx_job j;
     int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
-    j.write_flags = MX_BACKPROJECT_OVERWRITE; /* angle-aware: measured better than first-wins (issue 13) */
     if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
     if (!rc) {

@@ -58,11 +58,18 @@ typedef struct mx_texture_opts {
      * ("interrupted") and leaves no output folder and no staging folder behind. */
     volatile sig_atomic_t *cancel;
     int force;               /* replace an existing non-empty output folder (atomically) */
+    const char *source_path; /* transfer: the textured mesh whose texture moves onto mesh_path */
+    int fast;                /* few-step path: LCM scheduler + TAESD decoder; the weight file must hold
+                                a merged LCM-LoRA (unet.lcm_lora) and taesd.* (texture only) */
+    int first_wins;          /* texture, transfer: 0 = angle-aware writes (default; a later view restarts
+                                texels it sees with |n.v| higher by 0.15), 1 = the first writer keeps them */
+    float background[3];     /* transfer: colour behind the source in its renders (0, 0, 0) */
+    int through_model_image; /* transfer: each render goes through the model image (crop, image_size, back) */
 } mx_texture_opts;
 
 void mx_texture_opts_default(mx_texture_opts *o);
 
-typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE } mx_texture_mode;
+typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE, MX_TEXTURE_MODE_TRANSFER } mx_texture_mode;
 
 /* Checks every option before any work (MX_EUSAGE, the message names the option, its value and
  * the valid range). mx_texture_run and mx_enhance_run call it first; front ends (the CLI, the
@@ -77,5 +84,11 @@ typedef struct mx_texture_result {
 
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
+/* `matex transfer` (pipeline/texture/transfer.c): the texture of o->source_path moves onto
+ * o->mesh_path (its UVs, or an atlas): the job's views (front, back, then Alg. 1 over the
+ * candidates) render the source with its texture, each render is backprojected onto the
+ * destination where both meshes are seen, then the job's fill and export. No networks: the
+ * weights, prompt and sampler options are unused. Both meshes share pose and units. */
+int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
 
 #endif
