@@ -151,7 +151,8 @@ fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
 	sh tests/fuzz/run.sh $(BUILD) $(FUZZ_SECONDS) $(FUZZ_NAMES)
 
 # ---- fault injection: a test-only matex failing the k-th allocation or write (tests/faults/fault.c);
-# `make test` samples k (tests/cli_faults.sh), `make faults` sweeps every k under ASan ----
+# `make test` samples k (tests/cli_faults.sh), `make faults` tries every k under ASan
+# (FAULTS_SWEEP=sites: the first allocation of each allocation site) ----
 MATEX_FAULTS = $(BUILD)/tests/faults/matex_faults
 FAULT_WRAP   = $(foreach f,malloc calloc realloc aligned_alloc posix_memalign strdup strndup _Znwm _Znam,-Wl,--wrap=$(f))
 $(MATEX_FAULTS): $(call obj,tools/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
@@ -160,8 +161,9 @@ $(MATEX_FAULTS): $(call obj,tools/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.
 .PHONY: faults faults-run
 faults:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 faults-run
+FAULTS_SWEEP ?= full
 faults-run: $(MATEX_FAULTS) $(DEMO_WEIGHTS)
-	$(TEST_ENV) MATEX_FAULTS_SWEEP=full sh tests/cli_faults.sh
+	$(TEST_ENV) MATEX_FAULTS_SWEEP=$(FAULTS_SWEEP) sh tests/cli_faults.sh
 
 # The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
 # activation memory from outside the op layer crashes them (docs/DESIGN.md §4).

@@ -4,13 +4,14 @@
 # message on stderr, leave nothing behind (no output folder, no temporary sibling), and, in an
 # ASan build, report no leak. `make test` samples k; MATEX_FAULTS_SWEEP=full (`make faults`)
 # tries every k. A run where the failure is absorbed (exit 0) must still have written the
-# whole output; such k are counted and listed.
+# whole output; such k are counted and listed. MATEX_FAULTS_SWEEP=sites fails the first
+# allocation of every allocation site (and every write).
 NAME=faults
 . "$(dirname "$0")/lib_cli.sh"
 F=${MATEX_FAULTS:-build/tests/faults/matex_faults}
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
 MESH=$(data assets/fedora_hat/fedora.obj)
-SAMPLES=${MATEX_FAULTS_SAMPLES:-12}
+SAMPLES=${MATEX_FAULTS_SAMPLES:-8}
 OUTPUTS="texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json"
 
 run() { # run DIR [VAR=k]: the tiny texturing run into DIR/out, stdout/stderr in DIR
@@ -40,16 +41,19 @@ judge() {
     [ "$why" = ok ] && rm -rf "$d"
 }
 
-# ks N: the k to try among 1..N (all of them in a full sweep, else SAMPLES spread evenly)
+# ks KIND N: the k to try among 1..N (all of them in a full sweep, the first allocation of each
+# site in a sites sweep, else SAMPLES spread evenly)
 ks() {
-    if [ "${MATEX_FAULTS_SWEEP:-}" = full ] || [ "$1" -le "$SAMPLES" ]; then seq 1 "$1"
+    sweep=${MATEX_FAULTS_SWEEP:-sample}
+    if [ "$sweep" = full ] || [ "$2" -le "$SAMPLES" ] || { [ "$sweep" = sites ] && [ "$1" = write ]; }; then seq 1 "$2"
+    elif [ "$sweep" = sites ]; then sed -n 's/^first //p' "$T/base/report" | sort -n
     else seq 0 $((SAMPLES - 1)) | awk -v n="$1" -v s="$SAMPLES" '{ print 1 + int($1 * (n - 1) / (s - 1)) }'
     fi
 }
 
 sweep() { # sweep KIND N: two runs at a time
     i=0
-    for k in $(ks "$2"); do
+    for k in $(ks "$1" "$2"); do
         judge "$1" "$k" &
         i=$((i + 1))
         [ $((i % 2)) -eq 0 ] && wait

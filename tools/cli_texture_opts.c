@@ -4,6 +4,7 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../pipeline/geom/masks.h"
 #include "../runtime/buf.h"
@@ -189,6 +190,11 @@ static volatile sig_atomic_t interrupted;
 
 static void on_signal(int sig) {
     (void)sig;
+    static const char note[] = "matex: interrupted, stopping after the current step\n";
+    if (!interrupted) {
+        ssize_t n = write(STDERR_FILENO, note, sizeof note - 1); /* async-signal-safe, unlike stdio */
+        (void)n;                                                  /* nothing to do if stderr is gone */
+    }
     interrupted = 1;
 }
 

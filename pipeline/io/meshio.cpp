@@ -360,14 +360,25 @@ bool ply_header_line_ok(const std::string &line) {
         i = j;
     }
     static const char *const kws[] = {"format", "element", "property", "end_header", "ply"};
+    static const char *const types[] = {"char",   "uchar",  "short", "ushort",  "int",     "uint",
+                                        "float",  "double", "int8",  "uint8",   "int16",   "uint16",
+                                        "int32",  "uint32", "float32", "float64"};
+    auto is_type = [&](const std::string &t) {
+        for (const char *k : types)
+            if (t == k) return true;
+        return false;
+    };
     if (w.empty()) return false;
     if (w[0] == "comment" || w[0] == "obj_info") return true;
     for (const char *k : kws)
         for (size_t i = 1; i < w.size(); i++)
             if (w[i] == k) return false; // a keyword in a name's place makes OpenMesh lose its way
-    if (w[0] == "format") return w.size() == 3;
+    if (w[0] == "format")
+        return w.size() == 3 && w[2] == "1.0" &&
+               (w[1] == "ascii" || w[1] == "binary_little_endian" || w[1] == "binary_big_endian");
     if (w[0] == "element") return w.size() == 3 && w[2].find_first_not_of("0123456789") == std::string::npos;
-    if (w[0] == "property") return w.size() == 3 || (w.size() == 5 && w[1] == "list");
+    if (w[0] == "property")
+        return (w.size() == 3 && is_type(w[1])) || (w.size() == 5 && w[1] == "list" && is_type(w[2]) && is_type(w[3]));
     return false;
 }
 

@@ -7,7 +7,8 @@
  *   MATEX_FAIL_WRITE=k   the k-th write is short (half the bytes, ENOSPC) and every later write
  *                        fails with ENOSPC: a disk that fills up
  *   MATEX_FAULT_REPORT=F at exit, F gets "allocs N sites S" and "writes N sites S": calls made
- *                        and distinct call sites (return addresses) seen
+ *                        and distinct call sites (return addresses) seen, then "first K" for
+ *                        each allocation site: the number of the first allocation made there
  * Calls are counted across threads (run with --threads 1 for a reproducible k), from the start
  * of main's constructors on: the shared libraries' own start-up is not matex's to handle. */
 #include <dlfcn.h>
@@ -27,6 +28,7 @@ typedef struct counter {
     atomic_long calls;
     long fail_at; /* 0: never */
     atomic_uintptr_t sites[MAX_SITES]; /* open-addressed set of return addresses */
+    long first[MAX_SITES];              /* number of the first call from that site */
 } counter;
 
 /* Test-harness state: the wrapped functions have no context argument to carry it. */
@@ -48,10 +50,11 @@ __attribute__((constructor)) static void init(void) {
     atomic_store(&armed, 1);
 }
 
-static void add_site(counter *c, uintptr_t site) {
+static void add_site(counter *c, uintptr_t site, long k) {
     for (size_t i = (site >> 4) % MAX_SITES, n = 0; n < MAX_SITES; i = (i + 1) % MAX_SITES, n++) {
         uintptr_t cur = 0;
-        if (atomic_compare_exchange_strong(&c->sites[i], &cur, site) || cur == site) return;
+        if (atomic_compare_exchange_strong(&c->sites[i], &cur, site)) c->first[i] = k;
+        if (!cur || cur == site) return;
     }
 }
 
@@ -65,7 +68,7 @@ static size_t count_sites(counter *c) {
 static long tick(counter *c, void *site) {
     if (!atomic_load(&armed)) return 0;
     long k = atomic_fetch_add(&c->calls, 1) + 1;
-    add_site(c, (uintptr_t)site);
+    add_site(c, (uintptr_t)site, k);
     return k;
 }
 
@@ -90,8 +93,14 @@ static void write_report(void) {
     int n = snprintf(line, sizeof line, "allocs %ld sites %zu\nwrites %ld sites %zu\n", atomic_load(&allocs.calls),
                      count_sites(&allocs), atomic_load(&writes.calls), count_sites(&writes));
     FILE *f = fopen(getenv("MATEX_FAULT_REPORT"), "w");
-    if (f && real_write) real_write(fileno(f), line, (size_t)n);
-    if (f) fclose(f);
+    if (!f || !real_write) return;
+    real_write(fileno(f), line, (size_t)n);
+    for (size_t i = 0; i < MAX_SITES; i++)
+        if (atomic_load(&allocs.sites[i])) {
+            n = snprintf(line, sizeof line, "first %ld\n", allocs.first[i]);
+            real_write(fileno(f), line, (size_t)n);
+        }
+    fclose(f);
 }
 
 /* ---- allocations (-Wl,--wrap=NAME: calls to NAME in matex's objects land in __wrap_NAME) ---- */
