@@ -13,10 +13,17 @@ CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR
 LDLIBS   = -lm -lpthread
 IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lstdc++
 
+SANITIZERS = address,undefined
 ifeq ($(SAN),1)
-CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-CXXFLAGS += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-LDFLAGS  += -fsanitize=address,undefined
+CFLAGS   += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+CXXFLAGS += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDFLAGS  += -fsanitize=$(SANITIZERS)
+endif
+
+# CUDA=1 (set by `make cuda`): the C code knows the CUDA backend; programs link libmx_cuda.a.
+ifeq ($(CUDA),1)
+CFLAGS  += -DMX_WITH_CUDA
+LDLIBS  += $(BUILD)/libmx_cuda.a $(BUILD)/libmx_core.a $(CUDA_LIBS)
 endif
 ifeq ($(SAN),fuzz)
 CFLAGS   += -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
@@ -26,17 +33,18 @@ endif
 
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
+AVX512BF16_FLAGS = $(AVX512_FLAGS) -mavx512bf16
 
 # x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones.
 ifneq ($(filter x86_64 i686 i386,$(shell uname -m)),)
-SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c)
+SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c)
 else
 SIMD_SRC    =
 CFLAGS     += -DMX_NO_X86_SIMD
 endif
 
 # Modules: a test links only the modules it needs, so one module's breakage stays local.
-CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
+CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(wildcard pipeline/geom/*.c)
@@ -56,7 +64,7 @@ LIBMATEX    = $(BUILD)/libmatex.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install
+.PHONY: all test asan bench clean cuda test-full demo install deps
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -79,6 +87,10 @@ $(BUILD)/%.a: | $(BUILD)/empty.o
 	rm -f $@
 	ar rcs $@ $^ $(if $^,,$(BUILD)/empty.o)
 
+# What `matex --version` says of the build (runtime/version.c).
+$(BUILD)/runtime/version.o: CFLAGS += -DMX_BUILD_FLAGS='"$(OPT) -ffp-contract=off"' \
+                                      -DMX_BUILD_SAN='"$(if $(filter 1,$(SAN)),$(SANITIZERS),none)"'
+
 $(BUILD)/empty.o:
 	@mkdir -p $(dir $@)
 	echo 'typedef int mx_empty_unit;' | $(CC) -x c -c -o $@ -
@@ -89,6 +101,9 @@ $(BUILD)/%_avx2.o: %_avx2.c
 $(BUILD)/%_avx512.o: %_avx512.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512_FLAGS) -c -o $@ $<
+$(BUILD)/%_avx512bf16.o: %_avx512bf16.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c -o $@ $<
@@ -122,7 +137,7 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 # each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz ----
 FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
 FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
-FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
@@ -150,8 +165,12 @@ FAULTS_SWEEP ?= full
 faults-run: $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) MATEX_FAULTS_SWEEP=$(FAULTS_SWEEP) sh tests/cli_faults.sh
 
-TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
-           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS)
+# The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
+# activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
+MX_TEST_DEVICE ?= cpu-strict
+TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
+           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
+           MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw
 test: all $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
@@ -173,6 +192,10 @@ demo: all $(DEMO_WEIGHTS)
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
 
+# The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
+deps:
+	sh tools/deps.sh
+
 # ---- benchmarks: OpenBLAS is linked into the benchmark only ----
 BENCH_SRC  = $(wildcard tools/bench_*.c)
 BENCH_BINS = $(patsubst tools/%.c,$(BUILD)/tools/%,$(BENCH_SRC))
@@ -193,25 +216,40 @@ clean:
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 
-# ---- CUDA backend: `make cuda` builds $(BUILD)/libmx_cuda.a and its test, `make test-cuda` runs the test
-# (it skips when no GPU is present). Not part of `make` / `make test`. Fat binary for sm_80 and sm_90.
+# ---- CUDA backend: `make cuda` builds, in $(CUDA_BUILD), the CUDA kernels (libmx_cuda.a), their op
+# test, the network tests and a matex whose --device accepts cuda (C sources with -DMX_WITH_CUDA).
+# `make test-cuda` runs the op test, then every network golden and the tiny pipeline on the GPU
+# against the CPU goldens (bound 1e-2); without a GPU it prints one skip line. Not part of `make` /
+# `make test`. Fat binary for sm_80 and sm_90.
 NVCC       ?= /usr/local/cuda/bin/nvcc
 CUDA_HOME  ?= /usr/local/cuda
+CUDA_BUILD ?= build-cuda
 NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
 NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
 CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
-CUDA_LDLIBS = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -lm -lpthread
+CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
+CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
+                test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
 	@mkdir -p $(dir $@)
 	$(NVCC) $(NVCCFLAGS) -c -o $@ $<
 $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB_CORE)
-	$(NVCC) $(NVCC_ARCH) -o $@ $^ $(CUDA_LDLIBS)
+	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
-.PHONY: test-cuda
-cuda: $(LIB_CUDA) $(CUDA_TEST)
+ifeq ($(CUDA),1)
+$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): | $(LIB_CUDA)
+endif
+
+.PHONY: test-cuda cuda-all cuda-run-tests
+cuda:
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
+cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 test-cuda: cuda
-	$(CUDA_TEST)
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-run-tests
+cuda-run-tests:
+	$(TEST_ENV) MX_TEST_DEVICE=cuda MX_TEST_MIN_BOUND=1e-2 MATEX_FULL=1 sh tests/cuda/run.sh $(CUDA_TEST) \
+	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))

@@ -85,6 +85,8 @@ struct mx_kernels {
     void (*transpose_hwc_chw)(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
     void (*resize_bilinear)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+    void (*copy_rect)(const mx_ctx *, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w);
     void (*pad2d)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
                   int right);
     void (*copy)(const mx_ctx *, float *y, const float *x, size_t n);
@@ -92,22 +94,24 @@ struct mx_kernels {
     void (*axpy)(const mx_ctx *, float *y, const float *x, float s, size_t n);
     void (*lincomb)(const mx_ctx *, float *y, int k, const float *coef, const float *const *x, size_t n);
     void (*clamp)(const mx_ctx *, float *y, const float *x, float lo, float hi, size_t n);
+    void (*tanh)(const mx_ctx *, float *x, size_t n);
     void (*affine)(const mx_ctx *, float *y, const float *x, float a, float b, size_t n);
     void (*timestep_embedding)(const mx_ctx *, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
                                float downscale_freq_shift, float max_period);
     void (*embed_tokens)(const mx_ctx *, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
                          mx_wptr positions);
-    void (*f16_to_f32)(float *y, const uint16_t *x, size_t n);
-    void (*f32_to_f16)(uint16_t *y, const float *x, size_t n);
-    void (*bf16_to_f32)(float *y, const uint16_t *x, size_t n);
-    void (*f32_to_bf16)(uint16_t *y, const float *x, size_t n);
+    void (*f16_to_f32)(const mx_ctx *, float *y, const uint16_t *x, size_t n);
+    void (*f32_to_f16)(const mx_ctx *, uint16_t *y, const float *x, size_t n);
+    void (*bf16_to_f32)(const mx_ctx *, float *y, const uint16_t *x, size_t n);
+    void (*f32_to_bf16)(const mx_ctx *, uint16_t *y, const float *x, size_t n);
 };
 
 /* The table for an ISA level (clamped to what this CPU supports). */
 const mx_kernels *mx_kernels_for(mx_isa isa);
 /* The scalar reference table (the test oracle). */
 const mx_kernels *mx_kernels_scalar(void);
-/* The best table for this CPU (mx_cpu_best_isa). */
+/* The best fp32 table for this CPU (mx_cpu_isa_for(MX_PREC_FP32)): what a context without a
+ * table gets. */
 const mx_kernels *mx_kernels_best(void);
 
 /* ---- wrappers: the op semantics ---- */
@@ -137,6 +141,8 @@ void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, c
 void mx_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_quick_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_silu(const mx_ctx *c, float *x, size_t n);
+/* In place: tanh (TAESD's latent clamp 3 tanh(x / 3)). */
+void mx_tanh(const mx_ctx *c, float *x, size_t n);
 /* GEGLU (diffusers): x[M, 2N] = [h | g]; y[M, N] = h * gelu(g). */
 void mx_geglu(const mx_ctx *c, float *y, const float *x, int M, int N);
 /* y = a op b with numpy broadcasting over ndim (1..5) dims; y has the broadcast shape.
@@ -159,6 +165,10 @@ void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int 
  * (0: half-pixel centres, no antialias). */
 void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                         int align_corners);
+/* Rectangle copy over BC planes: y[p, y0 + r, x0 + q] = x[p, sy0 + r, sx0 + q] for r < h, q < w, with
+ * y planes Hy×Wy and x planes Hx×Wx (the rectangle must lie inside both). Crops, pastes, tiles. */
+void mx_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
+                  int sx0, int BC, int h, int w);
 /* Zero padding of BC planes H×W by (top, bottom, left, right) rows/columns, each >= 0
  * (diffusers' asymmetric Downsample2D pad is (0, 1, 0, 1)). */
 void mx_pad2d(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
@@ -215,6 +225,8 @@ const mx_ctx *mx_run_ctx(const mx_ctx *c, const mx_arena *a);
 /* n activation floats from the arena; in a measuring arena a placeholder handle (never NULL:
  * the arena only counts), so forward code needs no special case. NULL only on failure. */
 float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st);
+/* A placeholder handle for the outputs of a dry run (ops on a measuring context ignore it). */
+float *mx_act_placeholder(void);
 
 /* A ready-to-use context: best kernels, a pool of nthreads (<=0: all CPUs) and a scratch
  * arena of scratch_bytes. Free with mx_ctx_destroy. */

@@ -16,6 +16,7 @@ check "unknown option exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulate
 check "bad number exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps ten)" = 2 ]
 check "--device cuda exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --device cuda)" = 2 ]
 check "steps out of range exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps 0)" = 2 ]
+check "bad --precision exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --precision fp16)" = 2 ]
 check "missing weights exits 1" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$T/none.mxw" -o "$T/a")" = 1 ]
 check "the message names the weights" grep -q "none.mxw" "$T/err"
 check "missing mesh exits 1" [ "$(rc_of "$M" texture "$T/none.obj" x --weights "$W" -o "$T/a" $SMALL)" = 1 ]
@@ -23,9 +24,22 @@ check "the message names the mesh" grep -q "none.obj" "$T/err"
 check "no output after a failure" [ ! -e "$T/a" ]
 check "texture runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a grey felt hat" --weights "$W" -o "$T/hat" --json $SMALL)" = 0 ]
 check "--json summary" grep -q '"ok":true' "$T/out"
+# the report names the arithmetic: bf16 by default where the CPU has AVX512_BF16
+want=fp32
+if grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null && [ "${MATEX_ISA:-avx512bf16}" = avx512bf16 ]; then want=bf16; fi
+check "report names the precision ($want)" grep -q "\"precision\": *\"$want\"" "$T/hat/report.json"
 for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do
     check "texture wrote $f" [ -s "$T/hat/$f" ]
 done
+# --fast: refused clearly without the LCM-LoRA mark and TAESD, runs 4 LCM steps with them
+WF=${MATEX_DEMO_FAST_WEIGHTS:-build/demo/demo_fast.mxw}
+check "--fast without LCM/TAESD exits 1" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]
+check "--fast says what it needs" grep -q -- "--fast needs .*--lcm-lora.*--taesd" "$T/err"
+check "no output after --fast is refused" [ ! -e "$T/f" ]
+check "texture --fast runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$WF" -o "$T/fast" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
+check "--fast report: 4 steps, guidance 1" grep -q '"steps":4,"fast":true,"guidance":1,' "$T/fast/report.json"
+check "--fast ran the LCM timesteps" grep -q "step 4/4 (t=259)" "$T/err"
+check "enhance --fast exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" x --weights "$WF" -o "$T/f" --fast)" = 2 ]
 check "enhance runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$W" -o "$T/hat2" $SMALL)" = 0 ]
 check "enhance wrote mesh.glb" [ -s "$T/hat2/mesh.glb" ]
 check "bad strength exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" --strength 2 --weights "$W" -o "$T/b")" = 2 ]

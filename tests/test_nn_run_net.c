@@ -1,6 +1,6 @@
 /* `matex convert` + `matex run-net` end to end (the binary ./matex, run from the repo root):
- * unet_tiny, controlnet_tiny (scale 0.5, inputs written here) and vae_tiny decode against the
- * golden outputs. */
+ * unet_tiny, controlnet_tiny (scale 0.5, inputs written here), vae_tiny and taesd encode/decode
+ * against the golden outputs. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -26,9 +26,12 @@ static int convert(const char *net) {
     return sh("./matex convert %s -o %s --dtype f32 --quiet", src, dst);
 }
 
+/* Runs on MX_TEST_DEVICE (cpu-strict under make test). */
 static int run_net(const char *args, const char *out) {
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "./matex run-net %s --out %s/%s 2>/dev/null", args, tmpdir, out);
+    char cmd[2300];
+    mx_backend_kind device = golden_device();
+    snprintf(cmd, sizeof cmd, "./matex run-net %s --device %s --out %s/%s 2>/dev/null", args, mx_backend_name(device),
+             tmpdir, out);
     int rc = system(cmd);
     if (rc) fprintf(stderr, "command failed (%d): %s\n", rc, cmd);
     return rc;
@@ -121,6 +124,15 @@ int main(void) {
     CHECK(run_net(args, "enc.safetensors") == 0);
     compare("enc.safetensors", "mean", "vae_tiny", "outputs.safetensors", "encode.mean");
     compare("enc.safetensors", "logvar", "vae_tiny", "outputs.safetensors", "encode.logvar");
+
+    CHECK(convert("taesd") == 0);
+    golden_path(gin, sizeof gin, "taesd", "inputs.safetensors");
+    snprintf(args, sizeof args, "taesd-decode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
+    CHECK(run_net(args, "tdec.safetensors") == 0);
+    compare("tdec.safetensors", "image", "taesd", "outputs.safetensors", "image_dec");
+    snprintf(args, sizeof args, "taesd-encode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
+    CHECK(run_net(args, "tenc.safetensors") == 0);
+    compare("tenc.safetensors", "latents", "taesd", "outputs.safetensors", "latents_enc");
 
     sh("rm -rf %s%s", tmpdir, "");
     return mx_test_finish("test_nn_run_net");

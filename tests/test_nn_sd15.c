@@ -11,19 +11,16 @@
 #include "../runtime/log.h"
 #include "nn_golden.h"
 
-static int with_arena(mx_arena *a, size_t bytes) {
-    mx_status st;
-    if (mx_arena_create(a, bytes, &st)) return fprintf(stderr, "%s\n", st.msg), -1;
-    return 0;
-}
-
-static void compare(const mx_safetensors *out, const char *label, const char *name, const float *got) {
+/* bf16_bound: the bound under bf16 arithmetic (nn_golden.h) */
+static void compare(const mx_ctx *c, const mx_safetensors *out, const char *label, const char *name, const float *got,
+                    double bf16_bound) {
     size_t n;
-    char l[192];
+    char l[192], tag[64];
     float *want = golden_f32(out, name, &n);
     CHECK(want != NULL);
-    snprintf(l, sizeof l, "%s %s", label, name);
-    if (want) mx_check_close(l, got, want, n, 1e-4);
+    golden_label(tag, sizeof tag, c, label);
+    snprintf(l, sizeof l, "%s %s", tag, name);
+    if (want) mx_check_close(l, got, want, n, golden_bound(c, bf16_bound));
     free(want);
 }
 
@@ -50,8 +47,7 @@ static void sd15_unet(const mx_ctx *c) {
     mx_unet_input ui = {sample, tsteps, ehs, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3], (int)te->shape[1],
                         NULL, NULL};
     float *got = malloc((size_t)ui.B * cfg.out_channels * ui.H * ui.W * sizeof *got);
-    mx_arena a;
-    CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0 && with_arena(&a, bytes) == 0);
+    CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0);
     printf("sd15_unet: arena %.1f MB\n", bytes / 1e6);
     int n = mx_unet_num_residuals(&cfg);
     for (int s = -1; s < 2; s++) {
@@ -71,12 +67,11 @@ static void sd15_unet(const mx_ctx *c) {
             snprintf(name, sizeof name, "out_plain");
         }
         t0 = mx_now();
-        CHECK(mx_unet_forward(c, u, &ui, got, &a, &st) == 0);
+        CHECK(golden_run_unet(c, u, &ui, got) == 0);
         printf("sd15_unet %s: %.2f s\n", name, mx_now() - t0);
-        compare(&out, "sd15_unet", name, got);
+        compare(c, &out, "sd15_unet", name, got, GOLDEN_BF16);
         for (int i = 0; i <= n; i++) free(res[i]);
     }
-    mx_arena_destroy(&a);
     free(got);
     free(sample);
     free(ehs);
@@ -93,7 +88,7 @@ static void sd15_controlnet(const mx_ctx *c) {
     mx_binder b;
     mx_controlnet *m = NULL;
     mx_safetensors in, out;
-    size_t len, bytes = 0;
+    size_t len;
     char *text = golden_text("sd15_controlnet", "config.json", &len);
     CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_controlnet", &st) == 0);
     free(text);
@@ -114,22 +109,19 @@ static void sd15_controlnet(const mx_ctx *c) {
         mx_unet_residual_shape(&cfg, i, ci.H, ci.W, &C, &h, &w);
         res[i] = malloc((size_t)ci.B * C * h * w * sizeof(float));
     }
-    mx_arena a;
-    CHECK(mx_controlnet_arena_bytes(m, ci.B, ci.H, ci.W, ci.T, &bytes, &st) == 0 && with_arena(&a, bytes) == 0);
     const float scales[2] = {1.0f, 0.5f};
     for (int s = 0; s < 2; s++) {
         ci.scale = scales[s];
         double t0 = mx_now();
-        CHECK(mx_controlnet_forward(c, m, &ci, res, res[n], 0, &a, &st) == 0);
+        CHECK(golden_run_controlnet(c, m, &ci, res, res[n], 0) == 0);
         printf("sd15_controlnet scale %g: %.2f s\n", scales[s], mx_now() - t0);
         for (int i = 0; i <= n; i++) {
             char name[96];
             if (i < n) snprintf(name, sizeof name, "scale%d.down_block_res_sample.%d", s, i);
             else snprintf(name, sizeof name, "scale%d.mid_block_res_sample", s);
-            compare(&out, "sd15_controlnet", name, res[i]);
+            compare(c, &out, "sd15_controlnet", name, res[i], GOLDEN_BF16_DEEP);
         }
     }
-    mx_arena_destroy(&a);
     for (int i = 0; i <= n; i++) free(res[i]);
     free(sample);
     free(ehs);
@@ -147,7 +139,7 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     mx_binder b;
     mx_vae *v = NULL;
     mx_safetensors in, out;
-    size_t len, bytes = 0;
+    size_t len;
     char *text = golden_text("sd15_vae", "config.json", &len);
     CHECK(text && mx_vae_config_parse(&cfg, text, len, "sd15_vae", &st) == 0);
     free(text);
@@ -161,22 +153,17 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     int B = (int)ti->shape[0], H = (int)ti->shape[2], W = (int)ti->shape[3], f = mx_vae_factor(v);
     size_t nl = (size_t)B * cfg.latent_channels * (H / f) * (W / f), ni = (size_t)B * cfg.out_channels * H * W;
     float *mean = malloc(nl * sizeof(float)), *logvar = malloc(nl * sizeof(float)), *dec = malloc(ni * sizeof(float));
-    mx_arena a;
-    size_t b2 = 0;
-    CHECK(mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st) == 0 && mx_vae_decode_arena_bytes(v, B, H / f, W / f, &b2, &st) == 0);
-    CHECK(with_arena(&a, bytes > b2 ? bytes : b2) == 0);
     double t0 = mx_now();
-    CHECK(mx_vae_encode(c, v, img, B, H, W, mean, logvar, &a, &st) == 0);
+    CHECK(golden_vae_encode(c, v, img, B, H, W, mean, logvar) == 0);
     printf("sd15_vae encode: %.2f s\n", mx_now() - t0);
-    compare(&out, outfile, "encode.mean", mean);
-    compare(&out, outfile, "encode.logvar", logvar);
+    compare(c, &out, outfile, "encode.mean", mean, GOLDEN_BF16_DEEP);
+    compare(c, &out, outfile, "encode.logvar", logvar, GOLDEN_BF16_DEEP);
     t0 = mx_now();
-    CHECK(mx_vae_decode(c, v, lat, B, H / f, W / f, dec, &a, &st) == 0);
+    CHECK(golden_vae_decode(c, v, lat, B, H / f, W / f, dec) == 0);
     printf("sd15_vae decode: %.2f s\n", mx_now() - t0);
-    compare(&out, outfile, "decode", dec);
-    CHECK(mx_vae_decode(c, v, mean, B, H / f, W / f, dec, &a, &st) == 0);
-    compare(&out, outfile, "decode_of_encode_mean", dec);
-    mx_arena_destroy(&a);
+    compare(c, &out, outfile, "decode", dec, GOLDEN_BF16_DEEP);
+    CHECK(golden_vae_decode(c, v, mean, B, H / f, W / f, dec) == 0);
+    compare(c, &out, outfile, "decode_of_encode_mean", dec, GOLDEN_BF16_CHAIN);
     free(mean);
     free(logvar);
     free(dec);
@@ -203,5 +190,11 @@ int main(void) {
     if (golden_have("sd15_controlnet", "inputs.safetensors")) sd15_controlnet(&c);
     if (golden_have("sd15_unet", "inputs.safetensors")) sd15_unet(&c);
     mx_ctx_destroy(&c);
+    if (golden_bf16_ctx(&c, "test_nn_sd15") == 0) { /* bf16 arithmetic against the fp32 goldens */
+        sd15_vae(&c, MX_F32, "outputs.safetensors");
+        sd15_controlnet(&c);
+        sd15_unet(&c);
+        mx_ctx_destroy(&c);
+    }
     return mx_test_finish("test_nn_sd15");
 }

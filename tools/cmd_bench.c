@@ -7,6 +7,7 @@
 #include "../ops/ops.h"
 #include "../runtime/log.h"
 #include "cli.h"
+#include "cli_args.h"
 
 typedef struct {
     const char *name;
@@ -23,10 +24,11 @@ static const bench_case cases[] = {
 };
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex bench [--threads N] [--repeats R] [--json]\n"
+    fprintf(f, "usage: matex bench [--threads N] [--repeats R] [--precision fp32|bf16] [--json]\n"
                "Times matex's GEMM, 3x3 conv and attention kernels on the SD1.5 UNet shapes at a\n"
                "64x64 latent and prints GFLOP/s (median of R runs after a warm-up; default R=5).\n"
                "  --threads N   worker threads (default: all CPUs)\n"
+               "  --precision P fp32 (default) or bf16 kernels (bf16 needs AVX512_BF16)\n"
                "  --json        one JSON object on stdout instead of the table\n"
                "MATEX_ISA=scalar|avx2|avx512 lowers the kernel level.\n");
 }
@@ -76,28 +78,20 @@ static double median_seconds(const mx_ctx *c, const bench_case *b, float *x, flo
     return t[repeats / 2];
 }
 
-static int parse_int(const char *s, int lo, int hi, int *out) {
-    char *end;
-    long v = strtol(s, &end, 10);
-    if (*s == 0 || *end != 0 || v < lo || v > hi) return -1;
-    *out = (int)v;
-    return 0;
-}
-
 int cmd_bench(int argc, char **argv) {
     int threads = 0, repeats = 5, json = 0;
+    mx_precision prec = MX_PREC_FP32;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
             usage(stdout);
             return 0;
         } else if (!strcmp(argv[i], "--threads") && i + 1 < argc) {
-            if (parse_int(argv[++i], 1, 256, &threads)) {
-                fprintf(stderr, "matex bench: --threads wants 1..256, got '%s'\n", argv[i]);
-                return 2;
-            }
+            if (mx_arg_int("bench", "--threads", argv[++i], 1, 256, &threads)) return 2;
         } else if (!strcmp(argv[i], "--repeats") && i + 1 < argc) {
-            if (parse_int(argv[++i], 1, 31, &repeats)) {
-                fprintf(stderr, "matex bench: --repeats wants 1..31, got '%s'\n", argv[i]);
+            if (mx_arg_int("bench", "--repeats", argv[++i], 1, 31, &repeats)) return 2;
+        } else if (!strcmp(argv[i], "--precision") && i + 1 < argc) {
+            if (mx_precision_parse(argv[++i], &prec)) {
+                fprintf(stderr, "matex bench: --precision wants fp32 or bf16, got '%s'\n", argv[i]);
                 return 2;
             }
         } else if (!strcmp(argv[i], "--json"))
@@ -110,7 +104,7 @@ int cmd_bench(int argc, char **argv) {
     }
     mx_ctx ctx;
     mx_status st;
-    if (mx_ctx_create(&ctx, threads, mx_cpu_best_isa(), (size_t)64 << 20, &st) != 0) {
+    if (mx_ctx_create(&ctx, threads, mx_cpu_isa_for(prec), (size_t)64 << 20, &st) != 0) {
         fprintf(stderr, "matex bench: %s\n", st.msg);
         return 1;
     }

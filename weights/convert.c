@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 
 #include "../runtime/buf.h"
+#include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "lora.h"
@@ -39,10 +40,6 @@ typedef struct {
 
 
 
-
-static int join(char *out, size_t cap, const char *dir, const char *name) {
-    return snprintf(out, cap, "%s/%s", dir, name) < (int)cap ? 0 : -1;
-}
 
 static int is_file(const char *path) {
     struct stat sb;
@@ -109,6 +106,7 @@ static const char *network_kind(const mx_json *cfg) {
     if (!strcmp(cls, "UNet2DConditionModel")) return "unet";
     if (!strcmp(cls, "ControlNetModel")) return "controlnet";
     if (!strcmp(cls, "AutoencoderKL")) return "vae";
+    if (!strcmp(cls, "AutoencoderTiny")) return "taesd";
     if (json_array_has(mx_json_get(cfg, "architectures"), "CLIPTextModel") ||
         !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model"))
         return "text_encoder";
@@ -140,7 +138,7 @@ static int read_shard_index(const char *dir, const char *index_path, weight_file
             break;
         }
         char path[PATH_MAX];
-        if (join(path, sizeof path, dir, shard)) rc = mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+        rc = mx_path_join(path, sizeof path, dir, shard, st);
         size_t k = 0;
         while (!rc && k < wfs->n && strcmp(wfs->paths[k], path)) k++;
         if (!rc && k == wfs->n) {
@@ -162,14 +160,14 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
         for (int b = 0; b < 2; b++) {
             char name[128], path[PATH_MAX];
             snprintf(name, sizeof name, "%s%s.safetensors", bases[b], fp16 ? ".fp16" : "");
-            if (join(path, sizeof path, dir, name)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+            if (mx_path_join(path, sizeof path, dir, name, st)) return -1;
             if (is_file(path)) {
                 snprintf(wfs->paths[0], PATH_MAX, "%s", path);
                 wfs->n = 1;
                 return 0;
             }
             snprintf(name, sizeof name, "%s.safetensors.index%s.json", bases[b], fp16 ? ".fp16" : "");
-            if (join(path, sizeof path, dir, name)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+            if (mx_path_join(path, sizeof path, dir, name, st)) return -1;
             if (is_file(path)) return read_shard_index(dir, path, wfs, st);
         }
     }
@@ -271,7 +269,7 @@ static int add_weight_file(converter *cv, const char *prefix, const char *kind, 
 static int add_network(converter *cv, const char *dir, const char *prefix, const char *want_kind, mx_status *st) {
     char cfg_path[PATH_MAX];
     if (!is_dir(dir)) return mx_fail(st, MX_EINPUT, "%s: not a folder", dir);
-    if (join(cfg_path, sizeof cfg_path, dir, "config.json")) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    if (mx_path_join(cfg_path, sizeof cfg_path, dir, "config.json", st)) return -1;
     char *cfg_text = read_text(cfg_path, st);
     if (!cfg_text) return -1;
     mx_json *cfg = mx_json_parse(cfg_text, strlen(cfg_text), cfg_path, st);
@@ -281,7 +279,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
     else if (!kind)
         rc = mx_fail(st, MX_EINPUT,
                      "%s: unknown network type (need _class_name UNet2DConditionModel, ControlNetModel, "
-                     "AutoencoderKL or architectures CLIPTextModel)",
+                     "AutoencoderKL, AutoencoderTiny or architectures CLIPTextModel)",
                      cfg_path);
     else if (want_kind && strcmp(kind, want_kind))
         rc = mx_fail(st, MX_EINPUT, "%s: holds a %s, expected a %s", cfg_path, kind, want_kind);
@@ -323,7 +321,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
 static int add_text_meta(converter *cv, const char *dir, const char *file, const char *key, int must_be_json,
                          mx_status *st) {
     char path[PATH_MAX];
-    if (join(path, sizeof path, dir, file)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    if (mx_path_join(path, sizeof path, dir, file, st)) return -1;
     char *text = read_text(path, st);
     if (!text) return -1;
     int rc = 0;
@@ -352,17 +350,17 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
     char dir[PATH_MAX];
     size_t found = 0;
     for (int i = 0; i < 4; i++) {
-        if (join(dir, sizeof dir, root, subs[i])) return mx_fail(st, MX_EINPUT, "%s: path too long", root);
+        if (mx_path_join(dir, sizeof dir, root, subs[i], st)) return -1;
         if (!is_dir(dir)) continue;
         if (add_network(cv, dir, subs[i], subs[i], st)) return -1;
         found++;
     }
-    if (join(dir, sizeof dir, root, "tokenizer") == 0 && is_dir(dir)) {
+    if (mx_path_join(dir, sizeof dir, root, "tokenizer", NULL) == 0 && is_dir(dir)) {
         if (add_tokenizer(cv, dir, st)) return -1;
     } else if (found) {
         mx_warn("convert: %s has no tokenizer/ folder: prompts cannot be tokenized with this file", root);
     }
-    if (join(dir, sizeof dir, root, "scheduler") == 0 && is_dir(dir)) {
+    if (mx_path_join(dir, sizeof dir, root, "scheduler", NULL) == 0 && is_dir(dir)) {
         if (add_text_meta(cv, dir, "scheduler_config.json", "scheduler.config", 1, st)) return -1;
     }
     if (!found)
@@ -384,7 +382,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
     if (o->input) {
         char cfg[PATH_MAX];
         if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder", o->input);
-        if (join(cfg, sizeof cfg, o->input, "config.json")) return mx_fail(st, MX_EINPUT, "%s: path too long", o->input);
+        if (mx_path_join(cfg, sizeof cfg, o->input, "config.json", st)) return -1;
         if (is_file(cfg) ? add_network(cv, o->input, NULL, NULL, st) : convert_model_set(cv, o->input, st)) return -1;
     }
     for (size_t i = 0; i < o->n_controlnets; i++) {
@@ -394,6 +392,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
         snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
         if (add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st)) return -1;
     }
+    if (o->taesd && add_network(cv, o->taesd, "taesd", "taesd", st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -429,6 +428,21 @@ static int add_provenance(converter *cv, mx_status *st) {
     return rc;
 }
 
+/* "unet.lcm_lora": {"file": ..., "scale": ...} of the LoRA marked as the LCM-LoRA. */
+static int add_lcm_mark(converter *cv, mx_status *st) {
+    for (size_t k = 0; k < cv->o->n_loras; k++) {
+        if (!cv->o->loras[k].lcm) continue;
+        text_buf p = {0};
+        mx_buf_put(&p, "{\"file\": ", 9);
+        mx_buf_json_str(&p, cv->o->loras[k].path);
+        mx_buf_printf(&p, ", \"scale\": %.9g}", (double)cv->o->loras[k].scale);
+        int rc = p.oom ? mx_fail(st, MX_ENOMEM, "convert: out of memory") : mx_wf_writer_meta(cv->w, "unet.lcm_lora", p.p, st);
+        free(p.p);
+        return rc;
+    }
+    return 0;
+}
+
 static void converter_free(converter *cv) {
     mx_wf_writer_free(cv->w);
     for (size_t i = 0; i < cv->n_files; i++) {
@@ -448,12 +462,16 @@ int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) 
     if (o->n_controlnets > MX_CONVERT_MAX_EXTRA || o->n_loras > MX_CONVERT_MAX_EXTRA)
         return mx_fail(st, MX_EUSAGE, "convert: at most %d ControlNets and %d LoRAs", MX_CONVERT_MAX_EXTRA,
                        MX_CONVERT_MAX_EXTRA);
+    size_t n_lcm = 0;
+    for (size_t k = 0; k < o->n_loras; k++) n_lcm += o->loras[k].lcm != 0;
+    if (n_lcm > 1) return mx_fail(st, MX_EUSAGE, "convert: more than one LCM-LoRA");
     converter cv = {.o = o};
     int rc = (cv.w = mx_wf_writer_create(st)) ? 0 : -1;
     if (!rc) rc = open_loras(&cv, st);
     if (!rc) rc = convert_inputs(&cv, st);
     if (!rc) rc = check_loras_used(&cv, st);
     if (!rc) rc = add_provenance(&cv, st);
+    if (!rc) rc = add_lcm_mark(&cv, st);
     if (!rc) rc = mx_wf_writer_finish(cv.w, o->output, st);
     if (!rc && res) *res = cv.res;
     converter_free(&cv);

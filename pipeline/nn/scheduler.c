@@ -86,6 +86,8 @@ static int parse_fields(mx_sched_config *c, const mx_json *root, const char *wha
     c->set_alpha_to_one = mx_json_get_bool(root, "set_alpha_to_one", c->set_alpha_to_one);
     c->clip_sample = mx_json_get_bool(root, "clip_sample", c->clip_sample);
     c->clip_sample_range = mx_json_get_num(root, "clip_sample_range", c->clip_sample_range);
+    c->original_inference_steps = (int)mx_json_get_num(root, "original_inference_steps", c->original_inference_steps);
+    c->timestep_scaling = mx_json_get_num(root, "timestep_scaling", c->timestep_scaling);
     e = (int)c->beta_schedule;
     if (parse_enum(root, "beta_schedule", betas, 2, &e, what, st)) return -1;
     c->beta_schedule = (mx_beta_schedule)e;
@@ -120,6 +122,11 @@ static int validate(const mx_sched_config *c, const char *what, mx_status *st) {
         return mx_fail(st, MX_EINPUT, "%s: solver_order %d outside 1..3", what, c->solver_order);
     if (c->steps_offset < 0 || c->steps_offset >= c->num_train_timesteps)
         return mx_fail(st, MX_EINPUT, "%s: steps_offset %d out of range", what, c->steps_offset);
+    if (c->kind == MX_SCHED_LCM &&
+        (c->original_inference_steps < 1 || c->original_inference_steps > c->num_train_timesteps ||
+         !(c->timestep_scaling > 0 && c->timestep_scaling < 1e6)))
+        return mx_fail(st, MX_EINPUT, "%s: LCM original_inference_steps %d or timestep_scaling %g out of range", what,
+                       c->original_inference_steps, c->timestep_scaling);
     return 0;
 }
 
@@ -127,10 +134,15 @@ int mx_sched_config_from_json(mx_sched_config *cfg, const mx_json *obj, const ch
     if (mx_json_kind(obj) != MX_JSON_OBJ)
         return mx_fail(st, MX_EINPUT, "%s: scheduler config is not a JSON object", what);
     const char *cls = mx_json_get_str(obj, "_class_name", "");
-    if (strcmp(cls, "DDIMScheduler") == 0)
+    if (strcmp(cls, "DDIMScheduler") == 0) {
         mx_sched_config_sd15_ddim(cfg);
-    else
+    } else if (strcmp(cls, "LCMScheduler") == 0) {
+        mx_sched_config sd15;
+        mx_sched_config_sd15(&sd15);
+        mx_sched_config_lcm(cfg, &sd15);
+    } else {
         mx_sched_config_sd15(cfg);
+    }
     if (parse_fields(cfg, obj, what, st)) return -1;
     return validate(cfg, what, st);
 }
@@ -316,9 +328,10 @@ static int dpm_schedule(mx_sched *s, int steps, mx_status *st) {
     return 0;
 }
 
-int mx_sched_init(mx_sched *s, const mx_sched_config *cfg, int num_inference_steps, size_t numel,
-                  mx_status *st) {
+int mx_sched_init(mx_sched *s, const mx_ctx *c, const mx_sched_config *cfg, int num_inference_steps,
+                  size_t numel, mx_status *st) {
     memset(s, 0, sizeof *s);
+    s->c = c;
     if (validate(cfg, "scheduler", st)) return -1;
     if (num_inference_steps < 1 || num_inference_steps > MX_SCHED_MAX_STEPS ||
         num_inference_steps > cfg->num_train_timesteps)
@@ -330,26 +343,35 @@ int mx_sched_init(mx_sched *s, const mx_sched_config *cfg, int num_inference_ste
     compute_alphas_cumprod(cfg, s->alphas_cumprod);
     if (cfg->kind == MX_SCHED_DDIM) {
         s->n_steps = ddim_timesteps(cfg, num_inference_steps, s->timesteps);
+    } else if (cfg->kind == MX_SCHED_LCM) {
+        if ((s->n_steps = mx_sched_lcm_timesteps(cfg, num_inference_steps, s->timesteps, st)) < 0) return -1;
     } else if (dpm_schedule(s, num_inference_steps, st)) {
         return -1;
     }
     s->numel = numel;
-    s->buf = malloc(sizeof(float) * numel * 4);
-    if (!s->buf) return mx_fail(st, MX_ENOMEM, "scheduler: out of memory for %zu latents", numel);
+    s->buf = mx_dev_alloc(c, numel * 5, st);
+    if (!s->buf) return mx_fail_prefix(st, "scheduler: %zu latents", numel);
     for (int i = 0; i < 3; i++) s->model_outputs[i] = s->buf + (size_t)i * numel;
-    s->work = s->buf + 3 * numel;
+    s->work[0] = s->buf + 3 * numel;
+    s->work[1] = s->buf + 4 * numel;
+    if (cfg->kind == MX_SCHED_LCM && !(s->noise_host = malloc(numel * sizeof(float))))
+        return mx_fail(st, MX_ENOMEM, "scheduler: out of memory for %zu noise values", numel);
     return 0;
 }
 
 void mx_sched_free(mx_sched *s) {
-    free(s->buf);
+    mx_dev_free(s->c, s->buf);
+    free(s->noise_host);
     s->buf = NULL;
+    s->noise_host = NULL;
 }
 
 int mx_sched_set_strength(mx_sched *s, float strength, mx_status *st) {
     if (!(strength >= 0.0f && strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "scheduler: strength %g outside [0, 1]", (double)strength);
     if (s->step_index != s->begin) return mx_fail(st, MX_EUSAGE, "scheduler: strength set after stepping");
+    if (s->cfg.kind == MX_SCHED_LCM && strength != 1.0f)
+        return mx_fail(st, MX_EUSAGE, "scheduler: LCM with img2img strength is not supported");
     int init = (int)((float)s->num_inference_steps * strength);
     if (init > s->num_inference_steps) init = s->num_inference_steps;
     int t_start = s->num_inference_steps - init;
@@ -381,20 +403,21 @@ static dpm_point dpm_point_at(float ve_sigma) {
     return p;
 }
 
+/* The step arithmetic runs as ops on the scheduler's context (its history lives on that
+ * backend); each op sequence evaluates the same float32 expression as diffusers, term by term. */
+static void lin2(const mx_sched *s, float *y, float a, const float *x0, float b, const float *x1) {
+    const float coef[2] = {a, b};
+    const float *const x[2] = {x0, x1};
+    mx_lincomb(s->c, y, 2, coef, x, s->numel);
+}
+
 /* x0 prediction from the model output at the current step. */
 static void dpm_convert(const mx_sched *s, const float *mo, const float *x, float *x0) {
     dpm_point p = dpm_point_at(s->sigmas[s->step_index]);
-    size_t n = s->numel;
     switch (s->cfg.prediction_type) {
-    case MX_PRED_EPSILON:
-        for (size_t i = 0; i < n; i++) x0[i] = (x[i] - p.sigma * mo[i]) / p.alpha;
-        break;
-    case MX_PRED_V:
-        for (size_t i = 0; i < n; i++) x0[i] = p.alpha * x[i] - p.sigma * mo[i];
-        break;
-    case MX_PRED_SAMPLE:
-        memcpy(x0, mo, sizeof(float) * n);
-        break;
+    case MX_PRED_EPSILON: lin2(s, x0, 1.0f / p.alpha, x, -p.sigma / p.alpha, mo); break;
+    case MX_PRED_V: lin2(s, x0, p.alpha, x, -p.sigma, mo); break;
+    case MX_PRED_SAMPLE: mx_copy(s->c, x0, mo, s->numel); break;
     }
 }
 
@@ -403,8 +426,14 @@ static void dpm_first_order(const mx_sched *s, float *x) {
     dpm_point s0 = dpm_point_at(s->sigmas[s->step_index]);
     float h = t.lambda - s0.lambda;
     float a = t.sigma / s0.sigma, b = t.alpha * (expf(-h) - 1.0f);
-    const float *m0 = s->model_outputs[2];
-    for (size_t i = 0; i < s->numel; i++) x[i] = a * x[i] - b * m0[i];
+    lin2(s, x, a, x, -b, s->model_outputs[2]);
+}
+
+/* d = k·(p − q) into d. */
+static void scaled_diff(const mx_sched *s, float *d, const float *p, const float *q, float k) {
+    int64_t shape[1] = {(int64_t)s->numel};
+    mx_binary(s->c, MX_BIN_SUB, d, p, shape, q, shape, 1);
+    mx_scale(s->c, d, d, k, s->numel);
 }
 
 static void dpm_second_order(const mx_sched *s, float *x) {
@@ -417,10 +446,11 @@ static void dpm_second_order(const mx_sched *s, float *x) {
     /* midpoint: - 0.5 b D1; heun: + alpha (e^-h - 1)/h + 1) D1 */
     float c = s->cfg.solver_type == MX_SOLVER_MIDPOINT ? -(0.5f * b) : t.alpha * ((expf(-h) - 1.0f) / h + 1.0f);
     const float *m0 = s->model_outputs[2], *m1 = s->model_outputs[1];
-    for (size_t i = 0; i < s->numel; i++) {
-        float d1 = inv_r0 * (m0[i] - m1[i]);
-        x[i] = a * x[i] - b * m0[i] + c * d1;
-    }
+    float *d1 = s->work[0];
+    scaled_diff(s, d1, m0, m1, inv_r0);
+    const float coef[3] = {a, -b, c};
+    const float *const terms[3] = {x, m0, d1};
+    mx_lincomb(s->c, x, 3, coef, terms, s->numel);
 }
 
 static void dpm_third_order(const mx_sched *s, float *x) {
@@ -434,11 +464,16 @@ static void dpm_third_order(const mx_sched *s, float *x) {
     float b = t.alpha * em, c1 = t.alpha * (em / h + 1.0f), c2 = t.alpha * ((em + h) / (h * h) - 0.5f);
     float k0 = 1.0f / r0, k1 = 1.0f / r1, k2 = r0 / (r0 + r1), k3 = 1.0f / (r0 + r1);
     const float *m0 = s->model_outputs[2], *m1 = s->model_outputs[1], *m2 = s->model_outputs[0];
-    for (size_t i = 0; i < s->numel; i++) {
-        float d10 = k0 * (m0[i] - m1[i]), d11 = k1 * (m1[i] - m2[i]);
-        float d1 = d10 + k2 * (d10 - d11), d2 = k3 * (d10 - d11);
-        x[i] = a * x[i] - b * m0[i] + c1 * d1 - c2 * d2;
-    }
+    float *d1 = s->work[0], *d2 = s->work[1];
+    int64_t shape[1] = {(int64_t)s->numel};
+    scaled_diff(s, d1, m0, m1, k0);                           /* d10 */
+    scaled_diff(s, d2, m1, m2, k1);                           /* d11 */
+    mx_binary(s->c, MX_BIN_SUB, d2, d1, shape, d2, shape, 1); /* d10 - d11 */
+    mx_axpy(s->c, d1, d2, k2, s->numel);                      /* d1 = d10 + k2 (d10 - d11) */
+    mx_scale(s->c, d2, d2, k3, s->numel);                     /* d2 = k3 (d10 - d11) */
+    const float coef[4] = {a, -b, c1, -c2};
+    const float *const terms[4] = {x, m0, d1, d2};
+    mx_lincomb(s->c, x, 4, coef, terms, s->numel);
 }
 
 static int dpm_step(mx_sched *s, const float *mo, float *x) {
@@ -475,25 +510,24 @@ static void ddim_step(mx_sched *s, const float *mo, float *x) {
     float bt = 1.0f - at;
     float sa = sqrtf(at), sb = sqrtf(bt), sap = sqrtf(ap), dir = sqrtf(1.0f - ap);
     float lim = (float)c->clip_sample_range;
-    for (size_t i = 0; i < s->numel; i++) {
-        float x0, eps;
-        switch (c->prediction_type) {
-        case MX_PRED_EPSILON:
-            x0 = (x[i] - sb * mo[i]) / sa;
-            eps = mo[i];
-            break;
-        case MX_PRED_V:
-            x0 = sa * x[i] - sb * mo[i];
-            eps = sa * mo[i] + sb * x[i];
-            break;
-        default:
-            x0 = mo[i];
-            eps = (x[i] - sa * x0) / sb;
-            break;
-        }
-        if (c->clip_sample) x0 = x0 < -lim ? -lim : (x0 > lim ? lim : x0);
-        x[i] = sap * x0 + dir * eps;
+    float *x0 = s->work[0], *eps = s->work[1];
+    const float *e = eps;
+    switch (c->prediction_type) {
+    case MX_PRED_EPSILON:
+        lin2(s, x0, 1.0f / sa, x, -sb / sa, mo);
+        e = mo;
+        break;
+    case MX_PRED_V:
+        lin2(s, x0, sa, x, -sb, mo);
+        lin2(s, eps, sa, mo, sb, x);
+        break;
+    default:
+        mx_copy(s->c, x0, mo, s->numel);
+        lin2(s, eps, 1.0f / sb, x, -sa / sb, x0);
+        break;
     }
+    if (c->clip_sample) mx_clamp(s->c, x0, x0, -lim, lim, s->numel);
+    lin2(s, x, sap, x0, dir, e);
 }
 
 int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st) {
@@ -502,6 +536,7 @@ int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_stat
     int64_t t = s->timesteps[s->step_index];
     if (t < 0 || t >= s->cfg.num_train_timesteps)
         return mx_fail(st, MX_EINTERNAL, "scheduler: timestep %lld out of range", (long long)t);
+    if (s->cfg.kind == MX_SCHED_LCM) return mx_sched_lcm_step(s, model_output, sample, st);
     if (s->cfg.kind == MX_SCHED_DDIM)
         ddim_step(s, model_output, sample);
     else
@@ -513,7 +548,7 @@ int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_stat
 void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n) {
     float a, b;
     int i = s->step_index < s->n_steps ? s->step_index : s->n_steps - 1;
-    if (s->cfg.kind == MX_SCHED_DDIM) {
+    if (s->cfg.kind == MX_SCHED_DDIM || s->cfg.kind == MX_SCHED_LCM) {
         float acp = s->alphas_cumprod[s->timesteps[i]];
         a = sqrtf(acp);
         b = sqrtf(1.0f - acp);
@@ -525,6 +560,7 @@ void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const floa
     for (size_t k = 0; k < n; k++) y[k] = a * x0[k] + b * noise[k];
 }
 
-void mx_cfg_combine(float *out, const float *uncond, const float *cond, float guidance, size_t n) {
-    for (size_t i = 0; i < n; i++) out[i] = uncond[i] + guidance * (cond[i] - uncond[i]);
+void mx_sched_scale_initial(const mx_sched *s, float *lat, size_t n) {
+    float sigma = mx_sched_init_noise_sigma(s);
+    for (size_t k = 0; k < n; k++) lat[k] *= sigma;
 }

@@ -12,6 +12,7 @@
 #include "../geom/masks.h"
 #include "../geom/uvfill.h"
 #include "../nn/sd_pipeline.h"
+#include "../nn/vae_tiled.h"
 #include "condition.h"
 #include "digest.h"
 #include "outdir.h"
@@ -22,6 +23,10 @@
 #define CAMERA_HALF_EXTENT 1.02f /* the normalised mesh lies in the unit sphere */
 #define CROP_MARGIN 0.05f
 #define UV_GUTTER 4
+/* VAE decode in tiles of this many latents (384 pixels), one image at a time: bounds the decode's
+ * memory (SD1.5: ~0.5 GB instead of ~0.94 GB per 512x512 image and ~1.9 GB for the 1024x512
+ * grid) at ~1.4x its work; blend as diffusers' tiled_decode (pipeline/nn/vae_tiled.h). */
+#define VAE_TILE 48
 static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 
 void mx_job_progress(const mx_job *j, const char *fmt, ...) {
@@ -34,16 +39,21 @@ void mx_job_progress(const mx_job *j, const char *fmt, ...) {
     fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
 }
 
+/* A mesh with UVs keeps them (faces without get an atlas and a texture of their own: one
+ * layer per material); a mesh without gets one atlas and one texture. */
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_mesh *m = &j->mesh;
-    if (m->nuv > 0) {
+    mx_uvatlas_opts ao = mx_uvatlas_defaults();
+    ao.texture_size = j->o->tex_size;
+    if (m->nuv > 0 && m->face_uv) {
+        int atlas_faces = 0;
+        if (mx_uvatlas_complete(m, &ao, &j->atlas, &atlas_faces, st)) return -1;
+        j->atlas_built = atlas_faces > 0;
         j->nlayers = m->nmat > 1 && m->face_mat ? m->nmat : 1;
         return 0;
     }
     if (need_uvs)
         return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
-    mx_uvatlas_opts ao = mx_uvatlas_defaults();
-    ao.texture_size = j->o->tex_size;
     if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
     j->atlas_built = 1;
     /* one atlas for the whole mesh: every face renders and exports with material 0 */
@@ -98,19 +108,27 @@ static void report_header(mx_job *j) {
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", "0.1");
     mx_jw_str(w, "mesh", o->mesh_path);
-    mx_jw_str(w, "prompt", o->prompt);
-    mx_jw_str(w, "negative_prompt", o->negative_prompt);
-    mx_jw_int(w, "seed", (long long)o->seed);
-    mx_jw_int(w, "steps", o->steps);
-    mx_jw_num(w, "guidance", o->guidance);
+    if (o->source_path) mx_jw_str(w, "source", o->source_path);
+    if (j->models_ready) {
+        mx_jw_str(w, "prompt", o->prompt);
+        mx_jw_str(w, "negative_prompt", o->negative_prompt);
+        mx_jw_int(w, "seed", (long long)o->seed);
+        mx_jw_int(w, "steps", o->steps);
+        mx_jw_bool(w, "fast", o->fast);
+        mx_jw_num(w, "guidance", o->guidance);
+        mx_jw_int(w, "image_size", o->image_size);
+    }
     mx_jw_int(w, "texture_size", o->tex_size);
     mx_jw_int(w, "render_size", o->render_size);
-    mx_jw_int(w, "image_size", o->image_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
-    mx_jw_str(w, "weights", o->weights_path);
-    char digest[32];
-    mx_file_digest_hex(o->weights_path, digest);
-    mx_jw_str(w, "weights_digest", digest);
+    if (j->models_ready) {
+        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
+        mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
+        mx_jw_str(w, "weights", o->weights_path);
+        char digest[32];
+        mx_file_digest_hex(o->weights_path, digest);
+        mx_jw_str(w, "weights_digest", digest);
+    }
     mx_jw_int(w, "faces", j->mesh.nfaces);
     mx_jw_int(w, "vertices", j->mesh.nverts);
     mx_jw_int(w, "textures", j->nlayers);
@@ -128,22 +146,43 @@ static void report_header(mx_job *j) {
     mx_jw_begin_arr(w, "views");
 }
 
+/* --fast runs the LCM scheduler on an LCM-distilled UNet and decodes with TAESD: both must be in
+ * the weight file. */
+static int check_fast_models(const mx_job *j, mx_status *st) {
+    const mx_models *m = &j->models;
+    if (m->lcm && m->taesd) return 0;
+    return mx_fail(st, MX_EINPUT,
+                   "%s: --fast needs a weight file with the LCM-LoRA merged into the UNet and TAESD; this one has %s. "
+                   "Make one with: matex convert SD15_DIR --controlnet depth=DIR --controlnet inpaint=DIR "
+                   "--lcm-lora lcm-lora-sdv1-5.safetensors --taesd TAESD_DIR -o W.mxw",
+                   j->o->weights_path, !m->lcm && !m->taesd ? "neither" : !m->lcm ? "no LCM-LoRA (metadata unet.lcm_lora)"
+                                                                                : "no TAESD (taesd.*)");
+}
+
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st) {
     memset(j, 0, sizeof *j);
     j->o = o;
     j->t0 = mx_now();
     if (mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_ctx_create_on(&j->ctx, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
-    if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
-    j->models_ready = 1;
-    mx_job_progress(j, "loaded weights %s", o->weights_path);
+    j->psnr_db = NAN;
+    if (model_needs != MX_JOB_NO_MODELS) {
+        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s",
+                        mx_backend_name(o->device), mx_precision_name(mx_isa_precision(j->ctx.k->isa)), mx_isa_name(j->ctx.k->isa),
+                        mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+        if (mx_models_load(&j->models, &j->ctx, o->weights_path, model_needs, st)) return -1;
+        j->models_ready = 1;
+        if (o->fast && check_fast_models(j, st)) return -1;
+        mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
+    }
     if (mx_job_check_cancel(j, st) || mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
     if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
-    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
+    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || encode_negative(j, st)) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models_ready && encode_negative(j, st)))
+        return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -237,7 +276,7 @@ static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *l
     for (int i = 0; i < b->n; i++)
         mx_rng_fill_normal(lat + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
-        mx_scale(&j->ctx, lat, lat, mx_sched_init_noise_sigma(s), numel);
+        mx_sched_scale_initial(s, lat, numel);
         return 0;
     }
     if (mx_sched_set_strength(s, b->strength, st)) return -1;
@@ -250,8 +289,30 @@ static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *l
     return rc;
 }
 
+/* LCM step noise: item i draws from its own stream (first_stream + i) after its start latents,
+ * step k at indices (k + 1) * per_item.., so an item's noise does not depend on its batch. */
+typedef struct lcm_noise {
+    uint64_t seed, first_stream;
+    int n;
+    size_t per_item;
+} lcm_noise;
+
+static int fill_lcm_noise(void *user, int step, float *noise, size_t numel) {
+    const lcm_noise *z = user;
+    if (numel != z->per_item * (size_t)z->n) return -1;
+    for (int i = 0; i < z->n; i++)
+        mx_rng_fill_normal(noise + i * z->per_item, z->per_item, z->seed, z->first_stream + (uint64_t)i,
+                           (uint64_t)(step + 1) * z->per_item);
+    return 0;
+}
+
+static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float *images, mx_status *st) {
+    if (j->o->fast) return mx_taesd_decode_image(&j->ctx, j->models.taesd, lat, n, h, w, images, st);
+    return mx_vae_decode_image_tiled(&j->ctx, j->models.vae, lat, n, h, w, VAE_TILE, images, st);
+}
+
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
-    int f = mx_vae_factor(j->models.vae);
+    int f = j->o->fast ? mx_taesd_factor(j->models.taesd) : mx_vae_factor(j->models.vae);
     if (b->image_h % f || b->image_w % f)
         return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
                        b->image_h, f);
@@ -260,15 +321,20 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     float *lat = malloc(per_item * b->n * sizeof *lat);
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
+    mx_sched_config scfg = j->models.sched;
+    lcm_noise noise = {j->o->seed, b->first_stream, b->n, per_item};
     memset(&s, 0, sizeof s);
     int rc = -1, sched_ready = 0;
+    if (j->o->fast) mx_sched_config_lcm(&scfg, &j->models.sched);
     if (!lat || !cond || !uncond) {
         mx_fail(st, MX_ENOMEM, "generation buffers: out of memory");
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, &j->ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
+    s.noise_fn = fill_lcm_noise;
+    s.noise_user = &noise;
     if (start_latents(j, b, &s, lat, per_item, h, w, st)) goto done;
     mx_sd_control controls[2];
     int nc = 0;
@@ -286,7 +352,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     }
     j->last_denoise_s = mx_now() - t;
     t = mx_now();
-    rc = mx_sd_decode_latents(&j->ctx, j->models.vae, lat, b->n, h, w, images, st);
+    rc = decode_images(j, lat, b->n, h, w, images, st);
     j->last_decode_s = mx_now() - t;
 done:
     if (sched_ready) mx_sched_free(&s);
@@ -418,8 +484,7 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_end_obj(w);
 }
 
-/* Push-pull fill of every layer's unreached chart texels. */
-static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
+int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     int T = j->o->tex_size;
     uint8_t *chart = malloc((size_t)T * T);
     if (!chart) return mx_fail(st, MX_ENOMEM, "UV fill: out of memory");
@@ -435,11 +500,12 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || mx_job_fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
     mx_jw_int(w, "views_generated", j->views_done);
+    if (!isnan(j->psnr_db)) mx_jw_num(w, "psnr_db", j->psnr_db);
     mx_job_stage_done(j, "uv_fill", mx_now() - t);
     mx_jw_begin_obj(w, "stages_s");
     for (int i = 0; i < j->nstages; i++) mx_jw_num(w, j->stage_name[i], j->stage_s[i]);

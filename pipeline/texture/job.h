@@ -18,6 +18,8 @@
 #define MX_JOB_MAX_PROMPTS 16
 /* A candidate with fewer untextured pixels (at the candidate render size) is not worth a view. */
 #define MX_JOB_MIN_UNTEXTURED_PIXELS 16
+/* model_needs of mx_job_open for a job without networks (transfer). */
+#define MX_JOB_NO_MODELS (-1)
 
 typedef struct mx_prompt_cache {
     int n;
@@ -33,7 +35,8 @@ typedef struct mx_job {
     mx_models models;
     int models_ready;
     mx_mesh mesh;
-    float *pos;  /* normalised positions for rendering */
+    float *pos;  /* normalised positions for rendering: (R p - center) * scale */
+    float center[3], scale;
     int nlayers; /* textures: one per material keeping its own UVs, else 1 */
     mx_bake bake;
     int bake_ready;
@@ -50,6 +53,7 @@ typedef struct mx_job {
     int views_done;
     double t0;
     double last_denoise_s, last_decode_s; /* of the latest mx_job_generate, for the report */
+    double psnr_db; /* transfer onto its own mesh: PSNR of the painted texels (report), else NAN */
     int nstages; /* seconds per stage, for the report */
     const char *stage_name[8];
     double stage_s[8];
@@ -80,7 +84,7 @@ typedef struct mx_gen_batch {
 } mx_gen_batch;
 
 /* Output folder (checked, staging folder created), context, models (needs:
- * MX_MODELS_NEED_*), mesh and its normalised copy, bake sized tex_size with nlayers layers,
+ * MX_MODELS_NEED_*, or MX_JOB_NO_MODELS), mesh and its normalised copy, bake sized tex_size with nlayers layers,
  * candidate cache and the report's header. mx_job_close removes the staging folder of a run
  * that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
@@ -109,6 +113,8 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
                         float w_inpaint);
 /* Fraction of candidate-visible texels in T^B. */
 double mx_job_coverage(const mx_job *j);
+/* Fills unreached texels (push-pull inside the charts, gutter dilation) of every layer. */
+int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Fills unreached texels, writes the output folder (staged, then moved into place). */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
 /* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set, else 0. */

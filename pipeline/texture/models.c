@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "../nn/netcfg.h"
+#include "../nn/sd_pipeline.h"
 
 static const char *config_text(const mx_weightfile *wf, const char *prefix, mx_status *st) {
     char key[96];
@@ -23,18 +24,24 @@ static int has_network(const mx_weightfile *wf, const char *prefix) {
     return mx_wf_meta(wf, key) != NULL;
 }
 
+/* The binder of one network: the weight file's, and the device one over it (slot i). */
+static int bind_net(mx_models *m, int i, mx_binder *b, const char *prefix, mx_status *st) {
+    return mx_binder_wf(&m->wf_binders[i], m->wf, prefix, st) || mx_binder_device(b, &m->wf_binders[i], m->c, st) ? -1
+                                                                                                                 : 0;
+}
+
 static int load_clip(mx_models *m, mx_status *st) {
     const char *text = config_text(m->wf, "text_encoder.", st);
     if (!text) return -1;
     mx_clip_config cfg;
     if (mx_clip_config_parse(&cfg, text, strlen(text), mx_wf_path(m->wf), st)) return -1;
-    if (mx_binder_wf(&m->b_clip, m->wf, "text_encoder.", st)) return -1;
+    if (bind_net(m, 0, &m->b_clip, "text_encoder.", st)) return -1;
     if (mx_clip_load(&m->clip, &cfg, &m->b_clip, st)) return -1;
     m->clip_loaded = 1;
     return 0;
 }
 
-static int load_unet_like(mx_models *m, const char *prefix, int controlnet, mx_binder *b, void **out,
+static int load_unet_like(mx_models *m, const char *prefix, int controlnet, int slot, mx_binder *b, void **out,
                           mx_status *st) {
     const char *text = config_text(m->wf, prefix, st);
     if (!text) return -1;
@@ -44,7 +51,7 @@ static int load_unet_like(mx_models *m, const char *prefix, int controlnet, mx_b
         return mx_fail(st, MX_EINPUT, "%s: network '%s' is a %s, expected a %s", mx_wf_path(m->wf), prefix,
                        cfg.is_controlnet ? "ControlNetModel" : "UNet2DConditionModel",
                        controlnet ? "ControlNetModel" : "UNet2DConditionModel");
-    if (mx_binder_wf(b, m->wf, prefix, st)) return -1;
+    if (bind_net(m, slot, b, prefix, st)) return -1;
     if (controlnet) return mx_controlnet_load((mx_controlnet **)out, &cfg, b, st);
     return mx_unet_load((mx_unet **)out, &cfg, b, st);
 }
@@ -54,8 +61,18 @@ static int load_vae(mx_models *m, mx_status *st) {
     if (!text) return -1;
     mx_vae_config cfg;
     if (mx_vae_config_parse(&cfg, text, strlen(text), mx_wf_path(m->wf), st)) return -1;
-    if (mx_binder_wf(&m->b_vae, m->wf, "vae.", st)) return -1;
+    if (bind_net(m, 4, &m->b_vae, "vae.", st)) return -1;
     return mx_vae_load(&m->vae, &cfg, &m->b_vae, st);
+}
+
+static int load_taesd(mx_models *m, mx_status *st) {
+    m->lcm = mx_wf_meta(m->wf, "unet.lcm_lora") != NULL;
+    if (!has_network(m->wf, "taesd.")) return 0;
+    const char *text = config_text(m->wf, "taesd.", st);
+    mx_taesd_config cfg;
+    if (mx_taesd_config_parse(&cfg, text, strlen(text), mx_wf_path(m->wf), st)) return -1;
+    if (bind_net(m, 5, &m->b_taesd, "taesd.", st)) return -1;
+    return mx_taesd_load(&m->taesd, &cfg, &m->b_taesd, st);
 }
 
 static int load_scheduler(mx_models *m, mx_status *st) {
@@ -72,13 +89,13 @@ static int load_controlnets(mx_models *m, int needs, mx_status *st) {
                                : has_network(m->wf, "controlnet.")     ? "controlnet."
                                                                        : NULL;
     if (depth_prefix) {
-        if (load_unet_like(m, depth_prefix, 1, &m->b_depth, (void **)&m->cn_depth, st)) return -1;
+        if (load_unet_like(m, depth_prefix, 1, 2, &m->b_depth, (void **)&m->cn_depth, st)) return -1;
     } else if (needs & MX_MODELS_NEED_DEPTH) {
         return mx_fail(st, MX_EINPUT, "%s: no depth ControlNet (controlnet_depth.*) in this weight file",
                        mx_wf_path(m->wf));
     }
     if (has_network(m->wf, "controlnet_inpaint.")) {
-        if (load_unet_like(m, "controlnet_inpaint.", 1, &m->b_inpaint, (void **)&m->cn_inpaint, st)) return -1;
+        if (load_unet_like(m, "controlnet_inpaint.", 1, 3, &m->b_inpaint, (void **)&m->cn_inpaint, st)) return -1;
     } else if (needs & MX_MODELS_NEED_INPAINT) {
         return mx_fail(st, MX_EINPUT, "%s: no inpainting ControlNet (controlnet_inpaint.*) in this weight file",
                        mx_wf_path(m->wf));
@@ -86,12 +103,13 @@ static int load_controlnets(mx_models *m, int needs, mx_status *st) {
     return 0;
 }
 
-int mx_models_load(mx_models *m, const char *path, int needs, mx_status *st) {
+int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st) {
     memset(m, 0, sizeof *m);
+    m->c = c;
     if (mx_wf_open(&m->wf, path, st)) return -1;
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_clip(m, st) ||
-        load_unet_like(m, "unet.", 0, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
-        load_vae(m, st) || load_scheduler(m, st)) {
+        load_unet_like(m, "unet.", 0, 1, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
+        load_vae(m, st) || load_taesd(m, st) || load_scheduler(m, st)) {
         mx_models_free(m);
         return -1;
     }
@@ -111,11 +129,13 @@ void mx_models_free(mx_models *m) {
     mx_controlnet_free(m->cn_depth);
     mx_controlnet_free(m->cn_inpaint);
     mx_vae_free(m->vae);
+    mx_taesd_free(m->taesd);
     mx_binder_free(&m->b_clip);
     mx_binder_free(&m->b_unet);
     mx_binder_free(&m->b_depth);
     mx_binder_free(&m->b_inpaint);
     mx_binder_free(&m->b_vae);
+    for (int i = 0; i < 6; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);
@@ -125,15 +145,5 @@ int mx_models_text_dim(const mx_models *m) { return m->clip.cfg.hidden_size; }
 
 int mx_models_encode_text(const mx_models *m, const mx_ctx *c, const char *text, float *out, int *n_dropped,
                           mx_status *st) {
-    mx_tok_result tr;
-    if (mx_tok_encode(m->tok, text, &tr, st)) return -1;
-    if (n_dropped) *n_dropped = tr.n_dropped;
-    mx_arena measure;
-    mx_arena_measure(&measure);
-    if (mx_clip_forward(&m->clip, c, &measure, tr.ids, 1, MX_CLIP_CONTEXT, out, NULL, NULL, st)) return -1;
-    mx_arena arena;
-    if (mx_arena_create(&arena, measure.peak, st)) return -1;
-    int rc = mx_clip_forward(&m->clip, c, &arena, tr.ids, 1, MX_CLIP_CONTEXT, out, NULL, NULL, st);
-    mx_arena_destroy(&arena);
-    return rc;
+    return mx_sd_encode_prompts(c, &m->clip, m->tok, &text, 1, out, n_dropped, st);
 }

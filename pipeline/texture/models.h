@@ -1,7 +1,8 @@
 /* The model set of the texturing method, loaded from one matex weight file: tokenizer, CLIP
  * text encoder, UNet, ControlNet depth, ControlNet inpaint, VAE and the scheduler config.
  * Tensor prefixes are those `matex convert` writes: "text_encoder.", "unet.",
- * "controlnet_depth." (or a single "controlnet."), "controlnet_inpaint.", "vae.". */
+ * "controlnet_depth." (or a single "controlnet."), "controlnet_inpaint.", "vae.", and for the
+ * few-step path "taesd." (optional). */
 #ifndef MX_MODELS_H
 #define MX_MODELS_H
 
@@ -11,6 +12,7 @@
 #include "../nn/controlnet.h"
 #include "../nn/params.h"
 #include "../nn/scheduler.h"
+#include "../nn/taesd.h"
 #include "../nn/tokenizer.h"
 #include "../nn/unet.h"
 #include "../nn/vae.h"
@@ -25,19 +27,23 @@ typedef struct mx_models {
     mx_controlnet *cn_depth;   /* NULL when not in the file and not needed */
     mx_controlnet *cn_inpaint; /* NULL when not in the file and not needed */
     mx_vae *vae;
+    mx_taesd *taesd;           /* NULL when the file has no taesd.* */
+    int lcm;                   /* the UNet has a merged LCM-LoRA (metadata unet.lcm_lora) */
     mx_sched_config sched;
-    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae;
+    const mx_ctx *c;                           /* the weights live on c's backend */
+    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd; /* weights on the device */
+    mx_binder wf_binders[6];                   /* the weight file's binders behind them */
     int clip_loaded;
 } mx_models;
 
-/* Opens the weight file and binds every network. `needs` (MX_MODELS_NEED_*) lists the
- * ControlNets that must be present; a missing network is an error naming the file and the
- * prefix it looked for. */
-int mx_models_load(mx_models *m, const char *path, int needs, mx_status *st);
+/* Opens the weight file and binds every network, its weights kept on c's backend (c must
+ * outlive m). `needs` (MX_MODELS_NEED_*) lists the ControlNets that must be present; a missing
+ * network is an error naming the file and the prefix it looked for. */
+int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st);
 void mx_models_free(mx_models *m);
 
-/* Prompt -> CLIP last_hidden_state [77, C] (C = text hidden size). *n_dropped gets the
- * number of tokens cut by truncation to 77 (the caller warns). */
+/* Prompt -> CLIP last_hidden_state [77, C] (C = text hidden size) in host memory. *n_dropped gets
+ * the number of tokens cut by truncation to 77 (the caller warns). */
 int mx_models_encode_text(const mx_models *m, const mx_ctx *c, const char *text, float *out, int *n_dropped,
                           mx_status *st);
 /* Hidden size of the text encoder (= the UNet's cross-attention dim). */

@@ -12,6 +12,7 @@ void mx_texture_opts_default(mx_texture_opts *o) {
     memset(o, 0, sizeof *o);
     o->negative_prompt = "";
     o->steps = 10;
+    o->precision = MX_PREC_BF16;
     o->views = 6;
     o->candidates = 40;
     o->tex_size = 1024;
