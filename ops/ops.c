@@ -258,7 +258,10 @@ int mx_ctx_create_on(mx_ctx *c, mx_backend_kind kind, int nthreads, mx_isa isa, 
     if (mx_backend_create(&c->be, kind, isa, st)) return -1;
     c->k = c->be->k;
     c->pool = mx_pool_create(nthreads, st);
-    if (!c->pool) return -1;
+    if (!c->pool) {
+        mx_ctx_destroy(c); /* the backend is already made */
+        return -1;
+    }
     c->scratch = malloc(sizeof *c->scratch);
     if (!c->scratch) {
         mx_ctx_destroy(c);

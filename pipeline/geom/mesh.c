@@ -215,6 +215,10 @@ static int cmp_weld(const void *x, const void *y) {
 }
 
 /* canon[v] = smallest vertex index with bit-identical position (or v itself without weld). */
+static int weld_map(const mx_mesh *m, int weld, int32_t *canon, mx_status *st);
+
+int mx_mesh_weld_map(const mx_mesh *m, int32_t *canon, mx_status *st) { return weld_map(m, 1, canon, st); }
+
 static int weld_map(const mx_mesh *m, int weld, int32_t *canon, mx_status *st) {
     for (int v = 0; v < m->nverts; v++) canon[v] = v;
     if (!weld) return 0;

@@ -46,6 +46,10 @@ int mx_mesh_placed(const mx_mesh *m, mx_up_axis up, const float center[3], float
  * (m->pos or a normalised copy); zero vector for a degenerate face. */
 int mx_mesh_face_normals(const mx_mesh *m, const float *pos, float **nrm_out, mx_status *st);
 
+/* canon[v] (nverts entries) = the smallest vertex index with a bit-identical position: the
+ * vertices glTF and OBJ files duplicate along UV seams become one. */
+int mx_mesh_weld_map(const mx_mesh *m, int32_t *canon, mx_status *st);
+
 /* Edge connectivity. With weld = 1, vertices with bit-identical positions count as one
  * (glTF duplicates vertices along UV seams); with weld = 0 the raw indices are used. */
 typedef struct mx_mesh_topology {

@@ -377,6 +377,7 @@ int check_ply_header(const char *path, mx_status *st) {
     head.resize(fread(&head[0], 1, head.size(), f));
     fclose(f);
     size_t pos = 0;
+    bool seen_element = false; // OpenMesh crashes on a property before any element
     for (int line_no = 1;; line_no++) {
         size_t nl = head.find('\n', pos);
         if (nl == std::string::npos)
@@ -388,9 +389,11 @@ int check_ply_header(const char *path, mx_status *st) {
             if (line != "ply") return mx_fail(st, MX_EINPUT, "%s: not a PLY file (first line is not 'ply')", path);
         } else if (line == "end_header") {
             return 0;
-        } else if (!ply_header_line_ok(line)) {
+        } else if (!ply_header_line_ok(line) || (line_no == 2) != (line.compare(0, 7, "format ") == 0) ||
+                   (!seen_element && line.compare(0, 9, "property ") == 0)) {
             return mx_fail(st, MX_EINPUT, "%s: PLY header line %d is malformed", path, line_no);
         }
+        seen_element |= line.compare(0, 8, "element ") == 0;
     }
 }
 
