@@ -579,5 +579,5 @@ int main(void) {
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);
-    return mx_test_finish("test_nn_convert");
+    return mx_test_finish("test_weights_convert");
 }
