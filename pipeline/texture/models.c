@@ -135,6 +135,7 @@ void mx_models_free(mx_models *m) {
     mx_binder_free(&m->b_depth);
     mx_binder_free(&m->b_inpaint);
     mx_binder_free(&m->b_vae);
+    mx_binder_free(&m->b_taesd);
     for (int i = 0; i < 6; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);
