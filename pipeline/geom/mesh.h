@@ -33,6 +33,9 @@ typedef struct mx_mesh {
 
 void mx_mesh_free(mx_mesh *m);
 
+/* A deep copy of src into dst (dst's arrays are its own; free with mx_mesh_free). */
+int mx_mesh_clone(const mx_mesh *src, mx_mesh *dst, mx_status *st);
+
 /* ---- mesh utilities (pipeline/geom/mesh.c) ---- */
 
 /* Loads any supported mesh, chosen by extension: .obj .ply .off .stl (pipeline/io/io.h),

@@ -24,14 +24,30 @@
 #define UV_GUTTER 4
 static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 
-void mx_job_progress(const mx_job *j, const char *fmt, ...) {
-    if (j->o->quiet) return;
+/* Sends one event to the progress callback; a non-zero answer stops the run. */
+static void emit_progress(mx_job *j, int step, int steps, const char *message) {
+    const mx_texture_opts *o = j->o;
+    if (!o->progress) return;
+    mx_texture_progress p = {j->phase, step, steps, j->views_done, o->views,
+                             j->visible ? mx_job_coverage(j) : 0.0, mx_now() - j->t0, message};
+    if (o->progress(o->progress_user, &p)) j->stop = 1;
+}
+
+void mx_job_progress(mx_job *j, const char *fmt, ...) {
+    if (j->o->quiet && !j->o->progress) return;
     char line[512];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(line, sizeof line, fmt, ap);
     va_end(ap);
-    fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    emit_progress(j, 0, 0, line);
+}
+
+int mx_job_cancelled(mx_job *j, mx_status *st) {
+    if (!j->stop && !(j->o->cancel && *j->o->cancel)) return 0;
+    mx_fail(st, MX_EUSAGE, "cancelled");
+    return 1;
 }
 
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
@@ -41,7 +57,7 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
         return 0;
     }
     if (need_uvs)
-        return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
+        return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", m->source_path);
     mx_uvatlas_opts ao = mx_uvatlas_defaults();
     ao.texture_size = j->o->tex_size;
     if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
@@ -79,11 +95,11 @@ static int build_candidates(mx_job *j, mx_status *st) {
 }
 
 static int encode_negative(mx_job *j, mx_status *st) {
-    int C = mx_models_text_dim(&j->models);
+    int C = mx_models_text_dim(j->models);
     j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
     if (!j->uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
-    if (mx_models_encode_text(&j->models, &j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
+    if (mx_models_encode_text(j->models, &j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
@@ -94,7 +110,7 @@ static void report_header(mx_job *j) {
     mx_jw_init(w);
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", "0.1");
-    mx_jw_str(w, "mesh", o->mesh_path);
+    mx_jw_str(w, "mesh", j->mesh.source_path);
     mx_jw_str(w, "prompt", o->prompt);
     mx_jw_str(w, "negative_prompt", o->negative_prompt);
     mx_jw_int(w, "seed", (long long)o->seed);
@@ -104,10 +120,8 @@ static void report_header(mx_job *j) {
     mx_jw_int(w, "render_size", o->render_size);
     mx_jw_int(w, "image_size", o->image_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
-    mx_jw_str(w, "weights", o->weights_path);
-    char digest[32];
-    mx_file_digest_hex(o->weights_path, digest);
-    mx_jw_str(w, "weights_digest", digest);
+    mx_jw_str(w, "weights", mx_models_path(j->models));
+    mx_jw_str(w, "weights_digest", j->models->digest);
     mx_jw_int(w, "faces", j->mesh.nfaces);
     mx_jw_int(w, "vertices", j->mesh.nverts);
     mx_jw_int(w, "textures", j->nlayers);
@@ -131,16 +145,25 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->t0 = mx_now();
     if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
-    if (mx_models_load(&j->models, o->weights_path, model_needs, st)) return -1;
-    j->models_ready = 1;
-    mx_job_progress(j, "loaded weights %s", o->weights_path);
-    if (mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
+    j->phase = "load";
+    if (o->models) {
+        j->models = o->models;
+    } else {
+        if (mx_models_load(&j->own_models, o->weights_path, model_needs, st)) return -1;
+        j->own_models_ready = 1;
+        j->models = &j->own_models;
+        mx_job_progress(j, "loaded weights %s", o->weights_path);
+    }
+    if (mx_models_check(j->models, model_needs, st)) return -1;
+    if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
+                : mx_mesh_load(o->mesh_path, &j->mesh, st))
+        return -1;
     if (prepare_uvs(j, need_uvs, st)) return -1;
     if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
     if (build_candidates(j, st) || encode_negative(j, st)) return -1;
-    mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
+    mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
     mx_job_stage_done(j, "load", mx_now() - j->t0);
@@ -158,7 +181,7 @@ void mx_job_close(mx_job *j) {
     if (j->bake_ready) mx_bake_free(&j->bake);
     free(j->pos);
     mx_mesh_free(&j->mesh);
-    if (j->models_ready) mx_models_free(&j->models);
+    if (j->own_models_ready) mx_models_free(&j->own_models);
     if (j->ctx_ready) mx_ctx_destroy(&j->ctx);
     mx_jw_free(&j->report);
     memset(j, 0, sizeof *j);
@@ -176,11 +199,11 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
         memmove(pc->emb, pc->emb + 1, sizeof(pc->emb[0]) * (MX_JOB_MAX_PROMPTS - 1));
         pc->n--;
     }
-    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
     float *emb = malloc(floats * sizeof *emb);
     char *copy = strdup(text);
     int dropped = 0;
-    if (!emb || !copy || mx_models_encode_text(&j->models, &j->ctx, text, emb, &dropped, st)) {
+    if (!emb || !copy || mx_models_encode_text(j->models, &j->ctx, text, emb, &dropped, st)) {
         free(emb);
         free(copy);
         if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
@@ -195,22 +218,21 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
     return pc->emb[pc->n++];
 }
 
-typedef struct {
-    const mx_job *job;
-    const char *stage;
-} progress_ctx;
-
+/* After each denoising step: the progress line and event; non-zero stops the loop. */
 static int report_step(void *user, int step, int n_steps, int64_t timestep, const float *latents, size_t numel) {
     (void)latents;
     (void)numel;
-    const progress_ctx *p = user;
-    mx_job_progress(p->job, "%s: step %d/%d (t=%lld)", p->stage, step + 1, n_steps, (long long)timestep);
-    return 0;
+    mx_job *j = user;
+    char line[160];
+    snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->phase, step + 1, n_steps, (long long)timestep);
+    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    emit_progress(j, step + 1, n_steps, line);
+    return j->stop || (j->o->cancel && *j->o->cancel);
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
 static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float *uncond, mx_status *st) {
-    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
     for (int i = 0; i < b->n; i++) {
         const float *e = prompt_embedding(j, b->prompts[i], st);
         if (!e) return -1;
@@ -233,20 +255,20 @@ static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *l
     if (mx_sched_set_strength(s, b->strength, st)) return -1;
     float *x0 = malloc(numel * sizeof *x0);
     if (!x0) return mx_fail(st, MX_ENOMEM, "latents: out of memory");
-    int rc = mx_sd_encode_image(&j->ctx, j->models.vae, b->init_images, b->n, h * mx_vae_factor(j->models.vae),
-                                w * mx_vae_factor(j->models.vae), x0, st);
+    int rc = mx_sd_encode_image(&j->ctx, j->models->vae, b->init_images, b->n, h * mx_vae_factor(j->models->vae),
+                                w * mx_vae_factor(j->models->vae), x0, st);
     if (!rc) mx_sched_add_noise(s, lat, x0, lat, numel);
     free(x0);
     return rc;
 }
 
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
-    int f = mx_vae_factor(j->models.vae);
+    int f = mx_vae_factor(j->models->vae);
     if (b->image_h % f || b->image_w % f)
         return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
                        b->image_h, f);
     int h = b->image_h / f, w = b->image_w / f;
-    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
     float *lat = malloc(per_item * b->n * sizeof *lat);
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
@@ -257,23 +279,26 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &j->models.sched, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, &j->models->sched, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     if (start_latents(j, b, &s, lat, per_item, h, w, st)) goto done;
     mx_sd_control controls[2];
     int nc = 0;
-    if (b->depth_planes && j->models.cn_depth && b->w_depth != 0)
-        controls[nc++] = (mx_sd_control){j->models.cn_depth, b->depth_planes, b->w_depth};
-    if (b->inpaint_planes && j->models.cn_inpaint && b->w_inpaint != 0)
-        controls[nc++] = (mx_sd_control){j->models.cn_inpaint, b->inpaint_planes, b->w_inpaint};
-    progress_ctx pc = {j, b->stage};
-    mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
-                        report_step, &pc};
+    if (b->depth_planes && j->models->cn_depth && b->w_depth != 0)
+        controls[nc++] = (mx_sd_control){j->models->cn_depth, b->depth_planes, b->w_depth};
+    if (b->inpaint_planes && j->models->cn_inpaint && b->w_inpaint != 0)
+        controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint};
+    j->phase = b->stage;
+    mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
+                        report_step, j};
     double t = mx_now();
-    if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) goto done;
+    if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) {
+        mx_job_cancelled(j, st); /* "cancelled" rather than the loop's message */
+        goto done;
+    }
     j->last_denoise_s = mx_now() - t;
     t = mx_now();
-    rc = mx_sd_decode_latents(&j->ctx, j->models.vae, lat, b->n, h, w, images, st);
+    rc = mx_sd_decode_latents(&j->ctx, j->models->vae, lat, b->n, h, w, images, st);
     j->last_decode_s = mx_now() - t;
 done:
     if (sched_ready) mx_sched_free(&s);
@@ -369,6 +394,7 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
     mx_image_free(&gen);
     mx_image_free(&canvas);
     j->views_done++;
+    if (!rc) emit_progress(j, 0, 0, "view backprojected");
     return rc;
 }
 
@@ -422,7 +448,8 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    if (fill_textures(j, tex, st)) return -1;
+    j->phase = "finish";
+    if (mx_job_cancelled(j, st) || fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
@@ -435,7 +462,42 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
+    if (mx_job_cancelled(j, st)) return -1;
+    if (!j->o->out_dir) return 0;
     if (mx_outdir_write(j->o->out_dir, &j->mesh, tex, j->nlayers, text, st)) return -1;
     mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
     return 0;
+}
+
+int mx_job_result(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *st) {
+    if (!res) return 0;
+    memset(res, 0, sizeof *res);
+    res->coverage = mx_job_coverage(j);
+    res->views = j->views_done;
+    res->seconds = mx_now() - j->t0;
+    if (!j->o->keep_outputs) return 0;
+    const char *report = mx_jw_text(&j->report);
+    res->textures = calloc((size_t)j->nlayers, sizeof *res->textures);
+    res->report_json = report ? strdup(report) : NULL;
+    if (!res->textures || !res->report_json) {
+        mx_texture_result_free(res);
+        return mx_fail(st, MX_ENOMEM, "result: out of memory");
+    }
+    res->ntex = j->nlayers;
+    for (int l = 0; l < j->nlayers; l++) {
+        res->textures[l] = tex[l];
+        memset(&tex[l], 0, sizeof tex[l]);
+    }
+    res->mesh = j->mesh;
+    memset(&j->mesh, 0, sizeof j->mesh);
+    return 0;
+}
+
+void mx_texture_result_free(mx_texture_result *res) {
+    if (!res) return;
+    for (int l = 0; l < res->ntex; l++) mx_image_free(&res->textures[l]);
+    free(res->textures);
+    free(res->report_json);
+    mx_mesh_free(&res->mesh);
+    memset(res, 0, sizeof *res);
 }

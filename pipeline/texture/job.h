@@ -28,8 +28,11 @@ typedef struct mx_job {
     const mx_texture_opts *o;
     mx_ctx ctx;
     int ctx_ready;
-    mx_models models;
-    int models_ready;
+    const mx_models *models; /* o->models, or own_models */
+    mx_models own_models;
+    int own_models_ready;
+    const char *phase; /* stage of the progress events */
+    int stop;          /* the progress callback asked to cancel */
     mx_mesh mesh;
     float *pos;  /* normalised positions for rendering */
     int nlayers; /* textures: one per material keeping its own UVs, else 1 */
@@ -77,7 +80,8 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Context, models (needs: MX_MODELS_NEED_*), mesh and its normalised copy, bake sized
+/* Context, models (o->models, else loaded from o->weights_path; needs: MX_MODELS_NEED_*),
+ * mesh (a copy of o->mesh, else loaded from o->mesh_path) and its normalised copy, bake sized
  * tex_size with nlayers layers, candidate cache and the report's header. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
 void mx_job_close(mx_job *j);
@@ -105,11 +109,17 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
                         float w_inpaint);
 /* Fraction of candidate-visible texels in T^B. */
 double mx_job_coverage(const mx_job *j);
-/* Fills unreached texels, writes the output folder (staged, then moved into place). */
+/* Fills unreached texels, writes the output folder (staged, then moved into place) when
+ * o->out_dir is set. Fails without writing anything once the run is cancelled. */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
+/* Fills res (may be NULL) after mx_job_finish; with o->keep_outputs it takes the textures
+ * (their data is moved: tex[l] is left empty), the mesh and the report. */
+int mx_job_result(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);
+/* 1 when the run must stop (o->cancel set or the progress callback asked); fails st then. */
+int mx_job_cancelled(mx_job *j, mx_status *st);
 /* Records the time of a finished stage (name: a string literal). */
 void mx_job_stage_done(mx_job *j, const char *name, double seconds);
-/* Progress line on stderr (unless quiet). */
-void mx_job_progress(const mx_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Progress line on stderr (unless quiet) and to the progress callback. */
+void mx_job_progress(mx_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 #endif

@@ -32,6 +32,10 @@ void mx_texture_opts_default(mx_texture_opts *o) {
     o->grid_word = "front and back view of";
 }
 
+int mx_texture_opts_have_io(const mx_texture_opts *o) {
+    return (o->mesh_path || o->mesh) && (o->weights_path || o->models) && (o->out_dir || o->keep_outputs);
+}
+
 static void free_views(mx_job_view *v, int n) {
     for (int i = 0; i < n; i++) mx_job_view_free(&v[i]);
 }
@@ -171,7 +175,7 @@ static int view_stage(mx_job *j, mx_status *st) {
 }
 
 static int check_opts(const mx_texture_opts *o, mx_status *st) {
-    if (!o->mesh_path || !o->weights_path || !o->out_dir || !o->prompt)
+    if (!mx_texture_opts_have_io(o) || !o->prompt)
         return mx_fail(st, MX_EUSAGE, "mesh, prompt, --weights and -o are required");
     if (o->steps < 1 || o->steps > 200) return mx_fail(st, MX_EUSAGE, "--steps must be in 1..200, not %d", o->steps);
     if (o->views < 2 || o->views > 64) return mx_fail(st, MX_EUSAGE, "--views must be in 2..64, not %d", o->views);
@@ -198,14 +202,9 @@ int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         mx_image tex[j.nlayers];
         rc = mx_job_current_textures(&j, tex, st);
         if (!rc) {
-            rc = mx_job_finish(&j, tex, st);
+            rc = mx_job_finish(&j, tex, st) || mx_job_result(&j, tex, res, st) ? -1 : 0;
             for (int l = 0; l < j.nlayers; l++) mx_image_free(&tex[l]);
         }
-    }
-    if (!rc && res) {
-        res->coverage = mx_job_coverage(&j);
-        res->views = j.views_done;
-        res->seconds = mx_now() - j.t0;
     }
     mx_job_close(&j);
     return rc;
