@@ -44,6 +44,8 @@ void mx_job_progress(mx_job *j, const char *fmt, ...) {
     emit_progress(j, 0, 0, line);
 }
 
+void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->phase, sizeof j->phase, "%s", stage); }
+
 int mx_job_cancelled(mx_job *j, mx_status *st) {
     if (!j->stop && !(j->o->cancel && *j->o->cancel)) return 0;
     mx_fail(st, MX_EUSAGE, "cancelled");
@@ -145,7 +147,7 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->t0 = mx_now();
     if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
     j->ctx_ready = 1;
-    j->phase = "load";
+    mx_job_set_phase(j, "load");
     if (o->models) {
         j->models = o->models;
     } else {
@@ -288,7 +290,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         controls[nc++] = (mx_sd_control){j->models->cn_depth, b->depth_planes, b->w_depth};
     if (b->inpaint_planes && j->models->cn_inpaint && b->w_inpaint != 0)
         controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint};
-    j->phase = b->stage;
+    mx_job_set_phase(j, b->stage);
     mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
                         report_step, j};
     double t = mx_now();
@@ -448,7 +450,7 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
-    j->phase = "finish";
+    mx_job_set_phase(j, "finish");
     if (mx_job_cancelled(j, st) || fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */

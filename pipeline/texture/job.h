@@ -31,7 +31,7 @@ typedef struct mx_job {
     const mx_models *models; /* o->models, or own_models */
     mx_models own_models;
     int own_models_ready;
-    const char *phase; /* stage of the progress events */
+    char phase[32];    /* stage of the progress events */
     int stop;          /* the progress callback asked to cancel */
     mx_mesh mesh;
     float *pos;  /* normalised positions for rendering */
@@ -115,6 +115,8 @@ int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
 /* Fills res (may be NULL) after mx_job_finish; with o->keep_outputs it takes the textures
  * (their data is moved: tex[l] is left empty), the mesh and the report. */
 int mx_job_result(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);
+/* Names the stage that the following progress events belong to (copied). */
+void mx_job_set_phase(mx_job *j, const char *stage);
 /* 1 when the run must stop (o->cancel set or the progress callback asked); fails st then. */
 int mx_job_cancelled(mx_job *j, mx_status *st);
 /* Records the time of a finished stage (name: a string literal). */

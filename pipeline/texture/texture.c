@@ -61,6 +61,7 @@ static int grid_stage(mx_job *j, mx_status *st) {
             goto done;
     }
     prompts[0] = v[0].prompt;
+    mx_job_set_phase(j, "grid");
     mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->grid_depth_weight);
     mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->grid_depth_weight, 0.0f, NULL, 0.0f, 0, "grid"};
     if (mx_job_generate(j, &b, image, st)) goto done;
@@ -110,6 +111,9 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     /* the views of a batch all see T as it is before the batch */
     if (mx_job_current_textures(j, current, st)) goto done;
     have_current = 1;
+    char stage[32];
+    snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
+    mx_job_set_phase(j, stage);
     for (int i = 0; i < n; i++) {
         v[i].cam = j->vc.cams[cand[i]];
         snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->prompt);
@@ -121,8 +125,6 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
                         (long long)v[i].untextured_pixels);
     }
-    char stage[32];
-    snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
     mx_gen_batch b = {n, S, S, prompts, depth, inpaint, wd, wi, NULL, 0.0f, (uint64_t)(k + 1), stage};
     if (mx_job_generate(j, &b, image, st)) goto done;
     for (int i = 0; i < n; i++) {
