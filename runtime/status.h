@@ -3,7 +3,8 @@
 #ifndef MX_STATUS_H
 #define MX_STATUS_H
 
-enum { MX_OK = 0, MX_EINPUT = 1, MX_EUSAGE = 2, MX_EIO = 3, MX_ENOMEM = 4, MX_EINTERNAL = 5 };
+enum { MX_OK = 0, MX_EINPUT = 1, MX_EUSAGE = 2, MX_EIO = 3, MX_ENOMEM = 4, MX_EINTERNAL = 5,
+       MX_ECANCEL = 6 /* stopped by the caller's cancel flag (a signal): "interrupted" */ };
 
 typedef struct mx_status {
     int code;       /* MX_OK or one of the MX_E* codes */

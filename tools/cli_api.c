@@ -6,7 +6,7 @@
 #include "../pipeline/texture/api_opts.h"
 
 void mx_cli_api_status(const matex_error *err, mx_status *st) {
-    st->code = err->code == MATEX_ECANCELLED ? MX_EUSAGE : err->code;
+    st->code = err->code; /* the same numbers */
     snprintf(st->msg, sizeof st->msg, "%s", err->message);
 }
 

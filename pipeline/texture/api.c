@@ -13,6 +13,12 @@
 #include "models.h"
 #include "outdir.h"
 
+/* Errors pass through unchanged: the public codes are the status codes. */
+_Static_assert((int)MATEX_EINPUT == (int)MX_EINPUT && (int)MATEX_EUSAGE == (int)MX_EUSAGE &&
+                   (int)MATEX_EIO == (int)MX_EIO && (int)MATEX_ENOMEM == (int)MX_ENOMEM &&
+                   (int)MATEX_EINTERNAL == (int)MX_EINTERNAL && (int)MATEX_ECANCELLED == (int)MX_ECANCEL,
+               "matex.h error codes");
+
 struct matex_models {
     mx_models m;
 };
@@ -170,17 +176,11 @@ static void result_view(api_result *r) {
     }
 }
 
-/* Forwards the pipeline's progress events; remembers a request to stop. */
-typedef struct progress_bridge {
-    const matex_options *o;
-    int stopped;
-} progress_bridge;
-
+/* Forwards the pipeline's progress events (user: the public options). */
 static int forward_progress(void *user, const mx_texture_progress *p) {
-    progress_bridge *b = user;
+    const matex_options *o = user;
     matex_progress q = {p->stage, p->step, p->steps, p->views_done, p->views_total, p->coverage, p->seconds, p->message};
-    if (b->o->progress(b->o->progress_user, &q)) b->stopped = 1;
-    return b->stopped;
+    return o->progress(o->progress_user, &q);
 }
 
 typedef int (*pipeline_fn)(const mx_texture_opts *, mx_texture_result *, mx_status *);
@@ -197,10 +197,9 @@ static int run(pipeline_fn fn, matex_models *m, const matex_options *o, matex_re
     mx_texture_opts t;
     mx_api_options_to_internal(o, &t);
     t.models = &m->m;
-    progress_bridge bridge = {o, 0};
     if (o->progress) {
         t.progress = forward_progress;
-        t.progress_user = &bridge;
+        t.progress_user = (void *)o;
     }
     mesh_view mv;
     memset(&mv, 0, sizeof mv);
@@ -223,8 +222,7 @@ static int run(pipeline_fn fn, matex_models *m, const matex_options *o, matex_re
     free(mv.mats);
     free(mv.textures);
     if (rc) {
-        int cancelled = bridge.stopped || (o->cancel && *o->cancel);
-        set_error(err, cancelled ? MATEX_ECANCELLED : st.code, st.msg);
+        set_error(err, st.code, st.msg);
         if (r) matex_result_free(&r->pub);
         return -1;
     }

@@ -46,10 +46,9 @@ void mx_job_progress(mx_job *j, const char *fmt, ...) {
 
 void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->phase, sizeof j->phase, "%s", stage); }
 
-int mx_job_cancelled(mx_job *j, mx_status *st) {
-    if (!j->stop && !(j->o->cancel && *j->o->cancel)) return 0;
-    mx_fail(st, MX_EUSAGE, "cancelled");
-    return 1;
+int mx_job_check_cancel(const mx_job *j, mx_status *st) {
+    if (j->stop || (j->o->cancel && *j->o->cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
+    return 0;
 }
 
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
@@ -295,7 +294,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                         report_step, j};
     double t = mx_now();
     if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) {
-        mx_job_cancelled(j, st); /* "cancelled" rather than the loop's message */
+        mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
         goto done;
     }
     j->last_denoise_s = mx_now() - t;
@@ -451,7 +450,7 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
     mx_job_set_phase(j, "finish");
-    if (mx_job_cancelled(j, st) || fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
@@ -464,7 +463,7 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
-    if (mx_job_cancelled(j, st)) return -1;
+    if (mx_job_check_cancel(j, st)) return -1;
     if (!j->o->out_dir) return 0;
     if (mx_outdir_write(j->o->out_dir, &j->mesh, tex, j->nlayers, text, st)) return -1;
     mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);

@@ -117,8 +117,9 @@ int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
 int mx_job_result(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);
 /* Names the stage that the following progress events belong to (copied). */
 void mx_job_set_phase(mx_job *j, const char *stage);
-/* 1 when the run must stop (o->cancel set or the progress callback asked); fails st then. */
-int mx_job_cancelled(mx_job *j, mx_status *st);
+/* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set or the progress
+ * callback asked to stop, else 0. */
+int mx_job_check_cancel(const mx_job *j, mx_status *st);
 /* Records the time of a finished stage (name: a string literal). */
 void mx_job_stage_done(mx_job *j, const char *name, double seconds);
 /* Progress line on stderr (unless quiet) and to the progress callback. */
