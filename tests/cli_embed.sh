@@ -15,28 +15,7 @@ export PKG_CONFIG_PATH="$P/lib/pkgconfig"
 check "pkg-config knows matex" pkg-config --exists matex
 check "the example builds with pkg-config" sh -c \
     "${CC:-cc} -std=c11 -Wall -Wextra -Werror examples/embed.c \$(pkg-config --cflags --libs matex) -o '$T/embed'"
-cat > "$T/box.obj" <<'OBJ'
-v -1 -0.5 -1
-v 1 -0.5 -1
-v 1 0.5 -1
-v -1 0.5 -1
-v -1 -0.5 1
-v 1 -0.5 1
-v 1 0.5 1
-v -1 0.5 1
-f 1 3 2
-f 1 4 3
-f 5 6 7
-f 5 7 8
-f 1 2 6
-f 1 6 5
-f 4 7 3
-f 4 8 7
-f 1 5 8
-f 1 8 4
-f 2 3 7
-f 2 7 6
-OBJ
+cp tests/data/box.obj "$T/box.obj"
 check "the example runs" [ "$(rc_of "$T/embed" --quick "$W" "$T/box.obj" "$T/box_out")" = 0 ]
 cp "$T/out" "$T/run.txt"; cat "$T/out" "$T/err"
 check "cube textured in memory" grep -q "^cube: [0-9]* views, coverage " "$T/run.txt"
