@@ -52,7 +52,7 @@ LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install core
+.PHONY: all test asan bench clean cuda test-full demo install core test-slurm
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -124,6 +124,11 @@ test: all core $(TEST_BINS) $(DEMO_WEIGHTS)
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: all core $(TEST_BINS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS)
+
+# A one-node Slurm cluster on localhost (munged, slurmctld, slurmd; slurm-wlm and munge installed when
+# missing) runs tools/slurm/matex-array.sbatch over tiny-weight jobs: submit, cancel, resume.
+test-slurm: all $(DEMO_WEIGHTS)
+	$(TEST_ENV) timeout 600 sh tests/slurm_cluster.sh
 
 # End to end in seconds with tiny random weights (they paint noise: see README).
 demo: all $(DEMO_WEIGHTS)
