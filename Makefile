@@ -21,17 +21,18 @@ endif
 
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
+AVX512BF16_FLAGS = $(AVX512_FLAGS) -mavx512bf16
 
 # x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones.
 ifneq ($(filter x86_64 i686 i386,$(shell uname -m)),)
-SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c)
+SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c)
 else
 SIMD_SRC    =
 CFLAGS     += -DMX_NO_X86_SIMD
 endif
 
 # Modules: a test links only the modules it needs, so one module's breakage stays local.
-CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
+CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(wildcard pipeline/geom/*.c)
@@ -88,6 +89,9 @@ $(BUILD)/%_avx2.o: %_avx2.c
 $(BUILD)/%_avx512.o: %_avx512.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512_FLAGS) -c -o $@ $<
+$(BUILD)/%_avx512bf16.o: %_avx512bf16.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c -o $@ $<
@@ -111,7 +115,8 @@ $(BUILD)/tests/test_tex_%: $(BUILD)/tests/test_tex_%.o $(TEST_UTIL) $(LIB_TEX) $
 
 # Tiny random networks of the SD1.5 family for the pipeline tests and `make demo`.
 DEMO_WEIGHTS = $(BUILD)/demo/demo.mxw
-$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*)
+$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*) \
+                 tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt
 	@mkdir -p $(dir $@)
 	sh tools/make_demo_weights.sh $(BUILD)/matex $@
 
@@ -130,11 +135,16 @@ test-full: all core $(TEST_BINS) $(DEMO_WEIGHTS)
 test-slurm: all $(DEMO_WEIGHTS)
 	$(TEST_ENV) timeout 600 sh tests/slurm_cluster.sh
 
-# End to end in seconds with tiny random weights (they paint noise: see README).
+# End to end in seconds with tiny random weights (they paint noise: see README): the shipped
+# Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
+DEMO_OUT = demo/spot
 demo: all $(DEMO_WEIGHTS)
-	$(BUILD)/matex texture ../shared/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
-	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 -o demo/spot
-	@echo "demo: textured mesh in demo/spot (mesh.glb, mesh.obj, texture.png, report.json)"
+	rm -rf $(DEMO_OUT)
+	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
+	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
+	$(BUILD)/matex render $(DEMO_OUT)/mesh.glb --views 8 --size 256 -o $(DEMO_OUT)/views
+	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, report.json)"
+	@echo "demo: contact sheet of 8 views in $(CURDIR)/$(DEMO_OUT)/views/contact_sheet.png"
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test

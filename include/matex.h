@@ -89,6 +89,8 @@ typedef struct matex_mesh {
 
 /* ---- options ---- */
 
+enum { MATEX_PRECISION_FP32 = 0, MATEX_PRECISION_BF16 = 1 }; /* of the networks' matrix products */
+
 typedef struct matex_progress {
     const char *stage;   /* "load", "grid", "views 3-4", "enhance view 2", "finish" */
     int step, steps;     /* denoising step (1-based) of the stage; 0, 0 for other events */
@@ -111,6 +113,7 @@ typedef struct matex_options {
     const char *negative_prompt;  /* "" */
     const char *out_dir;          /* write the output folder (texture.png/.exr, mesh.obj/.mtl/.glb,
                                      report.json); NULL: results in memory only */
+    int force;                    /* replace an existing non-empty out_dir (atomically); 0: refuse */
     uint64_t seed;                /* 0; the same seed gives the same texture */
     int steps;                    /* denoising steps: 10 */
     int views;                    /* view budget, front and back included: 6 */
@@ -130,6 +133,7 @@ typedef struct matex_options {
     int z_up;                     /* 0: the mesh is y-up */
     const char *front_back_words; /* "front and back view of" */
     int threads;                  /* 0: all CPUs */
+    int precision;                /* MATEX_PRECISION_BF16 (default: used where the CPU has it) or _FP32 */
     int verbose;                  /* 1: progress lines on stderr */
     matex_progress_fn progress;   /* NULL: none */
     void *progress_user;
@@ -155,8 +159,8 @@ typedef struct matex_result {
 int matex_texture(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
 /* Enhances the texture of a textured mesh (SDEdit over views). */
 int matex_enhance(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
-/* Writes a result's output folder (as out_dir does). */
-int matex_result_write(const matex_result *r, const char *out_dir, matex_error *err);
+/* Writes a result's output folder as out_dir does (force: replace a non-empty folder). */
+int matex_result_write(const matex_result *r, const char *out_dir, int force, matex_error *err);
 void matex_result_free(matex_result *r);
 
 #ifdef __cplusplus

@@ -1,10 +1,16 @@
 /* The op interface of matex. Every op has a scalar reference (ops/cpu/<op>_ref.c, the test
  * oracle) and SIMD kernels (ops/cpu/<op>_avx2.c, <op>_avx512.c), all behind one table of function
- * pointers chosen once at run time by cpuid. Networks call the mx_* wrappers below.
+ * pointers chosen once at run time by cpuid; the CUDA backend has a table of its own
+ * (ops/cuda). Networks call the mx_* wrappers below and nothing else touches activations.
  *
  * Conventions
  * - Activations are fp32, contiguous, row-major. Images/feature maps are NCHW
- *   (as in PyTorch); token sequences are [B, T, C].
+ *   (as in PyTorch); token sequences are [B, T, C]. A `float *` activation is a handle into the
+ *   memory of the context's backend (runtime/backend.h): only ops dereference it; offsets into
+ *   it (p + i) are fine. Host data enters and leaves through mx_upload / mx_download.
+ * - The measuring dry run lives here: on a measuring context (mx_ctx_measuring, what
+ *   mx_run_ctx gives for a measuring arena) every op returns at once, and mx_act_alloc hands
+ *   out placeholder handles while the arena counts the bytes.
  * - Weights are an mx_wptr: fp32, fp16 or bf16 data widened to fp32 as it is read.
  *   A weight with data == NULL (e.g. a missing bias) means "none".
  * - Linear weights are PyTorch's [N, K] (out_features, in_features); conv weights are
@@ -43,8 +49,10 @@ typedef struct mx_kernels mx_kernels;
 
 typedef struct mx_ctx {
     mx_pool *pool;           /* NULL: single-threaded */
-    const mx_kernels *k;     /* dispatch table (mx_kernels_for) */
+    const mx_kernels *k;     /* dispatch table (mx_kernels_for, or the backend's) */
     mx_arena *scratch;       /* temporary memory for kernels; must be a real (non-measuring) arena */
+    mx_backend *be;          /* where activations live; NULL: host memory, no guard */
+    int measuring;           /* 1: dry run, every op returns at once */
 } mx_ctx;
 
 typedef enum { MX_BIN_ADD = 0, MX_BIN_SUB = 1, MX_BIN_MUL = 2 } mx_binop;
@@ -77,6 +85,18 @@ struct mx_kernels {
     void (*transpose_hwc_chw)(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
     void (*resize_bilinear)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+    void (*pad2d)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+                  int right);
+    void (*copy)(const mx_ctx *, float *y, const float *x, size_t n);
+    void (*fill)(const mx_ctx *, float *y, float v, size_t n);
+    void (*axpy)(const mx_ctx *, float *y, const float *x, float s, size_t n);
+    void (*lincomb)(const mx_ctx *, float *y, int k, const float *coef, const float *const *x, size_t n);
+    void (*clamp)(const mx_ctx *, float *y, const float *x, float lo, float hi, size_t n);
+    void (*affine)(const mx_ctx *, float *y, const float *x, float a, float b, size_t n);
+    void (*timestep_embedding)(const mx_ctx *, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
+                               float downscale_freq_shift, float max_period);
+    void (*embed_tokens)(const mx_ctx *, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
+                         mx_wptr positions);
     void (*f16_to_f32)(float *y, const uint16_t *x, size_t n);
     void (*f32_to_f16)(uint16_t *y, const float *x, size_t n);
     void (*bf16_to_f32)(float *y, const uint16_t *x, size_t n);
@@ -87,7 +107,8 @@ struct mx_kernels {
 const mx_kernels *mx_kernels_for(mx_isa isa);
 /* The scalar reference table (the test oracle). */
 const mx_kernels *mx_kernels_scalar(void);
-/* The best table for this CPU (mx_cpu_best_isa). */
+/* The best fp32 table for this CPU (mx_cpu_isa_for(MX_PREC_FP32)): what a context without a
+ * table gets. */
 const mx_kernels *mx_kernels_best(void);
 
 /* ---- wrappers: the op semantics ---- */
@@ -139,11 +160,28 @@ void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int 
  * (0: half-pixel centres, no antialias). */
 void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                         int align_corners);
+/* Zero padding of BC planes H×W by (top, bottom, left, right) rows/columns, each >= 0
+ * (diffusers' asymmetric Downsample2D pad is (0, 1, 0, 1)). */
+void mx_pad2d(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+              int right);
+/* y = x over n floats (no overlap), y[i] = v, y += s·x, y = Σ_j coef[j]·x[j] (k <= 4 terms,
+ * summed left to right; y may be one of the x), y = clamp(x, lo, hi), y = a·x + b. */
+void mx_copy(const mx_ctx *c, float *y, const float *x, size_t n);
+void mx_fill(const mx_ctx *c, float *y, float v, size_t n);
+void mx_axpy(const mx_ctx *c, float *y, const float *x, float s, size_t n);
+#define MX_LINCOMB_MAX 4
+void mx_lincomb(const mx_ctx *c, float *y, int k, const float *coef, const float *const *x, size_t n);
+void mx_clamp(const mx_ctx *c, float *y, const float *x, float lo, float hi, size_t n);
+void mx_affine(const mx_ctx *c, float *y, const float *x, float a, float b, size_t n);
+/* y[b, t, :] = tokens[ids[b·T + t], :] + positions[t, :] (C columns). ids are HOST integers,
+ * already checked against the vocabulary by the caller. */
+void mx_embed_tokens(const mx_ctx *c, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
+                     mx_wptr positions);
 /* Sinusoidal timestep embedding exactly as diffusers' get_timestep_embedding:
  * half = dim/2, exponent_k = -ln(max_period) * k / (half - downscale_freq_shift),
  * emb = t * exp(exponent); out = [sin | cos] (or [cos | sin] when flip_sin_to_cos); zero pad if dim odd.
  * y: [B, dim]. SD1.5: flip_sin_to_cos=1, downscale_freq_shift=0, max_period=10000. */
-void mx_timestep_embedding(float *y, const float *t, int B, int dim, int flip_sin_to_cos,
+void mx_timestep_embedding(const mx_ctx *c, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
                            float downscale_freq_shift, float max_period);
 /* Conversions (round to nearest even; NaN stays NaN). */
 void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n);
@@ -156,9 +194,40 @@ uint16_t mx_float_to_half(float f);
 float mx_bf16_to_float(uint16_t h);
 uint16_t mx_float_to_bf16(float f);
 
+/* ---- the edges: backend memory and host copies ---- */
+
+/* n floats of the context's backend memory (host heap without a backend); NULL with a
+ * message when out of memory. Free with mx_dev_free. */
+float *mx_dev_alloc(const mx_ctx *c, size_t n, mx_status *st);
+void mx_dev_free(const mx_ctx *c, void *p);
+/* Copies n floats host -> backend (mx_upload) or backend -> host (mx_download, which waits
+ * for the queued ops first and reports an error any of them raised). */
+int mx_upload(const mx_ctx *c, float *dst, const float *src, size_t n, mx_status *st);
+int mx_download(const mx_ctx *c, float *dst, const float *src, size_t n, mx_status *st);
+/* Backend memory holding a copy of n host floats (mx_dev_alloc + mx_upload). */
+float *mx_dev_from_host(const mx_ctx *c, const float *src, size_t n, mx_status *st);
+
+/* ---- the dry run ---- */
+
+/* The context of a measuring dry run: every op returns at once. */
+const mx_ctx *mx_ctx_measuring(void);
+/* The context ops of a run in arena a get: mx_ctx_measuring() when a is measuring, else c. */
+const mx_ctx *mx_run_ctx(const mx_ctx *c, const mx_arena *a);
+/* n activation floats from the arena; in a measuring arena a placeholder handle (never NULL:
+ * the arena only counts), so forward code needs no special case. NULL only on failure. */
+float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st);
+
 /* A ready-to-use context: best kernels, a pool of nthreads (<=0: all CPUs) and a scratch
  * arena of scratch_bytes. Free with mx_ctx_destroy. */
 int mx_ctx_create(mx_ctx *c, int nthreads, mx_isa isa, size_t scratch_bytes, mx_status *st);
+/* The same on a backend of the given kind (cpu-strict and cuda own the activations; the
+ * context owns the backend). A kind this binary lacks fails with one clear line. */
+int mx_ctx_create_on(mx_ctx *c, mx_backend_kind kind, int nthreads, mx_isa isa, size_t scratch_bytes,
+                     mx_status *st);
 void mx_ctx_destroy(mx_ctx *c);
+
+/* Makes a backend (ops/backend.c): kernels for `isa` on the CPU kinds. */
+int mx_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa, mx_status *st);
+void mx_backend_destroy(mx_backend *be);
 
 #endif

@@ -6,9 +6,19 @@
 
 static size_t round_up(size_t n) { return (n + MX_ARENA_ALIGN - 1) & ~(size_t)(MX_ARENA_ALIGN - 1); }
 
-int mx_arena_create(mx_arena *a, size_t cap, mx_status *st) {
+int mx_arena_create(mx_arena *a, size_t cap, mx_status *st) { return mx_arena_create_on(a, NULL, cap, st); }
+
+int mx_arena_create_on(mx_arena *a, mx_backend *be, size_t cap, mx_status *st) {
     memset(a, 0, sizeof *a);
     cap = round_up(cap ? cap : MX_ARENA_ALIGN);
+    if (be) {
+        a->base = be->alloc(be, cap, st);
+        if (!a->base) return mx_fail_prefix(st, "arena");
+        a->be = be;
+        a->cap = cap;
+        a->owns = 1;
+        return 0;
+    }
     a->base = aligned_alloc(MX_ARENA_ALIGN, cap);
     if (!a->base) return mx_fail(st, MX_ENOMEM, "arena: cannot allocate %zu bytes", cap);
     a->cap = cap;
@@ -30,7 +40,10 @@ void mx_arena_measure(mx_arena *a) {
 }
 
 void mx_arena_destroy(mx_arena *a) {
-    if (a->owns) free(a->base);
+    if (a->owns && a->be)
+        a->be->release(a->be, a->base);
+    else if (a->owns)
+        free(a->base);
     memset(a, 0, sizeof *a);
 }
 

@@ -7,6 +7,7 @@
 
 #include <stddef.h>
 
+#include "backend.h"
 #include "status.h"
 
 #define MX_ARENA_ALIGN 64
@@ -17,10 +18,14 @@ typedef struct mx_arena {
     size_t used;
     size_t peak;
     int measuring;       /* 1: count sizes only, hand out NULL */
-    int owns;            /* 1: base was allocated by mx_arena_create */
+    int owns;            /* 1: base was allocated by mx_arena_create / mx_arena_create_on */
+    mx_backend *be;      /* the backend whose memory base is (NULL: host heap) */
 } mx_arena;
 
 int mx_arena_create(mx_arena *a, size_t cap, mx_status *st);
+/* An arena in a backend's memory (be NULL: the host heap, as mx_arena_create). Only ops may
+ * read or write what it hands out. */
+int mx_arena_create_on(mx_arena *a, mx_backend *be, size_t cap, mx_status *st);
 /* Arena over a caller's buffer (aligned to 64 inside). */
 void mx_arena_wrap(mx_arena *a, void *buf, size_t cap);
 /* An arena that only measures (dry run). */

@@ -1,16 +1,77 @@
-/* The backend interface: where tensors live and which kernels run them.
- * CPU: host memory, kernels from ops/cpu chosen by cpuid (scalar, AVX2+FMA, AVX-512F).
- * CUDA: device memory, kernels from ops/cuda (built by `make cuda`). */
+/* The backend interface: where activations live and which kernels run the ops.
+ *
+ * A backend owns device memory (the activation arena of a run and the network inputs and
+ * outputs), runs every op through its kernel table (struct mx_kernels, ops/ops.h) and copies
+ * to or from the host only at the edges (network inputs/outputs, images handed to the
+ * geometry code). Network code holds activations as `float *` handles that only ops
+ * dereference: on CUDA they are device pointers, on cpu-strict they point into memory that is
+ * inaccessible (PROT_NONE) except while one of the backend's kernels runs.
+ *
+ *   cpu         host memory, the cpuid-chosen SIMD kernels (ops/cpu)
+ *   cpu-strict  the same kernels; memory readable only inside them (tests prove the seam)
+ *   cuda        device memory, the kernels of ops/cuda (in binaries built by `make cuda`)
+ *
+ * Backends are made by mx_backend_create (ops/backend.c); ops reach them through mx_ctx.be. */
 #ifndef MX_BACKEND_H
 #define MX_BACKEND_H
 
-typedef enum { MX_BACKEND_CPU = 0, MX_BACKEND_CUDA = 1 } mx_backend_kind;
+#include <stddef.h>
 
-/* Instruction-set levels of the CPU kernels, in increasing order. */
-typedef enum { MX_ISA_SCALAR = 0, MX_ISA_AVX2 = 1, MX_ISA_AVX512 = 2 } mx_isa;
+#include "status.h"
 
-/* Best level this CPU and OS support (cpuid + xgetbv). MATEX_ISA=scalar|avx2|avx512 lowers it. */
+typedef enum { MX_BACKEND_CPU = 0, MX_BACKEND_CPU_STRICT = 1, MX_BACKEND_CUDA = 2 } mx_backend_kind;
+#define MX_BACKEND_KINDS 3
+
+/* Instruction-set levels of the CPU kernels, in increasing order. MX_ISA_AVX512_BF16 is the
+ * AVX-512 level with linear, conv2d and attention in bf16 arithmetic (fp32 accumulation): a
+ * precision choice as much as an ISA, so fp32 work asks for mx_cpu_isa_for(MX_PREC_FP32). */
+typedef enum { MX_ISA_SCALAR = 0, MX_ISA_AVX2 = 1, MX_ISA_AVX512 = 2, MX_ISA_AVX512_BF16 = 3 } mx_isa;
+
+/* Arithmetic of the matrix products: fp32, or bf16 inputs with fp32 accumulation. */
+typedef enum { MX_PREC_FP32 = 0, MX_PREC_BF16 = 1 } mx_precision;
+
+/* Best level this CPU and OS support (cpuid + xgetbv).
+ * MATEX_ISA=scalar|avx2|avx512|avx512bf16 lowers it. */
 mx_isa mx_cpu_best_isa(void);
+/* Best level for a precision: fp32 never gets a bf16 level; bf16 gets the best level, which is
+ * an fp32 one when the CPU has no bf16 arithmetic (check with mx_isa_precision). */
+mx_isa mx_cpu_isa_for(mx_precision p);
+/* The precision a level computes in. */
+mx_precision mx_isa_precision(mx_isa isa);
 const char *mx_isa_name(mx_isa isa);
+const char *mx_precision_name(mx_precision p);
+/* "fp32" or "bf16" into *p; -1 for anything else. */
+int mx_precision_parse(const char *s, mx_precision *p);
+
+struct mx_kernels;
+
+typedef struct mx_backend mx_backend;
+struct mx_backend {
+    mx_backend_kind kind;
+    const struct mx_kernels *k; /* the kernels that run every op */
+    int host_visible;           /* 1: weights in host memory serve as they are (no upload) */
+    /* Device memory, 64-byte aligned; NULL with a message in st when out of memory. */
+    void *(*alloc)(mx_backend *be, size_t bytes, mx_status *st);
+    void (*release)(mx_backend *be, void *p);
+    /* Copies between host and device memory; to_host first waits for queued work and
+     * reports any error it raised. */
+    int (*to_device)(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st);
+    int (*to_host)(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st);
+    /* Around every kernel call (NULL: nothing to do); calls nest. */
+    void (*enter)(mx_backend *be);
+    void (*leave)(mx_backend *be);
+    void (*destroy)(mx_backend *be);
+    void *impl;
+};
+
+/* "cpu", "cpu-strict", "cuda". */
+const char *mx_backend_name(mx_backend_kind kind);
+/* Parses a --device value; the message lists the accepted names. */
+int mx_backend_parse(const char *name, mx_backend_kind *kind, mx_status *st);
+/* 1 when this binary has the backend (cuda only in `make cuda` builds). */
+int mx_backend_compiled(mx_backend_kind kind);
+/* The backends compiled into this binary, space separated ("cpu cpu-strict" or
+ * "cpu cpu-strict cuda"), for `matex --version`. */
+const char *mx_backends_compiled(void);
 
 #endif

@@ -1,6 +1,6 @@
 /* mx_cpu_best_isa: cpuid for the instruction sets, xgetbv for the OS saving their registers.
- * MATEX_ISA=scalar|avx2|avx512 can only lower the level (asking for more than the CPU has
- * would crash with an illegal instruction). */
+ * MATEX_ISA=scalar|avx2|avx512|avx512bf16 can only lower the level (asking for more than the
+ * CPU has would crash with an illegal instruction). AMX is not detected: no kernel uses it. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -27,8 +27,10 @@ static mx_isa detect_isa(void) {
     int avx2 = (b >> 5) & 1;
     if (!avx2 || !fma || !f16c) return MX_ISA_SCALAR;
     int avx512 = ((b >> 16) & 1) && ((b >> 17) & 1) && ((b >> 30) & 1) && ((b >> 31) & 1); /* F DQ BW VL */
-    if (avx512 && (xcr0 & 0xE0) == 0xE0) return MX_ISA_AVX512; /* opmask, ZMM0-15 high, ZMM16-31 */
-    return MX_ISA_AVX2;
+    if (!avx512 || (xcr0 & 0xE0) != 0xE0) return MX_ISA_AVX2; /* opmask, ZMM0-15 high, ZMM16-31 */
+    /* leaf 7 subleaf 1, EAX bit 5: AVX512_BF16 (vdpbf16ps, vcvtne2ps2bf16) */
+    if (__get_cpuid_count(7, 1, &a, &b, &c, &d) && ((a >> 5) & 1)) return MX_ISA_AVX512_BF16;
+    return MX_ISA_AVX512;
 }
 #else
 static mx_isa detect_isa(void) { return MX_ISA_SCALAR; }
@@ -44,8 +46,10 @@ static mx_isa isa_from_env(mx_isa best) {
         want = MX_ISA_AVX2;
     else if (!strcmp(e, "avx512"))
         want = MX_ISA_AVX512;
+    else if (!strcmp(e, "avx512bf16"))
+        want = MX_ISA_AVX512_BF16;
     else {
-        mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2 or avx512); using %s", e, mx_isa_name(best));
+        mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2, avx512 or avx512bf16); using %s", e, mx_isa_name(best));
         return best;
     }
     return want < best ? want : best;
@@ -53,11 +57,31 @@ static mx_isa isa_from_env(mx_isa best) {
 
 mx_isa mx_cpu_best_isa(void) { return isa_from_env(detect_isa()); }
 
+mx_isa mx_cpu_isa_for(mx_precision p) {
+    mx_isa best = mx_cpu_best_isa();
+    return p == MX_PREC_FP32 && best > MX_ISA_AVX512 ? MX_ISA_AVX512 : best;
+}
+
+mx_precision mx_isa_precision(mx_isa isa) { return isa == MX_ISA_AVX512_BF16 ? MX_PREC_BF16 : MX_PREC_FP32; }
+
+const char *mx_precision_name(mx_precision p) { return p == MX_PREC_BF16 ? "bf16" : "fp32"; }
+
+int mx_precision_parse(const char *s, mx_precision *p) {
+    if (!strcmp(s, "fp32"))
+        *p = MX_PREC_FP32;
+    else if (!strcmp(s, "bf16"))
+        *p = MX_PREC_BF16;
+    else
+        return -1;
+    return 0;
+}
+
 const char *mx_isa_name(mx_isa isa) {
     switch (isa) {
     case MX_ISA_SCALAR: return "scalar";
     case MX_ISA_AVX2: return "avx2";
     case MX_ISA_AVX512: return "avx512";
+    case MX_ISA_AVX512_BF16: return "avx512bf16";
     }
     return "?";
 }

@@ -30,3 +30,9 @@ char *mx_read_file(const char *path, size_t max_bytes, size_t *len, mx_status *s
     fclose(f);
     return buf;
 }
+
+int mx_path_join(char *out, size_t cap, const char *dir, const char *name, mx_status *st) {
+    int n = snprintf(out, cap, "%s/%s", dir, name);
+    if (n < 0 || (size_t)n >= cap) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    return 0;
+}

@@ -1,5 +1,5 @@
 /* Reading small whole files (configs, vocabularies, reports) with size limits and errors
- * that name the file. */
+ * that name the file; joining paths. */
 #ifndef MX_FILEIO_H
 #define MX_FILEIO_H
 
@@ -10,5 +10,8 @@
 /* The whole file as a malloc'ed, NUL-terminated buffer; *len (may be NULL) gets its length.
  * Files larger than max_bytes are refused. NULL with an error in st on failure. */
 char *mx_read_file(const char *path, size_t max_bytes, size_t *len, mx_status *st);
+
+/* out = dir + "/" + name; -1 with "DIR: path too long" (MX_EINPUT) when it does not fit in cap. */
+int mx_path_join(char *out, size_t cap, const char *dir, const char *name, mx_status *st);
 
 #endif

@@ -3,7 +3,7 @@
 # JSON summary), bad input (exit 1, one message naming the file, no output file left).
 NAME=convert
 . "$(dirname "$0")/lib_cli.sh"
-G=$SHARED/golden
+G=$(data golden)
 no_output() { [ ! -e "$T/x.mxw" ] && [ -z "$(ls "$T" | grep '\.tmp\.')" ]; }
 
 check "--help exits 0" [ "$(rc_of "$M" convert --help)" = 0 ]

@@ -3,7 +3,7 @@
 # assets/MANIFEST.md, bad input (exit 1, message naming the file), weight-file dispatch.
 NAME=info
 . "$(dirname "$0")/lib_cli.sh"
-A=$SHARED/assets
+A=$(data assets)
 
 check "--help exits 0" [ "$(rc_of "$M" info --help)" = 0 ]
 check "--help prints usage" grep -q "usage: matex info" "$T/out"

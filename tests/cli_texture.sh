@@ -4,7 +4,7 @@
 # that `make test` builds (MATEX_DEMO_WEIGHTS).
 NAME=texture
 . "$(dirname "$0")/lib_cli.sh"
-A=$SHARED/assets
+A=$(data assets)
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
 SMALL="--image-size 64 --steps 1 --texture-size 256 --render-size 256 --candidates 12 --quiet"
 

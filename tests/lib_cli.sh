@@ -1,6 +1,5 @@
 # Shared by the tests/cli_*.sh scripts (sourced, not run): the binary under test, a scratch
-# folder removed on exit, and the two checks. Set NAME before sourcing.
-SHARED=${MATEX_SHARED:-../shared}
+# folder removed on exit, the test data and the checks. Set NAME before sourcing.
 M=${MATEX:-./matex}
 T=$(mktemp -d "/tmp/matex_cli_${NAME:-test}.XXXXXX")
 trap 'rm -rf "$T"' EXIT
@@ -10,3 +9,18 @@ check() { # check NAME COMMAND...: the command must succeed
     if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
 }
 rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; } # runs a command, prints its exit code
+# Test data as in tests/util_test.h: data REL prints tests/data/REL when the repository ships it,
+# else $MATEX_TESTDATA/REL (default ../shared). have REL is true when it exists; otherwise it
+# prints a SKIP line (a failure when CI=true, where that data must be there).
+data() {
+    if [ -e "tests/data/$1" ]; then echo "tests/data/$1"; else echo "${MATEX_TESTDATA:-../shared}/$1"; fi
+}
+have() {
+    [ -e "$(data "$1")" ] && return 0
+    if [ "${CI:-}" = true ]; then
+        echo "FAIL $1: test data missing (not in tests/data nor ${MATEX_TESTDATA:-../shared}; CI must have it)"; fail=1
+    else
+        echo "SKIP $1: not in tests/data nor ${MATEX_TESTDATA:-../shared} (set MATEX_TESTDATA)"
+    fi
+    return 1
+}

@@ -1,5 +1,8 @@
 /* Op tests: known answers for the scalar references, then every SIMD level this CPU has
- * against the scalar reference on random inputs of awkward sizes. */
+ * against the scalar reference on random inputs of awkward sizes. A level the CPU lacks is
+ * reported as not tested. The bf16 level (bf16 products, fp32 sums) is compared with the
+ * reference run on the same inputs rounded to bf16, so the bound stays the fp32 one wherever
+ * only the inputs are rounded. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -55,7 +58,7 @@ static void test_known_group_norm(const mx_ctx *c) {
 
 static void test_known_timestep_embedding(void) {
     float t[1] = {10}, y[4];
-    mx_timestep_embedding(y, t, 1, 4, 1, 0, 10000);
+    mx_timestep_embedding(NULL, y, t, 1, 4, 1, 0, 10000);
     /* half = 2: freqs 1 and 10000^-0.5 = 0.01; flip: [cos | sin] */
     const float want[4] = {cosf(10), cosf(0.1f), sinf(10), sinf(0.1f)};
     mx_check_close("known timestep embedding", y, want, 4, 1e-6);
@@ -66,6 +69,7 @@ static void test_known_timestep_embedding(void) {
 typedef struct {
     const mx_ctx *ref, *simd;
     const char *isa;
+    int bf16; /* the level rounds the inputs of its matrix products to bf16 */
 } levels;
 
 static float *rnd(size_t n, uint64_t seed) {
@@ -89,13 +93,35 @@ static mx_wptr rnd_weight(size_t n, uint64_t seed, mx_dtype dt, void **store) {
     return w;
 }
 
+/* The values the reference sees: x itself, or a copy rounded to bf16 on a bf16 level (free it). */
+static float *ref_input(const levels *lv, const float *x, size_t n, float **store) {
+    *store = NULL;
+    if (!lv->bf16) return (float *)x;
+    float *r = malloc((n ? n : 1) * sizeof *r);
+    for (size_t i = 0; i < n; i++) r[i] = mx_bf16_to_float(mx_float_to_bf16(x[i]));
+    *store = r;
+    return r;
+}
+
+/* The same for a weight (widened to fp32 first). */
+static mx_wptr ref_weight(const levels *lv, mx_wptr w, size_t n, float **store) {
+    *store = NULL;
+    if (!lv->bf16) return w;
+    float *f = malloc((n ? n : 1) * sizeof *f);
+    for (size_t i = 0; i < n; i++) f[i] = mx_bf16_to_float(mx_float_to_bf16(mx_w_get(w, i)));
+    *store = f;
+    return mx_w_f32(f);
+}
+
 static void test_linear_case(const levels *lv, int M, int N, int K, mx_dtype dt, int with_bias) {
     void *ws, *bs;
-    float *x = rnd((size_t)M * K, 1), *y = rnd((size_t)M * N, 9), *want = rnd((size_t)M * N, 8);
+    float *x = rnd((size_t)M * K, 1), *y = rnd((size_t)M * N, 9), *want = rnd((size_t)M * N, 8), *xr_s, *wr_s;
     mx_wptr w = rnd_weight((size_t)N * K, 2, dt, &ws), b = rnd_weight((size_t)N, 3, dt, &bs);
     if (!with_bias) b = mx_w_none();
-    mx_linear(lv->ref, want, x, w, b, M, N, K);
+    mx_linear(lv->ref, want, ref_input(lv, x, (size_t)M * K, &xr_s), ref_weight(lv, w, (size_t)N * K, &wr_s), b, M,
+              N, K);
     mx_linear(lv->simd, y, x, w, b, M, N, K);
+    free(xr_s), free(wr_s);
     char name[96];
     snprintf(name, sizeof name, "%s linear M=%d N=%d K=%d %s%s", lv->isa, M, N, K, mx_dtype_name(dt),
              with_bias ? " +bias" : "");
@@ -108,10 +134,13 @@ static void test_conv_case(const levels *lv, int B, int Cin, int H, int W, int C
     int Ho = (H + 2 * pad - ks) / stride + 1, Wo = (W + 2 * pad - ks) / stride + 1;
     size_t ny = (size_t)B * Cout * Ho * Wo;
     void *ws, *bs;
-    float *x = rnd((size_t)B * Cin * H * W, 4), *y = rnd(ny, 9), *want = rnd(ny, 8);
-    mx_wptr w = rnd_weight((size_t)Cout * Cin * ks * ks, 5, dt, &ws), b = rnd_weight((size_t)Cout, 6, dt, &bs);
-    mx_conv2d(lv->ref, want, x, B, Cin, H, W, w, b, Cout, ks, ks, stride, pad);
+    size_t nx = (size_t)B * Cin * H * W, nw = (size_t)Cout * Cin * ks * ks;
+    float *x = rnd(nx, 4), *y = rnd(ny, 9), *want = rnd(ny, 8), *xr_s, *wr_s;
+    mx_wptr w = rnd_weight(nw, 5, dt, &ws), b = rnd_weight((size_t)Cout, 6, dt, &bs);
+    mx_conv2d(lv->ref, want, ref_input(lv, x, nx, &xr_s), B, Cin, H, W, ref_weight(lv, w, nw, &wr_s), b, Cout, ks, ks,
+              stride, pad);
     mx_conv2d(lv->simd, y, x, B, Cin, H, W, w, b, Cout, ks, ks, stride, pad);
+    free(xr_s), free(wr_s);
     char name[96];
     snprintf(name, sizeof name, "%s conv B=%d %dx%dx%d->%d k%d s%d p%d %s", lv->isa, B, Cin, H, W, Cout, ks, stride,
              pad, mx_dtype_name(dt));
@@ -135,6 +164,26 @@ static void test_gemm_ops(const levels *lv) {
     test_conv_case(lv, 1, 2, 70, 71, 3, 3, 1, 1, MX_F32); /* 4970 pixels: two outer blocks */
     test_conv_case(lv, 2, 80, 70, 60, 13, 3, 1, 1, MX_F16); /* batch × K blocks (K = 720) × outer blocks */
     test_linear_case(lv, 40, 37, 1500, MX_F32, 1);          /* three K blocks */
+    test_linear_case(lv, 25, 70, 641, MX_F16, 1);           /* two K blocks of odd length (321, 320) */
+    test_conv_case(lv, 1, 3, 8, 8, 33, 3, 1, 1, MX_F32);    /* K = 27: an odd last k-pair */
+}
+
+/* The bf16 level's bound: the reference has the same rounded q, k, v, and the kernel rounds
+ * each probability for ·V (relative error <= 2^-9), so output i is off by at most 2^-9 of
+ * Σ_j p_ij |v_j|: the reference run on |v|. In relative L2: 2^-9 ||that|| / ||want||, plus
+ * the fp32 bound for the sums. */
+static double bf16_attention_bound(const levels *lv, const float *want, const float *q, const float *k, const float *v,
+                                   int B, int H, int Tq, int Tk, int D, int causal) {
+    int qs = H * D + 3, kvs = H * D + 5, os = H * D + 1;
+    size_t nkv = (size_t)B * Tk * kvs, no = (size_t)B * Tq * os;
+    float *vabs = malloc(nkv * sizeof *vabs), *yabs = malloc(no * sizeof *yabs);
+    for (size_t i = 0; i < nkv; i++) vabs[i] = fabsf(v[i]);
+    memcpy(yabs, want, no * sizeof *yabs); /* the gaps between heads stay as in want */
+    mx_attention(lv->ref, yabs, q, k, vabs, B, H, Tq, Tk, D, qs, kvs, os, causal, 1.0f / sqrtf((float)D));
+    double sa = 0, sw = 0;
+    for (size_t i = 0; i < no; i++) sa += (double)yabs[i] * yabs[i], sw += (double)want[i] * want[i];
+    free(vabs), free(yabs);
+    return ldexp(sqrt(sa / sw), -9) + 1e-5;
 }
 
 static void test_attention_case(const levels *lv, int B, int H, int Tq, int Tk, int D, int causal) {
@@ -142,13 +191,15 @@ static void test_attention_case(const levels *lv, int B, int H, int Tq, int Tk, 
     size_t nq = (size_t)B * Tq * qs, nkv = (size_t)B * Tk * kvs, no = (size_t)B * Tq * os;
     float *q = rnd(nq, 11), *k = rnd(nkv, 12), *v = rnd(nkv, 13), *y = rnd(no, 14), *want = rnd(no, 14);
     for (size_t i = 0; i < nq; i++) q[i] *= 3; /* peaked softmax rows */
-    mx_attention(lv->ref, want, q, k, v, B, H, Tq, Tk, D, qs, kvs, os, causal, 1.0f / sqrtf((float)D));
+    float *qr, *kr, *vr;
+    mx_attention(lv->ref, want, ref_input(lv, q, nq, &qr), ref_input(lv, k, nkv, &kr), ref_input(lv, v, nkv, &vr), B,
+                 H, Tq, Tk, D, qs, kvs, os, causal, 1.0f / sqrtf((float)D));
     mx_attention(lv->simd, y, q, k, v, B, H, Tq, Tk, D, qs, kvs, os, causal, 1.0f / sqrtf((float)D));
     char name[96];
     snprintf(name, sizeof name, "%s attention B=%d H=%d Tq=%d Tk=%d D=%d%s", lv->isa, B, H, Tq, Tk, D,
              causal ? " causal" : "");
-    mx_check_close(name, y, want, no, 1e-5);
-    free(q), free(k), free(v), free(y), free(want);
+    mx_check_close(name, y, want, no, lv->bf16 ? bf16_attention_bound(lv, want, qr, kr, vr, B, H, Tq, Tk, D, causal) : 1e-5);
+    free(q), free(k), free(v), free(y), free(want), free(qr), free(kr), free(vr);
 }
 
 static void test_attention_ops(const levels *lv) {
@@ -336,15 +387,15 @@ static void test_simd_levels(void) {
     mx_arena scratch;
     CHECK(pool != NULL);
     CHECK(mx_arena_create(&scratch, (size_t)8 << 20, &st) == 0);
-    mx_ctx ref = {pool, mx_kernels_scalar(), NULL};
-    for (mx_isa isa = MX_ISA_AVX2; isa <= MX_ISA_AVX512; isa++) {
+    mx_ctx ref = {.pool = pool, .k = mx_kernels_scalar()};
+    for (mx_isa isa = MX_ISA_AVX2; isa <= MX_ISA_AVX512_BF16; isa++) {
         const mx_kernels *k = mx_kernels_for(isa);
         if (k->isa != isa) {
-            printf("%s: not available (CPU or MATEX_ISA), skipped\n", mx_isa_name(isa));
+            printf("%s: NOT TESTED (not available on this CPU, or lowered by MATEX_ISA)\n", mx_isa_name(isa));
             continue;
         }
-        mx_ctx simd = {pool, k, &scratch};
-        levels lv = {&ref, &simd, mx_isa_name(isa)};
+        mx_ctx simd = {.pool = pool, .k = k, .scratch = &scratch};
+        levels lv = {&ref, &simd, mx_isa_name(isa), mx_isa_precision(isa) == MX_PREC_BF16};
         test_gemm_ops(&lv);
         test_attention_ops(&lv);
         test_elementwise_ops(&lv);
@@ -402,7 +453,7 @@ static void test_known_layout(const mx_ctx *c) {
 }
 
 int main(void) {
-    mx_ctx c = {NULL, mx_kernels_scalar(), NULL};
+    mx_ctx c = {.k = mx_kernels_scalar()};
     test_simd_levels();
     test_known_linear(&c);
     test_known_conversions();

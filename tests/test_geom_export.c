@@ -24,7 +24,7 @@ static void tmp_path(char *out, size_t cap, const char *name) { snprintf(out, ca
 static int load_asset(const char *rel, mx_mesh *m) {
     char path[1024];
     mx_status st;
-    snprintf(path, sizeof path, "%s/assets/%s", mx_shared_dir(), rel);
+    if (!mx_test_need(path, sizeof path, "assets/%s", rel)) return -1;
     if (mx_mesh_load(path, m, &st) == 0) return 0;
     printf("FAIL load %s: %s\n", rel, st.msg);
     mx_test_failures++;

@@ -193,7 +193,7 @@ static void test_hostile_gltf(void) {
 /* Truncations and byte corruptions of a real GLB: every outcome is a load or a clean error. */
 static void test_hostile_glb(void) {
     char src[1024];
-    snprintf(src, sizeof src, "%s/assets/cesium_milk_truck/CesiumMilkTruck.glb", mx_shared_dir());
+    if (!mx_test_need(src, sizeof src, "assets/cesium_milk_truck/CesiumMilkTruck.glb")) return;
     size_t n;
     unsigned char *glb = read_all(src, &n);
     CHECK(glb != NULL);
@@ -273,7 +273,7 @@ static void test_assets(void) {
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char path[1024];
-        snprintf(path, sizeof path, "%s/assets/%s", mx_shared_dir(), cases[i].file);
+        if (!mx_test_need(path, sizeof path, "assets/%s", cases[i].file)) continue;
         mx_mesh m;
         mx_status st;
         if (mx_mesh_load(path, &m, &st)) {
@@ -294,7 +294,7 @@ static void test_assets(void) {
     }
     /* The truck's texture lives inside the GLB: decode it through the "#image0" reference. */
     char path[1024];
-    snprintf(path, sizeof path, "%s/assets/cesium_milk_truck/CesiumMilkTruck.glb", mx_shared_dir());
+    if (!mx_test_need(path, sizeof path, "assets/cesium_milk_truck/CesiumMilkTruck.glb")) return;
     mx_image img;
     mx_status st;
     CHECK(mx_gltf_read_image(path, 0, &img, &st) == 0 && img.w == 2048 && img.h == 2048 && img.c >= 3);

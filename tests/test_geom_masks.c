@@ -98,7 +98,7 @@ static void test_sphere(mx_pool *pool) {
 
 static void test_garment(mx_pool *pool) {
     char path[2048];
-    snprintf(path, sizeof path, "%s/assets/garment_female_casual/female_casualsuit01.obj", mx_shared_dir());
+    if (!mx_test_need(path, sizeof path, "assets/garment_female_casual/female_casualsuit01.obj")) return;
     mx_mesh m = {0};
     mx_status st;
     float *pos = NULL;

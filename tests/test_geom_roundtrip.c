@@ -1,4 +1,4 @@
-/* Round trip on every UV-carrying shared asset: a smooth, colourful procedural texture
+/* Round trip on every UV-carrying test asset: a smooth, colourful procedural texture
  * (periodic in UV, so repeat-wrapped UVs stay consistent) is rendered from the views that
  * view selection picks, at 1024^2, and backprojected onto the same UVs (1024^2 texture).
  * Bars: PSNR >= 30 dB over covered texels, and coverage >= 99% of the texels visible from
@@ -80,9 +80,7 @@ static void measure(const mx_bake *bake, const mx_view_cache *vc, const mx_image
     free(visible);
 }
 
-static int roundtrip(const char *rel, mx_pool *pool, result *r, mx_status *st) {
-    char path[2048];
-    snprintf(path, sizeof path, "%s/assets/%s", mx_shared_dir(), rel);
+static int roundtrip(const char *path, mx_pool *pool, result *r, mx_status *st) {
     mx_mesh m = {0};
     if (mx_mesh_load(path, &m, st)) return -1;
     float *pos = NULL;
@@ -137,8 +135,10 @@ int main(void) {
     mx_pool *pool = mx_pool_create(2, &st);
     for (size_t a = 0; a < sizeof assets / sizeof *assets; a++) {
         result r = {0};
+        char path[2048];
+        if (!mx_test_need(path, sizeof path, "assets/%s", assets[a])) continue;
         double t0 = mx_now();
-        int rc = roundtrip(assets[a], pool, &r, &st);
+        int rc = roundtrip(path, pool, &r, &st);
         if (rc) printf("%-50s error: %s\n", assets[a], st.msg);
         else
             printf("%-48s views=%2d PSNR=%.2f dB coverage=%.2f%% (simulated %.2f%%) %.2fs\n", assets[a],

@@ -1,7 +1,7 @@
 /* The converter: single network folders (f32 exact, f16 rounding, fp16 variant), a model-set
  * folder with tokenizer, scheduler and named ControlNets, a sharded index, LoRA merges in
  * both key styles checked against a direct computation, and bad inputs (one error, no
- * output file). Uses ../shared/golden/{unet,controlnet,vae,clip}_tiny. */
+ * output file). Uses golden/{unet,controlnet,vae,clip}_tiny of tests/data. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -20,6 +20,7 @@ static char tmp[256], golden[512];
 
 static void in_tmp(char *out, size_t cap, const char *name) { snprintf(out, cap, "%s/%s", tmp, name); }
 
+/* The tiny golden cases are all in tests/data: one folder holds them. */
 static void golden_path(char *out, size_t cap, const char *name) { snprintf(out, cap, "%s/%s", golden, name); }
 
 static void link_into(const char *target, const char *linkname) {
@@ -488,7 +489,7 @@ static void test_bad_inputs(void) {
 int main(void) {
     snprintf(tmp, sizeof tmp, "/tmp/mx_test_convert_XXXXXX");
     if (!mkdtemp(tmp)) return 1;
-    snprintf(golden, sizeof golden, "%s/golden", mx_shared_dir());
+    mx_test_path(golden, sizeof golden, "golden");
     char *abs = realpath(golden, NULL); /* symlinks made in tmp need an absolute target */
     if (abs && strlen(abs) < sizeof golden) memcpy(golden, abs, strlen(abs) + 1);
     free(abs);

@@ -101,8 +101,8 @@ static void test_roundtrip(void) {
 /* The golden fp32 and fp16 weights of clip_tiny hold the same values up to fp16 rounding. */
 static void test_golden_files(void) {
     char p32[512], p16[512];
-    snprintf(p32, sizeof p32, "%s/golden/clip_tiny/model.safetensors", mx_shared_dir());
-    snprintf(p16, sizeof p16, "%s/golden/clip_tiny/model.fp16.safetensors", mx_shared_dir());
+    mx_test_path(p32, sizeof p32, "golden/clip_tiny/model.safetensors");
+    mx_test_path(p16, sizeof p16, "golden/clip_tiny/model.fp16.safetensors");
     mx_safetensors a, b;
     mx_status st;
     if (mx_st_open(&a, p32, &st)) {

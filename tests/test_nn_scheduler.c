@@ -108,7 +108,7 @@ static void replace_infinity(char *text) {
 
 static void test_golden_cases(void) {
     char dir[1024], path[1100];
-    snprintf(dir, sizeof dir, "%s/golden/scheduler_dpmsolver_multistep", mx_shared_dir());
+    mx_test_path(dir, sizeof dir, "golden/scheduler_dpmsolver_multistep");
     snprintf(path, sizeof path, "%s/manifest.json", dir);
     size_t len;
     char *text = mx_read_file(path, (size_t)1 << 30, &len, NULL);

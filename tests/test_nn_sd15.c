@@ -1,5 +1,6 @@
 /* SD1.5-size networks (weights by the golden-v1 rule, generated in memory) against
- * ../shared/golden/sd15_{unet,controlnet,vae}: runs only with MATEX_FULL=1 (minutes, GBs). */
+ * golden/sd15_{unet,controlnet,vae} (outside the repository, MATEX_TESTDATA): runs only with
+ * MATEX_FULL=1 (minutes, GBs). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,13 +17,14 @@ static int with_arena(mx_arena *a, size_t bytes) {
     return 0;
 }
 
-static void compare(const mx_safetensors *out, const char *label, const char *name, const float *got) {
+static void compare(const mx_ctx *c, const mx_safetensors *out, const char *label, const char *name, const float *got) {
     size_t n;
-    char l[192];
+    char l[192], tag[64];
     float *want = golden_f32(out, name, &n);
     CHECK(want != NULL);
-    snprintf(l, sizeof l, "%s %s", label, name);
-    if (want) mx_check_close(l, got, want, n, 1e-4);
+    golden_label(tag, sizeof tag, c, label);
+    snprintf(l, sizeof l, "%s %s", tag, name);
+    if (want) mx_check_close(l, got, want, n, golden_bound(c));
     free(want);
 }
 
@@ -72,7 +74,7 @@ static void sd15_unet(const mx_ctx *c) {
         t0 = mx_now();
         CHECK(mx_unet_forward(c, u, &ui, got, &a, &st) == 0);
         printf("sd15_unet %s: %.2f s\n", name, mx_now() - t0);
-        compare(&out, "sd15_unet", name, got);
+        compare(c, &out, "sd15_unet", name, got);
         for (int i = 0; i <= n; i++) free(res[i]);
     }
     mx_arena_destroy(&a);
@@ -125,7 +127,7 @@ static void sd15_controlnet(const mx_ctx *c) {
             char name[96];
             if (i < n) snprintf(name, sizeof name, "scale%d.down_block_res_sample.%d", s, i);
             else snprintf(name, sizeof name, "scale%d.mid_block_res_sample", s);
-            compare(&out, "sd15_controlnet", name, res[i]);
+            compare(c, &out, "sd15_controlnet", name, res[i]);
         }
     }
     mx_arena_destroy(&a);
@@ -167,14 +169,14 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     double t0 = mx_now();
     CHECK(mx_vae_encode(c, v, img, B, H, W, mean, logvar, &a, &st) == 0);
     printf("sd15_vae encode: %.2f s\n", mx_now() - t0);
-    compare(&out, outfile, "encode.mean", mean);
-    compare(&out, outfile, "encode.logvar", logvar);
+    compare(c, &out, outfile, "encode.mean", mean);
+    compare(c, &out, outfile, "encode.logvar", logvar);
     t0 = mx_now();
     CHECK(mx_vae_decode(c, v, lat, B, H / f, W / f, dec, &a, &st) == 0);
     printf("sd15_vae decode: %.2f s\n", mx_now() - t0);
-    compare(&out, outfile, "decode", dec);
+    compare(c, &out, outfile, "decode", dec);
     CHECK(mx_vae_decode(c, v, mean, B, H / f, W / f, dec, &a, &st) == 0);
-    compare(&out, outfile, "decode_of_encode_mean", dec);
+    compare(c, &out, outfile, "decode_of_encode_mean", dec);
     mx_arena_destroy(&a);
     free(mean);
     free(logvar);
@@ -195,10 +197,18 @@ int main(void) {
     }
     mx_ctx c;
     if (golden_ctx(&c)) return 1;
-    sd15_vae(&c, MX_F32, "outputs.safetensors");
-    sd15_vae(&c, MX_F16, "outputs_fp16w.safetensors");
-    sd15_controlnet(&c);
-    sd15_unet(&c);
+    if (golden_have("sd15_vae", "inputs.safetensors")) {
+        sd15_vae(&c, MX_F32, "outputs.safetensors");
+        sd15_vae(&c, MX_F16, "outputs_fp16w.safetensors");
+    }
+    if (golden_have("sd15_controlnet", "inputs.safetensors")) sd15_controlnet(&c);
+    if (golden_have("sd15_unet", "inputs.safetensors")) sd15_unet(&c);
     mx_ctx_destroy(&c);
+    if (golden_bf16_ctx(&c, "test_nn_sd15") == 0) { /* bf16 arithmetic against the fp32 goldens */
+        sd15_vae(&c, MX_F32, "outputs.safetensors");
+        sd15_controlnet(&c);
+        sd15_unet(&c);
+        mx_ctx_destroy(&c);
+    }
     return mx_test_finish("test_nn_sd15");
 }

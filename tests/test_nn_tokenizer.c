@@ -41,7 +41,7 @@ static void check_record(const mx_tokenizer *tok, const mx_json *rec) {
 
 static void test_golden(const mx_tokenizer *tok) {
     char path[1024];
-    snprintf(path, sizeof path, "%s/golden/tokenizer/tokenizer_golden.json", mx_shared_dir());
+    mx_test_path(path, sizeof path, "golden/tokenizer/tokenizer_golden.json");
     size_t len;
     char *text = mx_read_file(path, (size_t)1 << 30, &len, NULL);
     CHECK(text != NULL);
@@ -131,8 +131,8 @@ static void test_bad_files(void) {
 
 int main(void) {
     char v[1024], m[1024];
-    snprintf(v, sizeof v, "%s/golden/tokenizer/vocab.json", mx_shared_dir());
-    snprintf(m, sizeof m, "%s/golden/tokenizer/merges.txt", mx_shared_dir());
+    mx_test_path(v, sizeof v, "golden/tokenizer/vocab.json");
+    mx_test_path(m, sizeof m, "golden/tokenizer/merges.txt");
     mx_tokenizer *tok = NULL;
     mx_status st = {0};
     int ok = mx_tok_load_files(&tok, v, m, &st) == 0;

@@ -96,7 +96,7 @@ static void test_memory_and_file(matex_models *m, const char *tmp) {
     CHECK(r->coverage > 0.9);
     CHECK(log.steps >= 2 * 2 && log.last_views == r->views);
     CHECK(strstr(r->report_json, "mesh in memory") != NULL);
-    CHECK(matex_result_write(r, out_mem, &err) == 0);
+    CHECK(matex_result_write(r, out_mem, 0, &err) == 0);
     matex_result_free(r);
 
     small_options(&o);

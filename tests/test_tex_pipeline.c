@@ -1,6 +1,7 @@
 /* The whole method with tiny random weights (MATEX_DEMO_WEIGHTS, made by
- * tools/make_demo_weights.sh) on every mesh of ../shared/assets: outputs exist and are valid,
- * coverage, determinism across thread counts, and bad input. Small sizes keep it fast. */
+ * tools/make_demo_weights.sh) on every test mesh (tests/data/assets; the others in
+ * MATEX_TESTDATA): outputs exist and are valid, coverage, determinism across thread counts,
+ * and bad input. Small sizes keep it fast. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -106,7 +107,7 @@ static double check_outputs(const char *dir, int nfaces) {
 static void test_all_assets(const char *weights, const char *tmp) {
     for (size_t i = 0; i < sizeof ASSETS / sizeof ASSETS[0]; i++) {
         char mesh[1024], out[1024];
-        snprintf(mesh, sizeof mesh, "%s/assets/%s", mx_shared_dir(), ASSETS[i]);
+        if (!mx_test_need(mesh, sizeof mesh, "assets/%s", ASSETS[i])) continue;
         snprintf(out, sizeof out, "%s/asset%zu", tmp, i);
         mx_texture_opts o;
         small_opts(&o, mesh, weights, out);
@@ -139,7 +140,7 @@ static void test_large_budget(const char *weights, const char *tmp) {
                                    "koala/koala.obj"};
     for (size_t i = 0; i < sizeof meshes / sizeof meshes[0]; i++) {
         char mesh[1024], out[1024];
-        snprintf(mesh, sizeof mesh, "%s/assets/%s", mx_shared_dir(), meshes[i]);
+        if (!mx_test_need(mesh, sizeof mesh, "assets/%s", meshes[i])) continue;
         snprintf(out, sizeof out, "%s/budget%zu", tmp, i);
         mx_texture_opts o;
         small_opts(&o, mesh, weights, out);
@@ -155,24 +156,25 @@ static void test_large_budget(const char *weights, const char *tmp) {
 /* enhance: a textured mesh goes through SDEdit over views; a mesh without UVs is refused. */
 static void test_enhance(const char *weights, const char *tmp) {
     char mesh[1024], out[1024];
-    snprintf(mesh, sizeof mesh, "%s/assets/bob/bob_tri.obj", mx_shared_dir());
-    snprintf(out, sizeof out, "%s/enhance", tmp);
     mx_texture_opts o;
-    small_opts(&o, mesh, weights, out);
-    o.views = 4;
-    o.strength = 0.6f;
     mx_texture_result r;
     mx_status st;
-    mx_status_clear(&st);
-    int rc = mx_enhance_run(&o, &r, &st);
-    if (rc) printf("enhance failed: %s\n", st.msg);
-    CHECK(rc == 0);
-    if (rc == 0) {
-        double cov = check_outputs(out, 10688);
-        printf("enhance bob: views %d coverage %.4f\n", r.views, cov);
-        CHECK(r.views == 4);
+    if (mx_test_need(mesh, sizeof mesh, "assets/bob/bob_tri.obj")) {
+        snprintf(out, sizeof out, "%s/enhance", tmp);
+        small_opts(&o, mesh, weights, out);
+        o.views = 4;
+        o.strength = 0.6f;
+        mx_status_clear(&st);
+        int rc = mx_enhance_run(&o, &r, &st);
+        if (rc) printf("enhance failed: %s\n", st.msg);
+        CHECK(rc == 0);
+        if (rc == 0) {
+            double cov = check_outputs(out, 10688);
+            printf("enhance bob: views %d coverage %.4f\n", r.views, cov);
+            CHECK(r.views == 4);
+        }
     }
-    snprintf(mesh, sizeof mesh, "%s/assets/spot_ply/spot.ply", mx_shared_dir());
+    if (!mx_test_need(mesh, sizeof mesh, "assets/spot_ply/spot.ply")) return;
     snprintf(out, sizeof out, "%s/enhance_bad", tmp);
     small_opts(&o, mesh, weights, out);
     mx_status_clear(&st);
@@ -192,7 +194,7 @@ static int files_equal(const char *a, const char *b) {
 
 static void test_thread_determinism(const char *weights, const char *tmp) {
     char mesh[1024], out1[1024], out2[1024], a[1100], b[1100];
-    snprintf(mesh, sizeof mesh, "%s/assets/fedora_hat/fedora.obj", mx_shared_dir());
+    if (!mx_test_need(mesh, sizeof mesh, "assets/fedora_hat/fedora.obj")) return;
     snprintf(out1, sizeof out1, "%s/nested/deeper/threads1", tmp); /* parents are created */
     snprintf(out2, sizeof out2, "%s/threads3", tmp);
     mx_texture_opts o;
@@ -224,7 +226,7 @@ static void expect_failure(const char *what, const mx_texture_opts *o, const cha
 
 static void test_bad_input(const char *weights, const char *tmp) {
     char mesh[1024], out[1024], empty[1024], unet_only[1024];
-    snprintf(mesh, sizeof mesh, "%s/assets/spot/spot_triangulated.obj", mx_shared_dir());
+    if (!mx_test_need(mesh, sizeof mesh, "assets/spot/spot_triangulated.obj")) return;
     snprintf(out, sizeof out, "%s/bad", tmp);
     mx_texture_opts o;
     small_opts(&o, mesh, "/nonexistent/weights.mxw", out);

@@ -1,8 +1,11 @@
 #include "util_test.h"
 
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
 
 int mx_test_failures = 0;
 
@@ -36,9 +39,42 @@ void mx_fill_random(float *x, size_t n, uint64_t seed, float lo, float hi) {
     }
 }
 
-const char *mx_shared_dir(void) {
-    const char *d = getenv("MATEX_SHARED");
+static int mx_test_skips = 0;
+
+static const char *outside_data_dir(void) {
+    const char *d = getenv("MATEX_TESTDATA");
     return d && *d ? d : "../shared";
+}
+
+int mx_test_path(char *buf, size_t cap, const char *rel) {
+    struct stat sb;
+    snprintf(buf, cap, "tests/data/%s", rel);
+    if (stat(buf, &sb) == 0) return 0;
+    snprintf(buf, cap, "%s/%s", outside_data_dir(), rel);
+    return stat(buf, &sb) == 0 ? 0 : -1;
+}
+
+int mx_test_need(char *buf, size_t cap, const char *rel_fmt, ...) {
+    char rel[1024];
+    va_list ap;
+    va_start(ap, rel_fmt);
+    vsnprintf(rel, sizeof rel, rel_fmt, ap);
+    va_end(ap);
+    if (mx_test_path(buf, cap, rel) == 0) return 1;
+    const char *ci = getenv("CI");
+    if (ci && strcmp(ci, "true") == 0) {
+        printf("FAIL %s: test data missing (not in tests/data nor %s; CI must have it)\n", rel, outside_data_dir());
+        mx_test_failures++;
+    } else {
+        printf("SKIP %s: not in tests/data nor %s (set MATEX_TESTDATA)\n", rel, outside_data_dir());
+        mx_test_skips++;
+    }
+    return 0;
+}
+
+int mx_test_have(const char *rel) {
+    char path[1100];
+    return mx_test_need(path, sizeof path, "%s", rel);
 }
 
 int mx_test_finish(const char *name) {
@@ -46,6 +82,9 @@ int mx_test_finish(const char *name) {
         printf("%s: %d check(s) failed\n", name, mx_test_failures);
         return 1;
     }
-    printf("%s: all checks passed\n", name);
+    if (mx_test_skips)
+        printf("%s: all checks passed, %d case(s) skipped for want of test data\n", name, mx_test_skips);
+    else
+        printf("%s: all checks passed\n", name);
     return 0;
 }

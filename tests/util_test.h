@@ -1,5 +1,5 @@
 /* Small helpers shared by the test programs: checks that count failures, random inputs,
- * relative L2 error, and the path of ../shared. */
+ * relative L2 error, and where the test data is. */
 #ifndef MX_UTIL_TEST_H
 #define MX_UTIL_TEST_H
 
@@ -24,9 +24,21 @@ int mx_check_close(const char *name, const float *got, const float *want, size_t
 double mx_rel_l2(const float *got, const float *want, size_t n);
 /* Deterministic uniform values in [lo, hi) from a seed (splitmix64). */
 void mx_fill_random(float *x, size_t n, uint64_t seed, float lo, float hi);
-/* Path of the shared folder: $MATEX_SHARED or ../shared. */
-const char *mx_shared_dir(void);
-/* Prints the summary and returns the exit code (0 when no failures). */
+/* Test data, named by its path REL under the data root ("golden/unet_tiny/config.json",
+ * "assets/spot/spot_triangulated.obj"): tests/data/REL when the repository ships it, otherwise
+ * $MATEX_TESTDATA/REL (default ../shared), where the larger cases live (mini, SD1.5-size, the
+ * full mesh library). Tests run from the repository root (tests/data/README.md). */
+#define MX_PRINTF(f, a) __attribute__((format(printf, f, a)))
+/* Writes the path of REL to buf; 0 when it exists, -1 when not (buf then names the outside copy). */
+int mx_test_path(char *buf, size_t cap, const char *rel);
+/* 1 with the path of REL (printf-style) in buf when it exists; otherwise prints "SKIP REL: ..."
+ * and returns 0. The skip is counted, and is a failure when CI=true (CI always has the outside
+ * data). */
+int mx_test_need(char *buf, size_t cap, const char *rel_fmt, ...) MX_PRINTF(3, 4);
+/* mx_test_need without the path. */
+int mx_test_have(const char *rel);
+/* Prints the summary (with the number of skipped cases) and returns the exit code (0 when no
+ * failures). */
 int mx_test_finish(const char *name);
 
 #endif

@@ -2,6 +2,8 @@
 # `make bench`: runs every benchmark program built in BUILD/tools (bench_*), one after the
 # other. Usage: sh tools/bench.sh BUILD. Exits non-zero when one fails or none is built.
 BUILD=${1:-build}
+# the benchmarks that need the SD1.5 model set make it once with this matex (bench_sd15.h)
+export MATEX="${MATEX:-$BUILD/matex}"
 status=0
 found=0
 for b in "$BUILD"/tools/bench_*; do

@@ -1,8 +1,9 @@
-/* bench_nets: the full SD1.5 set (UNet, 2 ControlNets, VAE, CLIP text encoder; configs from
- * ../shared/golden/sd15_*) with golden-v1 rule weights in one fp16 matex weight file under /tmp
- * (generated once by a child process, reused when present). Reports load time, peak RSS, and
- * the time, FLOPs and GFLOP/s of one UNet call (64×64 latent, batch 2, 77 tokens), one
- * ControlNet call, one VAE decode (64×64 latent, batch 1) and one CLIP call (batch 2).
+/* bench_nets: the full SD1.5 set (UNet, 2 ControlNets, VAE, CLIP text encoder) with golden-v1
+ * rule weights in one fp16 matex weight file (bench_sd15.h: cached outside the repository).
+ * Reports load time, peak RSS, and the time, FLOPs and GFLOP/s of one ControlNet call, one UNet
+ * call (64×64 latent, batch 2, 77 tokens), one VAE decode (64×64 latent, batch 1) and one CLIP
+ * call (batch 2), each in fp32 and, where the CPU has AVX512_BF16, in bf16 right after it (same
+ * load on the machine), with the share of the measured peak of these cores (bench_sd15.h).
  * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] */
 #include <stdio.h>
 #include <stdlib.h>
@@ -19,125 +20,13 @@
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
 #include "../runtime/log.h"
-#include "../weights/golden_rule.h"
 #include "../weights/weights.h"
-
-#define DEFAULT_WEIGHTS "/tmp/matex_bench_sd15_f16.mxw"
-
-typedef struct net_spec {
-    const char *golden;  /* folder under ../shared/golden */
-    const char *prefix;  /* in the weight file */
-    uint64_t seed;
-} net_spec;
-
-static const net_spec nets[] = {
-    {"sd15_unet", "unet.", 1},
-    {"sd15_controlnet", "controlnet_depth.", 2},
-    {"sd15_controlnet", "controlnet_inpaint.", 3},
-    {"sd15_vae", "vae.", 1},
-    {"sd15_clip", "text_encoder.", 1},
-};
-#define NNETS (sizeof nets / sizeof nets[0])
-
-static char *read_config(const char *golden) {
-    char path[1024];
-    const char *sh = getenv("MATEX_SHARED") ? getenv("MATEX_SHARED") : "../shared";
-    snprintf(path, sizeof path, "%s/golden/%s/config.json", sh, golden);
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        fprintf(stderr, "bench_nets: cannot open %s\n", path);
-        return NULL;
-    }
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = n > 0 ? malloc((size_t)n + 1) : NULL;
-    if (s && fread(s, 1, (size_t)n, f) == (size_t)n) s[n] = 0;
-    else {
-        free(s);
-        s = NULL;
-    }
-    fclose(f);
-    return s;
-}
+#include "bench_sd15.h"
 
 static double peak_rss_mb(void) {
     struct rusage ru;
     getrusage(RUSAGE_SELF, &ru);
     return ru.ru_maxrss / 1024.0;
-}
-
-/* ---- weight file generation (child process, so the parent's peak RSS is the runtime's) ---- */
-
-typedef struct gen_state {
-    mx_wf_writer *w;
-    void **bufs;
-    size_t nbufs, cap;
-} gen_state;
-
-static int gen_net(gen_state *g, const net_spec *ns, mx_status *st) {
-    char *cfg = read_config(ns->golden);
-    mx_binder b;
-    if (!cfg) return mx_fail(st, MX_EIO, "no config for %s", ns->golden);
-    char key[96];
-    snprintf(key, sizeof key, "%sconfig", ns->prefix);
-    int rc = mx_binder_enum(&b, st) || mx_net_enumerate(&b, cfg, strlen(cfg), ns->golden, st) ||
-             mx_wf_writer_meta(g->w, key, cfg, st);
-    free(cfg);
-    for (size_t i = 0; !rc && i < mx_binder_enum_count(&b); i++) {
-        const mx_param_info *p = mx_binder_enum_at(&b, i);
-        size_t n = (size_t)mx_shape_numel(p->ndim, p->shape);
-        float *x = malloc(n * sizeof *x);
-        if (!x || g->nbufs == g->cap) {
-            free(x);
-            rc = mx_fail(st, MX_ENOMEM, "out of memory generating %s", p->name);
-            break;
-        }
-        mx_golden_v1_fill(p->name, p->ndim, p->shape, ns->seed, x);
-        char name[256];
-        snprintf(name, sizeof name, "%s%s", ns->prefix, p->name);
-        if (p->ndim >= 2) { /* fp16 storage for matrices; vectors stay fp32 (as the converter does) */
-            uint16_t *h = (uint16_t *)x;
-            for (size_t k = 0; k < n; k++) h[k] = mx_float_to_half(x[k]);
-            rc = mx_wf_writer_add(g->w, name, MX_F16, p->ndim, p->shape, h, MX_F16, st);
-        } else {
-            rc = mx_wf_writer_add(g->w, name, MX_F32, p->ndim, p->shape, x, MX_F32, st);
-        }
-        g->bufs[g->nbufs++] = x;
-    }
-    mx_binder_free(&b);
-    return rc;
-}
-
-static int generate(const char *path) {
-    mx_status st;
-    gen_state g = {0};
-    g.cap = 4096;
-    g.bufs = calloc(g.cap, sizeof *g.bufs);
-    g.w = mx_wf_writer_create(&st);
-    int rc = !g.bufs || !g.w;
-    for (size_t i = 0; !rc && i < NNETS; i++) rc = gen_net(&g, &nets[i], &st);
-    if (!rc) rc = mx_wf_writer_meta(g.w, "provenance", "golden-v1 rule weights (bench_nets)", &st);
-    if (!rc) rc = mx_wf_writer_finish(g.w, path, &st);
-    if (rc) fprintf(stderr, "bench_nets: generating %s: %s\n", path, st.msg);
-    mx_wf_writer_free(g.w);
-    for (size_t i = 0; i < g.nbufs; i++) free(g.bufs[i]);
-    free(g.bufs);
-    return rc ? 1 : 0;
-}
-
-static int ensure_weights(const char *path) {
-    struct stat sb;
-    if (stat(path, &sb) == 0) return 0;
-    printf("generating %s (once)...\n", path);
-    fflush(stdout);
-    double t0 = mx_now();
-    pid_t pid = fork();
-    if (pid == 0) _exit(generate(path));
-    int status = 0;
-    if (pid < 0 || waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status)) return -1;
-    printf("generated in %.1f s\n", mx_now() - t0);
-    return 0;
 }
 
 /* ---- the runs ---- */
@@ -160,8 +49,20 @@ static const char *config_of(const mx_weightfile *wf, const char *prefix, mx_sta
     return c;
 }
 
-static void report(const char *what, double secs, double flops) {
-    printf("%-34s %8.2f s  %8.1f GFLOP  %7.1f GFLOP/s\n", what, secs, flops / 1e9, flops / 1e9 / secs);
+/* Times of one network in fp32 ([0]) and bf16 ([1]; 0 without bf16), and its FLOPs. */
+typedef struct net_time {
+    const char *what;
+    double secs[2], flops;
+} net_time;
+
+static void report(const net_time *t, const double peak[2]) {
+    double g = t->flops * 1e-9;
+    printf("%-32s %7.0f %8.2f %8.1f %5.0f%%", t->what, g, t->secs[0], g / t->secs[0], 100 * g / t->secs[0] / peak[0]);
+    if (t->secs[1] > 0)
+        printf(" %8.2f %8.1f %5.0f%% %6.2fx\n", t->secs[1], g / t->secs[1], 100 * g / t->secs[1] / peak[1],
+               t->secs[0] / t->secs[1]);
+    else
+        printf(" %8s %8s %6s %7s\n", "-", "-", "-", "-");
 }
 
 typedef struct bench_opts {
@@ -199,9 +100,16 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         return -1;
     printf("%-34s %8.3f s (mmap + bind, 5 networks)\n", "load", mx_now() - t0);
 
-    mx_ctx c;
-    if (mx_ctx_create(&c, o->threads, mx_cpu_best_isa(), (size_t)512 << 20, st)) return -1;
-    printf("threads %d, isa %s\n", mx_pool_threads(c.pool), mx_isa_name(mx_cpu_best_isa()));
+    /* [0] fp32, [1] bf16 (when the CPU has it): each network runs in both, one after the other */
+    mx_ctx c[2];
+    mx_isa bf16_isa = mx_cpu_isa_for(MX_PREC_BF16);
+    int nprec = mx_isa_precision(bf16_isa) == MX_PREC_BF16 ? 2 : 1;
+    if (mx_ctx_create(&c[0], o->threads, mx_cpu_isa_for(MX_PREC_FP32), (size_t)512 << 20, st) ||
+        (nprec == 2 && mx_ctx_create(&c[1], o->threads, bf16_isa, (size_t)512 << 20, st)))
+        return -1;
+    printf("threads %d, kernels %s%s%s\n", mx_pool_threads(c[0].pool), mx_isa_name(c[0].k->isa),
+           nprec == 2 ? " and " : " (bf16 not available on this CPU)", nprec == 2 ? mx_isa_name(c[1].k->isa) : "");
+    double peak[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
     int B = 2, H = 64, W = 64, T = 77, D = ucfg.cross_attention_dim;
     size_t ns = (size_t)B * ucfg.in_channels * H * W;
     float *sample = filled(ns, -1, 1, 1), *ehs = filled((size_t)B * T * D, -1, 1, 2), ts[2] = {981, 37};
@@ -216,7 +124,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     printf("arena: UNet %.0f MB, ControlNet %.0f MB, VAE decode %.0f MB\n", ub / 1e6, cb / 1e6, vb / 1e6);
     if (mx_arena_create(&a, need, st)) return -1;
 
-    /* residuals of both ControlNets, summed (accumulate), then the UNet with them */
+    /* residuals of the depth ControlNet, then the UNet with them */
     int nres = mx_unet_num_residuals(&ccfg), C, h, w;
     float *res[MX_UNET_MAX_RES + 1];
     for (int i = 0; i <= nres; i++) {
@@ -224,24 +132,37 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         res[i] = calloc((size_t)B * C * h * w, sizeof(float));
     }
     float *cond = filled((size_t)B * 3 * H * 8 * W * 8, 0, 1, 3);
-    if (!o->skip_cn) {
+    float *img = malloc((size_t)3 * H * 8 * W * 8 * sizeof *img);
+    net_time nt_cn = {"ControlNet 64x64 batch 2", {0, 0}, mx_controlnet_flops(cn[0], B, H, W, T)};
+    net_time nt_unet = {"UNet 64x64 batch 2 (+residuals)", {0, 0}, mx_unet_flops(u, B, H, W, T)};
+    net_time nt_vae = {"VAE decode 64x64 batch 1", {0, 0}, mx_vae_decode_flops(v, 1, H, W)};
+    for (int p = 0; p < nprec && !o->skip_cn; p++) {
         mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f};
         t0 = mx_now();
-        if (mx_controlnet_forward(&c, cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
-        report("ControlNet 64x64 batch 2", mx_now() - t0, mx_controlnet_flops(cn[0], B, H, W, T));
+        if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
+        nt_cn.secs[p] = mx_now() - t0;
     }
     mx_unet_input ui = {sample, ts, ehs, B, H, W, T, o->skip_cn ? NULL : (const float *const *)res,
                         o->skip_cn ? NULL : res[nres]};
-    t0 = mx_now();
-    if (mx_unet_forward(&c, u, &ui, out, &a, st)) return -1;
-    report("UNet 64x64 batch 2 (+residuals)", mx_now() - t0, mx_unet_flops(u, B, H, W, T));
-    if (!o->skip_vae) {
-        float *img = malloc((size_t)3 * H * 8 * W * 8 * sizeof *img);
+    for (int p = 0; p < nprec; p++) {
         t0 = mx_now();
-        if (mx_vae_decode(&c, v, sample, 1, H, W, img, &a, st)) return -1;
-        report("VAE decode 64x64 batch 1", mx_now() - t0, mx_vae_decode_flops(v, 1, H, W));
-        free(img);
+        if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
+        nt_unet.secs[p] = mx_now() - t0;
     }
+    for (int p = 0; p < nprec && !o->skip_vae; p++) {
+        t0 = mx_now();
+        if (mx_vae_decode(&c[p], v, sample, 1, H, W, img, &a, st)) return -1;
+        nt_vae.secs[p] = mx_now() - t0;
+    }
+    double peak_after[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
+    for (int p = 0; p < 2; p++) peak[p] = 0.5 * (peak[p] + peak_after[p]);
+    printf("measured peak of %d threads (zmm FMA / vdpbf16ps loops, before and after): fp32 %.0f GFLOP/s, "
+           "bf16 %.0f GFLOP/s\n", mx_pool_threads(c[0].pool), peak[0], peak[1]);
+    printf("%-32s %7s %8s %8s %6s %8s %8s %6s %7s\n", "network", "GFLOP", "fp32 s", "GFLOP/s", "%peak", "bf16 s",
+           "GFLOP/s", "%peak", "bf/fp");
+    if (!o->skip_cn) report(&nt_cn, peak);
+    report(&nt_unet, peak);
+    if (!o->skip_vae) report(&nt_vae, peak);
     {
         int32_t ids[2 * 77];
         for (int i = 0; i < 2 * 77; i++) ids[i] = i % 77 == 0 ? 49406 : i % 77 < 9 ? 320 + i % 77 : 49407;
@@ -249,16 +170,20 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         float *last = malloc(nt * sizeof *last), *pooled = malloc((size_t)2 * tcfg.hidden_size * sizeof *pooled);
         mx_arena dry, ca;
         mx_arena_measure(&dry);
-        if (mx_clip_forward(&clip, &c, &dry, ids, 2, 77, last, pooled, NULL, st) ||
+        if (mx_clip_forward(&clip, &c[0], &dry, ids, 2, 77, last, pooled, NULL, st) ||
             mx_arena_create(&ca, dry.peak + 256, st))
             return -1;
         t0 = mx_now();
-        if (mx_clip_forward(&clip, &c, &ca, ids, 2, 77, last, pooled, NULL, st)) return -1;
-        printf("%-34s %8.2f s\n", "CLIP text encoder batch 2", mx_now() - t0);
+        if (mx_clip_forward(&clip, &c[0], &ca, ids, 2, 77, last, pooled, NULL, st)) return -1;
+        printf("%-32s %8.2f s (fp32)\n", "CLIP text encoder batch 2", mx_now() - t0);
         mx_arena_destroy(&ca);
         free(last);
         free(pooled);
     }
+    printf("bench-nets-summary: unet_fp32_s=%.2f unet_bf16_s=%.2f unet_bf16_speedup=%.2f peak_fp32_gflops=%.0f "
+           "peak_bf16_gflops=%.0f\n", nt_unet.secs[0], nt_unet.secs[1],
+           nt_unet.secs[1] > 0 ? nt_unet.secs[0] / nt_unet.secs[1] : 0, peak[0], peak[1]);
+    free(img);
     printf("%-34s %8.0f MB\n", "peak RSS", peak_rss_mb());
     for (int i = 0; i <= nres; i++) free(res[i]);
     free(cond);
@@ -266,7 +191,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     free(ehs);
     free(out);
     mx_arena_destroy(&a);
-    mx_ctx_destroy(&c);
+    for (int p = 0; p < nprec; p++) mx_ctx_destroy(&c[p]);
     mx_unet_free(u);
     mx_controlnet_free(cn[0]);
     mx_controlnet_free(cn[1]);
@@ -282,7 +207,8 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
 }
 
 int main(int argc, char **argv) {
-    bench_opts o = {0, 0, 0, DEFAULT_WEIGHTS};
+    char cached[1100];
+    bench_opts o = {0, 0, 0, NULL};
     setvbuf(stdout, NULL, _IOLBF, 0); /* progress lines show up as they happen */
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
@@ -294,8 +220,9 @@ int main(int argc, char **argv) {
             return 2;
         }
     }
-    if (ensure_weights(o.weights)) {
-        fprintf(stderr, "bench_nets: could not generate %s\n", o.weights);
+    if (!o.weights && bench_sd15_weights(cached, sizeof cached) == 0) o.weights = cached;
+    if (!o.weights) {
+        fprintf(stderr, "bench_nets: could not make the SD1.5 weight file %s\n", cached);
         return 1;
     }
     mx_status st;

@@ -1,6 +1,8 @@
 /* bench_ops: matex's GEMM and 3×3 conv against OpenBLAS (cblas_sgemm; conv anchor = im2col +
  * sgemm) on the SD1.5 UNet shapes at a 64×64 latent, same thread count for both, plus
- * attention at 4096 tokens × 8 heads × 40 dims. Usage: bench_ops [--threads N] [--repeats R]. */
+ * attention at 4096 tokens × 8 heads × 40 dims. Where the CPU has AVX512_BF16 the bf16 kernels
+ * run too, interleaved with the fp32 ones and OpenBLAS, so their ratios come from one run.
+ * Usage: bench_ops [--threads N] [--repeats R]. */
 #include <cblas.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -49,39 +51,37 @@ static double median(double *t, int n) {
     return n % 2 ? t[n / 2] : 0.5 * (t[n / 2 - 1] + t[n / 2]);
 }
 
-typedef void (*bench_fn)(void *arg);
-
-/* Median seconds of `repeats` runs of each of two functions after one warm-up run each; the
- * runs alternate, so a change in machine load hits both sides alike. */
-static void time_pair(bench_fn f0, bench_fn f1, void *arg, int repeats, double *t0_med, double *t1_med) {
-    double t0[64], t1[64];
-    if (repeats > 64) repeats = 64;
-    f0(arg);
-    f1(arg);
-    for (int r = 0; r < repeats; r++) {
-        double s = mx_now();
-        f0(arg);
-        double m = mx_now();
-        f1(arg);
-        t0[r] = m - s;
-        t1[r] = mx_now() - m;
-    }
-    *t0_med = median(t0, repeats);
-    *t1_med = median(t1, repeats);
-}
-
-static double time_median(bench_fn fn, void *arg, int repeats) {
-    double t, unused;
-    time_pair(fn, fn, arg, repeats, &t, &unused);
-    return t;
-}
-
 typedef struct {
-    const mx_ctx *ctx;
+    const mx_ctx *ctx; /* the side being timed: fp32 or bf16 kernels */
+    const mx_ctx *fp32, *bf16; /* bf16 NULL when the CPU has no bf16 arithmetic */
     const gemm_shape *s;
     const conv_shape *cs;
     float *x, *w, *y, *col;
 } bench_args;
+
+typedef void (*bench_fn)(void *arg);
+
+/* One timed side: a function and the context it runs with. */
+typedef struct {
+    bench_fn fn;
+    const mx_ctx *ctx;
+} side;
+
+/* Median seconds of `repeats` runs of each side after one warm-up run each; the sides run in
+ * turn, so a change in machine load hits all of them alike. */
+static void time_sides(const side *sides, int n, bench_args *a, int repeats, double *med) {
+    double t[4][64];
+    if (repeats > 64) repeats = 64;
+    for (int i = 0; i < n; i++) a->ctx = sides[i].ctx, sides[i].fn(a);
+    for (int r = 0; r < repeats; r++)
+        for (int i = 0; i < n; i++) {
+            a->ctx = sides[i].ctx;
+            double s = mx_now();
+            sides[i].fn(a);
+            t[i][r] = mx_now() - s;
+        }
+    for (int i = 0; i < n; i++) med[i] = median(t[i], repeats);
+}
 
 static void run_matex_gemm(void *arg) {
     bench_args *a = arg;
@@ -126,55 +126,86 @@ static void run_attention(void *arg) {
     mx_attention(a->ctx, a->y, a->x, a->w, a->col, 1, 8, 4096, 4096, 40, 320, 320, 320, 0, 0.15811388f);
 }
 
-static double bench_gemms(const mx_ctx *ctx, int repeats) {
+/* One line of GFLOP/s: matex fp32, OpenBLAS, their ratio, and matex bf16 with its ratio to
+ * matex fp32 ("-" without bf16). Returns the fp32/OpenBLAS ratio; *bf16_ratio the bf16/fp32 one. */
+static double report_line(const char *name, double flop, bench_args *a, bench_fn matex, bench_fn blas, int repeats,
+                          double *bf16_ratio) {
+    side sides[3] = {{matex, a->fp32}, {blas, NULL}, {matex, a->bf16}};
+    double t[3];
+    time_sides(sides, a->bf16 ? 3 : 2, a, repeats, t);
+    double gm = flop / t[0] * 1e-9, gb = flop / t[1] * 1e-9;
+    printf("%-28s %10.1f %10.1f %7.3f", name, gm, gb, gm / gb);
+    if (a->bf16)
+        printf(" %10.1f %7.3f   GFLOP/s\n", flop / t[2] * 1e-9, t[0] / t[2]);
+    else
+        printf(" %10s %7s   GFLOP/s\n", "-", "-");
+    *bf16_ratio = a->bf16 ? t[0] / t[2] : 0;
+    return gm / gb;
+}
+
+static void print_header(const char *what) {
+    printf("%-28s %10s %10s %7s %10s %7s\n", what, "fp32", "openblas", "ratio", "bf16", "bf/fp");
+}
+
+/* Worst matex fp32 / OpenBLAS ratio over the shapes; *bf16_min the worst bf16 / fp32 ratio. */
+static double bench_gemms(bench_args *base, int repeats, double *bf16_min) {
     double worst = 1e30;
-    printf("%-28s %10s %10s %7s\n", "gemm M N K", "matex", "openblas", "ratio");
+    *bf16_min = 1e30;
+    print_header("gemm M N K");
     for (size_t i = 0; i < sizeof gemm_shapes / sizeof gemm_shapes[0]; i++) {
         const gemm_shape *s = &gemm_shapes[i];
-        bench_args a = {ctx, s, NULL, random_floats((size_t)s->M * s->K, 1), random_floats((size_t)s->N * s->K, 2),
-                        random_floats((size_t)s->M * s->N, 3), NULL};
-        double flop = 2.0 * s->M * s->N * s->K;
-        double tm, tb;
-        time_pair(run_matex_gemm, run_blas_gemm, &a, repeats, &tm, &tb);
-        double gm = flop / tm * 1e-9, gb = flop / tb * 1e-9;
+        bench_args a = *base;
+        a.s = s;
+        a.x = random_floats((size_t)s->M * s->K, 1), a.w = random_floats((size_t)s->N * s->K, 2);
+        a.y = random_floats((size_t)s->M * s->N, 3);
         char name[64];
         snprintf(name, sizeof name, "%d %d %d", s->M, s->N, s->K);
-        printf("%-28s %10.1f %10.1f %7.3f   GFLOP/s\n", name, gm, gb, gm / gb);
-        if (gm / gb < worst) worst = gm / gb;
+        double bf, r = report_line(name, 2.0 * s->M * s->N * s->K, &a, run_matex_gemm, run_blas_gemm, repeats, &bf);
+        if (r < worst) worst = r;
+        if (bf < *bf16_min) *bf16_min = bf;
         free(a.x), free(a.w), free(a.y);
     }
     return worst;
 }
 
-static double bench_convs(const mx_ctx *ctx, int repeats) {
+static double bench_convs(bench_args *base, int repeats, double *bf16_min) {
     double worst = 1e30;
-    printf("%-28s %10s %10s %7s\n", "conv3x3 HxWxC (Cin=Cout)", "matex", "openblas", "ratio");
+    *bf16_min = 1e30;
+    print_header("conv3x3 HxWxC (Cin=Cout)");
     for (size_t i = 0; i < sizeof conv_shapes / sizeof conv_shapes[0]; i++) {
         const conv_shape *c = &conv_shapes[i];
         size_t HW = (size_t)c->H * c->W;
-        bench_args a = {ctx, NULL, c, random_floats(c->C * HW, 4), random_floats((size_t)c->C * c->C * 9, 5),
-                        random_floats(c->C * HW, 6), random_floats((size_t)c->C * 9 * HW, 7)};
-        double flop = 2.0 * c->C * HW * c->C * 9;
-        double tm, tb;
-        time_pair(run_matex_conv, run_blas_conv, &a, repeats, &tm, &tb);
-        double gm = flop / tm * 1e-9, gb = flop / tb * 1e-9;
+        bench_args a = *base;
+        a.cs = c;
+        a.x = random_floats(c->C * HW, 4), a.w = random_floats((size_t)c->C * c->C * 9, 5);
+        a.y = random_floats(c->C * HW, 6), a.col = random_floats((size_t)c->C * 9 * HW, 7);
         char name[64];
         snprintf(name, sizeof name, "%dx%dx%d", c->H, c->W, c->C);
-        printf("%-28s %10.1f %10.1f %7.3f   GFLOP/s\n", name, gm, gb, gm / gb);
-        if (gm / gb < worst) worst = gm / gb;
+        double bf, r = report_line(name, 2.0 * c->C * HW * c->C * 9, &a, run_matex_conv, run_blas_conv, repeats, &bf);
+        if (r < worst) worst = r;
+        if (bf < *bf16_min) *bf16_min = bf;
         free(a.x), free(a.w), free(a.y), free(a.col);
     }
     return worst;
 }
 
-static double bench_attention(const mx_ctx *ctx, int repeats) {
+/* Attention with the fp32 kernel and (interleaved) the bf16 one: ms[0], ms[1] (0 without bf16). */
+static void bench_attention(bench_args *base, int repeats, double ms[2]) {
     size_t n = (size_t)4096 * 320;
-    bench_args a = {ctx, NULL, NULL, random_floats(n, 8), random_floats(n, 9), random_floats(n, 10),
-                    random_floats(n, 11)};
-    double ms = time_median(run_attention, &a, repeats) * 1e3;
-    printf("attention 4096x4096 tokens, 8 heads x 40: %.1f ms\n", ms);
+    bench_args a = *base;
+    a.x = random_floats(n, 8), a.w = random_floats(n, 9), a.y = random_floats(n, 10), a.col = random_floats(n, 11);
+    side sides[2] = {{run_attention, a.fp32}, {run_attention, a.bf16}};
+    time_sides(sides, a.bf16 ? 2 : 1, &a, repeats, ms);
+    ms[0] *= 1e3;
+    ms[1] = a.bf16 ? ms[1] * 1e3 : 0;
+    /* 4·T²·D multiply-adds per head: q·k and p·v */
+    double gflop = 4.0 * 4096 * 4096 * 40 * 8 * 1e-9;
+    printf("attention 4096x4096 tokens, 8 heads x 40: fp32 %.1f ms (%.0f GFLOP/s)", ms[0], gflop / ms[0] * 1e3);
+    if (a.bf16)
+        printf(", bf16 %.1f ms (%.0f GFLOP/s), bf16/fp32 speed-up %.2fx\n", ms[1], gflop / ms[1] * 1e3, ms[0] / ms[1]);
+    else
+        printf(", bf16 not available on this CPU\n");
     free(a.x), free(a.w), free(a.y), free(a.col);
-    return ms;
 }
 
 int main(int argc, char **argv) {
@@ -193,19 +224,30 @@ int main(int argc, char **argv) {
         fprintf(stderr, "bench_ops: --threads and --repeats must be >= 1\n");
         return 2;
     }
-    mx_ctx ctx;
+    mx_ctx fp32, bf16;
     mx_status st;
-    if (mx_ctx_create(&ctx, threads, mx_cpu_best_isa(), (size_t)64 << 20, &st) != 0) {
+    mx_isa bf16_isa = mx_cpu_isa_for(MX_PREC_BF16);
+    int has_bf16 = mx_isa_precision(bf16_isa) == MX_PREC_BF16;
+    if (mx_ctx_create(&fp32, threads, mx_cpu_isa_for(MX_PREC_FP32), (size_t)64 << 20, &st) != 0 ||
+        (has_bf16 && mx_ctx_create(&bf16, threads, bf16_isa, (size_t)64 << 20, &st) != 0)) {
         fprintf(stderr, "bench_ops: %s\n", st.msg);
         return 1;
     }
     openblas_set_num_threads(threads);
-    printf("bench_ops: %d threads, kernels %s, median of %d; OpenBLAS kernels: %s\n", threads, mx_isa_name(ctx.k->isa),
-           repeats, openblas_get_corename());
-    double g = bench_gemms(&ctx, repeats);
-    double c = bench_convs(&ctx, repeats);
-    double ms = bench_attention(&ctx, repeats < 3 ? repeats : 3);
-    printf("bench-summary: gemm_ratio_min=%.3f conv_ratio_min=%.3f attention_ms=%.1f\n", g, c, ms);
-    mx_ctx_destroy(&ctx);
+    printf("bench_ops: %d threads, kernels %s and %s, median of %d; OpenBLAS kernels: %s\n", threads,
+           mx_isa_name(fp32.k->isa), has_bf16 ? mx_isa_name(bf16.k->isa) : "(no bf16)", repeats,
+           openblas_get_corename());
+    bench_args base = {NULL, &fp32, has_bf16 ? &bf16 : NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    double gb, cb, ms[2];
+    double g = bench_gemms(&base, repeats, &gb);
+    double c = bench_convs(&base, repeats, &cb);
+    bench_attention(&base, repeats < 3 ? repeats : 3, ms);
+    printf("bench-summary: gemm_ratio_min=%.3f conv_ratio_min=%.3f attention_ms=%.1f", g, c, ms[0]);
+    if (has_bf16)
+        printf(" bf16_gemm_speedup_min=%.3f bf16_conv_speedup_min=%.3f attention_bf16_ms=%.1f\n", gb, cb, ms[1]);
+    else
+        printf(" bf16=na\n");
+    mx_ctx_destroy(&fp32);
+    if (has_bf16) mx_ctx_destroy(&bf16);
     return 0;
 }

@@ -1,5 +1,5 @@
 /* End-to-end benchmark of `matex texture` on the CPU with the full SD1.5 architecture
- * (random weights, fp16 file made by tools/make_sd15_weights.sh on first use): a run at
+ * (random weights, the cached fp16 file of bench_sd15.h): a run at
  * 2 steps and 4 views (the front+back grid, then 2 inpainting views), stage by stage, with
  * FLOP counts of the networks, extrapolated to the default 10 steps and 6 views.
  * usage: bench_texture [--weights W.mxw] [--mesh MESH] [--threads N] */
@@ -13,6 +13,7 @@
 #include "../pipeline/texture/texture.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
+#include "bench_sd15.h"
 
 #define STEPS 2
 #define VIEWS 4
@@ -24,15 +25,6 @@ static void step_flops(const mx_models *m, int h, int w, int n_controlnets, doub
     if (n_controlnets > 0) *step += mx_controlnet_flops(m->cn_depth, 2, h, w, 77);
     if (n_controlnets > 1) *step += mx_controlnet_flops(m->cn_inpaint, 2, h, w, 77);
     *decode = mx_vae_decode_flops(m->vae, 1, h, w);
-}
-
-static int ensure_weights(const char *path) {
-    if (access(path, R_OK) == 0) return 0;
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "sh tools/make_sd15_weights.sh %s %s", getenv("MATEX") ? getenv("MATEX") : "./matex",
-             path);
-    fprintf(stderr, "bench_texture: making %s (once)\n", path);
-    return system(cmd) == 0 ? 0 : -1;
 }
 
 static void print_view_rows(const mx_json *views, int steps, const double *step_gflop, const double *dec_gflop) {
@@ -54,7 +46,8 @@ static void print_view_rows(const mx_json *views, int steps, const double *step_
 }
 
 int main(int argc, char **argv) {
-    const char *weights = "/tmp/matex_bench_texture_sd15_f16.mxw";
+    char cached[1100];
+    const char *weights = NULL;
     const char *mesh = "../shared/assets/spot/spot_triangulated.obj";
     int threads = 2;
     for (int i = 1; i + 1 < argc; i += 2) {
@@ -62,8 +55,9 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--mesh")) mesh = argv[i + 1];
         else if (!strcmp(argv[i], "--threads")) threads = atoi(argv[i + 1]);
     }
-    if (ensure_weights(weights)) {
-        fprintf(stderr, "bench_texture: cannot make %s\n", weights);
+    if (!weights && bench_sd15_weights(cached, sizeof cached) == 0) weights = cached;
+    if (!weights) {
+        fprintf(stderr, "bench_texture: cannot make %s\n", cached);
         return 1;
     }
     mx_status st;
@@ -104,8 +98,8 @@ int main(int argc, char **argv) {
         fprintf(stderr, "bench_texture: cannot read the report\n");
         return 1;
     }
-    printf("matex texture, full SD1.5 architecture (random fp16 weights), %s, %d threads, %d steps, %d views\n",
-           mesh, threads, STEPS, r.views);
+    printf("matex texture, full SD1.5 architecture (random fp16 weights), %s, %d threads, %d steps, %d views, "
+           "kernels %s\n", mesh, threads, STEPS, r.views, mx_isa_name(mx_cpu_isa_for(o.precision)));
     printf("FLOPs: grid step (UNet+ControlNet depth, CFG batch 2, 64x128 latent) %.0f GFLOP, decode %.0f GFLOP;\n"
            "       view step (UNet+2 ControlNets, CFG batch 2, 64x64) %.0f GFLOP, decode %.0f GFLOP\n",
            step_gf[0], dec_gf[0], step_gf[1], dec_gf[1]);

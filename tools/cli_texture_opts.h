@@ -18,8 +18,10 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
                          void (*usage)(FILE *));
 /* The option list (printed by both verbs' --help). */
 void mx_cli_texture_options_help(FILE *f);
-/* Runs the verb's function and prints errors / the --json summary; returns the exit code. */
-int mx_cli_texture_run(const mx_cli_texture *c, const char *verb,
+/* Checks the options (mx_texture_opts_check), runs the verb's function with SIGINT/SIGTERM
+ * setting its cancel flag, prints errors (also in the --json summary) and returns the exit
+ * code: 0, 1 (bad input), 2 (usage), 130 (interrupted: nothing written). */
+int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
                        int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *));
 
 #endif

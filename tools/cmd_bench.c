@@ -23,10 +23,11 @@ static const bench_case cases[] = {
 };
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex bench [--threads N] [--repeats R] [--json]\n"
+    fprintf(f, "usage: matex bench [--threads N] [--repeats R] [--precision fp32|bf16] [--json]\n"
                "Times matex's GEMM, 3x3 conv and attention kernels on the SD1.5 UNet shapes at a\n"
                "64x64 latent and prints GFLOP/s (median of R runs after a warm-up; default R=5).\n"
                "  --threads N   worker threads (default: all CPUs)\n"
+               "  --precision P fp32 (default) or bf16 kernels (bf16 needs AVX512_BF16)\n"
                "  --json        one JSON object on stdout instead of the table\n"
                "MATEX_ISA=scalar|avx2|avx512 lowers the kernel level.\n");
 }
@@ -86,6 +87,7 @@ static int parse_int(const char *s, int lo, int hi, int *out) {
 
 int cmd_bench(int argc, char **argv) {
     int threads = 0, repeats = 5, json = 0;
+    mx_precision prec = MX_PREC_FP32;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
             usage(stdout);
@@ -100,6 +102,11 @@ int cmd_bench(int argc, char **argv) {
                 fprintf(stderr, "matex bench: --repeats wants 1..31, got '%s'\n", argv[i]);
                 return 2;
             }
+        } else if (!strcmp(argv[i], "--precision") && i + 1 < argc) {
+            if (mx_precision_parse(argv[++i], &prec)) {
+                fprintf(stderr, "matex bench: --precision wants fp32 or bf16, got '%s'\n", argv[i]);
+                return 2;
+            }
         } else if (!strcmp(argv[i], "--json"))
             json = 1;
         else {
@@ -110,7 +117,7 @@ int cmd_bench(int argc, char **argv) {
     }
     mx_ctx ctx;
     mx_status st;
-    if (mx_ctx_create(&ctx, threads, mx_cpu_best_isa(), (size_t)64 << 20, &st) != 0) {
+    if (mx_ctx_create(&ctx, threads, mx_cpu_isa_for(prec), (size_t)64 << 20, &st) != 0) {
         fprintf(stderr, "matex bench: %s\n", st.msg);
         return 1;
     }

@@ -35,6 +35,8 @@ static void usage(FILE *f) {
             "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., text_encoder.;\n"
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
+            "  --precision P   fp32 (default) or bf16: bf16 products with fp32 sums where the CPU has\n"
+            "                  AVX512_BF16 (linear, conv, attention); elsewhere fp32 with a warning\n"
             "  -h, --help      this help\n");
 }
 
@@ -326,12 +328,15 @@ static const char *default_prefix(const char *net) {
     return NULL;
 }
 
-static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_status *st) {
+static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
+               mx_status *st) {
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
     if (mx_wf_open(&io->wf, weights, st)) return -1;
-    if (mx_ctx_create(&io->ctx, threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
+    if (mx_ctx_create(&io->ctx, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
     io->ctx_ok = 1;
+    if (mx_isa_precision(io->ctx.k->isa) != prec)
+        mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     double t0 = mx_now();
     int rc = !strcmp(net, "unet")         ? run_unet(io, prefix, st)
              : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
@@ -346,6 +351,7 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
 int cmd_run_net(int argc, char **argv) {
     const char *net = NULL, *weights = NULL, *prefix = NULL;
     int threads = 0;
+    mx_precision prec = MX_PREC_FP32;
     run_io io;
     memset(&io, 0, sizeof io);
     for (int i = 1; i < argc; i++) {
@@ -360,6 +366,12 @@ int cmd_run_net(int argc, char **argv) {
         else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
         else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
+        else if (!strcmp(a, "--precision") && has_val) {
+            if (mx_precision_parse(argv[++i], &prec)) {
+                fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", argv[i]);
+                return 2;
+            }
+        }
         else if (a[0] != '-' && !net) net = a;
         else {
             fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
@@ -383,7 +395,7 @@ int cmd_run_net(int argc, char **argv) {
     snprintf(pfx, sizeof pfx, "%s%s", prefix, *prefix && prefix[strlen(prefix) - 1] != '.' ? "." : "");
     mx_status st;
     mx_status_clear(&st);
-    int rc = run(&io, net, weights, pfx, threads, &st);
+    int rc = run(&io, net, weights, pfx, threads, prec, &st);
     io_free(&io);
     if (rc) {
         fprintf(stderr, "matex run-net: %s\n", st.msg);

@@ -1,13 +1,13 @@
 #!/bin/sh
 # Builds the demo weight file: tiny random networks of the SD1.5 family (configs in
 # tests/data/demo, weights by `matex gen-weights`), the real CLIP tokenizer vocabulary from
-# ../shared/golden/tokenizer, assembled as a diffusers model folder and converted with
-# `matex convert`. Random weights paint noise: this only exercises the whole pipeline.
+# tests/data/golden/tokenizer (MIT, see LICENSE there), assembled as a diffusers model folder
+# and converted with `matex convert`. Random weights paint noise: this only exercises the whole
+# pipeline. Run from the repository root.
 # usage: sh tools/make_demo_weights.sh MATEX OUT.mxw
 set -eu
 MATEX=$1
 OUT=$2
-SHARED=${MATEX_SHARED:-../shared}
 CFG=tests/data/demo
 DIR=$(mktemp -d)
 trap 'rm -rf "$DIR"' EXIT
@@ -22,7 +22,7 @@ net controlnet_depth controlnet.json 12 diffusion_pytorch_model.safetensors
 net controlnet_inpaint controlnet.json 13 diffusion_pytorch_model.safetensors
 net vae vae.json 14 diffusion_pytorch_model.safetensors
 net text_encoder clip.json 15 model.safetensors
-cp "$SHARED/golden/tokenizer/vocab.json" "$SHARED/golden/tokenizer/merges.txt" "$DIR/tokenizer/"
+cp tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt "$DIR/tokenizer/"
 cp "$CFG/scheduler_config.json" "$DIR/scheduler/scheduler_config.json"
 "$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \
     --dtype f32 --quiet -o "$OUT"

@@ -5,7 +5,9 @@
 #define MX_LAYOUT_REF                                                                                        \
     .upsample_nearest2x = mx_upsample_nearest2x_ref, .concat_channels = mx_concat_channels_ref,              \
     .transpose_chw_hwc = mx_transpose_chw_hwc_ref, .transpose_hwc_chw = mx_transpose_hwc_chw_ref,            \
-    .resize_bilinear = mx_resize_bilinear_ref
+    .resize_bilinear = mx_resize_bilinear_ref, .pad2d = mx_pad2d_ref, .copy = mx_copy_ref, .fill = mx_fill_ref,  \
+    .axpy = mx_axpy_ref, .lincomb = mx_lincomb_ref, .clamp = mx_clamp_ref, .affine = mx_affine_ref,           \
+    .timestep_embedding = mx_timestep_embedding_ref, .embed_tokens = mx_embed_tokens_ref
 
 static const mx_kernels scalar_table = {
     .isa = MX_ISA_SCALAR,
@@ -50,25 +52,37 @@ static const mx_kernels avx2_table = {
     .f32_to_bf16 = mx_f32_to_bf16_avx2,
 };
 
+/* The AVX-512 entries without a bf16 kernel: shared by the avx512 and avx512bf16 tables. */
+#define MX_AVX512_FP32_ONLY                                                                                  \
+    .group_norm = mx_group_norm_avx512,                                                                      \
+    .layer_norm = mx_layer_norm_avx512,                                                                      \
+    .softmax = mx_softmax_avx512,                                                                            \
+    .gelu = mx_gelu_avx512,                                                                                  \
+    .quick_gelu = mx_quick_gelu_avx512,                                                                      \
+    .silu = mx_silu_avx512,                                                                                  \
+    .geglu = mx_geglu_avx512,                                                                                \
+    .binary = mx_binary_avx512,                                                                              \
+    .scale = mx_scale_avx512,                                                                                \
+    MX_LAYOUT_REF,                                                                                           \
+    .f16_to_f32 = mx_f16_to_f32_avx512,                                                                      \
+    .f32_to_f16 = mx_f32_to_f16_avx512,                                                                      \
+    .bf16_to_f32 = mx_bf16_to_f32_avx512,                                                                    \
+    .f32_to_bf16 = mx_f32_to_bf16_avx512
+
 static const mx_kernels avx512_table = {
     .isa = MX_ISA_AVX512,
     .linear = mx_linear_avx512,
     .conv2d = mx_conv2d_avx512,
-    .group_norm = mx_group_norm_avx512,
-    .layer_norm = mx_layer_norm_avx512,
-    .softmax = mx_softmax_avx512,
     .attention = mx_attention_avx512,
-    .gelu = mx_gelu_avx512,
-    .quick_gelu = mx_quick_gelu_avx512,
-    .silu = mx_silu_avx512,
-    .geglu = mx_geglu_avx512,
-    .binary = mx_binary_avx512,
-    .scale = mx_scale_avx512,
-    MX_LAYOUT_REF,
-    .f16_to_f32 = mx_f16_to_f32_avx512,
-    .f32_to_f16 = mx_f32_to_f16_avx512,
-    .bf16_to_f32 = mx_bf16_to_f32_avx512,
-    .f32_to_bf16 = mx_f32_to_bf16_avx512,
+    MX_AVX512_FP32_ONLY,
+};
+
+static const mx_kernels avx512bf16_table = {
+    .isa = MX_ISA_AVX512_BF16,
+    .linear = mx_linear_avx512bf16,
+    .conv2d = mx_conv2d_avx512bf16,
+    .attention = mx_attention_avx512bf16,
+    MX_AVX512_FP32_ONLY,
 };
 
 #endif
@@ -80,6 +94,7 @@ const mx_kernels *mx_kernels_for(mx_isa isa) {
     if (isa > best) isa = best;
 #ifndef MX_NO_X86_SIMD
     switch (isa) {
+    case MX_ISA_AVX512_BF16: return &avx512bf16_table;
     case MX_ISA_AVX512: return &avx512_table;
     case MX_ISA_AVX2: return &avx2_table;
     default: return &scalar_table;
@@ -90,4 +105,4 @@ const mx_kernels *mx_kernels_for(mx_isa isa) {
 #endif
 }
 
-const mx_kernels *mx_kernels_best(void) { return mx_kernels_for(mx_cpu_best_isa()); }
+const mx_kernels *mx_kernels_best(void) { return mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32)); }

@@ -117,12 +117,27 @@ typedef struct {
 
 #define PACK_PANELS_PER_TASK 4
 
+/* 32-bit words per k of a packed panel row: 1 for fp32, 1/2 for bf16 pairs (rounded up). */
+static size_t panel_words(const mx_gemm_kernel *g, int kc) { return g->to_pairs ? (size_t)(kc + 1) / 2 : (size_t)kc; }
+
+/* Packs one panel of `width` rows (A) or columns (B) from `first` into dst: straight for fp32,
+ * through an fp32 staging panel on the stack for bf16 pairs. */
+static void pack_panel(const gemm_job *j, mx_gemm_pack_fn fn, float *dst, int first, int width) {
+    if (!j->g->to_pairs) {
+        fn(j->p, j->g, dst, first, width, j->k0, j->kc);
+        return;
+    }
+    float staging[KC_MAX * MX_GEMM_PANEL_MAX];
+    fn(j->p, j->g, staging, first, width, j->k0, j->kc);
+    j->g->to_pairs((uint32_t *)(void *)dst, staging, width, j->kc);
+}
+
 static void pack_b_task(void *arg, int task, int thread) {
     (void)thread;
     const gemm_job *j = arg;
     int nr = j->g->nr;
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
-        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * j->kc * nr, j->n_off + np * nr, nr, j->k0, j->kc);
+        pack_panel(j, j->p->pack_b, j->bpack + (size_t)np * panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr);
 }
 
 /* The packed A panels of row block mb in this thread's buffer; packed only when the thread's
@@ -133,7 +148,7 @@ static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
     if (j->ablock_mb[thread] != mb) {
         int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
         for (int mp = mp0; mp < mp1; mp++)
-            j->p->pack_a(j->p, j->g, buf + (size_t)(mp - mp0) * j->kc * mr, mp * mr, mr, j->k0, j->kc);
+            pack_panel(j, j->p->pack_a, buf + (size_t)(mp - mp0) * panel_words(j->g, j->kc) * mr, mp * mr, mr);
         j->ablock_mb[thread] = mb;
     }
     return buf;
@@ -158,12 +173,13 @@ static void compute_task(void *arg, int task, int thread) {
     int mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
     int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
     const float *a = thread_a_block(j, mb, thread);
+    size_t words = panel_words(j->g, j->kc);
     for (int np = np0; np < np1; np++) {
-        const float *b = j->bpack + (size_t)np * j->kc * nr;
+        const float *b = j->bpack + (size_t)np * words * nr;
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
         for (int mp = mp0; mp < mp1; mp++) {
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
-            j->g->micro(j->kc, a + (size_t)(mp - mp0) * j->kc * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m,
+            j->g->micro(j->kc, a + (size_t)(mp - mp0) * words * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m,
                         n, !j->first_block);
         }
     }

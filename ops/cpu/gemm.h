@@ -5,24 +5,35 @@
  * of A it works on into its own buffer (MR-row panels; it stays in the thread's L2). Panels
  * are k-major and zero-padded at the edges. Packing is pluggable, so conv2d packs its B panels
  * straight from the image (tiled im2col, never a full copy). Every split depends on the
- * problem size only, so results do not depend on the thread count. */
+ * problem size only, so results do not depend on the thread count.
+ * bf16 levels: the packers still write fp32 panels, which the kernel's to_pairs turns into
+ * panels of k-pairs (one 32-bit word = bf16 of k and k+1, an odd last k paired with zero):
+ * the operand layout of vdpbf16ps, so the micro-kernel does two k per instruction. */
 #ifndef MX_OPS_CPU_GEMM_H
 #define MX_OPS_CPU_GEMM_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "kernels.h"
 
 typedef struct mx_gemm_kernel {
     int mr, nr;
     /* c[m × n] (row stride ldc) = (accumulate ? c : 0) + a[kc][mr] · b[kc][nr]; only the
-     * first m rows and n columns are written (m <= mr, n <= nr). */
-    void (*micro)(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n, int accumulate);
+     * first m rows and n columns are written (m <= mr, n <= nr). With to_pairs the panels are
+     * a[(kc+1)/2][mr] and b[(kc+1)/2][nr] words of bf16 pairs. */
+    void (*micro)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, int accumulate);
     /* y[i] = widened x[i] for a weight row (fp32, fp16 or bf16). */
     void (*widen)(float *y, mx_wptr x, size_t offset, size_t n);
     /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols (the packing transpose). */
     void (*transpose)(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols);
+    /* NULL for fp32 panels; else dst[kp][c] = bf16(src[2kp][c]) | bf16(src[2kp+1][c]) << 16 for
+     * c < width, kp < (kc+1)/2 (src[kc][·] read as zero), rounding to nearest even. */
+    void (*to_pairs)(uint32_t *dst, const float *src, int width, int kc);
 } mx_gemm_kernel;
+
+/* Widest panel (MR or NR) of any kernel: bounds the fp32 staging panel of the bf16 levels. */
+#define MX_GEMM_PANEL_MAX 32
 
 typedef struct mx_gemm_problem mx_gemm_problem;
 /* dst[k][r] for k < kc, r < rows: a panel starting at row (A) or column (B) `first`, rows past
@@ -58,6 +69,9 @@ void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, floa
 /* Packs B = im2col(image) columns [first, first+cols) for rows k0..k0+kc of (ci, ky, kx). */
 void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int cols,
                            int k0, int kc);
+
+/* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 level. */
+void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);
 
 /* Returns -1 (and writes nothing) when no memory for the packed panels could be had. */
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);

@@ -26,7 +26,8 @@
     }
 #define ALL_ROWS(X) X(0) X(1) X(2) X(3) X(4) X(5)
 
-static void micro_6x16(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n, int accumulate) {
+static void micro_6x16(int kc, const void *ap, const void *bp, float *c, size_t ldc, int m, int n, int accumulate) {
+    const float *a = ap, *b = bp;
     ALL_ROWS(ROW_DECL)
     /* the C tile is read at the end: start fetching it now (it is usually outside L2) */
     for (int i = 0; accumulate && i < m; i++) {
@@ -65,7 +66,7 @@ static void widen_avx2(float *y, mx_wptr w, size_t off, size_t n) {
     for (; i < n; i++) y[i] = mx_w_get(w, off + i);
 }
 
-static const mx_gemm_kernel kernel_avx2 = {MR, NR, micro_6x16, widen_avx2, mx_gemm_transpose};
+static const mx_gemm_kernel kernel_avx2 = {MR, NR, micro_6x16, widen_avx2, mx_gemm_transpose, NULL};
 
 void mx_linear_avx2(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx2, y, x, w, bias, M, N, K);

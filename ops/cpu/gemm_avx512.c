@@ -1,60 +1,21 @@
-/* AVX-512F GEMM micro-kernel (12×32: 24 zmm accumulators, 2 B loads and 12 broadcasts per k),
- * weight widening with F16C / integer shifts, and linear + conv2d on the GEMM engine. */
+/* AVX-512F GEMM micro-kernel (gemm_micro_avx512.inc with fp32 FMAs, one k per step), weight
+ * widening with F16C / integer shifts (shared with the bf16 level), and linear + conv2d on the
+ * GEMM engine. */
 #include <immintrin.h>
 
 #include "gemm.h"
 
-#define MR 12
-#define NR 32
-
-#define ROW_DECL(i) __m512 c##i##0 = _mm512_setzero_ps(), c##i##1 = _mm512_setzero_ps();
+#define MICRO_NAME micro_12x32
+#define MICRO_STEPS(kc) (kc)
 #define ROW_FMA(i)                                                                                           \
     {                                                                                                        \
         __m512 ai = _mm512_set1_ps(a[i]);                                                                    \
         c##i##0 = _mm512_fmadd_ps(ai, b0, c##i##0);                                                          \
         c##i##1 = _mm512_fmadd_ps(ai, b1, c##i##1);                                                          \
     }
-#define ROW_OUT(i)                                                                                           \
-    {                                                                                                        \
-        float *r = out + (size_t)(i) * ld;                                                                   \
-        if (direct && accumulate) {                                                                          \
-            c##i##0 = _mm512_add_ps(_mm512_loadu_ps(r), c##i##0);                                            \
-            c##i##1 = _mm512_add_ps(_mm512_loadu_ps(r + 16), c##i##1);                                       \
-        }                                                                                                    \
-        _mm512_storeu_ps(r, c##i##0);                                                                        \
-        _mm512_storeu_ps(r + 16, c##i##1);                                                                   \
-    }
-#define ALL_ROWS(X) X(0) X(1) X(2) X(3) X(4) X(5) X(6) X(7) X(8) X(9) X(10) X(11)
+#include "gemm_micro_avx512.inc"
 
-static void micro_12x32(int kc, const float *a, const float *b, float *c, size_t ldc, int m, int n,
-                        int accumulate) {
-    ALL_ROWS(ROW_DECL)
-    /* the C tile is read at the end: start fetching it now (it is usually outside L2) */
-    for (int i = 0; accumulate && i < m; i++) {
-        _mm_prefetch((const char *)(c + (size_t)i * ldc), _MM_HINT_T0);
-        _mm_prefetch((const char *)(c + (size_t)i * ldc + NR - 1), _MM_HINT_T0);
-    }
-    for (int k = 0; k < kc; k++) {
-        __m512 b0 = _mm512_loadu_ps(b), b1 = _mm512_loadu_ps(b + 16);
-        ALL_ROWS(ROW_FMA)
-        a += MR;
-        b += NR;
-    }
-    /* full tiles go straight to C; edge tiles through a local tile */
-    float tile[MR * NR];
-    int direct = m == MR && n == NR;
-    float *out = direct ? c : tile;
-    size_t ld = direct ? ldc : NR;
-    ALL_ROWS(ROW_OUT)
-    if (direct) return;
-    for (int i = 0; i < m; i++)
-        for (int j = 0; j < n; j++) {
-            float *cij = c + (size_t)i * ldc + j;
-            *cij = (accumulate ? *cij : 0.0f) + tile[i * NR + j];
-        }
-}
-
-static void widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
+void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
     const uint16_t *x = (const uint16_t *)w.data + off;
     size_t i = 0;
     if (w.dtype == MX_F16)
@@ -68,7 +29,7 @@ static void widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
     for (; i < n; i++) y[i] = mx_w_get(w, off + i);
 }
 
-static const mx_gemm_kernel kernel_avx512 = {MR, NR, micro_12x32, widen_avx512, mx_gemm_transpose};
+static const mx_gemm_kernel kernel_avx512 = {MR, NR, micro_12x32, mx_gemm_widen_avx512, mx_gemm_transpose, NULL};
 
 void mx_linear_avx512(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512, y, x, w, bias, M, N, K);

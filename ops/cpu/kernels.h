@@ -1,10 +1,11 @@
 /* Internal to ops/: the kernel functions behind the dispatch table (ops/cpu/dispatch.c),
  * the scratch-memory helper and the parallel-for helper they share.
- * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512.
+ * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512,
+ * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation).
  *
  * Files: <family>_ref.c are the references (linear, conv, norm, attention, activation, binary,
  * layout, convert). gemm.c is the blocked GEMM engine behind linear and conv2d; gemm_<isa>.c
- * holds its micro-kernels. The other SIMD kernels are written once as templates
+ * holds its micro-kernels (the AVX-512 one written once in gemm_micro_avx512.inc for fp32 and bf16). The other SIMD kernels are written once as templates
  * (attention_simd.inc, norm_simd.inc, activation_simd.inc, vmath_simd.inc for exp/erfc) over a
  * small vector vocabulary (simd_avx2.h, simd_avx512.h) and instantiated by attention_<isa>.c
  * and elementwise_<isa>.c; convert_<isa>.c are the fp16/bf16 conversions. */
@@ -61,6 +62,15 @@ MX_KERNEL_DECLS(ref)
 MX_KERNEL_DECLS(avx2)
 MX_KERNEL_DECLS(avx512)
 
+/* The AVX512_BF16 level: bf16 products with fp32 sums for the matrix products; everything else
+ * is the AVX-512 fp32 kernels. */
+void mx_linear_avx512bf16(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
+void mx_conv2d_avx512bf16(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                          mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+void mx_attention_avx512bf16(const mx_ctx *, float *out, const float *q, const float *k, const float *v, int B,
+                             int H, int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal,
+                             float scale);
+
 /* Layout ops have only a reference: they are memory-bound copies the compiler vectorises. */
 void mx_upsample_nearest2x_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W);
 void mx_concat_channels_ref(const mx_ctx *, float *y, const float *a, int Ca, const float *b, int Cb, int B,
@@ -69,6 +79,21 @@ void mx_transpose_chw_hwc_ref(const mx_ctx *, float *y, const float *x, int B, i
 void mx_transpose_hwc_chw_ref(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
 void mx_resize_bilinear_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+
+/* The seam ops (pad, copy, fill, vector combinations, embeddings): memory-bound or tiny,
+ * one reference for every level. */
+void mx_pad2d_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+                  int right);
+void mx_copy_ref(const mx_ctx *, float *y, const float *x, size_t n);
+void mx_fill_ref(const mx_ctx *, float *y, float v, size_t n);
+void mx_axpy_ref(const mx_ctx *, float *y, const float *x, float s, size_t n);
+void mx_lincomb_ref(const mx_ctx *, float *y, int k, const float *coef, const float *const *x, size_t n);
+void mx_clamp_ref(const mx_ctx *, float *y, const float *x, float lo, float hi, size_t n);
+void mx_affine_ref(const mx_ctx *, float *y, const float *x, float a, float b, size_t n);
+void mx_timestep_embedding_ref(const mx_ctx *, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
+                               float downscale_freq_shift, float max_period);
+void mx_embed_tokens_ref(const mx_ctx *, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
+                         mx_wptr positions);
 
 /* Elements per task of the element-wise kernels: fixed, so the split never depends on threads. */
 #define MX_EW_CHUNK 16384

@@ -126,3 +126,41 @@ void mx_resize_bilinear_ref(const mx_ctx *c, float *y, const float *x, int BC, i
     resize_args a = {y, x, H, W, Ho, Wo, align_corners};
     mx_par_for(c, BC, resize_plane, &a);
 }
+
+typedef struct {
+    float *y;
+    const float *x;
+    int H, W, top, bottom, left, right;
+} pad_args;
+
+static void pad_plane(void *arg, int p, int thread) {
+    (void)thread;
+    const pad_args *a = arg;
+    int Wp = a->W + a->left + a->right, Hp = a->H + a->top + a->bottom;
+    const float *xp = a->x + (size_t)p * a->H * a->W;
+    float *yp = a->y + (size_t)p * Hp * Wp;
+    memset(yp, 0, (size_t)a->top * Wp * sizeof *yp);
+    for (int i = 0; i < a->H; i++) {
+        float *row = yp + (size_t)(a->top + i) * Wp;
+        memset(row, 0, (size_t)a->left * sizeof *row);
+        memcpy(row + a->left, xp + (size_t)i * a->W, (size_t)a->W * sizeof *row);
+        memset(row + a->left + a->W, 0, (size_t)a->right * sizeof *row);
+    }
+    memset(yp + (size_t)(a->top + a->H) * Wp, 0, (size_t)a->bottom * Wp * sizeof *yp);
+}
+
+void mx_pad2d_ref(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+                  int right) {
+    pad_args a = {y, x, H, W, top, bottom, left, right};
+    mx_par_for(c, BC, pad_plane, &a);
+}
+
+void mx_copy_ref(const mx_ctx *c, float *y, const float *x, size_t n) {
+    (void)c;
+    memcpy(y, x, n * sizeof *y);
+}
+
+void mx_fill_ref(const mx_ctx *c, float *y, float v, size_t n) {
+    (void)c;
+    for (size_t i = 0; i < n; i++) y[i] = v;
+}

@@ -12,7 +12,7 @@
  * - Every function returns 0, or -1 with a message in st naming the op and the problem
  *   (a bad size, an unsupported shape, a CUDA or cuBLASLt error). Nothing aborts.
  * - Math: fp32 weights -> fp32 math (no TF32). fp16/bf16 weights -> the activation is rounded to
- *   the weight's type and the product runs on tensor cores with fp32 accumulation (DESIGN.md §4).
+ *   the weight's type and the product runs on tensor cores with fp32 accumulation (docs/DESIGN.md §4).
  */
 #ifndef MX_CUDA_BACKEND_H
 #define MX_CUDA_BACKEND_H

@@ -941,9 +941,13 @@ typedef struct packing {
  * memory. With commit, records each chart's turn and position. */
 static int pack_at_scale(atlas *a, const int32_t *order, double scale, int size, int gutter, packing *pk,
                          int commit) {
+    /* The four turns of one chart at a time: bottom and top rows of each turn's columns. */
     size_t need = 0;
-    for (int i = 0; i < a->ncharts; i++)
-        for (int k = 0; k < 2; k++) need += 2 * (size_t)profile_width(&a->charts[i], k, scale);
+    for (int i = 0; i < a->ncharts; i++) {
+        size_t chart_need = 0;
+        for (int k = 0; k < 4; k++) chart_need += 2 * (size_t)profile_width(&a->charts[i], k, scale);
+        if (chart_need > need) need = chart_need;
+    }
     if (need > pk->ncolumns) {
         free(pk->columns);
         pk->columns = malloc(need * sizeof *pk->columns);

@@ -1,4 +1,4 @@
-/* UV atlas for meshes without UVs (DESIGN.md §2 step 2): charts grown over faces whose normals
+/* UV atlas for meshes without UVs (docs/DESIGN.md §2 step 1): charts grown over faces whose normals
  * stay within a cone, each projected onto its plane (and cut until no triangle folds over or
  * overlaps another), small charts merged into neighbours, then all charts packed by their
  * outlines (tetris-like skyline) into the unit square at one common scale, so the texel density

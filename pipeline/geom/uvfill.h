@@ -1,4 +1,4 @@
-/* Filling the texels no view reached (DESIGN.md §2 step 8): texels inside charts (covered
+/* Filling the texels no view reached (docs/DESIGN.md §2 step 6): texels inside charts (covered
  * by some triangle in UV space) get a push-pull mip-pyramid interpolation of the known
  * texels; then the gutter around charts is dilated a few texels so that bilinear and mip
  * filtering across chart borders shows no cracks. */

@@ -11,18 +11,12 @@
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st) {
     memset(r, 0, sizeof *r);
-    r->c = c;
+    r->c = mx_run_ctx(c, a);
     r->a = a;
     r->st = st;
-    r->dry = a->measuring;
 }
 
-/* In a dry run nothing is computed, so any non-NULL pointer serves as the "allocation". */
-float *mx_run_alloc(mx_run *r, size_t n) {
-    float *p = mx_arena_floats(r->a, n, r->st);
-    if (r->dry) return (float *)&r->flops;
-    return p;
-}
+float *mx_run_alloc(mx_run *r, size_t n) { return mx_act_alloc(r->a, n, r->st); }
 
 /* ---- parameter groups ---- */
 
@@ -88,31 +82,28 @@ int mx_conv_out_size(const mx_conv *p, int n) { return (n + 2 * p->pad - p->k) /
 void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
     int Ho = mx_conv_out_size(p, H), Wo = mx_conv_out_size(p, W);
     r->flops += 2.0 * B * p->cout * Ho * Wo * (double)p->cin * p->k * p->k;
-    if (!r->dry) mx_conv2d(r->c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
+    mx_conv2d(r->c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
 }
 
 void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M) {
     r->flops += 2.0 * M * p->out * (double)p->in;
-    if (!r->dry) mx_linear(r->c, y, x, p->w, p->b, M, p->out, p->in);
+    mx_linear(r->c, y, x, p->w, p->b, M, p->out, p->in);
 }
 
 void mx_gn_run(mx_run *r, const mx_gn *p, float *y, const float *x, int B, int HW, int silu) {
-    if (!r->dry) mx_group_norm(r->c, y, x, B, p->c, HW, p->groups, p->g, p->b, p->eps, silu);
+    mx_group_norm(r->c, y, x, B, p->c, HW, p->groups, p->g, p->b, p->eps, silu);
 }
 
 void mx_ln_run(mx_run *r, const mx_ln *p, float *y, const float *x, int M) {
-    if (!r->dry) mx_layer_norm(r->c, y, x, M, p->c, p->g, p->b, p->eps);
+    mx_layer_norm(r->c, y, x, M, p->c, p->g, p->b, p->eps);
 }
 
-static void run_add(mx_run *r, float *y, const float *a, const float *b, size_t n) {
-    if (!r->dry) mx_add(r->c, y, a, b, n);
-}
+static void run_add(mx_run *r, float *y, const float *a, const float *b, size_t n) { mx_add(r->c, y, a, b, n); }
 
 static void run_attention(mx_run *r, float *out, const float *q, const float *k, const float *v, int B, int heads,
                           int Tq, int Tk, int D, int qs, int kvs, int os) {
     r->flops += 4.0 * B * heads * (double)Tq * Tk * D;
-    if (!r->dry)
-        mx_attention(r->c, out, q, k, v, B, heads, Tq, Tk, D, qs, kvs, os, 0, (float)(1.0 / sqrt((double)D)));
+    mx_attention(r->c, out, q, k, v, B, heads, Tq, Tk, D, qs, kvs, os, 0, (float)(1.0 / sqrt((double)D)));
 }
 
 /* ---- ResnetBlock2D ---- */
@@ -155,7 +146,7 @@ int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B
         if (!tp) return -1;
         mx_lin_run(r, &p->temb_proj, tp, temb_silu, B);
         int64_t hs[3] = {B, p->cout, (int64_t)HW}, ts[3] = {B, p->cout, 1};
-        if (!r->dry) mx_binary(r->c, MX_BIN_ADD, h, h, hs, tp, ts, 3);
+        mx_binary(r->c, MX_BIN_ADD, h, h, hs, tp, ts, 3);
     }
     mx_gn_run(r, &p->norm2, t, h, B, (int)HW, 1);
     mx_conv_run(r, &p->conv2, y, t, B, H, W);
@@ -166,8 +157,7 @@ int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B
     }
     size_t n = (size_t)B * p->cout * HW;
     run_add(r, y, skip, y, n);
-    if (p->out_scale != 1.0f && !r->dry)
-        for (size_t i = 0; i < n; i++) y[i] /= p->out_scale;
+    if (p->out_scale != 1.0f) mx_scale(r->c, y, y, 1.0f / p->out_scale, n);
     mx_arena_reset(r->a, mark);
     return 0;
 }
@@ -239,7 +229,7 @@ static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, c
     if (!n || !f || !g) return -1;
     mx_ln_run(r, &p->norm3, n, hs, N);
     mx_lin_run(r, &p->ff_in, f, n, N);
-    if (!r->dry) mx_geglu(r->c, g, f, N, p->ff_dim);
+    mx_geglu(r->c, g, f, N, p->ff_dim);
     mx_lin_run(r, &p->ff_out, n, g, N);
     run_add(r, hs, hs, n, nd);
     mx_arena_reset(r->a, mark);
@@ -292,19 +282,19 @@ int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float
     mx_gn_run(r, &p->norm, t, x, B, HW, 0);
     /* proj_in: 1×1 conv in NCHW then to tokens, or tokens then linear (use_linear_projection). */
     if (p->linear_proj) {
-        if (!r->dry) mx_transpose_chw_hwc(r->c, y, t, B, C, HW);
+        mx_transpose_chw_hwc(r->c, y, t, B, C, HW);
         mx_lin_run(r, &p->proj_in_lin, hs, y, B * HW);
     } else {
         mx_conv_run(r, &p->proj_in_conv, y, t, B, H, W);
-        if (!r->dry) mx_transpose_chw_hwc(r->c, hs, y, B, inner, HW);
+        mx_transpose_chw_hwc(r->c, hs, y, B, inner, HW);
     }
     for (int i = 0; i < p->nblocks; i++)
         if (tblock_run(r, &p->blocks[i], hs, B, HW, context, T)) return -1;
     if (p->linear_proj) {
         mx_lin_run(r, &p->proj_out_lin, t, hs, B * HW);
-        if (!r->dry) mx_transpose_hwc_chw(r->c, y, t, B, C, HW);
+        mx_transpose_hwc_chw(r->c, y, t, B, C, HW);
     } else {
-        if (!r->dry) mx_transpose_hwc_chw(r->c, t, hs, B, inner, HW);
+        mx_transpose_hwc_chw(r->c, t, hs, B, inner, HW);
         mx_conv_run(r, &p->proj_out_conv, y, t, B, H, W);
     }
     run_add(r, y, y, x, (size_t)B * C * HW);
@@ -330,13 +320,13 @@ int mx_vae_attn_run(mx_run *r, const mx_vae_attn *p, float *y, const float *x, i
           *v = mx_run_alloc(r, n);
     if (!t || !s || !q || !k || !v) return -1;
     mx_gn_run(r, &p->norm, t, x, B, HW, 0);
-    if (!r->dry) mx_transpose_chw_hwc(r->c, s, t, B, C, HW);
+    mx_transpose_chw_hwc(r->c, s, t, B, C, HW);
     mx_lin_run(r, &p->q, q, s, N);
     mx_lin_run(r, &p->k, k, s, N);
     mx_lin_run(r, &p->v, v, s, N);
     run_attention(r, t, q, k, v, B, 1, HW, HW, C, C, C, C);
     mx_lin_run(r, &p->o, s, t, N);
-    if (!r->dry) mx_transpose_hwc_chw(r->c, y, s, B, C, HW);
+    mx_transpose_hwc_chw(r->c, y, s, B, C, HW);
     run_add(r, y, y, x, n);
     mx_arena_reset(r->a, mark);
     return 0;
@@ -361,17 +351,7 @@ int mx_down_run(mx_run *r, const mx_down *p, float *y, const float *x, int B, in
     int C = p->conv.cin, Hp = H + 1, Wp = W + 1;
     float *xp = mx_run_alloc(r, (size_t)B * C * Hp * Wp);
     if (!xp) return -1;
-    if (!r->dry) {
-        for (size_t bc = 0; bc < (size_t)B * C; bc++) {
-            float *dst = xp + bc * Hp * Wp;
-            const float *src = x + bc * H * W;
-            for (int i = 0; i < H; i++) {
-                memcpy(dst + (size_t)i * Wp, src + (size_t)i * W, (size_t)W * sizeof *src);
-                dst[(size_t)i * Wp + W] = 0.0f;
-            }
-            memset(dst + (size_t)H * Wp, 0, (size_t)Wp * sizeof *dst);
-        }
-    }
+    mx_pad2d(r->c, xp, x, B * C, H, W, 0, 1, 0, 1);
     mx_conv_run(r, &p->conv, y, xp, B, Hp, Wp);
     mx_arena_reset(r->a, mark);
     return 0;
@@ -388,7 +368,7 @@ int mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H,
     int C = p->conv.cin;
     float *u = mx_run_alloc(r, (size_t)B * C * 4 * H * W);
     if (!u) return -1;
-    if (!r->dry) mx_upsample_nearest2x(r->c, u, x, B * C, H, W);
+    mx_upsample_nearest2x(r->c, u, x, B * C, H, W);
     mx_conv_run(r, &p->conv, y, u, B, 2 * H, 2 * W);
     mx_arena_reset(r->a, mark);
     return 0;
@@ -409,11 +389,11 @@ int mx_time_embed_run(mx_run *r, const mx_time_embed *p, float *temb_silu, const
     size_t mark = mx_arena_mark(r->a);
     float *tp = mx_run_alloc(r, (size_t)B * p->proj_dim), *h = mx_run_alloc(r, (size_t)B * p->dim);
     if (!tp || !h) return -1;
-    if (!r->dry) mx_timestep_embedding(tp, t, B, p->proj_dim, p->flip, p->shift, 10000.0f);
+    mx_timestep_embedding(r->c, tp, t, B, p->proj_dim, p->flip, p->shift, 10000.0f);
     mx_lin_run(r, &p->l1, h, tp, B);
-    if (!r->dry) mx_silu(r->c, h, (size_t)B * p->dim);
+    mx_silu(r->c, h, (size_t)B * p->dim);
     mx_lin_run(r, &p->l2, temb_silu, h, B);
-    if (!r->dry) mx_silu(r->c, temb_silu, (size_t)B * p->dim);
+    mx_silu(r->c, temb_silu, (size_t)B * p->dim);
     mx_arena_reset(r->a, mark);
     return 0;
 }
@@ -501,7 +481,7 @@ int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample
                         int W, const float *temb_silu, const float *context, int T, float *const *res, float *mid) {
     const mx_unet_config *c = &e->cfg;
     mx_conv_run(r, &e->conv_in, res[0], sample, B, H, W);
-    if (add && !r->dry) mx_add(r->c, res[0], res[0], add, (size_t)B * c->block_out_channels[0] * H * W);
+    if (add) mx_add(r->c, res[0], res[0], add, (size_t)B * c->block_out_channels[0] * H * W);
     int k = 0, h = H, w = W;
     for (int i = 0; i < c->nlevels; i++) {
         const mx_down_level *lv = &e->levels[i];
@@ -512,7 +492,7 @@ int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample
                 size_t mark = mx_arena_mark(r->a);
                 float *t = mx_run_alloc(r, (size_t)B * lv->cout * h * w);
                 if (!t || mx_transformer_run(r, &lv->attn[j], t, dst, B, h, w, context, T)) return -1;
-                if (!r->dry) memcpy(dst, t, (size_t)B * lv->cout * h * w * sizeof *t);
+                mx_copy(r->c, dst, t, (size_t)B * lv->cout * h * w);
                 mx_arena_reset(r->a, mark);
             }
             k++;

@@ -4,26 +4,26 @@
  *
  * Every block has a load function (binds its parameters under a dotted path such as
  * "down_blocks.0.resnets.1") and a forward function that writes into a caller buffer and
- * takes its temporaries from the run's arena (restoring the mark). In a dry run (measuring
- * arena) the forward functions allocate exactly as for real but compute nothing. */
+ * takes its temporaries from the run's arena (restoring the mark). Forward code only calls
+ * ops: in a dry run (measuring arena) the ops compute nothing (ops.h), so the same code
+ * allocates exactly as for real. */
 #ifndef MX_BLOCKS_H
 #define MX_BLOCKS_H
 
 #include "../../ops/ops.h"
 #include "params.h"
 
-/* One forward pass: ops context, activation arena, error sink, dry-run flag, FLOP counter. */
+/* One forward pass: ops context (the measuring one in a dry run), activation arena, error
+ * sink, FLOP counter. */
 typedef struct mx_run {
     const mx_ctx *c;
     mx_arena *a;
     mx_status *st;
-    int dry;
     double flops;
 } mx_run;
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
-/* Arena floats; in a dry run returns a non-NULL dummy so that callers need no special case.
- * Returns NULL only on failure (st filled). */
+/* Activation floats from the run's arena (mx_act_alloc). NULL only on failure (st filled). */
 float *mx_run_alloc(mx_run *r, size_t n);
 
 typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad; } mx_conv;

@@ -139,19 +139,6 @@ void mx_clip_free(mx_clip *m) {
 
 /* ---- forward ---- */
 
-/* x[b, t] = token_embedding[ids[b, t]] + position_embedding[t]. */
-static void embed(const mx_clip *m, const int32_t *ids, int B, int T, float *x) {
-    int C = m->cfg.hidden_size;
-    for (int b = 0; b < B; b++)
-        for (int t = 0; t < T; t++) {
-            size_t tok = (size_t)ids[b * T + t] * (size_t)C, pos = (size_t)t * (size_t)C;
-            float *row = x + ((size_t)b * T + t) * C;
-            for (int c = 0; c < C; c++)
-                row[c] = mx_w_get(m->token_embedding, tok + (size_t)c) +
-                         mx_w_get(m->position_embedding, pos + (size_t)c);
-        }
-}
-
 /* Activations of one forward pass, M = B*T rows. */
 typedef struct clip_buffers {
     float *h, *q, *k, *v, *attn, *mlp;
@@ -160,13 +147,10 @@ typedef struct clip_buffers {
 static int alloc_buffers(mx_arena *a, size_t M, const mx_clip_config *cfg, clip_buffers *bf, mx_status *st) {
     size_t MC = M * (size_t)cfg->hidden_size;
     float **bufs[] = {&bf->h, &bf->q, &bf->k, &bf->v, &bf->attn};
-    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) {
-        *bufs[i] = mx_arena_floats(a, MC, st);
-        if (!*bufs[i] && !a->measuring) return -1;
-    }
-    bf->mlp = mx_arena_floats(a, M * (size_t)cfg->intermediate_size, st);
-    if (!bf->mlp && !a->measuring) return -1;
-    return 0;
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
+        if (!(*bufs[i] = mx_act_alloc(a, MC, st))) return -1;
+    bf->mlp = mx_act_alloc(a, M * (size_t)cfg->intermediate_size, st);
+    return bf->mlp ? 0 : -1;
 }
 
 /* x += out_proj(attention(LN1(x))) with a causal mask. */
@@ -231,24 +215,20 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
     int C = cfg->hidden_size, M = B * T;
     size_t MC = (size_t)M * (size_t)C, mark = mx_arena_mark(arena);
     clip_buffers bf;
-    float *x = mx_arena_floats(arena, MC, st);
-    if ((!x && !arena->measuring) || alloc_buffers(arena, (size_t)M, cfg, &bf, st))
-        return mx_fail_prefix(st, "clip forward: ");
-    if (arena->measuring) {
-        mx_arena_reset(arena, mark);
-        return 0;
-    }
-    embed(m, ids, B, T, x);
-    if (hidden_states && hidden_states[0]) memcpy(hidden_states[0], x, MC * sizeof(float));
+    c = mx_run_ctx(c, arena);
+    float *x = mx_act_alloc(arena, MC, st);
+    if (!x || alloc_buffers(arena, (size_t)M, cfg, &bf, st)) return mx_fail_prefix(st, "clip forward: ");
+    mx_embed_tokens(c, x, ids, B, T, C, m->token_embedding, m->position_embedding);
+    if (hidden_states && hidden_states[0]) mx_copy(c, hidden_states[0], x, MC);
     for (int i = 0; i < cfg->num_hidden_layers; i++) {
         attention_block(m, &m->layers[i], c, x, B, T, &bf);
         mlp_block(m, &m->layers[i], c, x, M, &bf);
-        if (hidden_states && hidden_states[i + 1]) memcpy(hidden_states[i + 1], x, MC * sizeof(float));
+        if (hidden_states && hidden_states[i + 1]) mx_copy(c, hidden_states[i + 1], x, MC);
     }
     mx_layer_norm(c, last_hidden, x, M, C, m->final_ln_w, m->final_ln_b, cfg->layer_norm_eps);
     for (int b = 0; pooled && b < B; b++) {
         int t = pooled_position(cfg, ids + (size_t)b * T, T);
-        memcpy(pooled + (size_t)b * C, last_hidden + ((size_t)b * T + t) * C, (size_t)C * sizeof(float));
+        mx_copy(c, pooled + (size_t)b * C, last_hidden + ((size_t)b * T + t) * C, (size_t)C);
     }
     mx_arena_reset(arena, mark);
     return 0;

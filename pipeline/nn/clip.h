@@ -61,8 +61,9 @@ void mx_clip_free(mx_clip *m);
  *   pooled        [B, C]     last_hidden at the end-of-text token (transformers 4.39 rule)
  *   hidden_states num_hidden_layers + 1 pointers, each [B, T, C] (0 = embeddings, i = after
  *                 layer i, before the final layer norm); a NULL entry is skipped.
- * Temporaries come from `arena`; when the arena is measuring, only allocations are made and
- * nothing is computed (the dry run that sizes the arena). */
+ * Outputs are backend memory of c (ids stay on the host). Temporaries come from `arena`; when
+ * the arena is measuring, only allocations are made and nothing is computed (the dry run that
+ * sizes the arena). */
 int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const int32_t *ids, int B, int T,
                     float *last_hidden, float *pooled, float **hidden_states, mx_status *st);
 

@@ -88,25 +88,25 @@ static int cond_embed_run(mx_run *r, const cond_embed *ce, const mx_unet_config 
     float *p[2] = {mx_run_alloc(r, (size_t)B * need), mx_run_alloc(r, (size_t)B * need)};
     if (!p[0] || !p[1]) return -1;
     const float *x = cond;
-    if (c->cond_bgr && !r->dry) { /* controlnet_conditioning_channel_order "bgr": flip channels */
+    if (c->cond_bgr) { /* controlnet_conditioning_channel_order "bgr": flip channels */
         int cc = c->conditioning_channels;
         size_t hw = (size_t)h * w;
         for (int bi = 0; bi < B; bi++)
             for (int ci = 0; ci < cc; ci++)
-                memcpy(p[1] + ((size_t)bi * cc + ci) * hw, cond + ((size_t)bi * cc + cc - 1 - ci) * hw, hw * sizeof *cond);
+                mx_copy(r->c, p[1] + ((size_t)bi * cc + ci) * hw, cond + ((size_t)bi * cc + cc - 1 - ci) * hw, hw);
         x = p[1];
     }
     mx_conv_run(r, &ce->conv_in, p[0], x, B, h, w);
     int cur = 0;
     size_t n = (size_t)B * c->cond_emb_channels[0] * h * w;
-    if (!r->dry) mx_silu(r->c, p[0], n);
+    mx_silu(r->c, p[0], n);
     for (int i = 0; i < ce->nblocks; i++) {
         const mx_conv *cv = &ce->blocks[i];
         mx_conv_run(r, cv, p[1 - cur], p[cur], B, h, w);
         h = mx_conv_out_size(cv, h);
         w = mx_conv_out_size(cv, w);
         cur = 1 - cur;
-        if (!r->dry) mx_silu(r->c, p[cur], (size_t)B * cv->cout * h * w);
+        mx_silu(r->c, p[cur], (size_t)B * cv->cout * h * w);
     }
     mx_conv_run(r, &ce->conv_out, emb, p[cur], B, h, w);
     mx_arena_reset(r->a, mark);
@@ -140,11 +140,10 @@ static int controlnet_run(mx_run *r, const mx_controlnet *m, const mx_controlnet
     for (int i = 0; i <= n; i++) {
         mx_unet_residual_shape(c, i, in->H, in->W, &C, &h, &w);
         mx_conv_run(r, i < n ? &m->zero_down[i] : &m->zero_mid, t, res[i], B, h, w);
-        if (r->dry) continue;
         float *dst = i < n ? down[i] : mid_out;
         size_t cnt = (size_t)B * C * h * w;
         if (accumulate)
-            for (size_t j = 0; j < cnt; j++) dst[j] += in->scale * t[j];
+            mx_axpy(r->c, dst, t, in->scale, cnt);
         else
             mx_scale(r->c, dst, t, in->scale, cnt);
     }
@@ -172,11 +171,20 @@ int mx_controlnet_forward(const mx_ctx *c, const mx_controlnet *m, const mx_cont
     return rc ? mx_fail_prefix(st, "ControlNet forward") : 0;
 }
 
-int mx_controlnet_arena_bytes(const mx_controlnet *m, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+/* Output handles of a dry run: placeholders from a measuring arena. */
+static void dry_outputs(float **out, int n) {
     mx_arena a;
     mx_arena_measure(&a);
+    for (int i = 0; i < n; i++) out[i] = mx_act_alloc(&a, 1, NULL);
+}
+
+int mx_controlnet_arena_bytes(const mx_controlnet *m, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+    mx_arena a;
+    float *out[MX_UNET_MAX_RES + 1];
+    dry_outputs(out, MX_UNET_MAX_RES + 1);
+    mx_arena_measure(&a);
     mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f};
-    if (mx_controlnet_forward(NULL, m, &in, NULL, NULL, 0, &a, st)) return -1;
+    if (mx_controlnet_forward(NULL, m, &in, out, out[MX_UNET_MAX_RES], 0, &a, st)) return -1;
     *bytes = a.peak + 4 * MX_ARENA_ALIGN;
     return 0;
 }
@@ -184,10 +192,13 @@ int mx_controlnet_arena_bytes(const mx_controlnet *m, int B, int H, int W, int T
 double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T) {
     mx_arena a;
     mx_status st;
+    float *out[MX_UNET_MAX_RES + 1];
+    dry_outputs(out, MX_UNET_MAX_RES + 1);
     mx_arena_measure(&a);
     mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f};
     mx_run r;
     mx_run_init(&r, NULL, &a, &st);
-    if (check_cond_sizes(&m->enc.cfg, &in, &st) || controlnet_run(&r, m, &in, NULL, NULL, 0)) return 0.0;
+    if (check_cond_sizes(&m->enc.cfg, &in, &st) || controlnet_run(&r, m, &in, out, out[MX_UNET_MAX_RES], 0))
+        return 0.0;
     return r.flops;
 }

@@ -134,7 +134,7 @@ static int up_level_run(mx_run *r, const up_level *lv, float **h, float *p[2], f
         float *cat = mx_run_alloc(r, (size_t)B * (lv->cin[j] + lv->cskip[j]) * hw);
         if (!cat) return -1;
         const float *skip = res[--*k];
-        if (!r->dry) mx_concat_channels(r->c, cat, *h, lv->cin[j], skip, lv->cskip[j], B, (int)hw);
+        mx_concat_channels(r->c, cat, *h, lv->cin[j], skip, lv->cskip[j], B, (int)hw);
         float *dst = *h == p[0] ? p[1] : p[0];
         if (mx_resnet_run(r, &lv->res[j], dst, cat, B, *H, *W, temb)) return -1;
         mx_arena_reset(r->a, mark);
@@ -157,7 +157,7 @@ static int up_level_run(mx_run *r, const up_level *lv, float **h, float *p[2], f
 
 static void add_residuals(mx_run *r, const mx_unet_config *c, const mx_unet_input *in, float *const *res, float *mid) {
     int n = mx_unet_num_residuals(c), C, h, w;
-    for (int i = 0; i <= n && !r->dry; i++) {
+    for (int i = 0; i <= n; i++) {
         const float *add = i < n ? (in->down_residuals ? in->down_residuals[i] : NULL) : in->mid_residual;
         if (!add) continue;
         mx_unet_residual_shape(c, i, in->H, in->W, &C, &h, &w);

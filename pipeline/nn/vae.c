@@ -166,8 +166,8 @@ static int mid_run(mx_run *r, const vae_mid *m, float *y, const float *x, int B,
     if (!t || mx_resnet_run(r, &m->res0, y, x, B, h, w, NULL)) return -1;
     if (m->has_attn) {
         if (mx_vae_attn_run(r, &m->attn, t, y, B, h, w)) return -1;
-    } else if (!r->dry) {
-        memcpy(t, y, (size_t)B * C * h * w * sizeof *t);
+    } else {
+        mx_copy(r->c, t, y, (size_t)B * C * h * w);
     }
     if (mx_resnet_run(r, &m->res1, y, t, B, h, w, NULL)) return -1;
     mx_arena_reset(r->a, mark);
@@ -209,17 +209,12 @@ static int encode_run(mx_run *r, const mx_vae *v, const float *image, int B, int
         mx_conv_run(r, &v->quant_conv, other(p, h), h, B, H, W);
         h = other(p, h);
     }
-    if (r->dry) return 0;
     /* moments = [mean | logvar] per item; logvar clamped to [-30, 20] as in DiagonalGaussianDistribution */
     size_t hw = (size_t)H * W, half = (size_t)lc * hw;
     for (int bi = 0; bi < B; bi++) {
         const float *mo = h + (size_t)bi * 2 * half;
-        memcpy(mean + (size_t)bi * half, mo, half * sizeof *mo);
-        if (!logvar) continue;
-        for (size_t i = 0; i < half; i++) {
-            float lv = mo[half + i];
-            logvar[(size_t)bi * half + i] = lv < -30.0f ? -30.0f : lv > 20.0f ? 20.0f : lv;
-        }
+        mx_copy(r->c, mean + (size_t)bi * half, mo, half);
+        if (logvar) mx_clamp(r->c, logvar + (size_t)bi * half, mo + half, -30.0f, 20.0f, half);
     }
     return 0;
 }

@@ -78,6 +78,7 @@ static const struct {
     SAME_FIELD(prompt, prompt),
     SAME_FIELD(negative_prompt, negative_prompt),
     SAME_FIELD(out_dir, out_dir),
+    SAME_FIELD(force, force),
     SAME_FIELD(seed, seed),
     SAME_FIELD(steps, steps),
     SAME_FIELD(views, views),
@@ -107,6 +108,7 @@ void mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t) {
     t->normal_source = o->geometric_normals ? MX_NORMAL_GEOMETRIC : MX_NORMAL_FROM_DEPTH;
     t->up = o->z_up ? MX_UP_Z : MX_UP_Y;
     t->quiet = !o->verbose;
+    t->precision = o->precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16;
 }
 
 void mx_api_options_from_internal(const mx_texture_opts *t, matex_options *o) {
@@ -116,6 +118,7 @@ void mx_api_options_from_internal(const mx_texture_opts *t, matex_options *o) {
     o->geometric_normals = t->normal_source == MX_NORMAL_GEOMETRIC;
     o->z_up = t->up == MX_UP_Z;
     o->verbose = !t->quiet;
+    o->precision = t->precision == MX_PREC_FP32 ? MATEX_PRECISION_FP32 : MATEX_PRECISION_BF16;
 }
 
 void matex_options_default(matex_options *o) {
@@ -241,7 +244,7 @@ int matex_enhance(matex_models *m, const matex_options *o, matex_result **result
     return run(mx_enhance_run, m, o, result, err);
 }
 
-int matex_result_write(const matex_result *r, const char *out_dir, matex_error *err) {
+int matex_result_write(const matex_result *r, const char *out_dir, int force, matex_error *err) {
     clear_error(err);
     if (!r || !out_dir) {
         set_error(err, MATEX_EUSAGE, "no result or no output folder given");
@@ -250,11 +253,13 @@ int matex_result_write(const matex_result *r, const char *out_dir, matex_error *
     const api_result *a = (const api_result *)r; /* pub is the first member */
     mx_status st;
     mx_status_clear(&st);
-    if (mx_outdir_write(out_dir, &a->in.mesh, a->in.textures, a->in.ntex, a->in.report_json, &st)) {
-        set_error(err, st.code, st.msg);
-        return -1;
-    }
-    return 0;
+    mx_outdir od;
+    memset(&od, 0, sizeof od);
+    int rc = mx_outdir_open(&od, out_dir, force, &st) ||
+             mx_outdir_commit(&od, &a->in.mesh, a->in.textures, a->in.ntex, a->in.report_json, NULL, &st);
+    mx_outdir_discard(&od);
+    if (rc) set_error(err, st.code, st.msg);
+    return rc ? -1 : 0;
 }
 
 void matex_result_free(matex_result *r) {

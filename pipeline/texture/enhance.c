@@ -112,10 +112,7 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
 }
 
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
-    if (!mx_texture_opts_have_io(o) || !o->prompt) return mx_fail(st, MX_EUSAGE, "mesh, --weights and -o are required");
-    if (!(o->strength > 0.0f && o->strength <= 1.0f))
-        return mx_fail(st, MX_EUSAGE, "--strength must be in (0, 1], not %g", (double)o->strength);
-    if (o->views < 1 || o->views > 64) return mx_fail(st, MX_EUSAGE, "--views must be in 1..64, not %d", o->views);
+    if (mx_texture_opts_check(o, MX_TEXTURE_MODE_ENHANCE, st)) return -1;
     mx_job j;
     int rc = mx_job_open(&j, o, 0, 1, st);
     mx_image *orig = NULL, *out = NULL;
@@ -131,6 +128,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
     double t = mx_now();
     for (int i = 0; !rc && i < ncam && i < o->views; i++) {
+        if ((rc = mx_job_check_cancel(&j, st))) break;
         mx_job_view v;
         memset(&v, 0, sizeof v);
         v.cam = cams[i];

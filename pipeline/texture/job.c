@@ -92,6 +92,9 @@ static int build_candidates(mx_job *j, mx_status *st) {
     if (!j->visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
     mx_view_cache_visible(&j->vc, j->visible);
     j->n_visible = mx_mask_count(j->visible, (int64_t)texels);
+    if (j->n_visible == 0)
+        return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
+                       j->o->mesh_path);
     return 0;
 }
 
@@ -121,6 +124,8 @@ static void report_header(mx_job *j) {
     mx_jw_int(w, "render_size", o->render_size);
     mx_jw_int(w, "image_size", o->image_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
+    mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
+    mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
     mx_jw_str(w, "weights", mx_models_path(j->models));
     mx_jw_str(w, "weights_digest", j->models->digest);
     mx_jw_int(w, "faces", j->mesh.nfaces);
@@ -144,9 +149,13 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     memset(j, 0, sizeof *j);
     j->o = o;
     j->t0 = mx_now();
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_best_isa(), SCRATCH_BYTES, st)) return -1;
-    j->ctx_ready = 1;
     mx_job_set_phase(j, "load");
+    if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
+    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
+    j->ctx_ready = 1;
+    mx_job_progress(j, "networks in %s arithmetic (kernels %s)%s", mx_precision_name(mx_isa_precision(j->ctx.k->isa)),
+                    mx_isa_name(j->ctx.k->isa),
+                    mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
     if (o->models) {
         j->models = o->models;
     } else {
@@ -155,15 +164,15 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
         j->models = &j->own_models;
         mx_job_progress(j, "loaded weights %s", o->weights_path);
     }
-    if (mx_models_check(j->models, model_needs, st)) return -1;
+    if (mx_models_check(j->models, model_needs, st) || mx_job_check_cancel(j, st)) return -1;
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
                 : mx_mesh_load(o->mesh_path, &j->mesh, st))
         return -1;
-    if (prepare_uvs(j, need_uvs, st)) return -1;
+    if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
     if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || encode_negative(j, st)) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || encode_negative(j, st)) return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -172,6 +181,7 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
 }
 
 void mx_job_close(mx_job *j) {
+    mx_outdir_discard(&j->out);
     for (int i = 0; i < j->prompts.n; i++) {
         free(j->prompts.text[i]);
         free(j->prompts.emb[i]);
@@ -465,7 +475,7 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
     if (mx_job_check_cancel(j, st)) return -1;
     if (!j->o->out_dir) return 0;
-    if (mx_outdir_write(j->o->out_dir, &j->mesh, tex, j->nlayers, text, st)) return -1;
+    if (mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st)) return -1;
     mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
     return 0;
 }

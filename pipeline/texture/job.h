@@ -12,6 +12,7 @@
 #include "../geom/views.h"
 #include "jsonw.h"
 #include "models.h"
+#include "outdir.h"
 #include "texture.h"
 
 #define MX_JOB_MAX_PROMPTS 16
@@ -26,6 +27,7 @@ typedef struct mx_prompt_cache {
 
 typedef struct mx_job {
     const mx_texture_opts *o;
+    mx_outdir out; /* opened (checked, staging folder created) before anything else */
     mx_ctx ctx;
     int ctx_ready;
     const mx_models *models; /* o->models, or own_models */
@@ -80,9 +82,11 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Context, models (o->models, else loaded from o->weights_path; needs: MX_MODELS_NEED_*),
- * mesh (a copy of o->mesh, else loaded from o->mesh_path) and its normalised copy, bake sized
- * tex_size with nlayers layers, candidate cache and the report's header. */
+/* Output folder when o->out_dir is set (checked, staging folder created), context, models
+ * (o->models, else loaded from o->weights_path; needs: MX_MODELS_NEED_*), mesh (a copy of
+ * o->mesh, else loaded from o->mesh_path) and its normalised copy, bake sized tex_size with
+ * nlayers layers, candidate cache and the report's header. mx_job_close removes the staging
+ * folder of a run that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
 void mx_job_close(mx_job *j);
 

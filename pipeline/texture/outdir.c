@@ -2,49 +2,24 @@
 
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
+#include <ftw.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "../geom/export.h"
 
-/* dir + "/" + name into out; 0 when it fits. */
-static int join_path(char *out, size_t cap, const char *dir, const char *name) {
-    int n = snprintf(out, cap, "%s/%s", dir, name);
-    return n < 0 || (size_t)n >= cap ? -1 : 0;
+static int remove_entry(const char *path, const struct stat *sb, int type, struct FTW *ftw) {
+    (void)sb, (void)type, (void)ftw;
+    remove(path);
+    return 0;
 }
 
-/* Removes the regular files of a folder, then the folder. */
-static void remove_tree(const char *dir) {
-    DIR *d = opendir(dir);
-    if (d) {
-        struct dirent *e;
-        char path[4096];
-        while ((e = readdir(d)) != NULL) {
-            if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
-            if (!join_path(path, sizeof path, dir, e->d_name)) unlink(path);
-        }
-        closedir(d);
-    }
-    rmdir(dir);
-}
-
-static int move_files(const char *from, const char *to, mx_status *st) {
-    DIR *d = opendir(from);
-    if (!d) return mx_fail(st, MX_EIO, "%s: cannot read staging folder: %s", from, strerror(errno));
-    struct dirent *e;
-    char src[4096], dst[4096];
-    int rc = 0;
-    while (!rc && (e = readdir(d)) != NULL) {
-        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
-        if (join_path(src, sizeof src, from, e->d_name) || join_path(dst, sizeof dst, to, e->d_name))
-            rc = mx_fail(st, MX_EINPUT, "%s: path too long", to);
-        else if (rename(src, dst)) rc = mx_fail(st, MX_EIO, "%s: cannot write: %s", dst, strerror(errno));
-    }
-    closedir(d);
-    return rc;
-}
+/* rm -r without following links (FTW_PHYS): a link inside is removed, never its target. */
+static void remove_tree(const char *dir) { nftw(dir, remove_entry, 16, FTW_DEPTH | FTW_PHYS); }
 
 static int make_folder(const char *path, mx_status *st) {
     if (mkdir(path, 0777) && errno != EEXIST)
@@ -55,8 +30,7 @@ static int make_folder(const char *path, mx_status *st) {
 /* mkdir -p of the folder that will hold `dir` (its parent). */
 static int make_parents(const char *dir, mx_status *st) {
     char path[4096];
-    int n = snprintf(path, sizeof path, "%s", dir);
-    if (n < 0 || (size_t)n >= sizeof path) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    snprintf(path, sizeof path, "%s", dir);
     char *slash = strrchr(path, '/');
     if (!slash || slash == path) return 0;
     *slash = 0;
@@ -69,29 +43,122 @@ static int make_parents(const char *dir, mx_status *st) {
     return make_folder(path, st);
 }
 
-int mx_outdir_write(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
-                    mx_status *st) {
-    char stage[4096];
-    if (!dir || !*dir) return mx_fail(st, MX_EINPUT, "no output folder given");
-    int n = snprintf(stage, sizeof stage, "%s.partial-%ld", dir, (long)getpid());
-    if (n < 0 || (size_t)n >= sizeof stage) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+static int folder_is_empty(const char *dir, mx_status *st) {
+    DIR *d = opendir(dir);
+    if (!d) return mx_fail(st, MX_EIO, "%s: cannot read folder: %s", dir, strerror(errno));
+    struct dirent *e;
+    int empty = 1;
+    while (empty && (e = readdir(d)) != NULL) empty = !strcmp(e->d_name, ".") || !strcmp(e->d_name, "..");
+    closedir(d);
+    return empty;
+}
+
+/* od->dir: an existing path resolved (links, ".", trailing "/"), a new one without trailing "/". */
+static int resolve_dir(mx_outdir *od, const char *dir, mx_status *st) {
     struct stat sb;
-    if (stat(dir, &sb) == 0 && !S_ISDIR(sb.st_mode))
-        return mx_fail(st, MX_EINPUT, "%s: exists and is not a folder", dir);
-    if (make_parents(dir, st)) return -1;
-    remove_tree(stage);
-    if (mx_write_outputs(stage, m, textures, ntex, report_json, st)) {
-        remove_tree(stage);
+    if (stat(dir, &sb) == 0) {
+        char *real = realpath(dir, NULL);
+        if (!real) return mx_fail(st, MX_EIO, "%s: cannot resolve the path: %s", dir, strerror(errno));
+        int n = snprintf(od->dir, sizeof od->dir, "%s", real);
+        free(real);
+        if (n < 0 || (size_t)n >= sizeof od->dir) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+        if (!S_ISDIR(sb.st_mode)) return mx_fail(st, MX_EINPUT, "%s: exists and is not a folder", dir);
+        if (!strcmp(od->dir, "/")) return mx_fail(st, MX_EINPUT, "%s: the root folder cannot be an output folder", dir);
+        od->exists = 1;
+        return 0;
+    }
+    if (errno != ENOENT) return mx_fail(st, MX_EIO, "%s: %s", dir, strerror(errno));
+    int n = snprintf(od->dir, sizeof od->dir, "%s", dir);
+    if (n < 0 || (size_t)n >= sizeof od->dir) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    while (n > 1 && od->dir[n - 1] == '/') od->dir[--n] = 0;
+    return 0;
+}
+
+/* An existing folder must be replaceable by a rename from its parent: not a mount point. */
+static int check_same_device(const mx_outdir *od, const char *given, mx_status *st) {
+    struct stat a, b;
+    if (stat(od->dir, &a) || stat(od->stage, &b)) return mx_fail(st, MX_EIO, "%s: %s", given, strerror(errno));
+    if (a.st_dev != b.st_dev)
+        return mx_fail(st, MX_EINPUT,
+                       "%s: is a mount point (another file system than its parent), so it cannot be replaced "
+                       "atomically; give a folder inside it",
+                       given);
+    return 0;
+}
+
+int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st) {
+    memset(od, 0, sizeof *od);
+    if (!dir || !*dir) return mx_fail(st, MX_EUSAGE, "no output folder given");
+    if (resolve_dir(od, dir, st)) return -1;
+    if (od->exists && !force) {
+        int empty = folder_is_empty(od->dir, st);
+        if (empty < 0) return -1;
+        if (!empty)
+            return mx_fail(st, MX_EINPUT, "%s: the output folder exists and is not empty (--force replaces it)", dir);
+    }
+    int n = snprintf(od->stage, sizeof od->stage, "%s.partial-%ld", od->dir, (long)getpid());
+    if (n < 0 || (size_t)n >= sizeof od->stage) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    if (make_parents(od->dir, st)) return -1;
+    remove_tree(od->stage); /* a stale one of an earlier process with the same id */
+    if (mkdir(od->stage, 0777))
+        return mx_fail(st, MX_EIO, "%s: cannot create the staging folder %s: %s", dir, od->stage, strerror(errno));
+    od->staged = 1;
+    if (od->exists && check_same_device(od, dir, st)) {
+        mx_outdir_discard(od);
         return -1;
     }
-    if (stat(dir, &sb) != 0) {
-        if (rename(stage, dir) == 0) return 0;
-        if (make_folder(dir, st)) {
-            remove_tree(stage);
-            return -1;
-        }
+    return 0;
+}
+
+void mx_outdir_discard(mx_outdir *od) {
+    if (od->staged) remove_tree(od->stage);
+    od->staged = 0;
+}
+
+/* Swaps the staging folder with the existing dir (atomic where the kernel can), then removes the
+ * old content, which the swap left under the staging name. */
+static int replace_existing(mx_outdir *od, mx_status *st) {
+#ifdef RENAME_EXCHANGE
+    if (renameat2(AT_FDCWD, od->stage, AT_FDCWD, od->dir, RENAME_EXCHANGE) == 0) {
+        remove_tree(od->stage);
+        od->staged = 0;
+        return 0;
     }
-    int rc = move_files(stage, dir, st);
-    remove_tree(stage);
-    return rc;
+    if (errno != EINVAL && errno != ENOSYS)
+        return mx_fail(st, MX_EIO, "%s: cannot replace: %s", od->dir, strerror(errno));
+#endif
+    /* no exchange on this file system: move the old folder aside, then the new one in */
+    char old[4300];
+    snprintf(old, sizeof old, "%s.old-%ld", od->dir, (long)getpid());
+    remove_tree(old);
+    if (rename(od->dir, old)) return mx_fail(st, MX_EIO, "%s: cannot replace: %s", od->dir, strerror(errno));
+    if (rename(od->stage, od->dir)) {
+        int e = errno;
+        rename(old, od->dir);
+        return mx_fail(st, MX_EIO, "%s: cannot write: %s", od->dir, strerror(e));
+    }
+    od->staged = 0;
+    remove_tree(old);
+    return 0;
+}
+
+int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
+                     const volatile sig_atomic_t *cancel, mx_status *st) {
+    if (!od->staged) return mx_fail(st, MX_EINTERNAL, "%s: output folder not opened", od->dir);
+    if (mx_write_outputs(od->stage, m, textures, ntex, report_json, st)) {
+        mx_outdir_discard(od);
+        return -1;
+    }
+    if (cancel && *cancel) {
+        mx_outdir_discard(od);
+        return mx_fail(st, MX_ECANCEL, "interrupted");
+    }
+    if (od->exists) return replace_existing(od, st);
+    if (rename(od->stage, od->dir)) {
+        int e = errno;
+        mx_outdir_discard(od);
+        return mx_fail(st, MX_EIO, "%s: cannot write: %s", od->dir, strerror(e));
+    }
+    od->staged = 0;
+    return 0;
 }

@@ -1,14 +1,33 @@
-/* Writing a run's output folder so that a failure leaves nothing half-written: the files are
- * written into "<dir>.partial-<pid>", then moved into <dir> (created when missing; files of
- * the same names in an existing <dir> are replaced), and the staging folder is removed. */
+/* The output folder of a run, checked and staged before any expensive work, so that a failure
+ * or an interrupt at any moment leaves either what was there before or the complete new folder:
+ *   mx_outdir_open: resolves DIR (a link to a folder is followed), refuses a path that is not a
+ *     folder and, unless force, a non-empty folder; creates missing parents and the staging
+ *     folder "DIR.partial-PID" beside DIR (same file system, so the final move cannot be
+ *     cross-device): an unwritable location fails at once, not after the generation;
+ *   mx_outdir_commit: writes the files into the staging folder, then puts it in place with one
+ *     rename (DIR missing or empty) or one atomic exchange (--force over a non-empty DIR; its old
+ *     content is then removed);
+ *   mx_outdir_discard: removes the staging folder (after a failure or an interrupt). */
 #ifndef MX_OUTDIR_H
 #define MX_OUTDIR_H
+
+#include <signal.h>
 
 #include "../../runtime/status.h"
 #include "../geom/image.h"
 #include "../geom/mesh.h"
 
-int mx_outdir_write(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
-                    mx_status *st);
+typedef struct mx_outdir {
+    char dir[4096];   /* the output folder, links resolved when it exists */
+    char stage[4200]; /* dir + ".partial-PID" */
+    int exists;       /* dir existed at open (empty, or non-empty with force) */
+    int staged;       /* the staging folder exists */
+} mx_outdir;
+
+int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st);
+/* cancel (may be NULL) is checked once more after the files are written, before the move. */
+int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
+                     const volatile sig_atomic_t *cancel, mx_status *st);
+void mx_outdir_discard(mx_outdir *od);
 
 #endif

@@ -12,6 +12,7 @@ void mx_texture_opts_default(mx_texture_opts *o) {
     memset(o, 0, sizeof *o);
     o->negative_prompt = "";
     o->steps = 10;
+    o->precision = MX_PREC_BF16;
     o->views = 6;
     o->candidates = 40;
     o->tex_size = 1024;
@@ -30,10 +31,6 @@ void mx_texture_opts_default(mx_texture_opts *o) {
     o->up = MX_UP_Y;
     o->strength = 0.5f;
     o->grid_word = "front and back view of";
-}
-
-int mx_texture_opts_have_io(const mx_texture_opts *o) {
-    return (o->mesh_path || o->mesh) && (o->weights_path || o->models) && (o->out_dir || o->keep_outputs);
 }
 
 static void free_views(mx_job_view *v, int n) {
@@ -152,6 +149,10 @@ static int view_stage(mx_job *j, mx_status *st) {
     int *cand = malloc(sizeof(int) * (o->max_batch > 0 ? o->max_batch : 1));
     if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
     while (k < n_later) {
+        if (mx_job_check_cancel(j, st)) {
+            free(cand);
+            return -1;
+        }
         mx_view_plan plan;
         if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
                               &plan, st)) {
@@ -176,29 +177,11 @@ static int view_stage(mx_job *j, mx_status *st) {
     return 0;
 }
 
-static int check_opts(const mx_texture_opts *o, mx_status *st) {
-    if (!mx_texture_opts_have_io(o) || !o->prompt)
-        return mx_fail(st, MX_EUSAGE, "mesh, prompt, --weights and -o are required");
-    if (o->steps < 1 || o->steps > 200) return mx_fail(st, MX_EUSAGE, "--steps must be in 1..200, not %d", o->steps);
-    if (o->views < 2 || o->views > 64) return mx_fail(st, MX_EUSAGE, "--views must be in 2..64, not %d", o->views);
-    if (o->candidates < 1 || o->candidates > 4096)
-        return mx_fail(st, MX_EUSAGE, "--candidates must be in 1..4096, not %d", o->candidates);
-    if (o->tex_size < 16 || o->tex_size > 8192)
-        return mx_fail(st, MX_EUSAGE, "--texture-size must be in 16..8192, not %d", o->tex_size);
-    if (o->render_size < 16 || o->render_size > 8192)
-        return mx_fail(st, MX_EUSAGE, "--render-size must be in 16..8192, not %d", o->render_size);
-    if (o->image_size < 8 || o->image_size > 2048 || o->image_size % 8)
-        return mx_fail(st, MX_EUSAGE, "--image-size must be a multiple of 8 in 8..2048, not %d", o->image_size);
-    if (!(o->strength > 0.0f && o->strength <= 1.0f))
-        return mx_fail(st, MX_EUSAGE, "--strength must be in (0, 1], not %g", (double)o->strength);
-    return 0;
-}
-
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
-    if (check_opts(o, st)) return -1;
+    if (mx_texture_opts_check(o, MX_TEXTURE_MODE_TEXTURE, st)) return -1;
     mx_job j;
     int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
-    if (!rc) rc = grid_stage(&j, st);
+    if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
     if (!rc) {
         mx_image tex[j.nlayers];

@@ -1,4 +1,4 @@
-/* The Make-A-Texture method (paper §3, DESIGN.md §2) as one call: `matex texture` and
+/* The Make-A-Texture method (paper §3, docs/DESIGN.md §2) as one call: `matex texture` and
  * `matex enhance`.
  *
  * texture: load mesh (atlas if it has no UVs) -> front+back grid with depth control ->
@@ -20,6 +20,7 @@
 #include <signal.h>
 #include <stdint.h>
 
+#include "../../runtime/backend.h"
 #include "../../runtime/status.h"
 #include "../geom/image.h"
 #include "../geom/mesh.h"
@@ -51,7 +52,6 @@ typedef struct mx_texture_opts {
     int keep_outputs;            /* the result takes the textured mesh, textures and report */
     mx_texture_progress_fn progress; /* NULL: none */
     void *progress_user;
-    volatile sig_atomic_t *cancel; /* set non-zero (e.g. by a signal handler) to stop the run; NULL: none */
     uint64_t seed;           /* 0 */
     int steps;               /* 10 */
     int views;               /* view budget, front and back included: 6 */
@@ -69,15 +69,25 @@ typedef struct mx_texture_opts {
     float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted: 0.995 */
     mx_up_axis up;
     int threads;             /* 0: all CPUs */
+    mx_precision precision;  /* of the networks' matrix products: bf16 (used where the CPU has it) */
     int quiet;
     float strength;          /* enhance: SDEdit strength in (0, 1]: 0.5 */
     const char *grid_word;   /* "front and back view of" */
+    /* NULL, or a flag another context (a signal handler) sets to non-zero to stop the run: it is
+     * checked between stages and between denoising steps; the run then fails with MX_ECANCEL
+     * ("interrupted") and leaves no output folder and no staging folder behind. */
+    volatile sig_atomic_t *cancel;
+    int force;               /* replace an existing non-empty output folder (atomically) */
 } mx_texture_opts;
 
 void mx_texture_opts_default(mx_texture_opts *o);
-/* 1 when a mesh (path or memory), the models (path or opened) and a destination (folder or
- * keep_outputs) are given. */
-int mx_texture_opts_have_io(const mx_texture_opts *o);
+
+typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE } mx_texture_mode;
+
+/* Checks every option before any work (MX_EUSAGE, the message names the option, its value and
+ * the valid range). mx_texture_run and mx_enhance_run call it first; front ends (the CLI, the
+ * public API) call it too, to refuse bad options at once. */
+int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st);
 
 typedef struct mx_texture_result {
     double coverage;   /* fraction of candidate-visible texels painted by views */

@@ -1,0 +1,47 @@
+/* AVX512_BF16 GEMM: the AVX-512 micro-kernel (gemm_micro_avx512.inc) with vdpbf16ps, two k per
+ * step (bf16 products summed in fp32), panels of bf16 k-pairs made by to_pairs, and linear +
+ * conv2d on the GEMM engine. Note: vdpbf16ps and vcvtne2ps2bf16 treat bf16/fp32 denormals as
+ * zero; the networks' activations and weights are far from that range. */
+#include <immintrin.h>
+
+#include "gemm.h"
+
+#define MICRO_NAME micro_12x32_bf16
+#define MICRO_STEPS(kc) (((kc) + 1) / 2)
+#define ROW_FMA(i)                                                                                           \
+    {                                                                                                        \
+        __m512bh ai = (__m512bh)_mm512_set1_ps(a[i]); /* the row's k-pair word in every lane */          \
+        c##i##0 = _mm512_dpbf16_ps(c##i##0, ai, (__m512bh)b0);                                              \
+        c##i##1 = _mm512_dpbf16_ps(c##i##1, ai, (__m512bh)b1);                                              \
+    }
+#include "gemm_micro_avx512.inc"
+
+/* Word c of pair row kp: bf16(src[2kp][c]) in the low half, bf16(src[2kp+1][c]) in the high. */
+static void to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc) {
+    /* vcvtne2ps2bf16(odd, even) puts even in bf16 lanes 0-15 and odd in 16-31; interleave them */
+    const __m512i interleave = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7,
+                                                22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
+    for (int kp = 0; kp < (kc + 1) / 2; kp++) {
+        const float *even = src + (size_t)(2 * kp) * width, *odd = even + width;
+        int has_odd = 2 * kp + 1 < kc;
+        for (int c = 0; c < width; c += 16) {
+            __mmask16 m = (__mmask16)(width - c >= 16 ? 0xffff : (1u << (width - c)) - 1);
+            __m512 e = _mm512_maskz_loadu_ps(m, even + c);
+            __m512 o = has_odd ? _mm512_maskz_loadu_ps(m, odd + c) : _mm512_setzero_ps();
+            __m512i both = (__m512i)_mm512_cvtne2ps_pbh(o, e);
+            _mm512_mask_storeu_epi32(dst + (size_t)kp * width + c, m, _mm512_permutexvar_epi16(interleave, both));
+        }
+    }
+}
+
+static const mx_gemm_kernel kernel_avx512bf16 = {MR, NR, micro_12x32_bf16, mx_gemm_widen_avx512, mx_gemm_transpose,
+                                                 to_pairs_avx512bf16};
+
+void mx_linear_avx512bf16(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
+    mx_gemm_linear(c, &kernel_avx512bf16, y, x, w, bias, M, N, K);
+}
+
+void mx_conv2d_avx512bf16(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                          mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    mx_gemm_conv2d(c, &kernel_avx512bf16, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+}

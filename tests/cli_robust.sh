@@ -1,0 +1,118 @@
+#!/bin/sh
+# What a new user hit (issue 12): flat, single-face and degenerate meshes; impossible options;
+# bad output locations found before any work; an existing output folder refused unless --force;
+# --json failures with the message; SIGINT/SIGTERM at many moments leave no partial output.
+NAME=robust
+. "$(dirname "$0")/lib_cli.sh"
+A=$(data assets)
+W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
+SMALL="--image-size 64 --steps 1 --texture-size 128 --render-size 128 --candidates 8 --quiet"
+FILES="texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json"
+
+complete() { # complete DIR: every output file is there and nothing else
+    for f in $FILES; do [ -s "$1/$f" ] || return 1; done
+    [ "$(ls "$1" | wc -l)" -eq 6 ]
+}
+no_staging() { ! ls -d "$1".partial-* "$1".old-* > /dev/null 2>&1; }
+
+# ---- flat, single-face and degenerate meshes ----
+printf 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n' > "$T/quad.obj"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n' > "$T/tri.obj"
+awk 'BEGIN { n = 10; for (y = 0; y <= n; y++) for (x = 0; x <= n; x++) print "v", x, y, 0;
+     for (y = 0; y < n; y++) for (x = 0; x < n; x++) { a = y * (n + 1) + x + 1;
+     print "f", a, a + 1, a + n + 2, a + n + 1 } }' > "$T/grid.obj"
+printf 'v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n' > "$T/zero.obj"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 4 5\n' > "$T/some_zero.obj"
+for m in quad tri grid some_zero; do
+    check "$m.obj textures" [ "$(rc_of "$M" texture "$T/$m.obj" "a tile" --weights "$W" -o "$T/o_$m" $SMALL)" = 0 ]
+    check "$m.obj: complete output" complete "$T/o_$m"
+done
+check "coverage of the quad is reported" grep -q '"coverage":' "$T/o_quad/report.json"
+check "zero-area mesh exits 1" [ "$(rc_of "$M" texture "$T/zero.obj" "a tile" --weights "$W" -o "$T/o_zero" $SMALL)" = 1 ]
+check "the message names the mesh and the problem" grep -q "zero.obj: .*zero area" "$T/err"
+check "zero-area mesh: no output" [ ! -e "$T/o_zero" ]
+check "zero-area mesh: no staging folder" no_staging "$T/o_zero"
+check "transfer onto a quad" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/quad.obj" --size 128 -o "$T/tq")" = 0 ]
+check "transfer onto a quad: mesh.glb" [ -s "$T/tq/mesh.glb" ]
+check "transfer onto a single triangle" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/tri.obj" --size 128 -o "$T/tt")" = 0 ]
+
+# ---- impossible options: exit 2, the valid range in the message, nothing written ----
+bad_option() { # bad_option EXPECTED_TEXT OPTIONS...
+    want=$1; shift
+    rc=$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" $SMALL "$@" --json)
+    [ "$rc" = 2 ] && grep -qF -- "$want" "$T/err" && grep -qF -- "$want" "$T/out" && grep -q '"ok":false' "$T/out" &&
+        [ ! -e "$T/bad" ] && no_staging "$T/bad"
+}
+check "--frontal-threshold 1.5" bad_option "--frontal-threshold must be in [0, 1), not 1.5" --frontal-threshold 1.5
+check "--coverage-stop 2" bad_option "--coverage-stop must be in (0, 1], not 2" --coverage-stop 2
+check "--guidance -3" bad_option "--guidance must be in [0, 50], not -3" --guidance -3
+check "--guidance nan" bad_option "--guidance must be in [0, 50]" --guidance nan
+check "--depth-weight 1,-1" bad_option "--depth-weight must be in [0, 2], not -1" --depth-weight 1,-1
+check "--batch 0" bad_option "--batch must be in 1..64, not 0" --batch 0
+check "--texture-size 8" bad_option "--texture-size must be in 16..8192, not 8" --texture-size 8
+check "empty prompt" [ "$(rc_of "$M" texture "$T/quad.obj" " " --weights "$W" -o "$T/bad" $SMALL)" = 2 ]
+check "empty prompt: message" grep -q "prompt is empty" "$T/err"
+check "enhance --strength 0" [ "$(rc_of "$M" enhance "$T/o_quad/mesh.obj" --strength 0 --weights "$W" -o "$T/bad")" = 2 ]
+check "enhance --strength 0: range" grep -qF "(0, 1]" "$T/err"
+
+# ---- output location: checked before any work (no weights loaded) ----
+: > "$T/afile"
+check "-o naming a file exits 1" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/afile" $SMALL --json)" = 1 ]
+check "-o naming a file: message" grep -q "afile: exists and is not a folder" "$T/err"
+check "-o naming a file: --json carries it" grep -q '"error":".*afile: exists and is not a folder"' "$T/out"
+"$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/afile" --image-size 64 --steps 1 > /dev/null 2> "$T/err"
+check "-o naming a file: refused before the weights load" sh -c "! grep -q 'loaded weights' '$T/err'"
+check "unwritable location exits 1" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o /proc/matex_out $SMALL)" = 1 ]
+check "unwritable location: message names it" grep -q "/proc/matex_out: cannot create" "$T/err"
+if [ "$(id -u)" != 0 ]; then
+    mkdir "$T/ro" && chmod 555 "$T/ro"
+    check "read-only folder exits 1" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/ro/x" $SMALL)" = 1 ]
+    chmod 755 "$T/ro"
+fi
+
+# ---- an existing output folder ----
+mkdir "$T/empty"
+check "an empty existing folder is used" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/empty" $SMALL)" = 0 ]
+check "an empty existing folder: complete" complete "$T/empty"
+mkdir "$T/full" && echo old > "$T/full/old_texture.png"
+check "a non-empty folder is refused" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL)" = 1 ]
+check "a non-empty folder: message says --force" grep -q "not empty (--force replaces it)" "$T/err"
+check "a non-empty folder: left alone" [ "$(ls "$T/full")" = old_texture.png ]
+check "--force replaces it" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL --force)" = 0 ]
+check "--force: only the new files" complete "$T/full"
+check "--force: no staging or old folder left" no_staging "$T/full"
+ln -s "$T/full" "$T/link"
+check "--force through a link to a folder" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/link" $SMALL --force)" = 0 ]
+check "--force through a link: the link stays a link" [ -L "$T/link" ] && check "... to a complete folder" complete "$T/full"
+check "trailing slash" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/slash/" $SMALL)" = 0 ]
+check "trailing slash: complete" complete "$T/slash"
+
+# ---- SIGINT / SIGTERM at many moments: exit 130 and nothing, or exit 0 and everything ----
+# (a 1024 texture makes the fill and export take about half of the run)
+LONG="--image-size 64 --steps 2 --texture-size 1024 --render-size 256 --candidates 12 --quiet"
+interrupted=0
+i=0
+for delay in 0.05 0.6 1.0 1.4 1.8 2.3; do
+    i=$((i + 1))
+    sig=INT
+    [ $((i % 2)) = 0 ] && sig=TERM
+    out="$T/sig$i"
+    "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$out" $LONG > /dev/null 2> "$T/err" &
+    pid=$!
+    sleep $delay
+    kill -$sig $pid 2> /dev/null
+    wait $pid
+    rc=$?
+    if [ $rc = 143 ]; then # SIGTERM before main installed the handler: nothing can have been written
+        check "SIGTERM after ${delay}s (before start-up ended): no output" [ ! -e "$out" ]
+    elif [ $rc = 130 ]; then
+        interrupted=$((interrupted + 1))
+        check "SIG$sig after ${delay}s: interrupted, no output" [ ! -e "$out" ]
+        check "SIG$sig after ${delay}s: says interrupted" grep -q "interrupted" "$T/err"
+    else
+        check "SIG$sig after ${delay}s: finished (exit $rc) with a complete folder" complete "$out"
+    fi
+    check "SIG$sig after ${delay}s: no staging folder" no_staging "$out"
+done
+check "some runs were interrupted ($interrupted of $i)" [ $interrupted -ge 2 ]
+exit $fail

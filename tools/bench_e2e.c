@@ -1,0 +1,164 @@
+/* bench_e2e: the one-line end-to-end summary of `make bench`:
+ *   bench-e2e: default_s=S fast_s=S unet_b2_64_fp32_s=S unet_b2_64_bf16_s=S peak_rss_mb=M weights_mb=M isa=LEVEL
+ * on the SD1.5-architecture model set with random weights (bench_sd15.h, cached outside the
+ * repository) and the spot mesh of ../shared/assets.
+ * - unet_b2_64_*: one UNet call (batch 2, 64×64 latent, 77 tokens), fp32 and bf16 alternated,
+ *   median of 3 each (bf16 "na" without AVX512_BF16).
+ * - default_s, peak_rss_mb: a default `matex texture` run (10 steps, 6 views, 1024², its default
+ *   precision), timed as a child process whose peak RSS wait4 reports. About 10-15 minutes on
+ *   2 cores, so only with BENCH_E2E=1; otherwise "na".
+ * - fast_s: the same with `--fast` when this matex has it (and BENCH_E2E=1), else "na".
+ * - isa: the kernel level a default `matex texture` uses.
+ * Usage: bench_e2e [--threads N] (MATEX: the matex binary, default ./matex). */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "../pipeline/texture/models.h"
+#include "bench_sd15.h"
+
+#define UNET_REPEATS 3
+
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Median seconds of one UNet call per precision (fp32, bf16), the calls alternated; secs[1] = 0
+ * without bf16. */
+static int time_unet(const char *weights, int threads, double secs[2], mx_status *st) {
+    mx_models m;
+    if (mx_models_load(&m, weights, 0, st)) return -1;
+    mx_ctx c[2];
+    mx_isa bf16_isa = mx_cpu_isa_for(MX_PREC_BF16);
+    int nprec = mx_isa_precision(bf16_isa) == MX_PREC_BF16 ? 2 : 1, rc = -1;
+    int B = 2, H = 64, W = 64, T = 77, D = mx_unet_cfg(m.unet)->cross_attention_dim;
+    size_t ns = (size_t)B * mx_unet_cfg(m.unet)->in_channels * H * W, nt = (size_t)B * T * D, bytes;
+    float *x = malloc(ns * sizeof *x), *e = malloc(nt * sizeof *e), *out = malloc(ns * sizeof *out), ts[2] = {981, 37};
+    mx_arena a = {0};
+    double t[2][UNET_REPEATS];
+    if (!x || !e || !out) {
+        mx_fail(st, MX_ENOMEM, "bench_e2e: out of memory");
+        goto done;
+    }
+    for (size_t i = 0; i < ns; i++) x[i] = (float)((i * 2654435761u) % 2001) / 1000.0f - 1.0f;
+    for (size_t i = 0; i < nt; i++) e[i] = (float)((i * 40503u) % 2001) / 1000.0f - 1.0f;
+    if (mx_ctx_create(&c[0], threads, mx_cpu_isa_for(MX_PREC_FP32), (size_t)64 << 20, st)) goto done;
+    if (nprec == 2 && mx_ctx_create(&c[1], threads, bf16_isa, (size_t)64 << 20, st)) {
+        mx_ctx_destroy(&c[0]);
+        goto done;
+    }
+    mx_unet_input in = {x, ts, e, B, H, W, T, NULL, NULL};
+    rc = mx_unet_arena_bytes(m.unet, B, H, W, T, &bytes, st) || mx_arena_create(&a, bytes, st) ? -1 : 0;
+    for (int r = 0; r < UNET_REPEATS && rc == 0; r++)
+        for (int p = 0; p < nprec && rc == 0; p++) {
+            double t0 = mx_now();
+            rc = mx_unet_forward(&c[p], m.unet, &in, out, &a, st);
+            t[p][r] = mx_now() - t0;
+        }
+    for (int p = 0; p < 2; p++) {
+        if (p < nprec) qsort(t[p], UNET_REPEATS, sizeof(double), cmp_double);
+        secs[p] = p < nprec ? t[p][UNET_REPEATS / 2] : 0;
+    }
+    mx_arena_destroy(&a);
+    for (int p = 0; p < nprec; p++) mx_ctx_destroy(&c[p]);
+done:
+    free(x), free(e), free(out);
+    mx_models_free(&m);
+    return rc;
+}
+
+/* Does this matex's texture verb have --fast? */
+static int matex_has_fast(const char *matex) {
+    char cmd[1200], line[512];
+    snprintf(cmd, sizeof cmd, "'%s' texture --help 2>/dev/null", matex);
+    FILE *f = popen(cmd, "r");
+    int found = 0;
+    while (f && fgets(line, sizeof line, f)) found |= strstr(line, "--fast") != NULL;
+    if (f) pclose(f);
+    return found;
+}
+
+/* Runs `matex texture` on spot with the defaults (plus --fast), as a child: its wall seconds
+ * and peak RSS (MB). Returns -1 when it fails. */
+static int run_texture(const char *matex, const char *weights, int threads, int fast, double *secs, double *rss_mb) {
+    char out[] = "/tmp/matex_bench_e2e.XXXXXX", thr[16];
+    if (!mkdtemp(out)) return -1;
+    snprintf(thr, sizeof thr, "%d", threads);
+    double t0 = mx_now();
+    pid_t pid = fork();
+    if (pid == 0) {
+        const char *mesh = "../shared/assets/spot/spot_triangulated.obj";
+        if (fast)
+            execl(matex, matex, "texture", mesh, "a black-and-white dairy cow", "--weights", weights, "-o", out,
+                  "--threads", thr, "--quiet", "--fast", (char *)NULL);
+        else
+            execl(matex, matex, "texture", mesh, "a black-and-white dairy cow", "--weights", weights, "-o", out,
+                  "--threads", thr, "--quiet", (char *)NULL);
+        _exit(127);
+    }
+    int status = 0;
+    struct rusage ru;
+    if (pid < 0 || wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status)) return -1;
+    *secs = mx_now() - t0;
+    *rss_mb = ru.ru_maxrss / 1024.0;
+    char cmd[128];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", out);
+    return system(cmd) == 0 ? 0 : -1;
+}
+
+static void fmt(char *buf, size_t cap, double v, const char *f) {
+    if (v > 0)
+        snprintf(buf, cap, f, v);
+    else
+        snprintf(buf, cap, "na");
+}
+
+int main(int argc, char **argv) {
+    int threads = 2;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--threads") && i + 1 < argc)
+            threads = atoi(argv[++i]);
+        else {
+            fprintf(stderr, "usage: bench_e2e [--threads N]\n");
+            return 2;
+        }
+    }
+    const char *matex = getenv("MATEX") ? getenv("MATEX") : "./matex";
+    const char *e2e = getenv("BENCH_E2E");
+    int run_e2e = e2e && !strcmp(e2e, "1");
+    char weights[1100];
+    if (bench_sd15_weights(weights, sizeof weights)) {
+        fprintf(stderr, "bench_e2e: cannot make the SD1.5 weight file %s\n", weights);
+        return 1;
+    }
+    mx_status st;
+    mx_status_clear(&st);
+    double unet[2], def_s = 0, fast_s = 0, rss = 0, fast_rss = 0;
+    if (time_unet(weights, threads, unet, &st)) {
+        fprintf(stderr, "bench_e2e: %s\n", st.msg);
+        return 1;
+    }
+    if (run_e2e && run_texture(matex, weights, threads, 0, &def_s, &rss)) {
+        fprintf(stderr, "bench_e2e: the default matex texture run failed\n");
+        return 1;
+    }
+    if (run_e2e && matex_has_fast(matex) && run_texture(matex, weights, threads, 1, &fast_s, &fast_rss)) {
+        fprintf(stderr, "bench_e2e: the matex texture --fast run failed\n");
+        return 1;
+    }
+    if (!run_e2e) printf("bench_e2e: the matex texture runs are opt-in (BENCH_E2E=1, ~10-15 min on 2 cores)\n");
+    char d[32], f[32], u0[32], u1[32], r[32];
+    fmt(d, sizeof d, def_s, "%.1f");
+    fmt(f, sizeof f, fast_s, "%.1f");
+    fmt(u0, sizeof u0, unet[0], "%.2f");
+    fmt(u1, sizeof u1, unet[1], "%.2f");
+    fmt(r, sizeof r, rss > fast_rss ? rss : fast_rss, "%.0f");
+    printf("bench-e2e: default_s=%s fast_s=%s unet_b2_64_fp32_s=%s unet_b2_64_bf16_s=%s peak_rss_mb=%s "
+           "weights_mb=%.0f isa=%s\n",
+           d, f, u0, u1, r, bench_file_mb(weights), mx_isa_name(mx_cpu_isa_for(MX_PREC_BF16)));
+    return 0;
+}

@@ -1,0 +1,99 @@
+/* Shared by the benchmarks that need the SD1.5-architecture model set: the cached weight file
+ * (random golden-v1 rule weights, fp16, with tokenizer and both ControlNets; made once by
+ * tools/make_sd15_weights.sh, ~3.6 GB, about a minute) and the peak arithmetic rate of the cores.
+ * The cache lives outside the repository: $MATEX_CACHE, else $HOME/.cache/matex. Header-only
+ * (each benchmark is one program). */
+#ifndef MX_BENCH_SD15_H
+#define MX_BENCH_SD15_H
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../ops/ops.h"
+#include "../runtime/log.h"
+
+/* The weight file's path into buf; makes the file when absent. Returns -1 when it cannot. */
+static inline int bench_sd15_weights(char *buf, size_t cap) {
+    const char *dir = getenv("MATEX_CACHE"), *home = getenv("HOME");
+    char d[1024];
+    if (dir && *dir)
+        snprintf(d, sizeof d, "%s", dir);
+    else
+        snprintf(d, sizeof d, "%s/.cache/matex", home && *home ? home : "/tmp");
+    snprintf(buf, cap, "%s/sd15_random_f16.mxw", d);
+    if (access(buf, R_OK) == 0) return 0;
+    char cmd[3072];
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s' && sh tools/make_sd15_weights.sh '%s' '%s'", d,
+             getenv("MATEX") ? getenv("MATEX") : "./matex", buf);
+    fprintf(stderr, "bench: making %s (once, ~3.6 GB, about a minute)\n", buf);
+    return system(cmd) == 0 ? 0 : -1;
+}
+
+static inline double bench_file_mb(const char *path) {
+    struct stat sb;
+    return stat(path, &sb) == 0 ? (double)sb.st_size / (1 << 20) : 0;
+}
+
+/* ---- peak arithmetic rate: independent accumulator chains, one task per pool thread ---- */
+
+#define PEAK_CHAINS 12
+#define PEAK_ITERS 4000000
+
+#if defined(__x86_64__) && !defined(MX_NO_X86_SIMD)
+#include <immintrin.h>
+
+__attribute__((target("avx512f"))) static inline float peak_fma_loop(void) {
+    __m512 acc[PEAK_CHAINS], a = _mm512_set1_ps(0.999999f), b = _mm512_set1_ps(1e-7f);
+    for (int i = 0; i < PEAK_CHAINS; i++) acc[i] = _mm512_set1_ps((float)i);
+    for (int it = 0; it < PEAK_ITERS; it++)
+        for (int i = 0; i < PEAK_CHAINS; i++) acc[i] = _mm512_fmadd_ps(acc[i], a, b);
+    float s = 0;
+    for (int i = 0; i < PEAK_CHAINS; i++) s += _mm512_reduce_add_ps(acc[i]);
+    return s;
+}
+
+__attribute__((target("avx512f,avx512bf16"))) static inline float peak_dpbf16_loop(void) {
+    __m512 acc[PEAK_CHAINS];
+    __m512bh a = (__m512bh)_mm512_set1_epi32(0x3f803f80), b = (__m512bh)_mm512_set1_epi32(0x33d633d6);
+    for (int i = 0; i < PEAK_CHAINS; i++) acc[i] = _mm512_set1_ps((float)i);
+    for (int it = 0; it < PEAK_ITERS; it++)
+        for (int i = 0; i < PEAK_CHAINS; i++) acc[i] = _mm512_dpbf16_ps(acc[i], a, b);
+    float s = 0;
+    for (int i = 0; i < PEAK_CHAINS; i++) s += _mm512_reduce_add_ps(acc[i]);
+    return s;
+}
+
+typedef struct {
+    int bf16;
+    volatile float sink;
+} peak_job;
+
+static inline void peak_task(void *arg, int task, int thread) {
+    (void)task, (void)thread;
+    peak_job *j = arg;
+    j->sink = j->bf16 ? peak_dpbf16_loop() : peak_fma_loop();
+}
+
+/* GFLOP/s of all pool threads together running zmm FMAs (16 multiply-adds per instruction) or
+ * vdpbf16ps (32 per instruction); 0 when the CPU lacks them. */
+static inline double bench_peak_gflops(const mx_ctx *c, int bf16) {
+    mx_isa need = bf16 ? MX_ISA_AVX512_BF16 : MX_ISA_AVX512;
+    if (mx_cpu_best_isa() < need) return 0;
+    int n = mx_pool_threads(c->pool);
+    peak_job j = {bf16, 0};
+    double t0 = mx_now();
+    mx_pool_for(c->pool, n, peak_task, &j);
+    double secs = mx_now() - t0;
+    double flop = 2.0 * (bf16 ? 32 : 16) * PEAK_CHAINS * (double)PEAK_ITERS * n;
+    return flop / secs * 1e-9;
+}
+#else
+static inline double bench_peak_gflops(const mx_ctx *c, int bf16) {
+    (void)c, (void)bf16;
+    return 0;
+}
+#endif
+
+#endif
