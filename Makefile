@@ -133,7 +133,7 @@ test-full: all core $(TEST_BINS) $(DEMO_WEIGHTS)
 # A one-node Slurm cluster on localhost (munged, slurmctld, slurmd; slurm-wlm and munge installed when
 # missing) runs tools/slurm/matex-array.sbatch over tiny-weight jobs: submit, cancel, resume.
 test-slurm: all $(DEMO_WEIGHTS)
-	$(TEST_ENV) timeout 600 sh tests/slurm_cluster.sh
+	$(TEST_ENV) timeout 300 sh tests/slurm_cluster.sh
 
 # End to end in seconds with tiny random weights (they paint noise: see README): the shipped
 # Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.

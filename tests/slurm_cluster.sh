@@ -14,7 +14,7 @@ set -u
 ROOT=$(pwd)
 M=$(realpath "${MATEX:-build/matex}")
 W=$(realpath "${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}")
-WAIT=${SLURM_TEST_TIMEOUT:-120}
+WAIT=${SLURM_TEST_TIMEOUT:-60}
 fail=0
 check() {
     name=$1
