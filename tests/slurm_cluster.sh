@@ -152,6 +152,11 @@ wait_gone() { # wait_gone JOBID: until the array has left the queue
     [ -z "$(squeue -h -j "$1" -o %i 2> /dev/null)" ]
 }
 complete_jobs() { ls "$1"/*/report.json 2> /dev/null | wc -l; }
+all_outputs() { # all_outputs OUTROOT: every job folder holds the whole output
+    for n in j0 j1 j2 j3 j4 j5; do
+        for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do [ -s "$1/$n/$f" ] || return 1; done
+    done
+}
 sum_of() { # sum_of KEY LOG...: the sum of "KEY":N over the task summaries
     key=$1
     shift
@@ -162,7 +167,7 @@ sum_of() { # sum_of KEY LOG...: the sum of "KEY":N over the task summaries
 t0=$(date +%s)
 id=$(submit run1 "$D/out1" --array=0-2) || die "sbatch failed"
 check "array 1 finishes" wait_gone "$id"
-check "6 outputs" [ "$(complete_jobs "$D/out1")" = 6 ]
+check "6 outputs" all_outputs "$D/out1"
 check "3 task summaries, 6 done" [ "$(sum_of done "$D"/jobs/run1-*.log)" = 6 ]
 check "no failure" [ ! -e "$D/out1/failed.jsonl" ]
 echo "array of 3 tasks over 6 jobs: $(($(date +%s) - t0)) s"
@@ -185,7 +190,7 @@ mkdir -p "$D/kept"
 for f in "$D"/out2/*/report.json; do cp "$f" "$D/kept/$(basename "$(dirname "$f")").json"; done
 id=$(submit run3 "$D/out2" --array=0-2) || die "sbatch failed"
 check "array 3 finishes" wait_gone "$id"
-check "6 outputs after the resubmission" [ "$(complete_jobs "$D/out2")" = 6 ]
+check "6 outputs after the resubmission" all_outputs "$D/out2"
 check "it ran only the missing jobs" [ "$(sum_of done "$D"/jobs/run3-*.log)" = $((6 - before)) ]
 check "and skipped the finished ones" [ "$(sum_of skipped "$D"/jobs/run3-*.log)" = "$before" ]
 for f in "$D"/kept/*.json; do
