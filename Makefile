@@ -13,10 +13,17 @@ CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR
 LDLIBS   = -lm -lpthread
 IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lstdc++
 
+SANITIZERS = address,undefined
 ifeq ($(SAN),1)
-CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-CXXFLAGS += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
-LDFLAGS  += -fsanitize=address,undefined
+CFLAGS   += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+CXXFLAGS += -fsanitize=$(SANITIZERS) -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDFLAGS  += -fsanitize=$(SANITIZERS)
+endif
+
+# CUDA=1 (set by `make cuda`): the C code knows the CUDA backend; programs link libmx_cuda.a.
+ifeq ($(CUDA),1)
+CFLAGS  += -DMX_WITH_CUDA
+LDLIBS  += $(BUILD)/libmx_cuda.a $(BUILD)/libmx_core.a $(CUDA_LIBS)
 endif
 
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
@@ -53,7 +60,7 @@ LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install core test-slurm
+.PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -78,6 +85,10 @@ $(BUILD)/%.a: | $(BUILD)/empty.o
 	@mkdir -p $(dir $@)
 	rm -f $@
 	ar rcs $@ $^ $(if $^,,$(BUILD)/empty.o)
+
+# What `matex --version` says of the build (runtime/version.c).
+$(BUILD)/runtime/version.o: CFLAGS += -DMX_BUILD_FLAGS='"$(OPT) -ffp-contract=off"' \
+                                      -DMX_BUILD_SAN='"$(if $(filter 1,$(SAN)),$(SANITIZERS),none)"'
 
 $(BUILD)/empty.o:
 	@mkdir -p $(dir $@)
@@ -120,7 +131,10 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 	@mkdir -p $(dir $@)
 	sh tools/make_demo_weights.sh $(BUILD)/matex $@
 
-TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
+# The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
+# activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
+MX_TEST_DEVICE ?= cpu-strict
+TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw \
            MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
 test: all core $(TEST_BINS) $(DEMO_WEIGHTS)
@@ -148,6 +162,10 @@ demo: all $(DEMO_WEIGHTS)
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
+
+# The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
+deps:
+	sh tools/deps.sh
 
 # ---- benchmarks: OpenBLAS is linked into the benchmark only ----
 BENCH_SRC  = $(wildcard tools/bench_*.c)
@@ -178,25 +196,39 @@ clean:
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 
-# ---- CUDA backend: `make cuda` builds $(BUILD)/libmx_cuda.a and its test, `make test-cuda` runs the test
-# (it skips when no GPU is present). Not part of `make` / `make test`. Fat binary for sm_80 and sm_90.
+# ---- CUDA backend: `make cuda` builds, in $(CUDA_BUILD), the CUDA kernels (libmx_cuda.a), their op
+# test, the network tests and a matex whose --device accepts cuda (C sources with -DMX_WITH_CUDA).
+# `make test-cuda` runs the op test, then every network golden and the tiny pipeline on the GPU
+# against the CPU goldens (bound 1e-2); without a GPU it prints one skip line. Not part of `make` /
+# `make test`. Fat binary for sm_80 and sm_90.
 NVCC       ?= /usr/local/cuda/bin/nvcc
 CUDA_HOME  ?= /usr/local/cuda
+CUDA_BUILD ?= build-cuda
 NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
 NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
 CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
-CUDA_LDLIBS = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -lm -lpthread
+CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
+CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
 	@mkdir -p $(dir $@)
 	$(NVCC) $(NVCCFLAGS) -c -o $@ $<
 $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB_CORE)
-	$(NVCC) $(NVCC_ARCH) -o $@ $^ $(CUDA_LDLIBS)
+	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
-.PHONY: test-cuda
-cuda: $(LIB_CUDA) $(CUDA_TEST)
+ifeq ($(CUDA),1)
+$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): | $(LIB_CUDA)
+endif
+
+.PHONY: test-cuda cuda-all cuda-run-tests
+cuda:
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
+cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 test-cuda: cuda
-	$(CUDA_TEST)
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-run-tests
+cuda-run-tests:
+	$(TEST_ENV) MX_TEST_DEVICE=cuda MX_TEST_MIN_BOUND=1e-2 MATEX_FULL=1 sh tests/cuda/run.sh $(CUDA_TEST) \
+	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))

@@ -33,15 +33,15 @@ int main(int argc, char **argv) {
     }
     printf("matex %s\n", matex_version());
     signal(SIGINT, on_sigint);
+    matex_options o;
+    matex_options_default(&o);
+    o.cancel = &stop;
     matex_error err;
-    matex_models *models = matex_models_open(argv[1], &err); /* once, for every run */
+    matex_models *models = matex_models_open(argv[1], &o, &err); /* once, for every run */
     if (!models) {
         fprintf(stderr, "embed: %s\n", err.message);
         return 1;
     }
-    matex_options o;
-    matex_options_default(&o);
-    o.cancel = &stop;
     if (quick) {
         o.steps = 1;
         o.image_size = 64;

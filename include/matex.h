@@ -4,9 +4,9 @@
  * `matex convert`) once, then texture as many meshes as you like with it:
  *
  *     matex_error err;
- *     matex_models *m = matex_models_open("sd15.mxw", &err);
  *     matex_options o;
  *     matex_options_default(&o);
+ *     matex_models *m = matex_models_open("sd15.mxw", &o, &err);
  *     o.prompt = "a rustic wooden chair";
  *     o.mesh_path = "chair.obj";          // or o.mesh = &my_mesh (in memory)
  *     o.out_dir = "out/chair";            // and/or keep the results in memory:
@@ -64,9 +64,11 @@ typedef struct matex_error {
 
 typedef struct matex_models matex_models;
 
-/* Opens a weight file (mmap) and binds tokenizer, CLIP, UNet, ControlNets, VAE and scheduler.
- * NULL on failure. */
-matex_models *matex_models_open(const char *weights_path, matex_error *err);
+struct matex_options;
+/* Opens a weight file (mmap) and binds tokenizer, CLIP, UNet, ControlNets, VAE and scheduler on
+ * the device of o, with o's threads and precision (o may be NULL: defaults); every run with this
+ * set computes there, whatever its own options say about those three. NULL on failure. */
+matex_models *matex_models_open(const char *weights_path, const struct matex_options *o, matex_error *err);
 void matex_models_close(matex_models *m);
 
 /* ---- meshes and images in memory ---- */
@@ -132,8 +134,10 @@ typedef struct matex_options {
     int geometric_normals;        /* 0: normals from depth (the paper) */
     int z_up;                     /* 0: the mesh is y-up */
     const char *front_back_words; /* "front and back view of" */
+    /* read by matex_models_open (a run uses those of its model set): */
     int threads;                  /* 0: all CPUs */
     int precision;                /* MATEX_PRECISION_BF16 (default: used where the CPU has it) or _FP32 */
+    const char *device;           /* "cpu" (default), "cpu-strict", "cuda" (a `make cuda` build) */
     int verbose;                  /* 1: progress lines on stderr */
     matex_progress_fn progress;   /* NULL: none */
     void *progress_user;

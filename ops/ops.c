@@ -219,10 +219,10 @@ void mx_timestep_embedding(const mx_ctx *c, float *y, const float *t, int B, int
         RUN_OP(c, timestep_embedding(c, y, t, B, dim, flip_sin_to_cos, downscale_freq_shift, max_period));
 }
 
-void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, f16_to_f32(y, x, n)); }
-void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_f16(y, x, n)); }
-void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, bf16_to_f32(y, x, n)); }
-void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_bf16(y, x, n)); }
+void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, f16_to_f32(c, y, x, n)); }
+void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_f16(c, y, x, n)); }
+void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, bf16_to_f32(c, y, x, n)); }
+void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_bf16(c, y, x, n)); }
 
 /* ---- the edges ---- */
 
@@ -284,6 +284,8 @@ float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st) {
     float *p = mx_arena_floats(a, n, st);
     return a->measuring ? placeholder : p;
 }
+
+float *mx_act_placeholder(void) { return placeholder; }
 
 int mx_ctx_create(mx_ctx *c, int nthreads, mx_isa isa, size_t scratch_bytes, mx_status *st) {
     return mx_ctx_create_on(c, MX_BACKEND_CPU, nthreads, isa, scratch_bytes, st);

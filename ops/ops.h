@@ -97,10 +97,10 @@ struct mx_kernels {
                                float downscale_freq_shift, float max_period);
     void (*embed_tokens)(const mx_ctx *, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
                          mx_wptr positions);
-    void (*f16_to_f32)(float *y, const uint16_t *x, size_t n);
-    void (*f32_to_f16)(uint16_t *y, const float *x, size_t n);
-    void (*bf16_to_f32)(float *y, const uint16_t *x, size_t n);
-    void (*f32_to_bf16)(uint16_t *y, const float *x, size_t n);
+    void (*f16_to_f32)(const mx_ctx *, float *y, const uint16_t *x, size_t n);
+    void (*f32_to_f16)(const mx_ctx *, uint16_t *y, const float *x, size_t n);
+    void (*bf16_to_f32)(const mx_ctx *, float *y, const uint16_t *x, size_t n);
+    void (*f32_to_bf16)(const mx_ctx *, uint16_t *y, const float *x, size_t n);
 };
 
 /* The table for an ISA level (clamped to what this CPU supports). */
@@ -216,6 +216,8 @@ const mx_ctx *mx_run_ctx(const mx_ctx *c, const mx_arena *a);
 /* n activation floats from the arena; in a measuring arena a placeholder handle (never NULL:
  * the arena only counts), so forward code needs no special case. NULL only on failure. */
 float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st);
+/* A placeholder handle for the outputs of a dry run (ops on a measuring context ignore it). */
+float *mx_act_placeholder(void);
 
 /* A ready-to-use context: best kernels, a pool of nthreads (<=0: all CPUs) and a scratch
  * arena of scratch_bytes. Free with mx_ctx_destroy. */

@@ -34,7 +34,57 @@ check "zero-area mesh: no output" [ ! -e "$T/o_zero" ]
 check "zero-area mesh: no staging folder" no_staging "$T/o_zero"
 check "transfer onto a quad" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/quad.obj" --size 128 -o "$T/tq")" = 0 ]
 check "transfer onto a quad: mesh.glb" [ -s "$T/tq/mesh.glb" ]
+S=$A/cesium_milk_truck/CesiumMilkTruck.glb # 4 materials, some faces without UVs
+check "transfer onto its own mesh" [ "$(rc_of "$M" transfer "$S" "$S" --size 256 --json -o "$T/ts")" = 0 ]
+check "transfer: --json summary" grep -q '"ok":true' "$T/out"
+check "transfer onto its own mesh: PSNR above 20 dB (22.5 measured)" \
+    awk -F'"psnr_db":' 'NF > 1 { split($2, v, /[,}]/); ok = v[1] > 20 } END { exit !ok }' "$T/ts/report.json"
+check "transfer without a texture on the source exits 1" \
+    [ "$(rc_of "$M" transfer "$T/quad.obj" "$T/quad.obj" -o "$T/tx")" = 1 ] && [ ! -e "$T/tx" ]
+check "transfer --views 1 exits 2" [ "$(rc_of "$M" transfer "$S" "$T/quad.obj" --views 1 -o "$T/tx")" = 2 ]
+check "transfer --size 12x exits 2" [ "$(rc_of "$M" transfer "$S" "$T/quad.obj" --size 12x -o "$T/tx")" = 2 ]
 check "transfer onto a single triangle" [ "$(rc_of "$M" transfer "$T/o_grid/mesh.obj" "$T/tri.obj" --size 128 -o "$T/tt")" = 0 ]
+
+# ---- several materials, one without UVs: one PNG + EXR per material, an atlas for the bare one ----
+cat > "$T/box.mtl" << 'EOF2'
+newmtl wood
+Kd 1 1 1
+newmtl metal
+Kd 1 1 1
+EOF2
+cat > "$T/box.obj" << 'EOF2'
+mtllib box.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+usemtl wood
+f 4/4 3/3 2/2 1/1
+f 6/2 7/3 8/4 5/1
+usemtl metal
+f 2 6 5 1
+f 3 7 6 2
+f 4 8 7 3
+f 1 5 8 4
+EOF2
+LOUD=$(echo "$SMALL" | sed 's/--quiet//')
+check "two materials, one without UVs" [ "$(rc_of "$M" texture "$T/box.obj" "a box" --weights "$W" -o "$T/box" $LOUD)" = 0 ]
+check "the material without UVs is named in a warning" grep -q "material 'metal' have no UVs" "$T/err"
+for f in texture_wood.png texture_wood.exr texture_metal.png texture_metal.exr mesh.obj mesh.mtl mesh.glb report.json; do
+    check "two materials: $f" [ -s "$T/box/$f" ]
+done
+check "two materials: no texture.png copy of one of them" [ ! -e "$T/box/texture.png" ] && [ ! -e "$T/box/texture.exr" ]
+check "two materials: mesh.mtl maps both" grep -q "map_Kd texture_metal.png" "$T/box/mesh.mtl"
+# a uniform grey 128x128 PNG compresses to a few hundred bytes; a painted one does not
+check "the atlas material is painted, not grey" [ "$(wc -c < "$T/box/texture_metal.png")" -gt 4000 ]
 
 # ---- impossible options: exit 2, the valid range in the message, nothing written ----
 bad_option() { # bad_option EXPECTED_TEXT OPTIONS...
@@ -46,10 +96,13 @@ bad_option() { # bad_option EXPECTED_TEXT OPTIONS...
 check "--frontal-threshold 1.5" bad_option "--frontal-threshold must be in [0, 1), not 1.5" --frontal-threshold 1.5
 check "--coverage-stop 2" bad_option "--coverage-stop must be in (0, 1], not 2" --coverage-stop 2
 check "--guidance -3" bad_option "--guidance must be in [0, 50], not -3" --guidance -3
-check "--guidance nan" bad_option "--guidance must be in [0, 50]" --guidance nan
+check "--guidance nan exits 2" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" $SMALL --guidance nan)" = 2 ]
 check "--depth-weight 1,-1" bad_option "--depth-weight must be in [0, 2], not -1" --depth-weight 1,-1
 check "--batch 0" bad_option "--batch must be in 1..64, not 0" --batch 0
 check "--texture-size 8" bad_option "--texture-size must be in 16..8192, not 8" --texture-size 8
+check "a bad number with --json: the message in the JSON" \
+    [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" --steps ten --json)" = 2 ]
+check "... names the option and value" grep -q '"error":"bad value for --steps: .ten."' "$T/out"
 check "empty prompt" [ "$(rc_of "$M" texture "$T/quad.obj" " " --weights "$W" -o "$T/bad" $SMALL)" = 2 ]
 check "empty prompt: message" grep -q "prompt is empty" "$T/err"
 check "enhance --strength 0" [ "$(rc_of "$M" enhance "$T/o_quad/mesh.obj" --strength 0 --weights "$W" -o "$T/bad")" = 2 ]

@@ -9,6 +9,10 @@ G=$(data golden)
 check "run-net --help exits 0" [ "$(rc_of "$M" run-net --help)" = 0 ]
 check "run-net --help prints usage" grep -q "usage: matex run-net" "$T/out"
 check "run-net without arguments exits 2" [ "$(rc_of "$M" run-net)" = 2 ]
+check "run-net unknown --device exits 2" [ "$(rc_of "$M" run-net unet --weights a --inputs b --out c --device tpu)" = 2 ]
+check "run-net --device names the choices" grep -q "cpu, cpu-strict or cuda" "$T/err"
+check "run-net --device cuda without a usable CUDA backend fails" [ "$(rc_of "$M" run-net unet --weights a --inputs b --out c --device cuda)" != 0 ]
+check "... in one line that names cuda" [ "$(grep -c cuda "$T/err")" = 1 ]
 check "run-net unknown NET exits 2" [ "$(rc_of "$M" run-net resnet --weights a --inputs b --out c)" = 2 ]
 check "gen-weights --help exits 0" [ "$(rc_of "$M" gen-weights --help)" = 0 ]
 check "gen-weights bad dtype exits 2" [ "$(rc_of "$M" gen-weights "$G/unet_tiny/config.json" -o "$T/x" --dtype f8)" = 2 ]

@@ -10,6 +10,9 @@
 #include <string.h>
 
 #include "../ops/ops.h"
+#include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/unet.h"
+#include "../pipeline/nn/vae.h"
 #include "../runtime/fileio.h"
 #include "../weights/safetensors.h"
 #include "util_test.h"
@@ -95,7 +98,7 @@ static inline int golden_bf16_ctx(mx_ctx *c, const char *test) {
     return golden_ctx_precision(c, MX_PREC_BF16);
 }
 
-/* Relative L2 bound against the fp32 goldens (../shared/golden/README.md): 1e-4 for fp32
+/* Relative L2 bound against the fp32 goldens (tests/data/golden/README.md): 1e-4 for fp32
  * arithmetic, 1e-2 for bf16. */
 static inline double golden_bound(const mx_ctx *c) {
     return mx_isa_precision(c->k->isa) == MX_PREC_BF16 ? 1e-2 : 1e-4;
@@ -145,6 +148,122 @@ static inline void golden_arena(const mx_ctx *c, mx_arena *a, size_t bytes) {
         fprintf(stderr, "%s\n", st.msg);
         exit(1);
     }
+}
+
+/* Runs one call on the context's device in an arena of exactly the measured size: the host
+ * inputs are copied to the device, the output back. */
+static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_unet_arena_bytes(u, in->B, in->H, in->W, in->T, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_unet_config *cfg = mx_unet_cfg(u);
+    int n = mx_unet_num_residuals(cfg), C, h, w;
+    mx_unet_input d = *in;
+    float *res[MX_UNET_MAX_RES + 1] = {0};
+    d.sample = golden_dev(c, in->sample, (size_t)in->B * cfg->in_channels * in->H * in->W);
+    d.timesteps = golden_dev(c, in->timesteps, (size_t)in->B);
+    d.encoder_hidden_states = golden_dev(c, in->encoder_hidden_states, (size_t)in->B * in->T * cfg->cross_attention_dim);
+    for (int i = 0; i <= n && in->down_residuals; i++) {
+        mx_unet_residual_shape(cfg, i, in->H, in->W, &C, &h, &w);
+        res[i] = golden_dev(c, i < n ? in->down_residuals[i] : in->mid_residual, (size_t)in->B * C * h * w);
+    }
+    d.down_residuals = in->down_residuals ? (const float *const *)res : NULL;
+    d.mid_residual = in->down_residuals ? res[n] : NULL;
+    size_t no = (size_t)in->B * cfg->out_channels * in->H * in->W;
+    float *dout = golden_dev_alloc(c, no);
+    int rc = mx_unet_forward(c, u, &d, dout, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, out, dout, no)) rc = -1;
+    mx_dev_free(c, (void *)d.sample);
+    mx_dev_free(c, (void *)d.timesteps);
+    mx_dev_free(c, (void *)d.encoder_hidden_states);
+    for (int i = 0; i <= n; i++) mx_dev_free(c, res[i]);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+/* The same for a ControlNet: down[0..n) and mid are host buffers (read too when accumulating). */
+static inline int golden_run_controlnet(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
+                                        float **down, float *mid, int accumulate) {
+    mx_status st;
+    size_t bytes;
+    mx_arena a;
+    if (mx_controlnet_arena_bytes(m, in->B, in->H, in->W, in->T, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_unet_config *cfg = mx_controlnet_cfg(m);
+    int n = mx_unet_num_residuals(cfg), C, h, w, f = 1 << (cfg->n_cond_emb - 1);
+    mx_controlnet_input d = *in;
+    float *res[MX_UNET_MAX_RES + 1];
+    size_t cnt[MX_UNET_MAX_RES + 1];
+    d.sample = golden_dev(c, in->sample, (size_t)in->B * cfg->in_channels * in->H * in->W);
+    d.timesteps = golden_dev(c, in->timesteps, (size_t)in->B);
+    d.encoder_hidden_states = golden_dev(c, in->encoder_hidden_states, (size_t)in->B * in->T * cfg->cross_attention_dim);
+    d.cond = golden_dev(c, in->cond, (size_t)in->B * cfg->conditioning_channels * in->H * f * in->W * f);
+    for (int i = 0; i <= n; i++) {
+        mx_unet_residual_shape(cfg, i, in->H, in->W, &C, &h, &w);
+        cnt[i] = (size_t)in->B * C * h * w;
+        res[i] = golden_dev(c, i < n ? down[i] : mid, cnt[i]);
+    }
+    int rc = mx_controlnet_forward(c, m, &d, res, res[n], accumulate, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    for (int i = 0; i <= n; i++)
+        if (golden_fetch(c, i < n ? down[i] : mid, res[i], cnt[i])) rc = -1;
+    mx_dev_free(c, (void *)d.sample);
+    mx_dev_free(c, (void *)d.timesteps);
+    mx_dev_free(c, (void *)d.encoder_hidden_states);
+    mx_dev_free(c, (void *)d.cond);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+/* Encode / decode on the context's device: host in, host out. */
+static inline int golden_vae_encode(const mx_ctx *c, const mx_vae *v, const float *img, int B, int H, int W, float *mean, float *logvar) {
+    mx_status st;
+    size_t bytes, f = (size_t)mx_vae_factor(v);
+    mx_arena a;
+    if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_vae_config *cfg = mx_vae_cfg(v);
+    size_t nl = (size_t)B * cfg->latent_channels * (H / f) * (W / f);
+    float *dimg = golden_dev(c, img, (size_t)B * cfg->in_channels * H * W), *dmean = golden_dev_alloc(c, nl);
+    float *dlogvar = logvar ? golden_dev_alloc(c, nl) : NULL;
+    int rc = mx_vae_encode(c, v, dimg, B, H, W, dmean, dlogvar, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, mean, dmean, nl) || (logvar && golden_fetch(c, logvar, dlogvar, nl))) rc = -1;
+    mx_dev_free(c, dimg);
+    mx_arena_destroy(&a);
+    return rc;
+}
+
+static inline int golden_vae_decode(const mx_ctx *c, const mx_vae *v, const float *lat, int B, int h, int w, float *img) {
+    mx_status st;
+    size_t bytes, f = (size_t)mx_vae_factor(v);
+    mx_arena a;
+    if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return -1;
+    }
+    golden_arena(c, &a, bytes);
+    const mx_vae_config *cfg = mx_vae_cfg(v);
+    size_t ni = (size_t)B * cfg->out_channels * (h * f) * (w * f);
+    float *dlat = golden_dev(c, lat, (size_t)B * cfg->latent_channels * h * w), *dimg = golden_dev_alloc(c, ni);
+    int rc = mx_vae_decode(c, v, dlat, B, h, w, dimg, &a, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    if (golden_fetch(c, img, dimg, ni)) rc = -1;
+    mx_dev_free(c, dlat);
+    mx_arena_destroy(&a);
+    return rc;
 }
 
 #endif

@@ -253,8 +253,15 @@ static void test_write_outputs(void) {
     tmp_path(dir, sizeof dir, "out4");
     rc = mx_write_outputs(dir, &m, tex, 4, NULL, &st);
     CHECK(rc == 0);
-    CHECK(exists(dir, "texture_truck.png") && exists(dir, "texture_glass.png") && exists(dir, "texture_window_trim.png") &&
-          exists(dir, "texture_wheels.png") && exists(dir, "texture.png"));
+    const char *mats[4] = {"truck", "glass", "window_trim", "wheels"};
+    for (int i = 0; i < 4; i++) {
+        char name[64];
+        snprintf(name, sizeof name, "texture_%s.png", mats[i]);
+        CHECK(exists(dir, name));
+        snprintf(name, sizeof name, "texture_%s.exr", mats[i]);
+        CHECK(exists(dir, name));
+    }
+    CHECK(!exists(dir, "texture.png") && !exists(dir, "texture.exr")); /* no copy of one material's texture */
     snprintf(p, sizeof p, "%s/mesh.glb", dir);
     check_glb_structure(p, 4);
     snprintf(p, sizeof p, "%s/mesh.obj", dir);

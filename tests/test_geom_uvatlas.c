@@ -512,11 +512,86 @@ static void test_assets(void) {
     }
 }
 
+/* Flat, single-face and degenerate meshes (issue 12: one chart overflowed the packer's profile
+ * storage): a quad, one triangle, a 10x10 grid plane, at several texture sizes. */
+static void test_flat_and_single_face(void) {
+    static const int sizes[] = {16, 64, 1024};
+    for (size_t i = 0; i < sizeof sizes / sizeof *sizes; i++) {
+        mx_uvatlas_opts o = mx_uvatlas_defaults();
+        o.texture_size = sizes[i];
+        builder quad = {0}, tri = {0}, grid = {0};
+        for (int k = 0; k < 4; k++) add_vertex(&quad, k == 1 || k == 2, k >= 2, 0);
+        add_quad(&quad, 0, 1, 2, 3);
+        add_vertex(&tri, 0, 0, 0), add_vertex(&tri, 1, 0, 0), add_vertex(&tri, 0, 1, 0);
+        add_face(&tri, 0, 1, 2);
+        for (int y = 0; y <= 10; y++)
+            for (int x = 0; x <= 10; x++) add_vertex(&grid, x, y, 0);
+        for (int y = 0; y < 10; y++)
+            for (int x = 0; x < 10; x++) add_quad(&grid, y * 11 + x, y * 11 + x + 1, y * 11 + x + 12, y * 11 + x + 11);
+        run_case("quad", &quad.m, &o, sizes[i] >= 64 ? 0.8 : 0.3);
+        run_case("triangle", &tri.m, &o, sizes[i] >= 64 ? 0.4 : 0.1);
+        run_case("grid plane", &grid.m, &o, sizes[i] >= 64 ? 0.8 : 0.3);
+        CHECK(quad.m.nuv > 0 && tri.m.nuv > 0 && grid.m.nuv > 0);
+        mx_mesh_free(&quad.m), mx_mesh_free(&tri.m), mx_mesh_free(&grid.m);
+        /* one zero-area triangle (collinear corners) */
+        builder zero = {0};
+        add_vertex(&zero, 0, 0, 0), add_vertex(&zero, 1, 0, 0), add_vertex(&zero, 2, 0, 0);
+        add_face(&zero, 0, 1, 2);
+        mx_status st = {0};
+        mx_uvatlas_report r = {0};
+        CHECK(mx_uvatlas_build(&zero.m, &o, &r, &st) == 0 && uvs_in_range(&zero.m) && r.charts == 1);
+        mx_mesh_free(&zero.m);
+    }
+}
+
+/* mx_uvatlas_complete: a cube whose material 0 has UVs on 4 of its 6 faces (quads 0, 1) and
+ * none on 2 (quad 2), and whose material 1 (quads 3-5) has none at all. */
+static void test_complete_missing_uvs(void) {
+    mx_mesh m = make_cube();
+    m.nmat = 2;
+    m.mats = calloc(2, sizeof *m.mats);
+    snprintf(m.mats[0].name, sizeof m.mats[0].name, "wood");
+    snprintf(m.mats[1].name, sizeof m.mats[1].name, "metal");
+    m.face_mat = calloc((size_t)m.nfaces, sizeof *m.face_mat);
+    for (int f = 6; f < 12; f++) m.face_mat[f] = 1;
+    m.nuv = 4;
+    m.uv = malloc(8 * sizeof *m.uv);
+    const float corners[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+    memcpy(m.uv, corners, sizeof corners);
+    m.face_uv = malloc(3 * (size_t)m.nfaces * sizeof *m.face_uv);
+    for (int f = 0; f < m.nfaces; f++)
+        for (int k = 0; k < 3; k++) m.face_uv[3 * f + k] = f < 4 ? (f & 1 ? (int[]){0, 2, 3}[k] : k) : -1;
+    int32_t before[12];
+    memcpy(before, m.face_uv, sizeof before);
+    mx_status st = {0};
+    mx_uvatlas_report r = {0};
+    int done = 0;
+    CHECK(mx_uvatlas_complete(&m, NULL, &r, &done, &st) == 0);
+    CHECK(done == 8 && r.charts >= 2);
+    CHECK(m.nmat == 3 && !strcmp(m.mats[2].name, "wood_atlas"));
+    CHECK(memcmp(m.face_uv, before, sizeof before) == 0); /* faces with UVs untouched */
+    for (int f = 0; f < m.nfaces; f++) {
+        int want = f < 4 ? 0 : f < 6 ? 2 : 1; /* the mixed material's faces move, metal keeps its */
+        CHECK(m.face_mat[f] == want);
+        for (int k = 0; k < 3; k++) CHECK(m.face_uv[3 * f + k] >= 0 && m.face_uv[3 * f + k] < m.nuv);
+    }
+    CHECK(uvs_in_range(&m));
+    mx_mesh_free(&m);
+    /* every face already has UVs: nothing to do */
+    mx_mesh q = make_cube();
+    CHECK(mx_uvatlas_build(&q, NULL, NULL, &st) == 0);
+    int nuv = q.nuv;
+    CHECK(mx_uvatlas_complete(&q, NULL, NULL, &done, &st) == 0 && done == 0 && q.nuv == nuv);
+    mx_mesh_free(&q);
+}
+
 int main(void) {
     test_checker_detects_defects();
     test_hand_made();
     test_fold_is_split();
     test_bad_input();
+    test_flat_and_single_face();
+    test_complete_missing_uvs();
     test_assets();
     return mx_test_finish("geom_uvatlas");
 }

@@ -69,14 +69,20 @@ static void run_and_compare(const mx_clip *m, const mx_ctx *c, const char *net, 
     mx_status st = {0};
     mx_arena measure, arena;
     mx_arena_measure(&measure);
-    CHECK(mx_clip_forward(m, c, &measure, ids, B, T, last, pooled, hs, &st) == 0);
+    float *dlast = golden_dev_alloc(c, MC), *dpooled = golden_dev_alloc(c, (size_t)B * C);
+    float **dhs = calloc((size_t)L + 1, sizeof *dhs);
+    for (int i = 0; i <= L; i++) dhs[i] = golden_dev_alloc(c, MC);
+    CHECK(mx_clip_forward(m, c, &measure, ids, B, T, dlast, dpooled, dhs, &st) == 0);
     CHECK(measure.peak > 0);
     double t0 = mx_now();
-    int ok = mx_arena_create(&arena, measure.peak, &st) == 0 &&
-             mx_clip_forward(m, c, &arena, ids, B, T, last, pooled, hs, &st) == 0;
+    golden_arena(c, &arena, measure.peak);
+    int ok = mx_clip_forward(m, c, &arena, ids, B, T, dlast, dpooled, dhs, &st) == 0;
     printf("%s: forward of %d x %d tokens in %.3f s (arena %zu bytes)\n", label, B, T, mx_now() - t0, measure.peak);
     if (!ok) fprintf(stderr, "%s: %s\n", label, st.msg);
     CHECK(ok);
+    CHECK(golden_fetch(c, last, dlast, MC) == 0 && golden_fetch(c, pooled, dpooled, (size_t)B * C) == 0);
+    for (int i = 0; i <= L; i++) CHECK(golden_fetch(c, hs[i], dhs[i], MC) == 0);
+    free(dhs);
     char path[1024], name[64], msg[160];
     golden_path(path, sizeof path, net, outputs_file);
     mx_safetensors sf;
@@ -267,8 +273,8 @@ static void test_sd15(const mx_ctx *c) {
 int main(void) {
     mx_ctx scalar, best;
     mx_status st = {0};
-    if (mx_ctx_create(&scalar, 1, MX_ISA_SCALAR, 16 << 20, &st) ||
-        mx_ctx_create(&best, 2, mx_cpu_isa_for(MX_PREC_FP32), 16 << 20, &st)) {
+    if (mx_ctx_create_on(&scalar, golden_device(), 1, MX_ISA_SCALAR, 16 << 20, &st) ||
+        mx_ctx_create_on(&best, golden_device(), 2, mx_cpu_isa_for(MX_PREC_FP32), 16 << 20, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return 1;
     }

@@ -89,10 +89,12 @@ static void check_embeddings(const nets *n, const mx_ctx *c, const mx_safetensor
         mx_status st = {0};
         mx_arena a;
         CHECK(fid && want && nid == 77 && nemb == 77 * (size_t)n->clip_cfg.hidden_size);
-        if (fid && want && nid == 77 && nemb == 77 * (size_t)n->clip_cfg.hidden_size &&
-            mx_arena_create(&a, (size_t)1 << 20, &st) == 0) {
+        if (fid && want && nid == 77 && nemb == 77 * (size_t)n->clip_cfg.hidden_size) {
+            golden_arena(c, &a, (size_t)1 << 20);
+            float *dgot = golden_dev_alloc(c, nemb);
             for (int i = 0; i < 77; i++) ids[i] = (int32_t)fid[i];
-            CHECK(mx_clip_forward(&n->clip, c, &a, ids, 1, 77, got, NULL, NULL, &st) == 0);
+            CHECK(mx_clip_forward(&n->clip, c, &a, ids, 1, 77, dgot, NULL, NULL, &st) == 0);
+            CHECK(golden_fetch(c, got, dgot, nemb) == 0);
             mx_check_close(emb_name[k], got, want, nemb, 1e-4);
             mx_arena_destroy(&a);
         }
@@ -138,7 +140,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
     mx_sched s;
     int ok = lat && ctl && cond && unc && ts && after && img_want && sched_text && nlat == 4 * 8 * 8 &&
              mx_sched_config_parse(&scfg, sched_text, lsched, "scheduler_config.json", &st) == 0 &&
-             mx_sched_init(&s, &scfg, 6, nlat, &st) == 0;
+             mx_sched_init(&s, c, &scfg, 6, nlat, &st) == 0;
     if (!ok) fprintf(stderr, "pipeline setup: %s\n", st.msg);
     CHECK(ok);
     if (ok) {
@@ -159,7 +161,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         mx_sched_free(&s);
         /* two ControlNets at 0.5 and 0.3 sum to the one at 0.8 (residuals are linear in the scale) */
         float *lat2 = golden_f32(&in, "latents", NULL);
-        CHECK(lat2 && mx_sched_init(&s, &scfg, 6, nlat, &st) == 0);
+        CHECK(lat2 && mx_sched_init(&s, c, &scfg, 6, nlat, &st) == 0);
         mx_sd_control two[2] = {{n->cnet, ctl, 0.5f}, {n->cnet, ctl, 0.3f}};
         rq.controls = two;
         rq.n_controls = 2;
@@ -172,7 +174,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         rq.progress = on_step;
         mx_sched_free(&s);
         /* a progress callback that returns non-zero stops the loop with an error */
-        CHECK(mx_sched_init(&s, &scfg, 6, nlat, &st) == 0);
+        CHECK(mx_sched_init(&s, c, &scfg, 6, nlat, &st) == 0);
         step_check cancel = {NULL, 0, 1};
         rq.sched = &s;
         rq.progress_user = &cancel;
@@ -180,7 +182,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         CHECK(strstr(st.msg, "cancelled") != NULL);
         /* a scheduler sized for other latents is refused */
         mx_sched_free(&s);
-        CHECK(mx_sched_init(&s, &scfg, 6, nlat * 2, &st) == 0);
+        CHECK(mx_sched_init(&s, c, &scfg, 6, nlat * 2, &st) == 0);
         rq.progress = NULL;
         CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) != 0);
         mx_sched_free(&s);

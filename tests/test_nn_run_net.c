@@ -26,9 +26,12 @@ static int convert(const char *net) {
     return sh("./matex convert %s -o %s --dtype f32 --quiet", src, dst);
 }
 
+/* Runs on MX_TEST_DEVICE (cpu-strict under make test). */
 static int run_net(const char *args, const char *out) {
-    char cmd[2048];
-    snprintf(cmd, sizeof cmd, "./matex run-net %s --out %s/%s 2>/dev/null", args, tmpdir, out);
+    char cmd[2300];
+    mx_backend_kind device = golden_device();
+    snprintf(cmd, sizeof cmd, "./matex run-net %s --device %s --out %s/%s 2>/dev/null", args, mx_backend_name(device),
+             tmpdir, out);
     int rc = system(cmd);
     if (rc) fprintf(stderr, "command failed (%d): %s\n", rc, cmd);
     return rc;

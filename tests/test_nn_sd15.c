@@ -11,12 +11,6 @@
 #include "../runtime/log.h"
 #include "nn_golden.h"
 
-static int with_arena(mx_arena *a, size_t bytes) {
-    mx_status st;
-    if (mx_arena_create(a, bytes, &st)) return fprintf(stderr, "%s\n", st.msg), -1;
-    return 0;
-}
-
 static void compare(const mx_ctx *c, const mx_safetensors *out, const char *label, const char *name, const float *got) {
     size_t n;
     char l[192], tag[64];
@@ -51,8 +45,7 @@ static void sd15_unet(const mx_ctx *c) {
     mx_unet_input ui = {sample, tsteps, ehs, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3], (int)te->shape[1],
                         NULL, NULL};
     float *got = malloc((size_t)ui.B * cfg.out_channels * ui.H * ui.W * sizeof *got);
-    mx_arena a;
-    CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0 && with_arena(&a, bytes) == 0);
+    CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0);
     printf("sd15_unet: arena %.1f MB\n", bytes / 1e6);
     int n = mx_unet_num_residuals(&cfg);
     for (int s = -1; s < 2; s++) {
@@ -72,12 +65,11 @@ static void sd15_unet(const mx_ctx *c) {
             snprintf(name, sizeof name, "out_plain");
         }
         t0 = mx_now();
-        CHECK(mx_unet_forward(c, u, &ui, got, &a, &st) == 0);
+        CHECK(golden_run_unet(c, u, &ui, got) == 0);
         printf("sd15_unet %s: %.2f s\n", name, mx_now() - t0);
         compare(c, &out, "sd15_unet", name, got);
         for (int i = 0; i <= n; i++) free(res[i]);
     }
-    mx_arena_destroy(&a);
     free(got);
     free(sample);
     free(ehs);
@@ -94,7 +86,7 @@ static void sd15_controlnet(const mx_ctx *c) {
     mx_binder b;
     mx_controlnet *m = NULL;
     mx_safetensors in, out;
-    size_t len, bytes = 0;
+    size_t len;
     char *text = golden_text("sd15_controlnet", "config.json", &len);
     CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_controlnet", &st) == 0);
     free(text);
@@ -115,13 +107,11 @@ static void sd15_controlnet(const mx_ctx *c) {
         mx_unet_residual_shape(&cfg, i, ci.H, ci.W, &C, &h, &w);
         res[i] = malloc((size_t)ci.B * C * h * w * sizeof(float));
     }
-    mx_arena a;
-    CHECK(mx_controlnet_arena_bytes(m, ci.B, ci.H, ci.W, ci.T, &bytes, &st) == 0 && with_arena(&a, bytes) == 0);
     const float scales[2] = {1.0f, 0.5f};
     for (int s = 0; s < 2; s++) {
         ci.scale = scales[s];
         double t0 = mx_now();
-        CHECK(mx_controlnet_forward(c, m, &ci, res, res[n], 0, &a, &st) == 0);
+        CHECK(golden_run_controlnet(c, m, &ci, res, res[n], 0) == 0);
         printf("sd15_controlnet scale %g: %.2f s\n", scales[s], mx_now() - t0);
         for (int i = 0; i <= n; i++) {
             char name[96];
@@ -130,7 +120,6 @@ static void sd15_controlnet(const mx_ctx *c) {
             compare(c, &out, "sd15_controlnet", name, res[i]);
         }
     }
-    mx_arena_destroy(&a);
     for (int i = 0; i <= n; i++) free(res[i]);
     free(sample);
     free(ehs);
@@ -148,7 +137,7 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     mx_binder b;
     mx_vae *v = NULL;
     mx_safetensors in, out;
-    size_t len, bytes = 0;
+    size_t len;
     char *text = golden_text("sd15_vae", "config.json", &len);
     CHECK(text && mx_vae_config_parse(&cfg, text, len, "sd15_vae", &st) == 0);
     free(text);
@@ -162,22 +151,17 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     int B = (int)ti->shape[0], H = (int)ti->shape[2], W = (int)ti->shape[3], f = mx_vae_factor(v);
     size_t nl = (size_t)B * cfg.latent_channels * (H / f) * (W / f), ni = (size_t)B * cfg.out_channels * H * W;
     float *mean = malloc(nl * sizeof(float)), *logvar = malloc(nl * sizeof(float)), *dec = malloc(ni * sizeof(float));
-    mx_arena a;
-    size_t b2 = 0;
-    CHECK(mx_vae_encode_arena_bytes(v, B, H, W, &bytes, &st) == 0 && mx_vae_decode_arena_bytes(v, B, H / f, W / f, &b2, &st) == 0);
-    CHECK(with_arena(&a, bytes > b2 ? bytes : b2) == 0);
     double t0 = mx_now();
-    CHECK(mx_vae_encode(c, v, img, B, H, W, mean, logvar, &a, &st) == 0);
+    CHECK(golden_vae_encode(c, v, img, B, H, W, mean, logvar) == 0);
     printf("sd15_vae encode: %.2f s\n", mx_now() - t0);
     compare(c, &out, outfile, "encode.mean", mean);
     compare(c, &out, outfile, "encode.logvar", logvar);
     t0 = mx_now();
-    CHECK(mx_vae_decode(c, v, lat, B, H / f, W / f, dec, &a, &st) == 0);
+    CHECK(golden_vae_decode(c, v, lat, B, H / f, W / f, dec) == 0);
     printf("sd15_vae decode: %.2f s\n", mx_now() - t0);
     compare(c, &out, outfile, "decode", dec);
-    CHECK(mx_vae_decode(c, v, mean, B, H / f, W / f, dec, &a, &st) == 0);
+    CHECK(golden_vae_decode(c, v, mean, B, H / f, W / f, dec) == 0);
     compare(c, &out, outfile, "decode_of_encode_mean", dec);
-    mx_arena_destroy(&a);
     free(mean);
     free(logvar);
     free(dec);

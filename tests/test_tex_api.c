@@ -132,7 +132,7 @@ static void test_cancel(matex_models *m, const char *tmp) {
 
 static void test_bad_input(matex_models *m) {
     matex_error err;
-    CHECK(matex_models_open("/nonexistent/w.mxw", &err) == NULL && strstr(err.message, "/nonexistent/w.mxw"));
+    CHECK(matex_models_open("/nonexistent/w.mxw", NULL, &err) == NULL && strstr(err.message, "/nonexistent/w.mxw"));
     printf("missing weights: %s\n", err.message);
     int32_t bad_faces[3] = {0, 1, 9};
     matex_mesh bad = {3, 1, &CUBE_POS[0][0], bad_faces, 0, NULL, NULL, NULL, 1};
@@ -187,7 +187,9 @@ int main(void) {
     char tmp[] = "/tmp/matex_test_api.XXXXXX";
     if (!mkdtemp(tmp)) return 1;
     matex_error err;
-    matex_models *m = matex_models_open(weights, &err);
+    matex_options mo;
+    small_options(&mo);
+    matex_models *m = matex_models_open(weights, &mo, &err);
     CHECK(m != NULL);
     if (m) {
         test_memory_and_file(m, tmp);

@@ -49,7 +49,8 @@ int main(int argc, char **argv) {
         for (int i = first; i < argc; i++) rc |= bench_mesh(argv[i], runs);
         return rc;
     }
-    const char *shared = getenv("MATEX_SHARED") ? getenv("MATEX_SHARED") : "../shared";
+    /* the larger test meshes live outside the repository (tests/data/README.md) */
+    const char *shared = getenv("MATEX_TESTDATA") ? getenv("MATEX_TESTDATA") : "../shared";
     for (size_t i = 0; i < sizeof assets / sizeof *assets; i++) {
         char path[2048];
         snprintf(path, sizeof path, "%s/assets/%s", shared, assets[i]);

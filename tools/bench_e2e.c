@@ -1,7 +1,7 @@
 /* bench_e2e: the one-line end-to-end summary of `make bench`:
  *   bench-e2e: default_s=S fast_s=S unet_b2_64_fp32_s=S unet_b2_64_bf16_s=S peak_rss_mb=M weights_mb=M isa=LEVEL
  * on the SD1.5-architecture model set with random weights (bench_sd15.h, cached outside the
- * repository) and the spot mesh of ../shared/assets.
+ * repository) and the spot mesh of tests/data/assets.
  * - unet_b2_64_*: one UNet call (batch 2, 64×64 latent, 77 tokens), fp32 and bf16 alternated,
  *   median of 3 each (bf16 "na" without AVX512_BF16).
  * - default_s, peak_rss_mb: a default `matex texture` run (10 steps, 6 views, 1024², its default
@@ -91,7 +91,7 @@ static int run_texture(const char *matex, const char *weights, int threads, int 
     double t0 = mx_now();
     pid_t pid = fork();
     if (pid == 0) {
-        const char *mesh = "../shared/assets/spot/spot_triangulated.obj";
+        const char *mesh = "tests/data/assets/spot/spot_triangulated.obj";
         if (fast)
             execl(matex, matex, "texture", mesh, "a black-and-white dairy cow", "--weights", weights, "-o", out,
                   "--threads", thr, "--quiet", "--fast", (char *)NULL);

@@ -3,7 +3,7 @@
  * view-selection loop: 40 candidates (cached at 256^2), front + back + 4 picked views, each
  * baked at 1024^2. Every number is the median over repeats (the machine is shared: medians
  * are steadier than means). Usage: bench_geom [MESH] [THREADS] [REPS]; the mesh defaults to
- * $MATEX_SHARED/assets/koala/koala.obj (../shared without the variable), 2 threads, 15 repeats. */
+ * $MATEX_TESTDATA/assets/koala/koala.obj (../shared without the variable), 2 threads, 15 repeats. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -128,7 +128,7 @@ static void env_free(bench_env *e) {
 
 int main(int argc, char **argv) {
     char koala[2048];
-    const char *shared = getenv("MATEX_SHARED");
+    const char *shared = getenv("MATEX_TESTDATA");
     snprintf(koala, sizeof koala, "%s/assets/koala/koala.obj", shared ? shared : "../shared");
     const char *path = argc > 1 ? argv[1] : koala;
     int threads = argc > 2 ? atoi(argv[2]) : 2;

@@ -48,7 +48,7 @@ static void print_view_rows(const mx_json *views, int steps, const double *step_
 int main(int argc, char **argv) {
     char cached[1100];
     const char *weights = NULL;
-    const char *mesh = "../shared/assets/spot/spot_triangulated.obj";
+    const char *mesh = "tests/data/assets/spot/spot_triangulated.obj";
     int threads = 2;
     for (int i = 1; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--weights")) weights = argv[i + 1];
@@ -81,6 +81,7 @@ int main(int argc, char **argv) {
     o.prompt = "a black-and-white dairy cow";
     o.weights_path = weights;
     o.out_dir = "/tmp/matex_bench_texture_out";
+    o.force = 1; /* the previous run's folder */
     o.steps = STEPS;
     o.views = VIEWS;
     o.max_batch = 1;

@@ -14,13 +14,13 @@ typedef int (*api_fn)(matex_models *, const matex_options *, matex_result **, ma
 
 static int run_once(api_fn fn, const mx_texture_opts *t, mx_texture_result *res, mx_status *st) {
     matex_error err;
-    matex_models *m = matex_models_open(t->weights_path, &err);
+    matex_options o;
+    mx_api_options_from_internal(t, &o);
+    matex_models *m = matex_models_open(t->weights_path, &o, &err);
     if (!m) {
         mx_cli_api_status(&err, st);
         return -1;
     }
-    matex_options o;
-    mx_api_options_from_internal(t, &o);
     matex_result *r = NULL;
     int rc = fn(m, &o, res ? &r : NULL, &err);
     if (rc) mx_cli_api_status(&err, st);

@@ -1,13 +1,14 @@
 #include "cli_texture_opts.h"
 
-#include <errno.h>
 #include <signal.h>
+#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "../pipeline/geom/masks.h"
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
+#include "cli_args.h"
 
 void mx_cli_texture_options_help(FILE *f) {
     fprintf(f,
@@ -34,36 +35,39 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --threads N              CPU threads (default: all)\n"
             "  --precision fp32|bf16    arithmetic of the networks (default bf16 where the CPU has AVX512_BF16,\n"
             "                           else fp32): bf16 products with fp32 sums, about 2x faster\n"
-            "  --device cpu|cuda        compute device (default cpu)\n"
+            "  --device D               cpu (default), cpu-strict (activations guarded, for tests) or cuda\n"
+            "                           (in binaries built by `make cuda`)\n"
             "  --force                  replace an existing non-empty output folder (atomically)\n"
             "  --quiet                  no progress on stderr\n"
             "  --json                   print a JSON summary on stdout\n"
             "  -h, --help               this help\n");
 }
 
-static int usage_error(const char *verb, const char *msg, const char *arg) {
-    fprintf(stderr, "matex %s: %s%s%s\n(matex %s --help for usage)\n", verb, msg, arg ? " " : "", arg ? arg : "",
-            verb);
+static void print_json_error(const char *msg) {
+    mx_buf b = {0};
+    mx_buf_printf(&b, "{\"ok\":false,\"error\":");
+    mx_buf_json_str(&b, msg);
+    mx_buf_printf(&b, "}");
+    puts(b.oom ? "{\"ok\":false,\"error\":\"out of memory\"}" : b.p);
+    mx_buf_free(&b);
+}
+
+int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
+    char msg[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "matex %s: %s\n(matex %s --help for usage)\n", verb, msg, verb);
+    if (json) print_json_error(msg);
     return 2;
 }
 
-static int parse_int(const char *s, int *out) {
-    char *end;
-    errno = 0;
-    long v = strtol(s, &end, 10);
-    if (errno || end == s || *end || v < -2147483647L || v > 2147483647L) return -1;
-    *out = (int)v;
-    return 0;
+static int usage_error(const mx_cli_texture *c, const char *verb, const char *msg, const char *arg) {
+    return mx_cli_usage_error(verb, c->json, "%s%s%s", msg, arg ? " " : "", arg ? arg : "");
 }
 
-static int parse_float(const char *s, float *out) {
-    char *end;
-    errno = 0;
-    float v = strtof(s, &end);
-    if (errno || end == s || *end) return -1;
-    *out = v;
-    return 0;
-}
+static int parse_int(const char *s, int *out) { return mx_parse_int(s, -2147483647L, 2147483647L, out); }
 
 /* "A" or "A,B" into w[2] (B = A when absent). */
 static int parse_pair(const char *s, float w[2]) {
@@ -71,21 +75,12 @@ static int parse_pair(const char *s, float w[2]) {
     snprintf(buf, sizeof buf, "%s", s);
     char *comma = strchr(buf, ',');
     if (comma) *comma = 0;
-    if (parse_float(buf, &w[0])) return -1;
+    if (mx_parse_float(buf, &w[0])) return -1;
     if (!comma) {
         w[1] = w[0];
         return 0;
     }
-    return parse_float(comma + 1, &w[1]);
-}
-
-static int parse_seed(const char *s, uint64_t *out) {
-    char *end;
-    errno = 0;
-    unsigned long long v = strtoull(s, &end, 10);
-    if (errno || end == s || *end || s[0] == '-') return -1;
-    *out = v;
-    return 0;
+    return mx_parse_float(comma + 1, &w[1]);
 }
 
 /* Options that take a value; returns 1 if handled, -1 on a bad value, 0 if unknown. */
@@ -94,7 +89,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) return o->out_dir = val, 1;
     if (!strcmp(arg, "--negative")) return o->negative_prompt = val, 1;
     if (!strcmp(arg, "--front-back-words")) return o->grid_word = val, 1;
-    if (!strcmp(arg, "--seed")) return parse_seed(val, &o->seed) ? -1 : 1;
+    if (!strcmp(arg, "--seed")) return mx_parse_u64(val, &o->seed) ? -1 : 1;
     if (!strcmp(arg, "--steps")) return parse_int(val, &o->steps) ? -1 : 1;
     if (!strcmp(arg, "--views")) return parse_int(val, &o->views) ? -1 : 1;
     if (!strcmp(arg, "--candidates")) return parse_int(val, &o->candidates) ? -1 : 1;
@@ -104,13 +99,13 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "--batch")) return parse_int(val, &o->max_batch) ? -1 : 1;
     if (!strcmp(arg, "--threads")) return parse_int(val, &o->threads) ? -1 : 1;
     if (!strcmp(arg, "--precision")) return mx_precision_parse(val, &o->precision) ? -1 : 1;
-    if (!strcmp(arg, "--guidance")) return parse_float(val, &o->guidance) ? -1 : 1;
-    if (!strcmp(arg, "--strength")) return parse_float(val, &o->strength) ? -1 : 1;
-    if (!strcmp(arg, "--grid-depth-weight")) return parse_float(val, &o->grid_depth_weight) ? -1 : 1;
+    if (!strcmp(arg, "--guidance")) return mx_parse_float(val, &o->guidance) ? -1 : 1;
+    if (!strcmp(arg, "--strength")) return mx_parse_float(val, &o->strength) ? -1 : 1;
+    if (!strcmp(arg, "--grid-depth-weight")) return mx_parse_float(val, &o->grid_depth_weight) ? -1 : 1;
     if (!strcmp(arg, "--depth-weight")) return parse_pair(val, o->depth_weight) ? -1 : 1;
     if (!strcmp(arg, "--inpaint-weight")) return parse_pair(val, o->inpaint_weight) ? -1 : 1;
-    if (!strcmp(arg, "--frontal-threshold")) return parse_float(val, &o->frontal_threshold) ? -1 : 1;
-    if (!strcmp(arg, "--coverage-stop")) return parse_float(val, &o->coverage_stop) ? -1 : 1;
+    if (!strcmp(arg, "--frontal-threshold")) return mx_parse_float(val, &o->frontal_threshold) ? -1 : 1;
+    if (!strcmp(arg, "--coverage-stop")) return mx_parse_float(val, &o->coverage_stop) ? -1 : 1;
     if (!strcmp(arg, "--normals")) {
         if (!strcmp(val, "depth")) return o->normal_source = MX_NORMAL_FROM_DEPTH, 1;
         if (!strcmp(val, "geometric")) return o->normal_source = MX_NORMAL_GEOMETRIC, 1;
@@ -121,7 +116,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
         if (!strcmp(val, "z")) return o->up = MX_UP_Z, 1;
         return -1;
     }
-    if (!strcmp(arg, "--device")) return !strcmp(val, "cpu") ? 1 : -2;
+    if (!strcmp(arg, "--device")) return mx_backend_parse(val, &o->device, NULL) ? -1 : mx_backend_compiled(o->device) ? 1 : -2;
     return 0;
 }
 
@@ -129,6 +124,7 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
     const char *verb = argv[0];
     memset(c, 0, sizeof *c);
     mx_texture_opts_default(&c->o);
+    for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
     int npos = 0;
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
@@ -149,13 +145,13 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             continue;
         }
         if (arg[0] == '-' && arg[1]) {
-            if (i + 1 >= argc) return usage_error(verb, "missing value after", arg);
+            if (i + 1 >= argc) return usage_error(c, verb, "missing value after", arg);
             int r = parse_valued(&c->o, arg, argv[++i]);
-            if (r == 0) return usage_error(verb, "unknown option", arg);
+            if (r == 0) return usage_error(c, verb, "unknown option", arg);
             if (r == -2)
-                return usage_error(verb, "this build has no CUDA device support (make cuda builds the kernels only);"
-                                         " --device must be cpu, not", argv[i]);
-            if (r < 0) return usage_error(verb, "bad value for", arg);
+                return usage_error(c, verb, "this matex was built without that backend (`make cuda` builds one with"
+                                            " cuda); --device", argv[i]);
+            if (r < 0) return mx_cli_usage_error(verb, c->json, "bad value for %s: '%s'", arg, argv[i]);
             continue;
         }
         if (npos == 0)
@@ -163,16 +159,16 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
         else if (npos == 1)
             c->o.prompt = arg;
         else
-            return usage_error(verb, "unexpected argument", arg);
+            return usage_error(c, verb, "unexpected argument", arg);
         npos++;
     }
-    if (!c->o.mesh_path) return usage_error(verb, "missing MESH", NULL);
+    if (!c->o.mesh_path) return usage_error(c, verb, "missing MESH", NULL);
     if (!c->o.prompt) {
-        if (!prompt_optional) return usage_error(verb, "missing PROMPT", NULL);
+        if (!prompt_optional) return usage_error(c, verb, "missing PROMPT", NULL);
         c->o.prompt = "";
     }
-    if (!c->o.weights_path) return usage_error(verb, "missing --weights FILE", NULL);
-    if (!c->o.out_dir) return usage_error(verb, "missing -o OUT_DIR", NULL);
+    if (!c->o.weights_path) return usage_error(c, verb, "missing --weights FILE", NULL);
+    if (!c->o.out_dir) return usage_error(c, verb, "missing -o OUT_DIR", NULL);
     return -1;
 }
 
@@ -196,14 +192,6 @@ static void catch_signals(void) {
     sigaction(SIGTERM, &sa, NULL);
 }
 
-static void print_json_error(const char *msg) {
-    mx_buf b = {0};
-    mx_buf_printf(&b, "{\"ok\":false,\"error\":");
-    mx_buf_json_str(&b, msg);
-    mx_buf_printf(&b, "}");
-    puts(b.oom ? "{\"ok\":false,\"error\":\"out of memory\"}" : b.p);
-    mx_buf_free(&b);
-}
 
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
                        int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *)) {
@@ -212,7 +200,9 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
     mx_status_clear(&st);
     mx_texture_result res;
     /* by the verb: run may be the pipeline's function or the API's (tools/cli_api.h) */
-    mx_texture_mode mode = !strcmp(verb, "enhance") ? MX_TEXTURE_MODE_ENHANCE : MX_TEXTURE_MODE_TEXTURE;
+    mx_texture_mode mode = !strcmp(verb, "enhance")    ? MX_TEXTURE_MODE_ENHANCE
+                           : !strcmp(verb, "transfer") ? MX_TEXTURE_MODE_TRANSFER
+                                                       : MX_TEXTURE_MODE_TEXTURE;
     int rc = mx_texture_opts_check(&c->o, mode, &st);
     if (!rc) {
         interrupted = 0;
@@ -221,10 +211,10 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
         rc = run(&c->o, &res, &st);
     }
     if (rc) {
+        if (st.code == MX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", st.msg);
         fprintf(stderr, "matex %s: %s\n", verb, st.msg);
-        if (st.code == MX_EUSAGE) fprintf(stderr, "(matex %s --help for usage)\n", verb);
         if (c->json) print_json_error(st.msg);
-        return st.code == MX_EUSAGE ? 2 : st.code == MX_ECANCEL ? 130 : 1;
+        return st.code == MX_ECANCEL ? 130 : 1;
     }
     if (c->json) {
         mx_buf b = {0};

@@ -16,6 +16,9 @@ typedef struct mx_cli_texture {
  * error, message printed). */
 int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_optional,
                          void (*usage)(FILE *));
+/* A usage error: "matex VERB: MESSAGE" and the --help hint on stderr, and with json
+ * {"ok":false,"error":MESSAGE} on stdout. Returns 2 (the usage-error exit code). */
+int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 /* The option list (printed by both verbs' --help). */
 void mx_cli_texture_options_help(FILE *f);
 /* Checks the options (mx_texture_opts_check), runs the verb's function with SIGINT/SIGTERM

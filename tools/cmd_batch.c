@@ -16,8 +16,8 @@
 #include "cli_batch_manifest.h"
 
 typedef struct batch_args {
-    const char *manifest, *weights, *outroot;
-    int shard, nshards, threads, json, quiet, verbose;
+    const char *manifest, *weights, *outroot, *device;
+    int shard, nshards, threads, precision, json, quiet, verbose;
 } batch_args;
 
 enum { JOB_DONE, JOB_SKIPPED, JOB_FAILED, JOB_INTERRUPTED };
@@ -50,7 +50,8 @@ static void batch_usage(FILE *f) {
             "options:\n"
             "  --shard I/N    run the jobs whose index (0-based, manifest order) mod N is I (default\n"
             "                 SLURM_ARRAY_TASK_ID-SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT, else 0/1)\n"
-            "  --threads N    CPU threads per job (default: all)\n"
+            "  --threads N    CPU threads (default: all)\n"
+            "  --precision fp32|bf16, --device cpu|cuda   as for matex texture (default bf16, cpu)\n"
             "  --json         print the summary as JSON on stdout\n"
             "  --verbose      the progress lines of every job on stderr\n"
             "  --quiet        no per-job lines on stderr\n"
@@ -81,6 +82,7 @@ static int shard_from_slurm(int *i, int *n) {
 static int parse_args(batch_args *a, int argc, char **argv) {
     memset(a, 0, sizeof *a);
     a->nshards = 1;
+    a->precision = MATEX_PRECISION_BF16;
     int have_shard = 0;
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
@@ -96,6 +98,11 @@ static int parse_args(batch_args *a, int argc, char **argv) {
             else if (!strcmp(arg, "--shard")) {
                 if (parse_shard(val, &a->shard, &a->nshards)) return usage_error("--shard must be I/N with 0 <= I < N, not", val);
                 have_shard = 1;
+            } else if (!strcmp(arg, "--precision")) {
+                if (strcmp(val, "fp32") && strcmp(val, "bf16")) return usage_error("--precision must be fp32 or bf16, not", val);
+                a->precision = !strcmp(val, "fp32") ? MATEX_PRECISION_FP32 : MATEX_PRECISION_BF16;
+            } else if (!strcmp(arg, "--device")) {
+                a->device = val; /* checked when the model set opens */
             } else if (!strcmp(arg, "--threads")) {
                 char *end;
                 long t = strtol(val, &end, 10);
@@ -161,7 +168,6 @@ static int run_job(batch_run *r, const mx_batch_job *j, double *coverage, char *
     matex_error err;
     matex_options o;
     mx_api_options_from_internal(&j->c.o, &o);
-    o.threads = r->a->threads;
     o.verbose = r->a->verbose;
     o.cancel = &stop_requested;
     matex_result *res = NULL;
@@ -200,7 +206,12 @@ static void batch_job(batch_run *r, const mx_batch_job *j) {
         return;
     }
     matex_error err;
-    if (!r->models && !(r->models = matex_models_open(r->a->weights, &err))) {
+    matex_options mo;
+    matex_options_default(&mo);
+    mo.threads = r->a->threads;
+    mo.precision = r->a->precision;
+    mo.device = r->a->device;
+    if (!r->models && !(r->models = matex_models_open(r->a->weights, &mo, &err))) {
         fprintf(stderr, "matex batch: %s\n", err.message);
         r->fatal = 1;
         return;

@@ -7,6 +7,7 @@
 #include "../ops/ops.h"
 #include "../runtime/log.h"
 #include "cli.h"
+#include "cli_args.h"
 
 typedef struct {
     const char *name;
@@ -77,14 +78,6 @@ static double median_seconds(const mx_ctx *c, const bench_case *b, float *x, flo
     return t[repeats / 2];
 }
 
-static int parse_int(const char *s, int lo, int hi, int *out) {
-    char *end;
-    long v = strtol(s, &end, 10);
-    if (*s == 0 || *end != 0 || v < lo || v > hi) return -1;
-    *out = (int)v;
-    return 0;
-}
-
 int cmd_bench(int argc, char **argv) {
     int threads = 0, repeats = 5, json = 0;
     mx_precision prec = MX_PREC_FP32;
@@ -93,15 +86,9 @@ int cmd_bench(int argc, char **argv) {
             usage(stdout);
             return 0;
         } else if (!strcmp(argv[i], "--threads") && i + 1 < argc) {
-            if (parse_int(argv[++i], 1, 256, &threads)) {
-                fprintf(stderr, "matex bench: --threads wants 1..256, got '%s'\n", argv[i]);
-                return 2;
-            }
+            if (mx_arg_int("bench", "--threads", argv[++i], 1, 256, &threads)) return 2;
         } else if (!strcmp(argv[i], "--repeats") && i + 1 < argc) {
-            if (parse_int(argv[++i], 1, 31, &repeats)) {
-                fprintf(stderr, "matex bench: --repeats wants 1..31, got '%s'\n", argv[i]);
-                return 2;
-            }
+            if (mx_arg_int("bench", "--repeats", argv[++i], 1, 31, &repeats)) return 2;
         } else if (!strcmp(argv[i], "--precision") && i + 1 < argc) {
             if (mx_precision_parse(argv[++i], &prec)) {
                 fprintf(stderr, "matex bench: --precision wants fp32 or bf16, got '%s'\n", argv[i]);

@@ -7,6 +7,7 @@
 #include "../runtime/log.h"
 #include "../weights/convert.h"
 #include "cli.h"
+#include "cli_args.h"
 
 static void convert_usage(FILE *f) {
     fprintf(f,
@@ -29,7 +30,10 @@ static void convert_usage(FILE *f) {
             "  --quiet                  no progress lines\n"
             "  -h, --help               this help\n"
             "\n"
-            "example: matex convert ../shared/golden/unet_tiny -o unet_tiny.mxw --dtype f32\n");
+            "examples:\n"
+            "  matex convert stable-diffusion-v1-5 --controlnet depth=control_v11f1p_sd15_depth \\\n"
+            "      --controlnet inpaint=control_v11p_sd15_inpaint -o sd15.mxw\n"
+            "  matex convert tests/data/golden/unet_tiny -o unet_tiny.mxw --dtype f32   (in the source tree)\n");
 }
 
 static int parse_dtype(const char *s, mx_dtype *dt) {
@@ -81,11 +85,9 @@ static int parse_args(int argc, char **argv, convert_args *a) {
             a->o.loras[a->o.n_loras].path = val;
             a->o.loras[a->o.n_loras++].scale = 1.0f;
         } else if (!strcmp(arg, "--lora-scale")) {
-            char *end;
-            double s = strtod(val, &end);
             if (a->o.n_loras == 0) return usage_error("--lora-scale must follow a --lora", NULL);
-            if (end == val || *end || s != s) return usage_error("--lora-scale wants a number, not", val);
-            a->o.loras[a->o.n_loras - 1].scale = (float)s;
+            if (mx_parse_float(val, &a->o.loras[a->o.n_loras - 1].scale))
+                return usage_error("--lora-scale wants a finite number, not", val);
         } else if (!strcmp(arg, "--json")) {
             a->json = 1;
         } else if (!strcmp(arg, "--quiet")) {

@@ -1,5 +1,5 @@
 /* matex gen-weights CONFIG.json --seed N -o W.safetensors [--dtype f32|f16]: the golden-v1
- * random weights (../shared/golden/README.md) of a network config, in diffusers/transformers
+ * random weights (tests/data/golden/README.md) of a network config, in diffusers/transformers
  * naming, as one safetensors file. The parameter list comes from the networks' own load code
  * (enumerating binder); tensors are generated and written one chunk at a time, so memory stays
  * small even for the SD1.5 UNet. */
@@ -18,15 +18,16 @@
 #include "../runtime/log.h"
 #include "../weights/golden_rule.h"
 #include "cli.h"
+#include "cli_args.h"
 
 #define CHUNK ((size_t)1 << 20)
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex gen-weights CONFIG.json --seed N -o OUT.safetensors [--dtype f32|f16]\n"
                "\n"
-               "Writes the golden-v1 rule weights (see ../shared/golden/README.md) of the network a diffusers /\n"
-               "transformers config.json describes (UNet2DConditionModel, ControlNetModel, AutoencoderKL,\n"
-               "CLIPTextModel), with the reference state-dict names, so that\n"
+               "Writes the golden-v1 rule weights (the rule: tests/data/golden/README.md in the source tree)\n"
+               "of the network a diffusers / transformers config.json describes (UNet2DConditionModel,\n"
+               "ControlNetModel, AutoencoderKL, CLIPTextModel), with the reference state-dict names, so that\n"
                "  mkdir d; cp CONFIG.json d/config.json; matex gen-weights CONFIG.json --seed 1 -o d/diffusion_pytorch_model.safetensors\n"
                "  matex convert d -o w.mxw\n"
                "works.\n\n"
@@ -115,13 +116,8 @@ int cmd_gen_weights(int argc, char **argv) {
             return 0;
         }
         int has_val = i + 1 < argc;
-        char *end = NULL;
         if (!strcmp(a, "--seed") && has_val) {
-            seed = strtoull(argv[++i], &end, 10);
-            if (!*argv[i] || *end) {
-                fprintf(stderr, "matex gen-weights: --seed needs a non-negative integer\n");
-                return 2;
-            }
+            if (mx_arg_u64("gen-weights", a, argv[++i], &seed)) return 2;
         } else if ((!strcmp(a, "-o") || !strcmp(a, "--output")) && has_val) {
             out = argv[++i];
         } else if (!strcmp(a, "--dtype") && has_val) {

@@ -13,6 +13,7 @@
 #include "../pipeline/io/io.h"
 #include "../runtime/log.h"
 #include "cli.h"
+#include "cli_args.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] -o DIR\n\n"
@@ -37,8 +38,11 @@ static int parse_args(int argc, char **argv, render_args *a) {
         const char *o = argv[i];
         int has = i + 1 < argc;
         if (!strcmp(o, "--texture") && has) a->texture = argv[++i];
-        else if (!strcmp(o, "--views") && has) a->views = atoi(argv[++i]);
-        else if (!strcmp(o, "--size") && has) a->size = atoi(argv[++i]);
+        else if (!strcmp(o, "--views") && has) {
+            if (mx_arg_int("render", o, argv[++i], 1, 360, &a->views)) return 2;
+        } else if (!strcmp(o, "--size") && has) {
+            if (mx_arg_int("render", o, argv[++i], 16, 4096, &a->size)) return 2;
+        }
         else if (!strcmp(o, "-o") && has) a->out = argv[++i];
         else if (!strcmp(o, "--up") && has) {
             const char *u = argv[++i];
@@ -54,10 +58,6 @@ static int parse_args(int argc, char **argv, render_args *a) {
     }
     if (!a->mesh || !a->out) {
         usage(stderr);
-        return 2;
-    }
-    if (a->views < 1 || a->views > 360 || a->size < 16 || a->size > 4096) {
-        fprintf(stderr, "matex render: --views must be 1..360 and --size 16..4096\n");
         return 2;
     }
     return 0;

@@ -13,6 +13,7 @@
 #include "../weights/safetensors.h"
 #include "../weights/weights.h"
 #include "cli.h"
+#include "cli_args.h"
 
 #define MAX_OUTS (MX_UNET_MAX_RES + 4)
 #define SCRATCH_BYTES ((size_t)256 << 20)
@@ -35,6 +36,7 @@ static void usage(FILE *f) {
             "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., text_encoder.;\n"
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
+            "  --device D      cpu (default), cpu-strict (activations guarded: tests) or cuda (`make cuda` builds)\n"
             "  --precision P   fp32 (default) or bf16: bf16 products with fp32 sums where the CPU has\n"
             "                  AVX512_BF16 (linear, conv, attention); elsewhere fp32 with a warning\n"
             "  -h, --help      this help\n");
@@ -46,13 +48,17 @@ typedef struct run_io {
     mx_safetensors in;
     int in_open;
     mx_weightfile *wf;
-    mx_binder b;
+    mx_binder wb, b; /* the weight file's binder; b keeps the weights on the device */
     mx_ctx ctx;
     int ctx_ok;
     mx_arena arena;
     int arena_ok;
     float *tmp[MAX_OUTS * 2];
     int ntmp;
+    float *dev[MAX_OUTS * 2]; /* device copies of inputs and outputs */
+    int ndev;
+    float *out_dev[MAX_OUTS]; /* device output i, fetched into outs[i].data after the run */
+    size_t out_n[MAX_OUTS];
     mx_st_out outs[MAX_OUTS];
     char names[MAX_OUTS][48];
     int nout;
@@ -110,6 +116,33 @@ static float *timesteps(run_io *io, int B, mx_status *st) {
     return ts;
 }
 
+/* Device memory for n floats, a copy of host data when host is not NULL (freed by io_free). */
+static float *on_device(run_io *io, const float *host, size_t n, mx_status *st) {
+    if (io->ndev == (int)(sizeof io->dev / sizeof io->dev[0])) return mx_fail(st, MX_EINTERNAL, "too many tensors"), NULL;
+    float *p = host ? mx_dev_from_host(&io->ctx, host, n, st) : mx_dev_alloc(&io->ctx, n, st);
+    if (p) io->dev[io->ndev++] = p;
+    return p;
+}
+
+/* The device copy of an optional host input (NULL stays NULL); *err set on failure. */
+static const float *dev_input(run_io *io, const float *host, size_t n, int *err, mx_status *st) {
+    if (!host) return NULL;
+    const float *p = on_device(io, host, n, st);
+    if (!p) *err = 1;
+    return p;
+}
+
+/* A network output: n floats on the device, written as `name` after the run. NULL on failure. */
+static float *dev_output(run_io *io, const char *name, int ndim, const int64_t *shape, mx_status *st);
+
+/* The edge out: every device output into its host buffer. */
+static int fetch_outputs(run_io *io, mx_status *st) {
+    for (int i = 0; i < io->nout; i++)
+        if (io->out_dev[i] && mx_download(&io->ctx, (float *)io->outs[i].data, io->out_dev[i], io->out_n[i], st))
+            return -1;
+    return 0;
+}
+
 static int add_output(run_io *io, const char *name, int ndim, const int64_t *shape, const float *data, mx_status *st) {
     if (io->nout == MAX_OUTS) return mx_fail(st, MX_EINTERNAL, "too many outputs");
     mx_st_out *o = &io->outs[io->nout];
@@ -123,10 +156,24 @@ static int add_output(run_io *io, const char *name, int ndim, const int64_t *sha
     return 0;
 }
 
+static float *dev_output(run_io *io, const char *name, int ndim, const int64_t *shape, mx_status *st) {
+    size_t n = (size_t)mx_shape_numel(ndim, shape);
+    float *host = new_floats(io, n, st), *d = host ? on_device(io, NULL, n, st) : NULL;
+    if (!d || add_output(io, name, ndim, shape, host, st)) return NULL;
+    io->out_dev[io->nout - 1] = d;
+    io->out_n[io->nout - 1] = n;
+    return d;
+}
+
 static int make_arena(run_io *io, size_t bytes, mx_status *st) {
-    if (mx_arena_create(&io->arena, bytes, st)) return -1;
+    if (mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)) return -1;
     io->arena_ok = 1;
     return 0;
+}
+
+/* The binder of the network under `prefix`: weight file, weights kept on the device. */
+static int bind_weights(run_io *io, const char *prefix, mx_status *st) {
+    return mx_binder_wf(&io->wb, io->wf, prefix, st) || mx_binder_device(&io->b, &io->wb, &io->ctx, st) ? -1 : 0;
 }
 
 /* Config text of the network under `prefix` ("<prefix>config" metadata). */
@@ -143,7 +190,7 @@ static int run_unet(run_io *io, const char *prefix, mx_status *st) {
     mx_unet *u = NULL;
     const char *text = net_config(io, prefix, key, sizeof key, st);
     if (!text || mx_unet_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_unet_load(&u, &cfg, &io->b, st)) return -1;
+    if (bind_weights(io, prefix, st) || mx_unet_load(&u, &cfg, &io->b, st)) return -1;
     int rc = -1;
     int64_t ss[4] = {-1, cfg.in_channels, -1, -1}, es[3] = {-1, -1, cfg.cross_attention_dim};
     float *sample = input(io, "sample", 4, ss, 1, st), *ehs = NULL, *ts = NULL, *out;
@@ -170,11 +217,20 @@ static int run_unet(run_io *io, const char *prefix, mx_status *st) {
     if (have) in.down_residuals = res;
     size_t bytes;
     int64_t os[4] = {B, cfg.out_channels, H, W};
-    if (!(out = new_floats(io, (size_t)B * cfg.out_channels * H * W, st))) goto done;
+    int err = 0;
+    in.sample = dev_input(io, sample, (size_t)B * cfg.in_channels * H * W, &err, st);
+    in.timesteps = dev_input(io, ts, (size_t)B, &err, st);
+    in.encoder_hidden_states = dev_input(io, ehs, (size_t)B * in.T * cfg.cross_attention_dim, &err, st);
+    for (int i = 0; i <= n && (have || in.mid_residual); i++) {
+        mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
+        if (i < n && have) res[i] = dev_input(io, res[i], (size_t)B * C * h * w, &err, st);
+        if (i == n) in.mid_residual = dev_input(io, in.mid_residual, (size_t)B * C * h * w, &err, st);
+    }
+    if (err || !(out = dev_output(io, "out", 4, os, st))) goto done;
     if (mx_unet_arena_bytes(u, B, H, W, in.T, &bytes, st) || make_arena(io, bytes, st) ||
         mx_unet_forward(&io->ctx, u, &in, out, &io->arena, st))
         goto done;
-    rc = add_output(io, "out", 4, os, out, st);
+    rc = 0;
 done:
     mx_unet_free(u);
     return rc;
@@ -187,7 +243,7 @@ static int run_controlnet(run_io *io, const char *prefix, mx_status *st) {
     const char *text = net_config(io, prefix, key, sizeof key, st);
     if (!text || mx_unet_config_parse(&cfg, text, strlen(text), key, st)) return -1;
     if (!cfg.is_controlnet) return mx_fail(st, MX_EINPUT, "%s: \"%s\" is not a ControlNetModel config", mx_wf_path(io->wf), key);
-    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_controlnet_load(&m, &cfg, &io->b, st)) return -1;
+    if (bind_weights(io, prefix, st) || mx_controlnet_load(&m, &cfg, &io->b, st)) return -1;
     int rc = -1, n = mx_unet_num_residuals(&cfg), f = 1 << (cfg.n_cond_emb - 1), C, h, w;
     int64_t ss[4] = {-1, cfg.in_channels, -1, -1}, es[3] = {-1, -1, cfg.cross_attention_dim}, cs[4], one[1] = {1};
     float *sample = input(io, "sample", 4, ss, 1, st), *ehs = NULL, *ts = NULL, *cond = NULL, *scale = NULL;
@@ -206,13 +262,19 @@ static int run_controlnet(run_io *io, const char *prefix, mx_status *st) {
     int B = (int)ss[0], H = (int)ss[2], W = (int)ss[3];
     mx_controlnet_input in = {sample, ts, ehs, cond, B, H, W, (int)es[1], scale ? scale[0] : 1.0f};
     if (mx_unet_check_sizes(&cfg, B, H, W, in.T, st)) goto done;
+    int err = 0;
+    in.sample = dev_input(io, sample, (size_t)B * cfg.in_channels * H * W, &err, st);
+    in.timesteps = dev_input(io, ts, (size_t)B, &err, st);
+    in.encoder_hidden_states = dev_input(io, ehs, (size_t)B * in.T * cfg.cross_attention_dim, &err, st);
+    in.cond = dev_input(io, cond, (size_t)B * cs[1] * cs[2] * cs[3], &err, st);
+    if (err) goto done;
     for (int i = 0; i <= n; i++) {
         char name[48];
         mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
         int64_t rs[4] = {B, C, h, w};
         if (i < n) snprintf(name, sizeof name, "down_block_res_sample.%d", i);
         else snprintf(name, sizeof name, "mid_block_res_sample");
-        if (!(down[i] = new_floats(io, (size_t)B * C * h * w, st)) || add_output(io, name, 4, rs, down[i], st)) goto done;
+        if (!(down[i] = dev_output(io, name, 4, rs, st))) goto done;
     }
     size_t bytes;
     if (mx_controlnet_arena_bytes(m, B, H, W, in.T, &bytes, st) || make_arena(io, bytes, st) ||
@@ -230,7 +292,7 @@ static int run_vae(run_io *io, const char *prefix, int decode, mx_status *st) {
     mx_vae *v = NULL;
     const char *text = net_config(io, prefix, key, sizeof key, st);
     if (!text || mx_vae_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_vae_load(&v, &cfg, &io->b, st)) return -1;
+    if (bind_weights(io, prefix, st) || mx_vae_load(&v, &cfg, &io->b, st)) return -1;
     int rc = -1, f = mx_vae_factor(v), lc = cfg.latent_channels;
     size_t bytes;
     if (decode) {
@@ -240,22 +302,22 @@ static int run_vae(run_io *io, const char *prefix, int decode, mx_status *st) {
         int B = (int)ls[0], h = (int)ls[2], w = (int)ls[3];
         int64_t os[4] = {B, cfg.out_channels, (int64_t)h * f, (int64_t)w * f};
         if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, st) || make_arena(io, bytes, st) ||
-            !(img = new_floats(io, (size_t)B * cfg.out_channels * h * f * w * f, st)) ||
+            !(lat = on_device(io, lat, (size_t)B * lc * h * w, st)) || !(img = dev_output(io, "image", 4, os, st)) ||
             mx_vae_decode(&io->ctx, v, lat, B, h, w, img, &io->arena, st))
             goto done;
-        rc = add_output(io, "image", 4, os, img, st);
+        rc = 0;
     } else {
         int64_t is[4] = {-1, cfg.in_channels, -1, -1};
         float *img = input(io, "image", 4, is, 1, st), *mean, *logvar;
         if (!img) goto done;
         int B = (int)is[0], H = (int)is[2], W = (int)is[3];
         if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, st) || make_arena(io, bytes, st)) goto done;
-        size_t n = (size_t)B * lc * (H / f) * (W / f);
         int64_t os[4] = {B, lc, H / f, W / f};
-        if (!(mean = new_floats(io, n, st)) || !(logvar = new_floats(io, n, st)) ||
+        if (!(img = on_device(io, img, (size_t)B * cfg.in_channels * H * W, st)) ||
+            !(mean = dev_output(io, "mean", 4, os, st)) || !(logvar = dev_output(io, "logvar", 4, os, st)) ||
             mx_vae_encode(&io->ctx, v, img, B, H, W, mean, logvar, &io->arena, st))
             goto done;
-        rc = add_output(io, "mean", 4, os, mean, st) || add_output(io, "logvar", 4, os, logvar, st) ? -1 : 0;
+        rc = 0;
     }
 done:
     mx_vae_free(v);
@@ -269,7 +331,7 @@ static int run_clip(run_io *io, const char *prefix, mx_status *st) {
     memset(&m, 0, sizeof m);
     const char *text = net_config(io, prefix, key, sizeof key, st);
     if (!text || mx_clip_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (mx_binder_wf(&io->b, io->wf, prefix, st) || mx_clip_load(&m, &cfg, &io->b, st)) return -1;
+    if (bind_weights(io, prefix, st) || mx_clip_load(&m, &cfg, &io->b, st)) return -1;
     int rc = -1, L = cfg.num_hidden_layers, C = cfg.hidden_size;
     int64_t is[2] = {-1, -1};
     float *idf = input(io, "input_ids", 2, is, 1, st), *last, *pooled;
@@ -285,24 +347,21 @@ static int run_clip(run_io *io, const char *prefix, mx_status *st) {
     ids = malloc((size_t)B * T * sizeof *ids);
     if (!ids) goto done;
     for (size_t i = 0; i < (size_t)B * T; i++) ids[i] = (int32_t)idf[i];
-    size_t btc = (size_t)B * T * C;
     int64_t hshape[3] = {B, T, C}, pshape[2] = {B, C};
-    if (!(last = new_floats(io, btc, st)) || !(pooled = new_floats(io, (size_t)B * C, st))) goto done;
-    for (int i = 0; i <= L; i++)
-        if (!(hs[i] = new_floats(io, btc, st))) goto done;
+    if (!(last = dev_output(io, "last_hidden_state", 3, hshape, st)) ||
+        !(pooled = dev_output(io, "pooler_output", 2, pshape, st)))
+        goto done;
+    for (int i = 0; i <= L; i++) {
+        char name[48];
+        snprintf(name, sizeof name, "hidden_states.%d", i);
+        if (!(hs[i] = dev_output(io, name, 3, hshape, st))) goto done;
+    }
     mx_arena dry;
     mx_arena_measure(&dry);
     if (mx_clip_forward(&m, &io->ctx, &dry, ids, B, T, last, pooled, hs, st) ||
         make_arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st) ||
         mx_clip_forward(&m, &io->ctx, &io->arena, ids, B, T, last, pooled, hs, st))
         goto done;
-    if (add_output(io, "last_hidden_state", 3, hshape, last, st) || add_output(io, "pooler_output", 2, pshape, pooled, st))
-        goto done;
-    for (int i = 0; i <= L; i++) {
-        char name[48];
-        snprintf(name, sizeof name, "hidden_states.%d", i);
-        if (add_output(io, name, 3, hshape, hs[i], st)) goto done;
-    }
     rc = 0;
 done:
     free(ids);
@@ -313,8 +372,10 @@ done:
 
 static void io_free(run_io *io) {
     if (io->arena_ok) mx_arena_destroy(&io->arena);
-    if (io->ctx_ok) mx_ctx_destroy(&io->ctx);
     mx_binder_free(&io->b);
+    mx_binder_free(&io->wb);
+    for (int i = 0; i < io->ndev; i++) mx_dev_free(&io->ctx, io->dev[i]);
+    if (io->ctx_ok) mx_ctx_destroy(&io->ctx);
     if (io->wf) mx_wf_close(io->wf);
     if (io->in_open) mx_st_close(&io->in);
     for (int i = 0; i < io->ntmp; i++) free(io->tmp[i]);
@@ -329,27 +390,27 @@ static const char *default_prefix(const char *net) {
 }
 
 static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
-               mx_status *st) {
+               mx_backend_kind device, mx_status *st) {
+    if (mx_ctx_create_on(&io->ctx, device, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
+    io->ctx_ok = 1;
+    if (device != MX_BACKEND_CUDA && mx_isa_precision(io->ctx.k->isa) != prec)
+        mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
     if (mx_wf_open(&io->wf, weights, st)) return -1;
-    if (mx_ctx_create(&io->ctx, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
-    io->ctx_ok = 1;
-    if (mx_isa_precision(io->ctx.k->isa) != prec)
-        mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     double t0 = mx_now();
     int rc = !strcmp(net, "unet")         ? run_unet(io, prefix, st)
              : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
              : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
              : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
                                           : run_clip(io, prefix, st);
-    if (rc) return -1;
-    mx_info("run-net %s: %.3f s", net, mx_now() - t0);
+    if (rc || fetch_outputs(io, st)) return -1;
+    mx_info("run-net %s on %s: %.3f s", net, mx_backend_name(device), mx_now() - t0);
     return mx_st_write(io->out_path, io->outs, (size_t)io->nout, st);
 }
 
 int cmd_run_net(int argc, char **argv) {
-    const char *net = NULL, *weights = NULL, *prefix = NULL;
+    const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu";
     int threads = 0;
     mx_precision prec = MX_PREC_FP32;
     run_io io;
@@ -365,14 +426,16 @@ int cmd_run_net(int argc, char **argv) {
         else if (!strcmp(a, "--inputs") && has_val) io.in_path = argv[++i];
         else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
-        else if (!strcmp(a, "--threads") && has_val) threads = atoi(argv[++i]);
-        else if (!strcmp(a, "--precision") && has_val) {
+        else if (!strcmp(a, "--threads") && has_val) {
+            if (mx_arg_int("run-net", a, argv[++i], 0, 1024, &threads)) return 2;
+        } else if (!strcmp(a, "--device") && has_val) {
+            device = argv[++i];
+        } else if (!strcmp(a, "--precision") && has_val) {
             if (mx_precision_parse(argv[++i], &prec)) {
                 fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", argv[i]);
                 return 2;
             }
-        }
-        else if (a[0] != '-' && !net) net = a;
+        } else if (a[0] != '-' && !net) net = a;
         else {
             fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
             usage(stderr);
@@ -395,7 +458,12 @@ int cmd_run_net(int argc, char **argv) {
     snprintf(pfx, sizeof pfx, "%s%s", prefix, *prefix && prefix[strlen(prefix) - 1] != '.' ? "." : "");
     mx_status st;
     mx_status_clear(&st);
-    int rc = run(&io, net, weights, pfx, threads, prec, &st);
+    mx_backend_kind kind;
+    if (mx_backend_parse(device, &kind, &st)) {
+        fprintf(stderr, "matex run-net: --device: %s\n", st.msg);
+        return 2;
+    }
+    int rc = run(&io, net, weights, pfx, threads, prec, kind, &st);
     io_free(&io);
     if (rc) {
         fprintf(stderr, "matex run-net: %s\n", st.msg);

@@ -1,12 +1,12 @@
 #!/bin/sh
 # Builds a full-size SD1.5 model set with random weights (the golden-v1 rule; configs from
-# ../shared/golden/sd15_*), the real CLIP vocabulary, two ControlNets (depth, inpaint), as an
+# tests/data/golden/sd15_*), the real CLIP vocabulary, two ControlNets (depth, inpaint), as an
 # fp16 matex weight file: what the end-to-end benchmark times. ~3.6 GB, about a minute.
 # usage: sh tools/make_sd15_weights.sh MATEX OUT.mxw
 set -eu
 MATEX=$1
 OUT=$2
-G=${MATEX_SHARED:-../shared}/golden
+G=tests/data/golden # run from the repository root
 DIR=$(mktemp -d "${TMPDIR:-/tmp}/matex_sd15.XXXXXX")
 trap 'rm -rf "$DIR"' EXIT
 net() { # folder golden-case seed weights-file-name

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "../runtime/log.h"
+#include "../runtime/version.h"
 #include "cli.h"
 
 typedef struct {
@@ -16,7 +17,8 @@ static const verb verbs[] = {MX_CLI_VERBS(MX_VERB_ENTRY)};
 #undef MX_VERB_ENTRY
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex VERB [options]   (matex VERB --help for each verb)\n\nverbs:\n");
+    fprintf(f, "usage: matex VERB [options]   (matex VERB --help for each verb)\n"
+               "       matex --version           version, build options, CPU kernels, backends\n\nverbs:\n");
     for (size_t i = 0; i < sizeof verbs / sizeof verbs[0]; i++) {
         char name[32];
         snprintf(name, sizeof name, "%s", verbs[i].name);
@@ -33,6 +35,10 @@ int main(int argc, char **argv) {
     }
     if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
         usage(stdout);
+        return 0;
+    }
+    if (!strcmp(argv[1], "--version") || !strcmp(argv[1], "-V")) {
+        mx_build_report(stdout);
         return 0;
     }
     char want[64];

@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 
 #include "../runtime/buf.h"
+#include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "lora.h"
@@ -39,10 +40,6 @@ typedef struct {
 
 
 
-
-static int join(char *out, size_t cap, const char *dir, const char *name) {
-    return snprintf(out, cap, "%s/%s", dir, name) < (int)cap ? 0 : -1;
-}
 
 static int is_file(const char *path) {
     struct stat sb;
@@ -140,7 +137,7 @@ static int read_shard_index(const char *dir, const char *index_path, weight_file
             break;
         }
         char path[PATH_MAX];
-        if (join(path, sizeof path, dir, shard)) rc = mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+        rc = mx_path_join(path, sizeof path, dir, shard, st);
         size_t k = 0;
         while (!rc && k < wfs->n && strcmp(wfs->paths[k], path)) k++;
         if (!rc && k == wfs->n) {
@@ -162,14 +159,14 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
         for (int b = 0; b < 2; b++) {
             char name[128], path[PATH_MAX];
             snprintf(name, sizeof name, "%s%s.safetensors", bases[b], fp16 ? ".fp16" : "");
-            if (join(path, sizeof path, dir, name)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+            if (mx_path_join(path, sizeof path, dir, name, st)) return -1;
             if (is_file(path)) {
                 snprintf(wfs->paths[0], PATH_MAX, "%s", path);
                 wfs->n = 1;
                 return 0;
             }
             snprintf(name, sizeof name, "%s.safetensors.index%s.json", bases[b], fp16 ? ".fp16" : "");
-            if (join(path, sizeof path, dir, name)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+            if (mx_path_join(path, sizeof path, dir, name, st)) return -1;
             if (is_file(path)) return read_shard_index(dir, path, wfs, st);
         }
     }
@@ -271,7 +268,7 @@ static int add_weight_file(converter *cv, const char *prefix, const char *kind, 
 static int add_network(converter *cv, const char *dir, const char *prefix, const char *want_kind, mx_status *st) {
     char cfg_path[PATH_MAX];
     if (!is_dir(dir)) return mx_fail(st, MX_EINPUT, "%s: not a folder", dir);
-    if (join(cfg_path, sizeof cfg_path, dir, "config.json")) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    if (mx_path_join(cfg_path, sizeof cfg_path, dir, "config.json", st)) return -1;
     char *cfg_text = read_text(cfg_path, st);
     if (!cfg_text) return -1;
     mx_json *cfg = mx_json_parse(cfg_text, strlen(cfg_text), cfg_path, st);
@@ -323,7 +320,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
 static int add_text_meta(converter *cv, const char *dir, const char *file, const char *key, int must_be_json,
                          mx_status *st) {
     char path[PATH_MAX];
-    if (join(path, sizeof path, dir, file)) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
+    if (mx_path_join(path, sizeof path, dir, file, st)) return -1;
     char *text = read_text(path, st);
     if (!text) return -1;
     int rc = 0;
@@ -352,17 +349,17 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
     char dir[PATH_MAX];
     size_t found = 0;
     for (int i = 0; i < 4; i++) {
-        if (join(dir, sizeof dir, root, subs[i])) return mx_fail(st, MX_EINPUT, "%s: path too long", root);
+        if (mx_path_join(dir, sizeof dir, root, subs[i], st)) return -1;
         if (!is_dir(dir)) continue;
         if (add_network(cv, dir, subs[i], subs[i], st)) return -1;
         found++;
     }
-    if (join(dir, sizeof dir, root, "tokenizer") == 0 && is_dir(dir)) {
+    if (mx_path_join(dir, sizeof dir, root, "tokenizer", NULL) == 0 && is_dir(dir)) {
         if (add_tokenizer(cv, dir, st)) return -1;
     } else if (found) {
         mx_warn("convert: %s has no tokenizer/ folder: prompts cannot be tokenized with this file", root);
     }
-    if (join(dir, sizeof dir, root, "scheduler") == 0 && is_dir(dir)) {
+    if (mx_path_join(dir, sizeof dir, root, "scheduler", NULL) == 0 && is_dir(dir)) {
         if (add_text_meta(cv, dir, "scheduler_config.json", "scheduler.config", 1, st)) return -1;
     }
     if (!found)
@@ -384,7 +381,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
     if (o->input) {
         char cfg[PATH_MAX];
         if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder", o->input);
-        if (join(cfg, sizeof cfg, o->input, "config.json")) return mx_fail(st, MX_EINPUT, "%s: path too long", o->input);
+        if (mx_path_join(cfg, sizeof cfg, o->input, "config.json", st)) return -1;
         if (is_file(cfg) ? add_network(cv, o->input, NULL, NULL, st) : convert_model_set(cv, o->input, st)) return -1;
     }
     for (size_t i = 0; i < o->n_controlnets; i++) {

@@ -1,4 +1,4 @@
-/* golden-v1 (../shared/golden/README.md). The value expressions must be evaluated exactly as
+/* golden-v1 (tests/data/golden/README.md). The value expressions must be evaluated exactly as
  * written, in double and rounded once to float, without fused multiply-add: the Makefile
  * compiles with -ffp-contract=off, and each product is stored in a double before the add. */
 #include "golden_rule.h"

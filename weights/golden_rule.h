@@ -1,4 +1,4 @@
-/* The "golden-v1" rule of ../shared/golden/README.md: random weights defined by a tensor's
+/* The "golden-v1" rule of tests/data/golden/README.md: random weights defined by a tensor's
  * name, shape and a seed, so that SD1.5-size parity tests need no downloaded model, and the
  * checksums listed in each sd15_* folder's weights_checksums.json. */
 #ifndef MX_GOLDEN_RULE_H

@@ -4,29 +4,29 @@
 
 #include "kernels.h"
 
-void mx_f16_to_f32_avx2(float *y, const uint16_t *x, size_t n) {
+void mx_f16_to_f32_avx2(const mx_ctx *c, float *y, const uint16_t *x, size_t n) {
     size_t i = 0;
     for (; i + 8 <= n; i += 8) _mm256_storeu_ps(y + i, _mm256_cvtph_ps(_mm_loadu_si128((const __m128i *)(x + i))));
-    mx_f16_to_f32_ref(y + i, x + i, n - i);
+    mx_f16_to_f32_ref(c, y + i, x + i, n - i);
 }
 
-void mx_f32_to_f16_avx2(uint16_t *y, const float *x, size_t n) {
+void mx_f32_to_f16_avx2(const mx_ctx *c, uint16_t *y, const float *x, size_t n) {
     size_t i = 0;
     for (; i + 8 <= n; i += 8)
         _mm_storeu_si128((__m128i *)(y + i), _mm256_cvtps_ph(_mm256_loadu_ps(x + i), _MM_FROUND_TO_NEAREST_INT));
-    mx_f32_to_f16_ref(y + i, x + i, n - i);
+    mx_f32_to_f16_ref(c, y + i, x + i, n - i);
 }
 
-void mx_bf16_to_f32_avx2(float *y, const uint16_t *x, size_t n) {
+void mx_bf16_to_f32_avx2(const mx_ctx *c, float *y, const uint16_t *x, size_t n) {
     size_t i = 0;
     for (; i + 8 <= n; i += 8) {
         __m256i v = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(x + i)));
         _mm256_storeu_ps(y + i, _mm256_castsi256_ps(_mm256_slli_epi32(v, 16)));
     }
-    mx_bf16_to_f32_ref(y + i, x + i, n - i);
+    mx_bf16_to_f32_ref(c, y + i, x + i, n - i);
 }
 
-void mx_f32_to_bf16_avx2(uint16_t *y, const float *x, size_t n) {
+void mx_f32_to_bf16_avx2(const mx_ctx *c, uint16_t *y, const float *x, size_t n) {
     size_t i = 0;
     const __m256i one = _mm256_set1_epi32(1), bias = _mm256_set1_epi32(0x7fff);
     for (; i + 8 <= n; i += 8) {
@@ -40,5 +40,5 @@ void mx_f32_to_bf16_avx2(uint16_t *y, const float *x, size_t n) {
         __m256i p = _mm256_permute4x64_epi64(_mm256_packus_epi32(r, r), 0xd8);
         _mm_storeu_si128((__m128i *)(y + i), _mm256_castsi256_si128(p));
     }
-    mx_f32_to_bf16_ref(y + i, x + i, n - i);
+    mx_f32_to_bf16_ref(c, y + i, x + i, n - i);
 }

@@ -53,10 +53,10 @@ void mx_scratch_release(const mx_ctx *c, mx_scratch *s);
     void mx_binary_##sfx(const mx_ctx *, mx_binop op, float *y, const float *a, const int64_t *ashape,       \
                          const float *b, const int64_t *bshape, int ndim);                                   \
     void mx_scale_##sfx(const mx_ctx *, float *y, const float *x, float s, size_t n);                        \
-    void mx_f16_to_f32_##sfx(float *y, const uint16_t *x, size_t n);                                         \
-    void mx_f32_to_f16_##sfx(uint16_t *y, const float *x, size_t n);                                         \
-    void mx_bf16_to_f32_##sfx(float *y, const uint16_t *x, size_t n);                                        \
-    void mx_f32_to_bf16_##sfx(uint16_t *y, const float *x, size_t n);
+    void mx_f16_to_f32_##sfx(const mx_ctx *, float *y, const uint16_t *x, size_t n);                                         \
+    void mx_f32_to_f16_##sfx(const mx_ctx *, uint16_t *y, const float *x, size_t n);                                         \
+    void mx_bf16_to_f32_##sfx(const mx_ctx *, float *y, const uint16_t *x, size_t n);                                        \
+    void mx_f32_to_bf16_##sfx(const mx_ctx *, uint16_t *y, const float *x, size_t n);
 
 MX_KERNEL_DECLS(ref)
 MX_KERNEL_DECLS(avx2)

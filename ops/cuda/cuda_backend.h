@@ -86,6 +86,26 @@ int mx_cuda_f16_to_f32(mx_cuda_ctx *c, float *y, const uint16_t *x, size_t n, mx
 int mx_cuda_f32_to_f16(mx_cuda_ctx *c, uint16_t *y, const float *x, size_t n, mx_status *st);
 int mx_cuda_bf16_to_f32(mx_cuda_ctx *c, float *y, const uint16_t *x, size_t n, mx_status *st);
 int mx_cuda_f32_to_bf16(mx_cuda_ctx *c, uint16_t *y, const float *x, size_t n, mx_status *st);
+/* The seam ops (cuda_seam.cu). embed_tokens: ids are HOST integers. */
+int mx_cuda_pad2d(mx_cuda_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+                  int right, mx_status *st);
+int mx_cuda_copy(mx_cuda_ctx *c, float *y, const float *x, size_t n, mx_status *st);
+int mx_cuda_fill(mx_cuda_ctx *c, float *y, float v, size_t n, mx_status *st);
+int mx_cuda_axpy(mx_cuda_ctx *c, float *y, const float *x, float s, size_t n, mx_status *st);
+int mx_cuda_lincomb(mx_cuda_ctx *c, float *y, int k, const float *coef, const float *const *x, size_t n,
+                    mx_status *st);
+int mx_cuda_clamp(mx_cuda_ctx *c, float *y, const float *x, float lo, float hi, size_t n, mx_status *st);
+int mx_cuda_affine(mx_cuda_ctx *c, float *y, const float *x, float a, float b, size_t n, mx_status *st);
+int mx_cuda_timestep_embedding(mx_cuda_ctx *c, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
+                               float downscale_freq_shift, float max_period, mx_status *st);
+int mx_cuda_embed_tokens(mx_cuda_ctx *c, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
+                         mx_wptr positions, mx_status *st);
+
+/* The CUDA backend of runtime/backend.h on device 0: every op of ops.h through a kernel table of
+ * the functions above (errors are kept and reported by the next copy to the host), device
+ * memory, host copies. Fails with one line when there is no usable device. */
+int mx_cuda_backend_create(mx_backend **out, mx_status *st);
+
 /* out[i] = mx_rng_normal(seed, stream, first + i) of runtime/rng.h, bit for bit. */
 int mx_cuda_rng_fill_normal(mx_cuda_ctx *c, float *out, size_t n, uint64_t seed, uint64_t stream,
                             uint64_t first, mx_status *st);

@@ -12,6 +12,7 @@
 
 #include "../../runtime/atomic_file.h"
 #include "../../runtime/buf.h"
+#include "../../runtime/fileio.h"
 #include "../io/io.h"
 
 /* ---- a growable byte buffer (JSON text and the GLB BIN chunk) ---- */
@@ -337,8 +338,8 @@ done:
 
 /* ---- the output folder ---- */
 
-/* names[i] = "texture_<name>.png" with the material name reduced to [A-Za-z0-9_-]; the
- * material index is added when an earlier material already gave that file name. */
+/* names[i] = "texture_<name>" with the material name reduced to [A-Za-z0-9_-]; the material
+ * index is added when an earlier material already gave that name. */
 static void material_texture_name(const mx_mesh *m, int i, char names[][160]) {
     char clean[128];
     size_t n = 0;
@@ -348,32 +349,31 @@ static void material_texture_name(const mx_mesh *m, int i, char names[][160]) {
         clean[n++] = ok ? c : '_';
     }
     clean[n] = 0;
-    snprintf(names[i], 160, "texture_%s.png", n ? clean : "material");
+    snprintf(names[i], 160, "texture_%s", n ? clean : "material");
     for (int k = 0; k < i; k++)
         if (!strcmp(names[k], names[i])) {
-            snprintf(names[i], 160, "texture_%s_%d.png", n ? clean : "material", i);
+            snprintf(names[i], 160, "texture_%s_%d", n ? clean : "material", i);
             return;
         }
 }
 
-static int join(char *out, size_t cap, const char *dir, const char *name, mx_status *st) {
-    if ((size_t)snprintf(out, cap, "%s/%s", dir, name) >= cap) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
-    return 0;
+/* "<base>.png" (8-bit) and "<base>.exr" (float) of one texture; names[i] becomes the PNG's name. */
+static int write_texture_pair(const char *dir, const mx_image *tex, char *name, mx_status *st) {
+    char path[1200];
+    size_t len = strlen(name);
+    snprintf(name + len, 160 - len, ".exr");
+    if (mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_exr(path, tex, st)) return -1;
+    snprintf(name + len, 160 - len, ".png");
+    return mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_png(path, tex, st) ? -1 : 0;
 }
 
+/* texture.png/.exr for one texture, else texture_<material>.png/.exr per textured material. */
 static int write_textures(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, char names[][160],
                           mx_status *st) {
-    char path[1200];
-    if (join(path, sizeof path, dir, "texture.png", st) || mx_io_write_png(path, &textures[0], st)) return -1;
-    if (join(path, sizeof path, dir, "texture.exr", st) || mx_io_write_exr(path, &textures[0], st)) return -1;
-    if (ntex == 1) {
-        snprintf(names[0], 160, "texture.png");
-        return 0;
-    }
     for (int i = 0; i < ntex; i++) {
-        material_texture_name(m, i, names);
-        if (textures[i].data && (join(path, sizeof path, dir, names[i], st) || mx_io_write_png(path, &textures[i], st)))
-            return -1;
+        if (ntex == 1) snprintf(names[0], 160, "texture");
+        else material_texture_name(m, i, names);
+        if (textures[i].data && write_texture_pair(dir, &textures[i], names[i], st)) return -1;
     }
     return 0;
 }
@@ -402,10 +402,10 @@ int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures
     }
     if (write_textures(dir, &one, textures, ntex, names, st)) goto done;
     for (int i = 0; i < ntex; i++) name_ptrs[i] = textures[i].data ? names[i] : NULL;
-    if (join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
-    if (join(path, sizeof path, dir, "mesh.glb", st) || mx_export_glb(path, &one, textures, ntex, st)) goto done;
+    if (mx_path_join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
+    if (mx_path_join(path, sizeof path, dir, "mesh.glb", st) || mx_export_glb(path, &one, textures, ntex, st)) goto done;
     const char *report = report_json ? report_json : "{}";
-    if (join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st)) goto done;
+    if (mx_path_join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st)) goto done;
     rc = 0;
 done:
     free(names);

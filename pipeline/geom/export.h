@@ -22,9 +22,10 @@ int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, 
                   mx_status *st);
 
 /* Writes the output folder (created if missing) of a texturing run:
- *   texture.png (8-bit), texture.exr (float) from textures[0];
- *   texture_<material>.png for each material when ntex > 1 (several materials keep their own
- *   UVs: textures[i] belongs to material i);
+ *   ntex == 1: texture.png (8-bit) and texture.exr (float), every face on one material;
+ *   ntex > 1 (several materials keep their own UVs: textures[i] belongs to material i):
+ *   texture_<material>.png and texture_<material>.exr per material with a texture (the name
+ *   reduced to [A-Za-z0-9_-], the index added when two materials give the same name);
  *   mesh.obj + mesh.mtl, mesh.glb (textures embedded), report.json (report_json verbatim,
  *   or "{}" when NULL). */
 int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex,

@@ -149,12 +149,14 @@ void mx_mesh_bbox(const mx_mesh *m, float lo[3], float hi[3]) {
         }
 }
 
-int mx_mesh_normalized(const mx_mesh *m, mx_up_axis up, float **pos_out, float center[3], float *scale,
-                       mx_status *st) {
-    *pos_out = NULL;
+/* A malloc'ed copy of the positions turned y-up. */
+static float *rotated_copy(const mx_mesh *m, mx_up_axis up, mx_status *st) {
     size_t n = (size_t)m->nverts;
     float *p = malloc(n * 3 * sizeof(float) + 1);
-    if (!p) return mx_fail(st, MX_ENOMEM, "%s: out of memory normalising %zu vertices", m->source_path, n);
+    if (!p) {
+        mx_fail(st, MX_ENOMEM, "%s: out of memory normalising %zu vertices", m->source_path, n);
+        return NULL;
+    }
     for (size_t v = 0; v < n; v++) {
         const float *q = m->pos + 3 * v;
         /* z-up -> y-up: a rotation of -90 degrees about x, (x, y, z) -> (x, z, -y). */
@@ -162,6 +164,19 @@ int mx_mesh_normalized(const mx_mesh *m, mx_up_axis up, float **pos_out, float c
         p[3 * v + 1] = up == MX_UP_Z ? q[2] : q[1];
         p[3 * v + 2] = up == MX_UP_Z ? -q[1] : q[2];
     }
+    return p;
+}
+
+static void move_and_scale(float *p, size_t n, const float c[3], float s) {
+    for (size_t v = 0; v < n; v++)
+        for (int k = 0; k < 3; k++) p[3 * v + k] = (p[3 * v + k] - c[k]) * s;
+}
+
+int mx_mesh_normalized(const mx_mesh *m, mx_up_axis up, float **pos_out, float center[3], float *scale,
+                       mx_status *st) {
+    size_t n = (size_t)m->nverts;
+    float *p = *pos_out = rotated_copy(m, up, st);
+    if (!p) return -1;
     mx_mesh tmp = *m;
     tmp.pos = p;
     float lo[3], hi[3], c[3];
@@ -174,12 +189,18 @@ int mx_mesh_normalized(const mx_mesh *m, mx_up_axis up, float **pos_out, float c
         if (d > r2) r2 = d;
     }
     float s = r2 > 0 ? (float)(1.0 / sqrt(r2)) : 1.f;
-    for (size_t v = 0; v < n; v++)
-        for (int k = 0; k < 3; k++) p[3 * v + k] = (p[3 * v + k] - c[k]) * s;
+    move_and_scale(p, n, c, s);
     if (center)
         for (int k = 0; k < 3; k++) center[k] = c[k];
     if (scale) *scale = s;
-    *pos_out = p;
+    return 0;
+}
+
+int mx_mesh_placed(const mx_mesh *m, mx_up_axis up, const float center[3], float scale, float **pos_out,
+                   mx_status *st) {
+    float *p = *pos_out = rotated_copy(m, up, st);
+    if (!p) return -1;
+    move_and_scale(p, (size_t)m->nverts, center, scale);
     return 0;
 }
 

@@ -64,6 +64,10 @@ void mx_mesh_bbox(const mx_mesh *m, float lo[3], float hi[3]);
  * p' = (R p - center) * scale. The mesh itself is not changed. */
 int mx_mesh_normalized(const mx_mesh *m, mx_up_axis up, float **pos_out, float center[3],
                        float *scale, mx_status *st);
+/* The same transform with a given center and scale (those of another mesh, to place two
+ * meshes that share pose and units in one frame). */
+int mx_mesh_placed(const mx_mesh *m, mx_up_axis up, const float center[3], float scale, float **pos_out,
+                   mx_status *st);
 
 /* Unit face normals [nfaces][3] (counter-clockwise = front) of the given positions
  * (m->pos or a normalised copy); zero vector for a degenerate face. */

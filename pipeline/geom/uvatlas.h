@@ -39,4 +39,13 @@ mx_uvatlas_opts mx_uvatlas_defaults(void);
  * o and r may be NULL. */
 int mx_uvatlas_build(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r, mx_status *st);
 
+/* For a mesh with UVs on some faces only (pipeline/geom/uvatlas_faces.c): the faces without
+ * UVs (a corner index -1) of each material get an atlas of their own, appended to m->uv, and a
+ * texture of their own: they keep their material when none of its faces had UVs, else they move
+ * to a new material "<name>_atlas" (m->mats, m->face_mat grow). A warning names each material.
+ * *faces_done: faces laid out; r (may be NULL): charts summed, utilisation and mean stretch
+ * averaged over the atlases, seconds summed. */
+int mx_uvatlas_complete(mx_mesh *m, const mx_uvatlas_opts *o, mx_uvatlas_report *r, int *faces_done,
+                        mx_status *st);
+
 #endif

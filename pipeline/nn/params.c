@@ -230,9 +230,67 @@ size_t mx_binder_enum_bytes(const mx_binder *b) {
     return total;
 }
 
+/* ---- weights on a device ---- */
+
+typedef struct device_binder {
+    mx_binder *inner;
+    const mx_ctx *c;
+    void **bufs;
+    size_t n, cap;
+} device_binder;
+
+static int keep_device_buffer(device_binder *d, void *p, mx_status *st) {
+    if (d->n == d->cap) {
+        size_t cap = d->cap ? 2 * d->cap : 256;
+        void **b = realloc(d->bufs, cap * sizeof *b);
+        if (!b) return mx_fail(st, MX_ENOMEM, "out of memory binding weights");
+        d->bufs = b;
+        d->cap = cap;
+    }
+    d->bufs[d->n++] = p;
+    return 0;
+}
+
+static int bind_device(mx_binder *b, const char *name, int ndim, const int64_t *shape, mx_wptr *out, mx_status *st) {
+    device_binder *d = b->impl;
+    mx_backend *be = d->c->be;
+    if (d->inner->bind(d->inner, name, ndim, shape, out, st)) return -1;
+    if (!out->data || !be || be->host_visible) return 0;
+    size_t bytes = (size_t)mx_shape_numel(ndim, shape) * mx_dtype_size(out->dtype);
+    void *p = be->alloc(be, bytes, st);
+    if (!p || keep_device_buffer(d, p, st)) {
+        if (p) be->release(be, p);
+        return mx_fail_prefix(st, "weight %s%s", d->inner->prefix, name);
+    }
+    if (be->to_device(be, p, out->data, bytes, st)) return mx_fail_prefix(st, "weight %s%s", d->inner->prefix, name);
+    out->data = p;
+    return 0;
+}
+
+int mx_binder_device(mx_binder *b, mx_binder *inner, const mx_ctx *c, mx_status *st) {
+    memset(b, 0, sizeof *b);
+    device_binder *d = calloc(1, sizeof *d);
+    if (!d) return mx_fail(st, MX_ENOMEM, "out of memory binding weights");
+    d->inner = inner;
+    d->c = c;
+    b->bind = bind_device;
+    b->impl = d;
+    b->enumerating = inner->enumerating;
+    memcpy(b->prefix, inner->prefix, sizeof b->prefix);
+    return 0;
+}
+
+static void free_device(device_binder *d) {
+    for (size_t i = 0; i < d->n; i++) d->c->be->release(d->c->be, d->bufs[i]);
+    free(d->bufs);
+    free(d);
+}
+
 void mx_binder_free(mx_binder *b) {
     if (!b || !b->impl) return;
-    if (b->enumerating) {
+    if (b->bind == bind_device) {
+        free_device(b->impl);
+    } else if (b->enumerating) {
         enum_binder *e = b->impl;
         for (size_t i = 0; i < e->n; i++) free(e->list[i].name);
         free(e->list);

@@ -46,6 +46,10 @@ int mx_binder_st(mx_binder *b, const struct mx_safetensors *f, const char *prefi
  * an owned buffer, stored as MX_F32 or MX_F16 (`dtype`): the SD1.5-size networks without a
  * weight file (tests, benchmarks). Names are used without prefix. */
 int mx_binder_rule(mx_binder *b, uint64_t seed, mx_dtype dtype, mx_status *st);
+/* Binds through `inner` and keeps each weight, in its stored type, in the memory of c's backend
+ * (uploaded once; on a host-visible backend the inner binder's data serves as it is). inner and
+ * c must outlive b; free b before inner. */
+int mx_binder_device(mx_binder *b, mx_binder *inner, const mx_ctx *c, mx_status *st);
 /* Records (name, ndim, shape) of every bind call, binds nothing (out->data = NULL). */
 int mx_binder_enum(mx_binder *b, mx_status *st);
 void mx_binder_free(mx_binder *b);

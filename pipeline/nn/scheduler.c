@@ -316,9 +316,10 @@ static int dpm_schedule(mx_sched *s, int steps, mx_status *st) {
     return 0;
 }
 
-int mx_sched_init(mx_sched *s, const mx_sched_config *cfg, int num_inference_steps, size_t numel,
-                  mx_status *st) {
+int mx_sched_init(mx_sched *s, const mx_ctx *c, const mx_sched_config *cfg, int num_inference_steps,
+                  size_t numel, mx_status *st) {
     memset(s, 0, sizeof *s);
+    s->c = c;
     if (validate(cfg, "scheduler", st)) return -1;
     if (num_inference_steps < 1 || num_inference_steps > MX_SCHED_MAX_STEPS ||
         num_inference_steps > cfg->num_train_timesteps)
@@ -334,15 +335,16 @@ int mx_sched_init(mx_sched *s, const mx_sched_config *cfg, int num_inference_ste
         return -1;
     }
     s->numel = numel;
-    s->buf = malloc(sizeof(float) * numel * 4);
-    if (!s->buf) return mx_fail(st, MX_ENOMEM, "scheduler: out of memory for %zu latents", numel);
+    s->buf = mx_dev_alloc(c, numel * 5, st);
+    if (!s->buf) return mx_fail_prefix(st, "scheduler: %zu latents", numel);
     for (int i = 0; i < 3; i++) s->model_outputs[i] = s->buf + (size_t)i * numel;
-    s->work = s->buf + 3 * numel;
+    s->work[0] = s->buf + 3 * numel;
+    s->work[1] = s->buf + 4 * numel;
     return 0;
 }
 
 void mx_sched_free(mx_sched *s) {
-    free(s->buf);
+    mx_dev_free(s->c, s->buf);
     s->buf = NULL;
 }
 
@@ -381,20 +383,21 @@ static dpm_point dpm_point_at(float ve_sigma) {
     return p;
 }
 
+/* The step arithmetic runs as ops on the scheduler's context (its history lives on that
+ * backend); each op sequence evaluates the same float32 expression as diffusers, term by term. */
+static void lin2(const mx_sched *s, float *y, float a, const float *x0, float b, const float *x1) {
+    const float coef[2] = {a, b};
+    const float *const x[2] = {x0, x1};
+    mx_lincomb(s->c, y, 2, coef, x, s->numel);
+}
+
 /* x0 prediction from the model output at the current step. */
 static void dpm_convert(const mx_sched *s, const float *mo, const float *x, float *x0) {
     dpm_point p = dpm_point_at(s->sigmas[s->step_index]);
-    size_t n = s->numel;
     switch (s->cfg.prediction_type) {
-    case MX_PRED_EPSILON:
-        for (size_t i = 0; i < n; i++) x0[i] = (x[i] - p.sigma * mo[i]) / p.alpha;
-        break;
-    case MX_PRED_V:
-        for (size_t i = 0; i < n; i++) x0[i] = p.alpha * x[i] - p.sigma * mo[i];
-        break;
-    case MX_PRED_SAMPLE:
-        memcpy(x0, mo, sizeof(float) * n);
-        break;
+    case MX_PRED_EPSILON: lin2(s, x0, 1.0f / p.alpha, x, -p.sigma / p.alpha, mo); break;
+    case MX_PRED_V: lin2(s, x0, p.alpha, x, -p.sigma, mo); break;
+    case MX_PRED_SAMPLE: mx_copy(s->c, x0, mo, s->numel); break;
     }
 }
 
@@ -403,8 +406,14 @@ static void dpm_first_order(const mx_sched *s, float *x) {
     dpm_point s0 = dpm_point_at(s->sigmas[s->step_index]);
     float h = t.lambda - s0.lambda;
     float a = t.sigma / s0.sigma, b = t.alpha * (expf(-h) - 1.0f);
-    const float *m0 = s->model_outputs[2];
-    for (size_t i = 0; i < s->numel; i++) x[i] = a * x[i] - b * m0[i];
+    lin2(s, x, a, x, -b, s->model_outputs[2]);
+}
+
+/* d = k·(p − q) into d. */
+static void scaled_diff(const mx_sched *s, float *d, const float *p, const float *q, float k) {
+    int64_t shape[1] = {(int64_t)s->numel};
+    mx_binary(s->c, MX_BIN_SUB, d, p, shape, q, shape, 1);
+    mx_scale(s->c, d, d, k, s->numel);
 }
 
 static void dpm_second_order(const mx_sched *s, float *x) {
@@ -417,10 +426,11 @@ static void dpm_second_order(const mx_sched *s, float *x) {
     /* midpoint: - 0.5 b D1; heun: + alpha (e^-h - 1)/h + 1) D1 */
     float c = s->cfg.solver_type == MX_SOLVER_MIDPOINT ? -(0.5f * b) : t.alpha * ((expf(-h) - 1.0f) / h + 1.0f);
     const float *m0 = s->model_outputs[2], *m1 = s->model_outputs[1];
-    for (size_t i = 0; i < s->numel; i++) {
-        float d1 = inv_r0 * (m0[i] - m1[i]);
-        x[i] = a * x[i] - b * m0[i] + c * d1;
-    }
+    float *d1 = s->work[0];
+    scaled_diff(s, d1, m0, m1, inv_r0);
+    const float coef[3] = {a, -b, c};
+    const float *const terms[3] = {x, m0, d1};
+    mx_lincomb(s->c, x, 3, coef, terms, s->numel);
 }
 
 static void dpm_third_order(const mx_sched *s, float *x) {
@@ -434,11 +444,16 @@ static void dpm_third_order(const mx_sched *s, float *x) {
     float b = t.alpha * em, c1 = t.alpha * (em / h + 1.0f), c2 = t.alpha * ((em + h) / (h * h) - 0.5f);
     float k0 = 1.0f / r0, k1 = 1.0f / r1, k2 = r0 / (r0 + r1), k3 = 1.0f / (r0 + r1);
     const float *m0 = s->model_outputs[2], *m1 = s->model_outputs[1], *m2 = s->model_outputs[0];
-    for (size_t i = 0; i < s->numel; i++) {
-        float d10 = k0 * (m0[i] - m1[i]), d11 = k1 * (m1[i] - m2[i]);
-        float d1 = d10 + k2 * (d10 - d11), d2 = k3 * (d10 - d11);
-        x[i] = a * x[i] - b * m0[i] + c1 * d1 - c2 * d2;
-    }
+    float *d1 = s->work[0], *d2 = s->work[1];
+    int64_t shape[1] = {(int64_t)s->numel};
+    scaled_diff(s, d1, m0, m1, k0);                           /* d10 */
+    scaled_diff(s, d2, m1, m2, k1);                           /* d11 */
+    mx_binary(s->c, MX_BIN_SUB, d2, d1, shape, d2, shape, 1); /* d10 - d11 */
+    mx_axpy(s->c, d1, d2, k2, s->numel);                      /* d1 = d10 + k2 (d10 - d11) */
+    mx_scale(s->c, d2, d2, k3, s->numel);                     /* d2 = k3 (d10 - d11) */
+    const float coef[4] = {a, -b, c1, -c2};
+    const float *const terms[4] = {x, m0, d1, d2};
+    mx_lincomb(s->c, x, 4, coef, terms, s->numel);
 }
 
 static int dpm_step(mx_sched *s, const float *mo, float *x) {
@@ -475,25 +490,24 @@ static void ddim_step(mx_sched *s, const float *mo, float *x) {
     float bt = 1.0f - at;
     float sa = sqrtf(at), sb = sqrtf(bt), sap = sqrtf(ap), dir = sqrtf(1.0f - ap);
     float lim = (float)c->clip_sample_range;
-    for (size_t i = 0; i < s->numel; i++) {
-        float x0, eps;
-        switch (c->prediction_type) {
-        case MX_PRED_EPSILON:
-            x0 = (x[i] - sb * mo[i]) / sa;
-            eps = mo[i];
-            break;
-        case MX_PRED_V:
-            x0 = sa * x[i] - sb * mo[i];
-            eps = sa * mo[i] + sb * x[i];
-            break;
-        default:
-            x0 = mo[i];
-            eps = (x[i] - sa * x0) / sb;
-            break;
-        }
-        if (c->clip_sample) x0 = x0 < -lim ? -lim : (x0 > lim ? lim : x0);
-        x[i] = sap * x0 + dir * eps;
+    float *x0 = s->work[0], *eps = s->work[1];
+    const float *e = eps;
+    switch (c->prediction_type) {
+    case MX_PRED_EPSILON:
+        lin2(s, x0, 1.0f / sa, x, -sb / sa, mo);
+        e = mo;
+        break;
+    case MX_PRED_V:
+        lin2(s, x0, sa, x, -sb, mo);
+        lin2(s, eps, sa, mo, sb, x);
+        break;
+    default:
+        mx_copy(s->c, x0, mo, s->numel);
+        lin2(s, eps, 1.0f / sb, x, -sa / sb, x0);
+        break;
     }
+    if (c->clip_sample) mx_clamp(s->c, x0, x0, -lim, lim, s->numel);
+    lin2(s, x, sap, x0, dir, e);
 }
 
 int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st) {
@@ -525,6 +539,7 @@ void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const floa
     for (size_t k = 0; k < n; k++) y[k] = a * x0[k] + b * noise[k];
 }
 
-void mx_cfg_combine(float *out, const float *uncond, const float *cond, float guidance, size_t n) {
-    for (size_t i = 0; i < n; i++) out[i] = uncond[i] + guidance * (cond[i] - uncond[i]);
+void mx_sched_scale_initial(const mx_sched *s, float *lat, size_t n) {
+    float sigma = mx_sched_init_noise_sigma(s);
+    for (size_t k = 0; k < n; k++) lat[k] *= sigma;
 }

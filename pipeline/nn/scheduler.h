@@ -5,14 +5,16 @@
  * torch does (betas = linspace(sqrt(b0), sqrt(b1))^2, cumulative product in float32), so
  * the integer timesteps equal the reference exactly.
  *
- * Use: mx_sched_init(&s, &cfg, steps, numel); for i in 0..mx_sched_steps(&s): run the model at
- * timestep mx_sched_timestep(&s, i), then mx_sched_step(&s, eps, latents). */
+ * Use: mx_sched_init(&s, ctx, &cfg, steps, numel); for i in 0..mx_sched_steps(&s): run the model
+ * at timestep mx_sched_timestep(&s, i), then mx_sched_step(&s, eps, latents). The step runs as ops
+ * on ctx: eps, latents and the history are memory of ctx's backend. */
 #ifndef MX_SCHEDULER_H
 #define MX_SCHEDULER_H
 
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../../ops/ops.h"
 #include "../../runtime/status.h"
 
 #define MX_SCHED_MAX_TRAIN 4000
@@ -71,15 +73,17 @@ typedef struct mx_sched {
     int64_t timesteps[MX_SCHED_MAX_STEPS];
     float sigmas[MX_SCHED_MAX_STEPS + 1]; /* DPM: VE sigmas, last = final sigma */
     size_t numel;                         /* elements of one latent batch */
+    const mx_ctx *c;                      /* the context the step's ops run on */
     float *model_outputs[3];              /* DPM history of converted outputs (x0), newest last */
-    float *buf;                           /* owns model_outputs and a work buffer */
-    float *work;
+    float *buf;                           /* backend memory: owns model_outputs and work */
+    float *work[2];
 } mx_sched;
 
 /* Computes the schedule for num_inference_steps and allocates history for latents of numel
- * floats. Free with mx_sched_free. */
-int mx_sched_init(mx_sched *s, const mx_sched_config *cfg, int num_inference_steps, size_t numel,
-                  mx_status *st);
+ * floats on c's backend (c NULL: host memory, single-threaded ops). c must outlive s. Free with
+ * mx_sched_free. */
+int mx_sched_init(mx_sched *s, const mx_ctx *c, const mx_sched_config *cfg, int num_inference_steps,
+                  size_t numel, mx_status *st);
 void mx_sched_free(mx_sched *s);
 
 /* img2img / SDEdit start: keeps the last min(floor(steps*strength), steps) timesteps, as the
@@ -92,16 +96,16 @@ int64_t mx_sched_timestep(const mx_sched *s, int i);
 /* Scale of the initial noise (1.0 for both samplers here). */
 float mx_sched_init_noise_sigma(const mx_sched *s);
 
-/* One step: sample (numel floats) is replaced by the previous sample given the model output
- * (epsilon, v or x0 per prediction_type) at the current timestep. */
+/* One step: sample (numel floats, backend memory) is replaced by the previous sample given the
+ * model output (epsilon, v or x0 per prediction_type) at the current timestep. */
 int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st);
 
-/* Noising for the first timestep still to run (SDEdit): y = a·x0 + b·noise with
+/* Start latents, on HOST arrays before they enter the denoise loop:
+ * noising for the first timestep still to run (SDEdit): y = a·x0 + b·noise with
  * a = sqrt(acp[t]), b = sqrt(1-acp[t]) for DDIM and a = 1/sqrt(sigma^2+1), b = sigma·a
  * for DPM-Solver++ (sigma of the current step), as diffusers' add_noise. y may equal x0 or noise. */
 void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n);
-
-/* Classifier-free guidance: out = u + g·(c - u) over n floats (out may equal u or c). */
-void mx_cfg_combine(float *out, const float *uncond, const float *cond, float guidance, size_t n);
+/* lat *= the initial noise sigma (text-to-image start). */
+void mx_sched_scale_initial(const mx_sched *s, float *lat, size_t n);
 
 #endif

@@ -14,10 +14,10 @@ typedef struct sd_dims {
     size_t res_numel[MX_UNET_MAX_RES + 1];
 } sd_dims;
 
-/* Working memory, one malloc. */
+/* Working memory on the context's backend: one block and the arena. */
 typedef struct sd_work {
     float *block;
-    float *x_in, *text, *timesteps, *eps, *guided;
+    float *lat, *x_in, *text, *timesteps, *eps, *guided;
     float *res[MX_UNET_MAX_RES + 1];
     float *cond[MX_SD_MAX_CONTROLNETS];
     mx_arena arena;
@@ -29,7 +29,8 @@ static size_t control_numel(const mx_controlnet *net, int h, int w) {
     return (size_t)cc->conditioning_channels * (size_t)(f * h) * (size_t)(f * w);
 }
 
-static int check_request(const mx_sd_request *rq, int n, int h, int w, sd_dims *d, mx_status *st) {
+static int check_request(const mx_sd_request *rq, const mx_ctx *c, int n, int h, int w, sd_dims *d,
+                         mx_status *st) {
     if (!rq->unet || !rq->sched || !rq->cond_text || n < 1 || h < 1 || w < 1 || rq->T < 1)
         return mx_fail(st, MX_EUSAGE, "sd pipeline: missing UNet, scheduler or prompt, or bad sizes");
     if (rq->n_controls < 0 || rq->n_controls > MX_SD_MAX_CONTROLNETS)
@@ -53,6 +54,7 @@ static int check_request(const mx_sd_request *rq, int n, int h, int w, sd_dims *
     if (rq->sched->numel != d->lat)
         return mx_fail(st, MX_EUSAGE, "sd pipeline: scheduler made for %zu latent values, latents have %zu",
                        rq->sched->numel, d->lat);
+    if (rq->sched->c != c) return mx_fail(st, MX_EUSAGE, "sd pipeline: the scheduler runs on another context");
     d->n_res = mx_unet_num_residuals(uc);
     if (d->n_res > MX_UNET_MAX_RES) return mx_fail(st, MX_EUSAGE, "sd pipeline: too many UNet residuals");
     for (int i = 0; i <= d->n_res; i++) {
@@ -77,16 +79,17 @@ static int loop_arena_bytes(const mx_sd_request *rq, const sd_dims *d, size_t *b
     return 0;
 }
 
-static void work_free(sd_work *wk) {
-    free(wk->block);
+static void work_free(const mx_ctx *c, sd_work *wk) {
+    mx_dev_free(c, wk->block);
     mx_arena_destroy(&wk->arena);
 }
 
-static int work_alloc(const mx_sd_request *rq, const sd_dims *d, sd_work *wk, mx_status *st) {
+static int work_alloc(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, mx_status *st) {
     memset(wk, 0, sizeof *wk);
-    size_t sizes[4 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
-    float **ptrs[4 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    size_t sizes[5 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    float **ptrs[5 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
     size_t per_b = d->lat / (size_t)d->n, np = 0, total = 0;
+    sizes[np] = d->lat, ptrs[np++] = &wk->lat;
     sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->x_in;
     sizes[np] = (size_t)d->B * d->text, ptrs[np++] = &wk->text;
     sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->eps;
@@ -96,8 +99,8 @@ static int work_alloc(const mx_sd_request *rq, const sd_dims *d, sd_work *wk, mx
         sizes[np] = (size_t)d->B * control_numel(rq->controls[k].net, d->h, d->w), ptrs[np++] = &wk->cond[k];
     for (size_t i = 0; i < np; i++) total += (sizes[i] + 15) & ~(size_t)15; /* keep 64-byte alignment */
     total += ((size_t)d->B + 15) & ~(size_t)15; /* timesteps */
-    wk->block = aligned_alloc(64, total * sizeof(float)); /* total is a multiple of 16 floats */
-    if (!wk->block) return mx_fail(st, MX_ENOMEM, "sd pipeline: out of memory (%zu floats)", total);
+    wk->block = mx_dev_alloc(c, total, st); /* total is a multiple of 16 floats */
+    if (!wk->block) return mx_fail_prefix(st, "sd pipeline");
     float *p = wk->block;
     for (size_t i = 0; i < np; i++) {
         *ptrs[i] = p;
@@ -105,29 +108,30 @@ static int work_alloc(const mx_sd_request *rq, const sd_dims *d, sd_work *wk, mx
     }
     wk->timesteps = p;
     size_t bytes;
-    if (loop_arena_bytes(rq, d, &bytes, st) || mx_arena_create(&wk->arena, bytes, st)) {
-        free(wk->block);
+    if (loop_arena_bytes(rq, d, &bytes, st) || mx_arena_create_on(&wk->arena, c->be, bytes, st)) {
+        mx_dev_free(c, wk->block);
         wk->block = NULL;
         return -1;
     }
     return 0;
 }
 
-/* Fills the per-call inputs that do not change between steps: text [uncond; cond] and the
- * control images repeated for both halves. */
-static void fill_constant_inputs(const mx_sd_request *rq, const sd_dims *d, sd_work *wk) {
+/* The edge in: latents, text [uncond; cond] and the control images repeated for both halves
+ * go to the device once. */
+static int upload_inputs(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk,
+                         const float *latents, mx_status *st) {
     size_t half = (size_t)d->n * d->text;
-    if (d->B == 2 * d->n) {
-        memcpy(wk->text, rq->uncond_text, half * sizeof(float));
-        memcpy(wk->text + half, rq->cond_text, half * sizeof(float));
-    } else {
-        memcpy(wk->text, rq->cond_text, half * sizeof(float));
-    }
+    int cfg_on = d->B == 2 * d->n;
+    if (mx_upload(c, wk->lat, latents, d->lat, st) ||
+        (cfg_on && mx_upload(c, wk->text, rq->uncond_text, half, st)) ||
+        mx_upload(c, wk->text + (cfg_on ? half : 0), rq->cond_text, half, st))
+        return -1;
     for (int k = 0; k < rq->n_controls; k++) {
         size_t one = (size_t)d->n * control_numel(rq->controls[k].net, d->h, d->w);
         for (int r = 0; r < d->B / d->n; r++)
-            memcpy(wk->cond[k] + (size_t)r * one, rq->controls[k].image, one * sizeof(float));
+            if (mx_upload(c, wk->cond[k] + (size_t)r * one, rq->controls[k].image, one, st)) return -1;
     }
+    return 0;
 }
 
 /* Sum over the ControlNets of their scaled residuals into wk->res; returns 1 when any ran. */
@@ -146,11 +150,20 @@ static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_di
     return ran;
 }
 
-/* One step: networks on the batch, CFG, scheduler update of latents. */
+/* Classifier-free guidance, out = u + g·(c − u), with the halves of eps [u; c] (c is overwritten). */
+static void cfg_combine(const mx_ctx *c, float *out, float *eps, float guidance, size_t n) {
+    int64_t shape[1] = {(int64_t)n};
+    float *u = eps, *cond = eps + n;
+    mx_binary(c, MX_BIN_SUB, cond, cond, shape, u, shape, 1);
+    mx_copy(c, out, u, n);
+    mx_axpy(c, out, cond, guidance, n);
+}
+
+/* One step: networks on the batch, CFG, scheduler update of the latents on the device. */
 static int denoise_step(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int64_t t,
-                        float *latents, mx_status *st) {
-    for (int r = 0; r < d->B / d->n; r++) memcpy(wk->x_in + (size_t)r * d->lat, latents, d->lat * sizeof(float));
-    for (int b = 0; b < d->B; b++) wk->timesteps[b] = (float)t;
+                        mx_status *st) {
+    for (int r = 0; r < d->B / d->n; r++) mx_copy(c, wk->x_in + (size_t)r * d->lat, wk->lat, d->lat);
+    mx_fill(c, wk->timesteps, (float)t, (size_t)d->B);
     int with_res = run_controlnets(rq, c, d, wk, st);
     if (with_res < 0) return -1;
     mx_unet_input in = {wk->x_in, wk->timesteps, wk->text, d->B, d->h, d->w, d->T,
@@ -158,26 +171,27 @@ static int denoise_step(const mx_sd_request *rq, const mx_ctx *c, const sd_dims 
     if (mx_unet_forward(c, rq->unet, &in, wk->eps, &wk->arena, st)) return mx_fail_prefix(st, "UNet: ");
     const float *eps = wk->eps;
     if (d->B == 2 * d->n) {
-        mx_cfg_combine(wk->guided, wk->eps, wk->eps + d->lat, rq->guidance, d->lat);
+        cfg_combine(c, wk->guided, wk->eps, rq->guidance, d->lat);
         eps = wk->guided;
     }
-    return mx_sched_step(rq->sched, eps, latents, st);
+    return mx_sched_step(rq->sched, eps, wk->lat, st);
 }
 
 int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int n, int h, int w,
                   mx_status *st) {
     sd_dims d = {0};
     sd_work wk;
-    if (check_request(rq, n, h, w, &d, st) || work_alloc(rq, &d, &wk, st)) return -1;
-    fill_constant_inputs(rq, &d, &wk);
-    int steps = mx_sched_steps(rq->sched), rc = 0;
+    if (check_request(rq, c, n, h, w, &d, st) || work_alloc(rq, c, &d, &wk, st)) return -1;
+    int steps = mx_sched_steps(rq->sched), rc = upload_inputs(rq, c, &d, &wk, latents, st);
     for (int i = 0; i < steps && rc == 0; i++) {
         int64_t t = mx_sched_timestep(rq->sched, i);
-        rc = denoise_step(rq, c, &d, &wk, t, latents, st);
-        if (rc == 0 && rq->progress && rq->progress(rq->progress_user, i, steps, t, latents, d.lat))
+        rc = denoise_step(rq, c, &d, &wk, t, st);
+        if (rc == 0 && rq->progress && (rc = mx_download(c, latents, wk.lat, d.lat, st)) == 0 &&
+            rq->progress(rq->progress_user, i, steps, t, latents, d.lat))
             rc = mx_fail(st, MX_EUSAGE, "sd pipeline: cancelled at step %d of %d", i + 1, steps);
     }
-    work_free(&wk);
+    if (rc == 0) rc = mx_download(c, latents, wk.lat, d.lat, st);
+    work_free(c, &wk);
     return rc;
 }
 
@@ -186,6 +200,8 @@ int mx_sd_encode_prompts(const mx_ctx *c, const mx_clip *clip, const mx_tokenize
     if (n < 1) return mx_fail(st, MX_EUSAGE, "encode prompts: no prompt");
     int32_t *ids = malloc(sizeof(int32_t) * (size_t)n * MX_CLIP_CONTEXT);
     if (!ids) return mx_fail(st, MX_ENOMEM, "encode prompts: out of memory");
+    size_t numel = (size_t)n * MX_CLIP_CONTEXT * (size_t)clip->cfg.hidden_size;
+    float *out = NULL;
     int rc = -1;
     mx_arena a = {0};
     for (int i = 0; i < n; i++) {
@@ -195,59 +211,70 @@ int mx_sd_encode_prompts(const mx_ctx *c, const mx_clip *clip, const mx_tokenize
         if (n_dropped) n_dropped[i] = r.n_dropped;
     }
     mx_arena_measure(&a);
-    if (mx_clip_forward(clip, c, &a, ids, n, MX_CLIP_CONTEXT, embeds, NULL, NULL, st)) goto done;
+    if (mx_clip_forward(clip, c, &a, ids, n, MX_CLIP_CONTEXT, mx_act_placeholder(), NULL, NULL, st)) goto done;
     size_t bytes = a.peak;
-    if (mx_arena_create(&a, bytes, st) || mx_clip_forward(clip, c, &a, ids, n, MX_CLIP_CONTEXT, embeds, NULL, NULL, st))
+    if (mx_arena_create_on(&a, c->be, bytes, st) || !(out = mx_dev_alloc(c, numel, st)) ||
+        mx_clip_forward(clip, c, &a, ids, n, MX_CLIP_CONTEXT, out, NULL, NULL, st) ||
+        mx_download(c, embeds, out, numel, st))
         goto done;
     rc = 0;
 done:
+    mx_dev_free(c, out);
     mx_arena_destroy(&a);
     free(ids);
+    return rc;
+}
+
+/* One VAE call on the device: the host input goes in, the host output comes out; pre and post
+ * are the affine maps (y = a·x + b) the SD pipelines apply around it, post clamped to [lo, hi]
+ * when lo < hi. */
+typedef struct vae_call {
+    const mx_vae *vae;
+    int decode, n, h, w; /* h, w: the input's spatial size */
+    size_t in_numel, out_numel;
+    float pre_a, pre_b, post_a, post_b, lo, hi;
+} vae_call;
+
+static int run_vae_call(const mx_ctx *c, const vae_call *v, const float *in, float *out, mx_status *st) {
+    float *din = mx_dev_alloc(c, v->in_numel, st), *dout = din ? mx_dev_alloc(c, v->out_numel, st) : NULL;
+    size_t bytes = 0;
+    mx_arena a = {0};
+    int rc = -1;
+    if (!dout || mx_upload(c, din, in, v->in_numel, st)) goto done;
+    mx_affine(c, din, din, v->pre_a, v->pre_b, v->in_numel);
+    if (v->decode ? mx_vae_decode_arena_bytes(v->vae, v->n, v->h, v->w, &bytes, st)
+                  : mx_vae_encode_arena_bytes(v->vae, v->n, v->h, v->w, &bytes, st))
+        goto done;
+    if (mx_arena_create_on(&a, c->be, bytes, st)) goto done;
+    if (v->decode ? mx_vae_decode(c, v->vae, din, v->n, v->h, v->w, dout, &a, st)
+                  : mx_vae_encode(c, v->vae, din, v->n, v->h, v->w, dout, NULL, &a, st))
+        goto done;
+    mx_affine(c, dout, dout, v->post_a, v->post_b, v->out_numel);
+    if (v->lo < v->hi) mx_clamp(c, dout, dout, v->lo, v->hi, v->out_numel);
+    rc = mx_download(c, out, dout, v->out_numel, st);
+done:
+    mx_arena_destroy(&a);
+    mx_dev_free(c, din);
+    mx_dev_free(c, dout);
     return rc;
 }
 
 int mx_sd_decode_latents(const mx_ctx *c, const mx_vae *vae, const float *latents, int n, int h, int w,
                          float *image, mx_status *st) {
     const mx_vae_config *vc = mx_vae_cfg(vae);
-    size_t lat = (size_t)n * (size_t)vc->latent_channels * (size_t)h * (size_t)w;
-    size_t f = (size_t)mx_vae_factor(vae), img = (size_t)n * (size_t)vc->out_channels * (h * f) * (w * f);
-    float *scaled = malloc(lat * sizeof(float));
-    size_t bytes = 0;
-    mx_arena a = {0};
-    int rc = -1;
-    if (!scaled) return mx_fail(st, MX_ENOMEM, "VAE decode: out of memory");
-    for (size_t i = 0; i < lat; i++) scaled[i] = latents[i] / MX_SD_VAE_SCALE;
-    if (mx_vae_decode_arena_bytes(vae, n, h, w, &bytes, st) == 0 && mx_arena_create(&a, bytes, st) == 0 &&
-        mx_vae_decode(c, vae, scaled, n, h, w, image, &a, st) == 0) {
-        for (size_t i = 0; i < img; i++) {
-            float v = image[i] / 2.0f + 0.5f;
-            image[i] = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
-        }
-        rc = 0;
-    }
-    mx_arena_destroy(&a);
-    free(scaled);
-    return rc;
+    size_t f = (size_t)mx_vae_factor(vae);
+    vae_call v = {vae, 1, n, h, w, (size_t)n * (size_t)vc->latent_channels * (size_t)h * (size_t)w,
+                  (size_t)n * (size_t)vc->out_channels * (h * f) * (w * f), 1.0f / MX_SD_VAE_SCALE, 0.0f, 0.5f,
+                  0.5f, 0.0f, 1.0f};
+    return run_vae_call(c, &v, latents, image, st);
 }
 
 int mx_sd_encode_image(const mx_ctx *c, const mx_vae *vae, const float *image, int n, int H, int W,
                        float *latents, mx_status *st) {
     const mx_vae_config *vc = mx_vae_cfg(vae);
     int f = mx_vae_factor(vae);
-    size_t img = (size_t)n * (size_t)vc->in_channels * (size_t)H * (size_t)W;
-    size_t lat = (size_t)n * (size_t)vc->latent_channels * (size_t)(H / f) * (size_t)(W / f);
-    float *signed_img = malloc(img * sizeof(float));
-    size_t bytes = 0;
-    mx_arena a = {0};
-    int rc = -1;
-    if (!signed_img) return mx_fail(st, MX_ENOMEM, "VAE encode: out of memory");
-    for (size_t i = 0; i < img; i++) signed_img[i] = 2.0f * image[i] - 1.0f;
-    if (mx_vae_encode_arena_bytes(vae, n, H, W, &bytes, st) == 0 && mx_arena_create(&a, bytes, st) == 0 &&
-        mx_vae_encode(c, vae, signed_img, n, H, W, latents, NULL, &a, st) == 0) {
-        for (size_t i = 0; i < lat; i++) latents[i] *= MX_SD_VAE_SCALE;
-        rc = 0;
-    }
-    mx_arena_destroy(&a);
-    free(signed_img);
-    return rc;
+    vae_call v = {vae, 0, n, H, W, (size_t)n * (size_t)vc->in_channels * (size_t)H * (size_t)W,
+                  (size_t)n * (size_t)vc->latent_channels * (size_t)(H / f) * (size_t)(W / f), 2.0f, -1.0f,
+                  MX_SD_VAE_SCALE, 0.0f, 0.0f, 0.0f};
+    return run_vae_call(c, &v, image, latents, st);
 }

@@ -10,6 +10,7 @@
 
 #include "../geom/masks.h"
 #include "api_opts.h"
+#include "job.h"
 #include "models.h"
 #include "outdir.h"
 
@@ -19,7 +20,11 @@ _Static_assert((int)MATEX_EINPUT == (int)MX_EINPUT && (int)MATEX_EUSAGE == (int)
                    (int)MATEX_EINTERNAL == (int)MX_EINTERNAL && (int)MATEX_ECANCELLED == (int)MX_ECANCEL,
                "matex.h error codes");
 
+/* A model set computes on its own context (device, threads, precision): the networks' weights
+ * live on its backend, and every run with the set uses it. */
 struct matex_models {
+    mx_ctx ctx;
+    int ctx_ready;
     mx_models m;
 };
 
@@ -43,10 +48,16 @@ static void set_error(matex_error *err, int code, const char *msg) {
     snprintf(err->message, sizeof err->message, "%s", msg);
 }
 
-matex_models *matex_models_open(const char *weights_path, matex_error *err) {
+matex_models *matex_models_open(const char *weights_path, const matex_options *o, matex_error *err) {
     clear_error(err);
     mx_status st;
     mx_status_clear(&st);
+    matex_options defaults;
+    if (!o) {
+        matex_options_default(&defaults);
+        o = &defaults;
+    }
+    mx_texture_opts t;
     matex_models *m = calloc(1, sizeof *m);
     if (!m) {
         set_error(err, MATEX_ENOMEM, "out of memory");
@@ -54,17 +65,19 @@ matex_models *matex_models_open(const char *weights_path, matex_error *err) {
     }
     if (!weights_path) {
         mx_fail(&st, MX_EUSAGE, "no weight file given");
-    } else if (!mx_models_load(&m->m, weights_path, 0, &st)) {
-        return m;
+    } else if (!mx_api_options_to_internal(o, &t, &st) && !mx_job_ctx_create(&m->ctx, &t, &st)) {
+        m->ctx_ready = 1;
+        if (!mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) return m;
     }
     set_error(err, st.code, st.msg);
-    free(m);
+    matex_models_close(m);
     return NULL;
 }
 
 void matex_models_close(matex_models *m) {
     if (!m) return;
-    mx_models_free(&m->m);
+    if (m->m.wf) mx_models_free(&m->m);
+    if (m->ctx_ready) mx_ctx_destroy(&m->ctx);
     free(m);
 }
 
@@ -99,7 +112,7 @@ static const struct {
     SAME_FIELD(cancel, cancel),
 };
 
-void mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t) {
+int mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t, mx_status *st) {
     mx_texture_opts_default(t);
     for (size_t i = 0; i < sizeof SAME_FIELDS / sizeof SAME_FIELDS[0]; i++)
         memcpy((char *)t + SAME_FIELDS[i].in, (const char *)o + SAME_FIELDS[i].pub, SAME_FIELDS[i].size);
@@ -109,6 +122,7 @@ void mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t) {
     t->up = o->z_up ? MX_UP_Z : MX_UP_Y;
     t->quiet = !o->verbose;
     t->precision = o->precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16;
+    return o->device ? mx_backend_parse(o->device, &t->device, st) : 0;
 }
 
 void mx_api_options_from_internal(const mx_texture_opts *t, matex_options *o) {
@@ -119,6 +133,7 @@ void mx_api_options_from_internal(const mx_texture_opts *t, matex_options *o) {
     o->z_up = t->up == MX_UP_Z;
     o->verbose = !t->quiet;
     o->precision = t->precision == MX_PREC_FP32 ? MATEX_PRECISION_FP32 : MATEX_PRECISION_BF16;
+    o->device = mx_backend_name(t->device);
 }
 
 void matex_options_default(matex_options *o) {
@@ -198,7 +213,10 @@ static int run(pipeline_fn fn, matex_models *m, const matex_options *o, matex_re
     mx_status st;
     mx_status_clear(&st);
     mx_texture_opts t;
-    mx_api_options_to_internal(o, &t);
+    if (mx_api_options_to_internal(o, &t, &st)) {
+        set_error(err, st.code, st.msg);
+        return -1;
+    }
     t.models = &m->m;
     if (o->progress) {
         t.progress = forward_progress;

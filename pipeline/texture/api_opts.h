@@ -6,7 +6,8 @@
 #include "../../include/matex.h"
 #include "texture.h"
 
-void mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t);
+/* Fails only on an unknown device name. */
+int mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t, mx_status *st);
 void mx_api_options_from_internal(const mx_texture_opts *t, matex_options *o);
 
 #endif

@@ -80,7 +80,7 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
     }
     snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->prompt);
     if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, depth, NULL, NULL, S, 0, st) ||
-        mx_render_textured(&v->vb.gb, &j->mesh, orig, j->nlayers, grey, j->ctx.pool, &rgb, st) ||
+        mx_render_textured(&v->vb.gb, &j->mesh, orig, j->nlayers, grey, j->ctx->pool, &rgb, st) ||
         mx_crop_resize(&rgb, v->crop, S, &small, st))
         goto done;
     mx_image_to_planes(&small, init, S, 0);

@@ -51,16 +51,21 @@ int mx_job_check_cancel(const mx_job *j, mx_status *st) {
     return 0;
 }
 
+/* A mesh with UVs keeps them (faces without get an atlas and a texture of their own: one
+ * layer per material); a mesh without gets one atlas and one texture. */
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_mesh *m = &j->mesh;
-    if (m->nuv > 0) {
+    mx_uvatlas_opts ao = mx_uvatlas_defaults();
+    ao.texture_size = j->o->tex_size;
+    if (m->nuv > 0 && m->face_uv) {
+        int atlas_faces = 0;
+        if (mx_uvatlas_complete(m, &ao, &j->atlas, &atlas_faces, st)) return -1;
+        j->atlas_built = atlas_faces > 0;
         j->nlayers = m->nmat > 1 && m->face_mat ? m->nmat : 1;
         return 0;
     }
     if (need_uvs)
         return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", m->source_path);
-    mx_uvatlas_opts ao = mx_uvatlas_defaults();
-    ao.texture_size = j->o->tex_size;
     if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
     j->atlas_built = 1;
     /* one atlas for the whole mesh: every face renders and exports with material 0 */
@@ -70,6 +75,10 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_job_progress(j, "UV atlas: %d charts, utilisation %.3f, %.2fs", j->atlas.charts, j->atlas.utilisation,
                     j->atlas.seconds);
     return 0;
+}
+
+int mx_job_ctx_create(mx_ctx *c, const mx_texture_opts *o, mx_status *st) {
+    return mx_ctx_create_on(c, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st);
 }
 
 void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
@@ -83,7 +92,7 @@ static int build_candidates(mx_job *j, mx_status *st) {
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
     int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
-                                 j->o->tex_size, j->nlayers, j->o->frontal_threshold, j->ctx.pool, st);
+                                 j->o->tex_size, j->nlayers, j->o->frontal_threshold, j->ctx->pool, st);
     free(cams);
     if (rc) return -1;
     j->vc_ready = 1;
@@ -103,7 +112,7 @@ static int encode_negative(mx_job *j, mx_status *st) {
     j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
     if (!j->uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
-    if (mx_models_encode_text(j->models, &j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
+    if (mx_models_encode_text(j->models, j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
@@ -115,19 +124,24 @@ static void report_header(mx_job *j) {
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", "0.1");
     mx_jw_str(w, "mesh", j->mesh.source_path);
-    mx_jw_str(w, "prompt", o->prompt);
-    mx_jw_str(w, "negative_prompt", o->negative_prompt);
-    mx_jw_int(w, "seed", (long long)o->seed);
-    mx_jw_int(w, "steps", o->steps);
-    mx_jw_num(w, "guidance", o->guidance);
+    if (o->source_path) mx_jw_str(w, "source", o->source_path);
+    if (j->models) {
+        mx_jw_str(w, "prompt", o->prompt);
+        mx_jw_str(w, "negative_prompt", o->negative_prompt);
+        mx_jw_int(w, "seed", (long long)o->seed);
+        mx_jw_int(w, "steps", o->steps);
+        mx_jw_num(w, "guidance", o->guidance);
+        mx_jw_int(w, "image_size", o->image_size);
+    }
     mx_jw_int(w, "texture_size", o->tex_size);
     mx_jw_int(w, "render_size", o->render_size);
-    mx_jw_int(w, "image_size", o->image_size);
-    mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
-    mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
-    mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
-    mx_jw_str(w, "weights", mx_models_path(j->models));
-    mx_jw_str(w, "weights_digest", j->models->digest);
+    mx_jw_int(w, "threads", mx_pool_threads(j->ctx->pool));
+    if (j->models) {
+        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx->k->isa)));
+        mx_jw_str(w, "kernels", mx_isa_name(j->ctx->k->isa));
+        mx_jw_str(w, "weights", mx_models_path(j->models));
+        mx_jw_str(w, "weights_digest", j->models->digest);
+    }
     mx_jw_int(w, "faces", j->mesh.nfaces);
     mx_jw_int(w, "vertices", j->mesh.nverts);
     mx_jw_int(w, "textures", j->nlayers);
@@ -150,29 +164,36 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->o = o;
     j->t0 = mx_now();
     mx_job_set_phase(j, "load");
+    j->psnr_db = NAN;
     if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
-    if (mx_ctx_create(&j->ctx, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
-    j->ctx_ready = 1;
-    mx_job_progress(j, "networks in %s arithmetic (kernels %s)%s", mx_precision_name(mx_isa_precision(j->ctx.k->isa)),
-                    mx_isa_name(j->ctx.k->isa),
-                    mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
-    if (o->models) {
+    if (o->models) { /* an opened model set computes on its own context */
         j->models = o->models;
+        j->ctx = o->models->c;
     } else {
-        if (mx_models_load(&j->own_models, o->weights_path, model_needs, st)) return -1;
+        if (mx_job_ctx_create(&j->own_ctx, o, st)) return -1;
+        j->own_ctx_ready = 1;
+        j->ctx = &j->own_ctx;
+    }
+    if (model_needs != MX_JOB_NO_MODELS && !j->models) {
+        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_backend_name(o->device),
+                        mx_precision_name(mx_isa_precision(j->ctx->k->isa)), mx_isa_name(j->ctx->k->isa),
+                        mx_isa_precision(j->ctx->k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+        if (mx_models_load(&j->own_models, j->ctx, o->weights_path, model_needs, st)) return -1;
         j->own_models_ready = 1;
         j->models = &j->own_models;
         mx_job_progress(j, "loaded weights %s", o->weights_path);
     }
-    if (mx_models_check(j->models, model_needs, st) || mx_job_check_cancel(j, st)) return -1;
+    if (model_needs == MX_JOB_NO_MODELS) j->models = NULL;
+    else if (mx_models_check(j->models, model_needs, st)) return -1;
+    if (mx_job_check_cancel(j, st)) return -1;
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
                 : mx_mesh_load(o->mesh_path, &j->mesh, st))
         return -1;
     if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
-    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, NULL, NULL, st)) return -1;
+    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || encode_negative(j, st)) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models && encode_negative(j, st))) return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -193,7 +214,7 @@ void mx_job_close(mx_job *j) {
     free(j->pos);
     mx_mesh_free(&j->mesh);
     if (j->own_models_ready) mx_models_free(&j->own_models);
-    if (j->ctx_ready) mx_ctx_destroy(&j->ctx);
+    if (j->own_ctx_ready) mx_ctx_destroy(&j->own_ctx);
     mx_jw_free(&j->report);
     memset(j, 0, sizeof *j);
 }
@@ -214,7 +235,7 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
     float *emb = malloc(floats * sizeof *emb);
     char *copy = strdup(text);
     int dropped = 0;
-    if (!emb || !copy || mx_models_encode_text(j->models, &j->ctx, text, emb, &dropped, st)) {
+    if (!emb || !copy || mx_models_encode_text(j->models, j->ctx, text, emb, &dropped, st)) {
         free(emb);
         free(copy);
         if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
@@ -260,13 +281,13 @@ static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *l
     for (int i = 0; i < b->n; i++)
         mx_rng_fill_normal(lat + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
-        mx_scale(&j->ctx, lat, lat, mx_sched_init_noise_sigma(s), numel);
+        mx_sched_scale_initial(s, lat, numel);
         return 0;
     }
     if (mx_sched_set_strength(s, b->strength, st)) return -1;
     float *x0 = malloc(numel * sizeof *x0);
     if (!x0) return mx_fail(st, MX_ENOMEM, "latents: out of memory");
-    int rc = mx_sd_encode_image(&j->ctx, j->models->vae, b->init_images, b->n, h * mx_vae_factor(j->models->vae),
+    int rc = mx_sd_encode_image(j->ctx, j->models->vae, b->init_images, b->n, h * mx_vae_factor(j->models->vae),
                                 w * mx_vae_factor(j->models->vae), x0, st);
     if (!rc) mx_sched_add_noise(s, lat, x0, lat, numel);
     free(x0);
@@ -290,7 +311,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &j->models->sched, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, j->ctx, &j->models->sched, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     if (start_latents(j, b, &s, lat, per_item, h, w, st)) goto done;
     mx_sd_control controls[2];
@@ -303,13 +324,13 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
                         report_step, j};
     double t = mx_now();
-    if (mx_sd_denoise(&rq, &j->ctx, lat, b->n, h, w, st)) {
+    if (mx_sd_denoise(&rq, j->ctx, lat, b->n, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
         goto done;
     }
     j->last_denoise_s = mx_now() - t;
     t = mx_now();
-    rc = mx_sd_decode_latents(&j->ctx, j->models->vae, lat, b->n, h, w, images, st);
+    rc = mx_sd_decode_latents(j->ctx, j->models->vae, lat, b->n, h, w, images, st);
     j->last_decode_s = mx_now() - t;
 done:
     if (sched_ready) mx_sched_free(&s);
@@ -323,7 +344,7 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     int R = j->o->render_size;
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
-    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx.pool,
+    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx->pool,
                         st))
         return -1;
     uint8_t *fg = malloc((size_t)R * R);
@@ -367,7 +388,7 @@ static int inpaint_control(mx_job *j, mx_job_view *v, const mx_image *tex, float
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
     mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, j->bake.known, j->o->tex_size, j->o->tex_size, mask);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
-    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx.pool, &rgb, st) &&
+    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx->pool, &rgb, st) &&
         !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
         !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) && !mx_inpaint_image(&rgb_s, &mask_s, &ctl, st)) {
         mx_image_to_planes(&ctl, planes, plane_w, x0);
@@ -401,7 +422,7 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         return -1;
     }
     mx_crop_paste(&gen, v->crop, &canvas);
-    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, 0, j->ctx.pool, st);
+    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, 0, j->ctx->pool, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
     j->views_done++;
@@ -442,8 +463,7 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_end_obj(w);
 }
 
-/* Push-pull fill of every layer's unreached chart texels. */
-static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
+int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     int T = j->o->tex_size;
     uint8_t *chart = malloc((size_t)T * T);
     if (!chart) return mx_fail(st, MX_ENOMEM, "UV fill: out of memory");
@@ -460,11 +480,12 @@ static int fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
     mx_job_set_phase(j, "finish");
-    if (mx_job_check_cancel(j, st) || fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || mx_job_fill_textures(j, tex, st)) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
     mx_jw_int(w, "views_generated", j->views_done);
+    if (!isnan(j->psnr_db)) mx_jw_num(w, "psnr_db", j->psnr_db);
     mx_job_stage_done(j, "uv_fill", mx_now() - t);
     mx_jw_begin_obj(w, "stages_s");
     for (int i = 0; i < j->nstages; i++) mx_jw_num(w, j->stage_name[i], j->stage_s[i]);

@@ -18,6 +18,8 @@
 #define MX_JOB_MAX_PROMPTS 16
 /* A candidate with fewer untextured pixels (at the candidate render size) is not worth a view. */
 #define MX_JOB_MIN_UNTEXTURED_PIXELS 16
+/* model_needs of mx_job_open for a job without networks (transfer). */
+#define MX_JOB_NO_MODELS (-1)
 
 typedef struct mx_prompt_cache {
     int n;
@@ -28,15 +30,17 @@ typedef struct mx_prompt_cache {
 typedef struct mx_job {
     const mx_texture_opts *o;
     mx_outdir out; /* opened (checked, staging folder created) before anything else */
-    mx_ctx ctx;
-    int ctx_ready;
-    const mx_models *models; /* o->models, or own_models */
+    const mx_ctx *ctx; /* the model set's context (o->models), or own_ctx */
+    mx_ctx own_ctx;
+    int own_ctx_ready;
+    const mx_models *models; /* o->models, or own_models; NULL with MX_JOB_NO_MODELS */
     mx_models own_models;
     int own_models_ready;
     char phase[32];    /* stage of the progress events */
     int stop;          /* the progress callback asked to cancel */
     mx_mesh mesh;
-    float *pos;  /* normalised positions for rendering */
+    float *pos;  /* normalised positions for rendering: (R p - center) * scale */
+    float center[3], scale;
     int nlayers; /* textures: one per material keeping its own UVs, else 1 */
     mx_bake bake;
     int bake_ready;
@@ -53,6 +57,7 @@ typedef struct mx_job {
     int views_done;
     double t0;
     double last_denoise_s, last_decode_s; /* of the latest mx_job_generate, for the report */
+    double psnr_db; /* transfer onto its own mesh: PSNR of the painted texels (report), else NAN */
     int nstages; /* seconds per stage, for the report */
     const char *stage_name[8];
     double stage_s[8];
@@ -82,13 +87,16 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Output folder when o->out_dir is set (checked, staging folder created), context, models
- * (o->models, else loaded from o->weights_path; needs: MX_MODELS_NEED_*), mesh (a copy of
- * o->mesh, else loaded from o->mesh_path) and its normalised copy, bake sized tex_size with
- * nlayers layers, candidate cache and the report's header. mx_job_close removes the staging
- * folder of a run that did not finish. */
+/* Output folder when o->out_dir is set (checked, staging folder created), context and models
+ * (o->models with its context, else loaded from o->weights_path; needs: MX_MODELS_NEED_*, or
+ * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->mesh_path) and its normalised
+ * copy, bake sized tex_size with nlayers layers, candidate cache and the report's header.
+ * mx_job_close removes the staging folder of a run that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
 void mx_job_close(mx_job *j);
+
+/* The context of a run (device, threads, precision of o), as a job or a model set makes it. */
+int mx_job_ctx_create(mx_ctx *c, const mx_texture_opts *o, mx_status *st);
 
 /* Runs one diffusion call: images out [n][3][h][w] in [0, 1]. */
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st);
@@ -113,6 +121,8 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
                         float w_inpaint);
 /* Fraction of candidate-visible texels in T^B. */
 double mx_job_coverage(const mx_job *j);
+/* Fills unreached texels (push-pull inside the charts, gutter dilation) of every layer. */
+int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Fills unreached texels, writes the output folder (staged, then moved into place) when
  * o->out_dir is set. Fails without writing anything once the run is cancelled. */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "../nn/netcfg.h"
+#include "../nn/sd_pipeline.h"
 #include "digest.h"
 
 static const char *config_text(const mx_weightfile *wf, const char *prefix, mx_status *st) {
@@ -24,18 +25,24 @@ static int has_network(const mx_weightfile *wf, const char *prefix) {
     return mx_wf_meta(wf, key) != NULL;
 }
 
+/* The binder of one network: the weight file's, and the device one over it (slot i). */
+static int bind_net(mx_models *m, int i, mx_binder *b, const char *prefix, mx_status *st) {
+    return mx_binder_wf(&m->wf_binders[i], m->wf, prefix, st) || mx_binder_device(b, &m->wf_binders[i], m->c, st) ? -1
+                                                                                                                 : 0;
+}
+
 static int load_clip(mx_models *m, mx_status *st) {
     const char *text = config_text(m->wf, "text_encoder.", st);
     if (!text) return -1;
     mx_clip_config cfg;
     if (mx_clip_config_parse(&cfg, text, strlen(text), mx_wf_path(m->wf), st)) return -1;
-    if (mx_binder_wf(&m->b_clip, m->wf, "text_encoder.", st)) return -1;
+    if (bind_net(m, 0, &m->b_clip, "text_encoder.", st)) return -1;
     if (mx_clip_load(&m->clip, &cfg, &m->b_clip, st)) return -1;
     m->clip_loaded = 1;
     return 0;
 }
 
-static int load_unet_like(mx_models *m, const char *prefix, int controlnet, mx_binder *b, void **out,
+static int load_unet_like(mx_models *m, const char *prefix, int controlnet, int slot, mx_binder *b, void **out,
                           mx_status *st) {
     const char *text = config_text(m->wf, prefix, st);
     if (!text) return -1;
@@ -45,7 +52,7 @@ static int load_unet_like(mx_models *m, const char *prefix, int controlnet, mx_b
         return mx_fail(st, MX_EINPUT, "%s: network '%s' is a %s, expected a %s", mx_wf_path(m->wf), prefix,
                        cfg.is_controlnet ? "ControlNetModel" : "UNet2DConditionModel",
                        controlnet ? "ControlNetModel" : "UNet2DConditionModel");
-    if (mx_binder_wf(b, m->wf, prefix, st)) return -1;
+    if (bind_net(m, slot, b, prefix, st)) return -1;
     if (controlnet) return mx_controlnet_load((mx_controlnet **)out, &cfg, b, st);
     return mx_unet_load((mx_unet **)out, &cfg, b, st);
 }
@@ -55,7 +62,7 @@ static int load_vae(mx_models *m, mx_status *st) {
     if (!text) return -1;
     mx_vae_config cfg;
     if (mx_vae_config_parse(&cfg, text, strlen(text), mx_wf_path(m->wf), st)) return -1;
-    if (mx_binder_wf(&m->b_vae, m->wf, "vae.", st)) return -1;
+    if (bind_net(m, 4, &m->b_vae, "vae.", st)) return -1;
     return mx_vae_load(&m->vae, &cfg, &m->b_vae, st);
 }
 
@@ -72,9 +79,9 @@ static int load_controlnets(mx_models *m, int needs, mx_status *st) {
     const char *depth_prefix = has_network(m->wf, "controlnet_depth.") ? "controlnet_depth."
                                : has_network(m->wf, "controlnet.")     ? "controlnet."
                                                                        : NULL;
-    if (depth_prefix && load_unet_like(m, depth_prefix, 1, &m->b_depth, (void **)&m->cn_depth, st)) return -1;
+    if (depth_prefix && load_unet_like(m, depth_prefix, 1, 2, &m->b_depth, (void **)&m->cn_depth, st)) return -1;
     if (has_network(m->wf, "controlnet_inpaint.") &&
-        load_unet_like(m, "controlnet_inpaint.", 1, &m->b_inpaint, (void **)&m->cn_inpaint, st))
+        load_unet_like(m, "controlnet_inpaint.", 1, 3, &m->b_inpaint, (void **)&m->cn_inpaint, st))
         return -1;
     return mx_models_check(m, needs, st);
 }
@@ -91,11 +98,12 @@ int mx_models_check(const mx_models *m, int needs, mx_status *st) {
 
 const char *mx_models_path(const mx_models *m) { return mx_wf_path(m->wf); }
 
-int mx_models_load(mx_models *m, const char *path, int needs, mx_status *st) {
+int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st) {
     memset(m, 0, sizeof *m);
+    m->c = c;
     if (mx_wf_open(&m->wf, path, st)) return -1;
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_clip(m, st) ||
-        load_unet_like(m, "unet.", 0, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
+        load_unet_like(m, "unet.", 0, 1, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
         load_vae(m, st) || load_scheduler(m, st)) {
         mx_models_free(m);
         return -1;
@@ -122,6 +130,7 @@ void mx_models_free(mx_models *m) {
     mx_binder_free(&m->b_depth);
     mx_binder_free(&m->b_inpaint);
     mx_binder_free(&m->b_vae);
+    for (int i = 0; i < 5; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);
@@ -131,15 +140,5 @@ int mx_models_text_dim(const mx_models *m) { return m->clip.cfg.hidden_size; }
 
 int mx_models_encode_text(const mx_models *m, const mx_ctx *c, const char *text, float *out, int *n_dropped,
                           mx_status *st) {
-    mx_tok_result tr;
-    if (mx_tok_encode(m->tok, text, &tr, st)) return -1;
-    if (n_dropped) *n_dropped = tr.n_dropped;
-    mx_arena measure;
-    mx_arena_measure(&measure);
-    if (mx_clip_forward(&m->clip, c, &measure, tr.ids, 1, MX_CLIP_CONTEXT, out, NULL, NULL, st)) return -1;
-    mx_arena arena;
-    if (mx_arena_create(&arena, measure.peak, st)) return -1;
-    int rc = mx_clip_forward(&m->clip, c, &arena, tr.ids, 1, MX_CLIP_CONTEXT, out, NULL, NULL, st);
-    mx_arena_destroy(&arena);
-    return rc;
+    return mx_sd_encode_prompts(c, &m->clip, m->tok, &text, 1, out, n_dropped, st);
 }

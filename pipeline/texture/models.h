@@ -26,23 +26,25 @@ typedef struct mx_models {
     mx_controlnet *cn_inpaint; /* NULL when not in the file and not needed */
     mx_vae *vae;
     mx_sched_config sched;
-    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae;
+    const mx_ctx *c;                           /* the weights live on c's backend */
+    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae; /* weights on the device */
+    mx_binder wf_binders[5];                   /* the weight file's binders behind them */
     int clip_loaded;
     char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;
 
-/* Opens the weight file and binds every network. `needs` (MX_MODELS_NEED_*) lists the
- * ControlNets that must be present; a missing network is an error naming the file and the
- * prefix it looked for. */
-int mx_models_load(mx_models *m, const char *path, int needs, mx_status *st);
+/* Opens the weight file and binds every network, its weights kept on c's backend (c must
+ * outlive m). `needs` (MX_MODELS_NEED_*) lists the ControlNets that must be present; a missing
+ * network is an error naming the file and the prefix it looked for. */
+int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st);
 void mx_models_free(mx_models *m);
 /* The same check for a model set already open (needs: MX_MODELS_NEED_*). */
 int mx_models_check(const mx_models *m, int needs, mx_status *st);
 /* The weight file's path. */
 const char *mx_models_path(const mx_models *m);
 
-/* Prompt -> CLIP last_hidden_state [77, C] (C = text hidden size). *n_dropped gets the
- * number of tokens cut by truncation to 77 (the caller warns). */
+/* Prompt -> CLIP last_hidden_state [77, C] (C = text hidden size) in host memory. *n_dropped gets
+ * the number of tokens cut by truncation to 77 (the caller warns). */
 int mx_models_encode_text(const mx_models *m, const mx_ctx *c, const char *text, float *out, int *n_dropped,
                           mx_status *st);
 /* Hidden size of the text encoder (= the UNet's cross-attention dim). */

@@ -29,10 +29,12 @@ static int blank(const char *s) {
 static int check_paths(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
     /* the embedding API may give the mesh in memory, an opened model set, and keep the results */
     if (!o->mesh && (!o->mesh_path || !*o->mesh_path)) return mx_fail(st, MX_EUSAGE, "no mesh given");
-    if (!o->models && (!o->weights_path || !*o->weights_path))
-        return mx_fail(st, MX_EUSAGE, "no weight file given (--weights)");
     if (!o->keep_outputs && (!o->out_dir || !*o->out_dir))
         return mx_fail(st, MX_EUSAGE, "no output folder given (-o)");
+    if (mode == MX_TEXTURE_MODE_TRANSFER)
+        return !o->source_path || !*o->source_path ? mx_fail(st, MX_EUSAGE, "no source mesh given") : 0;
+    if (!o->models && (!o->weights_path || !*o->weights_path))
+        return mx_fail(st, MX_EUSAGE, "no weight file given (--weights)");
     if (!o->prompt) return mx_fail(st, MX_EUSAGE, "no prompt given");
     if (mode == MX_TEXTURE_MODE_TEXTURE && blank(o->prompt))
         return mx_fail(st, MX_EUSAGE, "the prompt is empty: describe the texture, e.g. \"a rustic wooden chair\"");
@@ -42,7 +44,7 @@ static int check_paths(const mx_texture_opts *o, mx_texture_mode mode, mx_status
 
 static int check_sizes(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
     if (int_in("--steps", o->steps, 1, 200, st) ||
-        int_in("--views", o->views, mode == MX_TEXTURE_MODE_TEXTURE ? 2 : 1, 64, st) ||
+        int_in("--views", o->views, mode == MX_TEXTURE_MODE_ENHANCE ? 1 : 2, 64, st) ||
         int_in("--candidates", o->candidates, 1, 4096, st) || int_in("--texture-size", o->tex_size, 16, 8192, st) ||
         int_in("--render-size", o->render_size, 16, 8192, st) || int_in("--batch", o->max_batch, 1, 64, st) ||
         int_in("--threads", o->threads, 0, 1024, st))

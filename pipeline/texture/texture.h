@@ -21,6 +21,7 @@
 #include <stdint.h>
 
 #include "../../runtime/backend.h"
+
 #include "../../runtime/status.h"
 #include "../geom/image.h"
 #include "../geom/mesh.h"
@@ -69,6 +70,7 @@ typedef struct mx_texture_opts {
     float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted: 0.995 */
     mx_up_axis up;
     int threads;             /* 0: all CPUs */
+    mx_backend_kind device;  /* where the networks run: cpu (default), cpu-strict, cuda */
     mx_precision precision;  /* of the networks' matrix products: bf16 (used where the CPU has it) */
     int quiet;
     float strength;          /* enhance: SDEdit strength in (0, 1]: 0.5 */
@@ -78,11 +80,12 @@ typedef struct mx_texture_opts {
      * ("interrupted") and leaves no output folder and no staging folder behind. */
     volatile sig_atomic_t *cancel;
     int force;               /* replace an existing non-empty output folder (atomically) */
+    const char *source_path; /* transfer: the textured mesh whose texture moves onto mesh_path */
 } mx_texture_opts;
 
 void mx_texture_opts_default(mx_texture_opts *o);
 
-typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE } mx_texture_mode;
+typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE, MX_TEXTURE_MODE_TRANSFER } mx_texture_mode;
 
 /* Checks every option before any work (MX_EUSAGE, the message names the option, its value and
  * the valid range). mx_texture_run and mx_enhance_run call it first; front ends (the CLI, the
@@ -103,6 +106,12 @@ typedef struct mx_texture_result {
 /* Both fill *res (when not NULL) on success; free it with mx_texture_result_free. */
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
+/* `matex transfer` (pipeline/texture/transfer.c): the texture of o->source_path moves onto
+ * o->mesh_path (its UVs, or an atlas): the job's views (front, back, then Alg. 1 over the
+ * candidates) render the source with its texture, each render is backprojected onto the
+ * destination where both meshes are seen, then the job's fill and export. No networks: the
+ * weights, prompt and sampler options are unused. Both meshes share pose and units. */
+int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
 void mx_texture_result_free(mx_texture_result *res);
 
 #endif

@@ -1,0 +1,145 @@
+/* The backends and the seam ops: names and what is compiled in; cpu-strict memory really is
+ * out of reach outside the op layer (a direct read or write kills a child process with
+ * SIGSEGV) while ops and the host copies work on it; a measuring context computes nothing;
+ * the seam ops (pad, copy, fill, axpy, lincomb, clamp, affine, embed_tokens) on known values,
+ * on the strict backend. */
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "../ops/ops.h"
+#include "util_test.h"
+
+static void test_names(void) {
+    mx_backend_kind k;
+    mx_status st = {0};
+    CHECK(mx_backend_parse("cpu-strict", &k, &st) == 0 && k == MX_BACKEND_CPU_STRICT);
+    CHECK(mx_backend_parse("gpu", &k, &st) != 0 && strstr(st.msg, "cpu, cpu-strict or cuda"));
+    CHECK(strcmp(mx_backend_name(MX_BACKEND_CUDA), "cuda") == 0);
+    CHECK(strstr(mx_backends_compiled(), "cpu-strict") != NULL);
+    if (!mx_backend_compiled(MX_BACKEND_CUDA)) {
+        mx_ctx c;
+        CHECK(mx_ctx_create_on(&c, MX_BACKEND_CUDA, 1, MX_ISA_SCALAR, 1 << 16, &st) != 0);
+        CHECK(strstr(st.msg, "without the cuda backend") != NULL);
+    }
+}
+
+/* Runs fn(p) in a child; returns the signal that ended it (0: it exited). */
+static int child_signal(void (*fn)(volatile float *), volatile float *p) {
+    fflush(stdout);
+    fflush(stderr);
+    pid_t pid = fork();
+    if (pid == 0) {
+        signal(SIGSEGV, SIG_DFL); /* no sanitizer report: just die */
+        fn(p);
+        _exit(0);
+    }
+    int status = 0;
+    if (pid < 0 || waitpid(pid, &status, 0) != pid) return -1;
+    return WIFSIGNALED(status) ? WTERMSIG(status) : 0;
+}
+
+static void read_one(volatile float *p) {
+    float v = p[3];
+    (void)v;
+}
+static void write_one(volatile float *p) { p[3] = 1.0f; }
+
+static void test_strict_guard(void) {
+    mx_ctx c;
+    mx_status st = {0};
+    CHECK(mx_ctx_create_on(&c, MX_BACKEND_CPU_STRICT, 2, mx_cpu_best_isa(), 1 << 20, &st) == 0);
+    float host[100], back[100], want[100];
+    for (int i = 0; i < 100; i++) host[i] = (float)i, want[i] = 2.0f * (float)i;
+    float *d = mx_dev_from_host(&c, host, 100, &st);
+    CHECK(d != NULL);
+    if (!d) return;
+    mx_scale(&c, d, d, 2.0f, 100);
+    CHECK(mx_download(&c, back, d, 100, &st) == 0);
+    mx_check_close("cpu-strict: scale through the op layer", back, want, 100, 0);
+    CHECK(child_signal(read_one, d) == SIGSEGV);
+    CHECK(child_signal(write_one, d) == SIGSEGV);
+    /* an arena on the backend is guarded too */
+    mx_arena a;
+    CHECK(mx_arena_create_on(&a, c.be, 4096, &st) == 0);
+    float *x = mx_act_alloc(&a, 16, &st);
+    CHECK(x != NULL && child_signal(read_one, x) == SIGSEGV);
+    mx_arena_destroy(&a);
+    /* host memory is still fine for the host (the guard is only on backend memory) */
+    CHECK(child_signal(write_one, host) == 0);
+    mx_dev_free(&c, d);
+    mx_ctx_destroy(&c);
+}
+
+static void test_measuring(void) {
+    const mx_ctx *m = mx_ctx_measuring();
+    mx_arena a;
+    mx_arena_measure(&a);
+    float *p = mx_act_alloc(&a, 1000, NULL), *q = mx_act_alloc(&a, 10, NULL);
+    CHECK(p && q && a.peak >= 1010 * sizeof(float));
+    mx_copy(m, NULL, NULL, 1000); /* returns at once: would crash otherwise */
+    mx_conv2d(m, NULL, NULL, 1, 3, 8, 8, mx_w_none(), mx_w_none(), 4, 3, 3, 1, 1);
+    CHECK(mx_run_ctx(NULL, &a) == m);
+}
+
+static void test_seam_ops(const mx_ctx *c) {
+    mx_status st = {0};
+    /* pad a 2x3 plane by (top 1, bottom 0, left 0, right 2) */
+    const float x[6] = {1, 2, 3, 4, 5, 6};
+    const float pad_want[15] = {0, 0, 0, 0, 0, 1, 2, 3, 0, 0, 4, 5, 6, 0, 0};
+    float got[16];
+    float *dx = mx_dev_from_host(c, x, 6, &st), *dy = mx_dev_alloc(c, 16, &st);
+    CHECK(dx && dy);
+    if (!dx || !dy) return;
+    mx_pad2d(c, dy, dx, 1, 2, 3, 1, 0, 0, 2);
+    CHECK(mx_download(c, got, dy, 15, &st) == 0);
+    mx_check_close("pad2d (1, 0, 0, 2)", got, pad_want, 15, 0);
+    /* fill, copy, axpy, lincomb, clamp, affine */
+    mx_fill(c, dy, 0.5f, 6);
+    mx_axpy(c, dy, dx, 2.0f, 6); /* 0.5 + 2x */
+    const float axpy_want[6] = {2.5f, 4.5f, 6.5f, 8.5f, 10.5f, 12.5f};
+    CHECK(mx_download(c, got, dy, 6, &st) == 0);
+    mx_check_close("fill + axpy", got, axpy_want, 6, 0);
+    const float coef[3] = {1.0f, -2.0f, 0.5f};
+    const float *const terms[3] = {dy, dx, dx};
+    mx_lincomb(c, dy, 3, coef, terms, 6); /* 0.5 + 2x - 2x + 0.5x */
+    const float lc_want[6] = {1.0f, 1.5f, 2.0f, 2.5f, 3.0f, 3.5f};
+    CHECK(mx_download(c, got, dy, 6, &st) == 0);
+    mx_check_close("lincomb of 3", got, lc_want, 6, 0);
+    mx_clamp(c, dy, dy, 1.5f, 3.0f, 6);
+    mx_affine(c, dy, dy, 2.0f, -1.0f, 6);
+    const float ca_want[6] = {2.0f, 2.0f, 3.0f, 4.0f, 5.0f, 5.0f};
+    CHECK(mx_download(c, got, dy, 6, &st) == 0);
+    mx_check_close("clamp + affine", got, ca_want, 6, 0);
+    mx_copy(c, dy + 1, dx, 3);
+    const float cp_want[4] = {2.0f, 1.0f, 2.0f, 3.0f};
+    CHECK(mx_download(c, got, dy, 4, &st) == 0);
+    mx_check_close("copy at an offset", got, cp_want, 4, 0);
+    /* token + position embedding: vocabulary of 3, C = 2, T = 2 */
+    const float tok[6] = {0, 1, 10, 11, 20, 21}, pos[4] = {100, 200, 300, 400};
+    const int32_t ids[4] = {2, 0, 1, 1};
+    const float emb_want[8] = {120, 221, 300, 401, 110, 211, 310, 411};
+    mx_embed_tokens(c, dy, ids, 2, 2, 2, mx_w_f32(tok), mx_w_f32(pos));
+    CHECK(mx_download(c, got, dy, 8, &st) == 0);
+    mx_check_close("embed_tokens", got, emb_want, 8, 0);
+    mx_dev_free(c, dx);
+    mx_dev_free(c, dy);
+}
+
+int main(void) {
+    test_names();
+    test_strict_guard();
+    test_measuring();
+    mx_ctx c;
+    mx_status st = {0};
+    if (mx_ctx_create_on(&c, MX_BACKEND_CPU_STRICT, 2, mx_cpu_best_isa(), 1 << 20, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        return 1;
+    }
+    test_seam_ops(&c);
+    mx_ctx_destroy(&c);
+    return mx_test_finish("test_core_backend");
+}

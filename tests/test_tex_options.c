@@ -1,0 +1,230 @@
+/* The checks before any work and the stop at any moment (issue 12): mx_texture_opts_check
+ * refuses every impossible option with its valid range; the output folder is checked and
+ * staged first (mx_outdir: a file, a non-empty folder without force, an atomic replacement with
+ * force); a cancel flag set before or during a run (from another thread, at many moments) ends
+ * it with MX_ECANCEL and leaves neither the output folder nor its staging folder. */
+#include <dirent.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../pipeline/texture/outdir.h"
+#include "../pipeline/texture/texture.h"
+#include "../runtime/log.h"
+#include "util_test.h"
+
+static void base_opts(mx_texture_opts *o, const char *weights, const char *out) {
+    mx_texture_opts_default(o);
+    o->mesh_path = "mesh.obj";
+    o->prompt = "a chair";
+    o->weights_path = weights;
+    o->out_dir = out;
+}
+
+/* One impossible value: refused as a usage error whose message holds `want`. */
+static void expect_refused(const mx_texture_opts *o, mx_texture_mode mode, const char *want) {
+    mx_status st;
+    mx_status_clear(&st);
+    int rc = mx_texture_opts_check(o, mode, &st);
+    CHECK(rc == -1 && st.code == MX_EUSAGE);
+    if (!strstr(st.msg, want)) {
+        fprintf(stderr, "message '%s' lacks '%s'\n", st.msg, want);
+        mx_test_failures++;
+    }
+}
+
+static void test_options(void) {
+    mx_texture_opts o;
+    mx_status st;
+    base_opts(&o, "w.mxw", "out");
+    CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_TEXTURE, &st) == 0);
+#define REFUSE(field, value, want)                                                                                     \
+    do {                                                                                                               \
+        base_opts(&o, "w.mxw", "out");                                                                                 \
+        o.field = value;                                                                                               \
+        expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, want);                                                             \
+    } while (0)
+    REFUSE(frontal_threshold, 1.5f, "--frontal-threshold must be in [0, 1), not 1.5");
+    REFUSE(frontal_threshold, -0.1f, "--frontal-threshold must be in [0, 1)");
+    REFUSE(coverage_stop, 2.0f, "--coverage-stop must be in (0, 1], not 2");
+    REFUSE(coverage_stop, 0.0f, "--coverage-stop must be in (0, 1]");
+    REFUSE(guidance, -3.0f, "--guidance must be in [0, 50], not -3");
+    REFUSE(guidance, (float)NAN, "--guidance must be in [0, 50]");
+    REFUSE(guidance, (float)INFINITY, "--guidance must be in [0, 50]");
+    REFUSE(grid_depth_weight, 3.0f, "--grid-depth-weight must be in [0, 2]");
+    REFUSE(depth_weight[1], -1.0f, "--depth-weight must be in [0, 2], not -1");
+    REFUSE(inpaint_weight[0], 2.5f, "--inpaint-weight must be in [0, 2]");
+    REFUSE(strength, 0.0f, "--strength must be in (0, 1]");
+    REFUSE(steps, 0, "--steps must be in 1..200, not 0");
+    REFUSE(views, 1, "--views must be in 2..64, not 1");
+    REFUSE(candidates, 0, "--candidates must be in 1..4096");
+    REFUSE(tex_size, 8, "--texture-size must be in 16..8192, not 8");
+    REFUSE(render_size, 100000, "--render-size must be in 16..8192");
+    REFUSE(image_size, 100, "--image-size must be a multiple of 8");
+    REFUSE(max_batch, 0, "--batch must be in 1..64, not 0");
+    REFUSE(threads, -1, "--threads must be in 0..1024");
+    REFUSE(prompt, "", "the prompt is empty");
+    REFUSE(prompt, " \t ", "the prompt is empty");
+    REFUSE(prompt, NULL, "no prompt");
+    REFUSE(out_dir, "", "no output folder");
+    REFUSE(weights_path, NULL, "--weights");
+    REFUSE(normal_source, 7, "--normals");
+#undef REFUSE
+    /* enhance: the prompt may be empty and one view is enough */
+    base_opts(&o, "w.mxw", "out");
+    o.prompt = "";
+    o.views = 1;
+    CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_ENHANCE, &st) == 0);
+    expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "the prompt is empty");
+    /* transfer: a source, no weights, no prompt */
+    base_opts(&o, NULL, "out");
+    o.prompt = NULL;
+    expect_refused(&o, MX_TEXTURE_MODE_TRANSFER, "no source mesh");
+    o.source_path = "src.glb";
+    CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, &st) == 0);
+    /* mx_texture_run refuses before touching anything */
+    base_opts(&o, "w.mxw", "out_never");
+    o.coverage_stop = 2;
+    CHECK(mx_texture_run(&o, NULL, &st) == -1 && st.code == MX_EUSAGE);
+}
+
+static int exists(const char *path) {
+    struct stat sb;
+    return stat(path, &sb) == 0;
+}
+
+/* Nothing named "<dir>.partial-*" or "<dir>.old-*" beside dir. */
+static int no_staging(const char *dir) {
+    char parent[1024], base[256];
+    snprintf(parent, sizeof parent, "%s", dir);
+    char *slash = strrchr(parent, '/');
+    snprintf(base, sizeof base, "%s.", slash + 1);
+    *slash = 0;
+    DIR *d = opendir(parent);
+    if (!d) return 0;
+    struct dirent *e;
+    int clean = 1;
+    while ((e = readdir(d)) != NULL)
+        if (!strncmp(e->d_name, base, strlen(base))) clean = 0;
+    closedir(d);
+    return clean;
+}
+
+static int count_entries(const char *dir) {
+    DIR *d = opendir(dir);
+    if (!d) return -1;
+    int n = 0;
+    struct dirent *e;
+    while ((e = readdir(d)) != NULL) n += strcmp(e->d_name, ".") && strcmp(e->d_name, "..");
+    closedir(d);
+    return n;
+}
+
+static void test_outdir(const char *tmp) {
+    char file[600], full[600], old[700], staged[4400];
+    mx_outdir od;
+    mx_status st;
+    snprintf(file, sizeof file, "%s/a_file", tmp);
+    FILE *f = fopen(file, "w");
+    if (f) fclose(f);
+    CHECK(mx_outdir_open(&od, file, 1, &st) == -1 && strstr(st.msg, "not a folder"));
+    snprintf(full, sizeof full, "%s/full", tmp);
+    snprintf(old, sizeof old, "%s/old.png", full);
+    mkdir(full, 0777);
+    f = fopen(old, "w");
+    if (f) fclose(f);
+    CHECK(mx_outdir_open(&od, full, 0, &st) == -1 && strstr(st.msg, "--force"));
+    CHECK(exists(old) && no_staging(full));
+    /* with force: staged at once, discarded on failure, swapped in on commit */
+    CHECK(mx_outdir_open(&od, full, 1, &st) == 0 && exists(od.stage));
+    mx_outdir_discard(&od);
+    CHECK(!exists(od.stage) && exists(old));
+    CHECK(mx_outdir_open(&od, full, 1, &st) == 0);
+    snprintf(staged, sizeof staged, "%s/new.txt", od.stage);
+    f = fopen(staged, "w");
+    if (f) fclose(f);
+    mx_image tex;
+    mx_mesh m = {0};
+    float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0}, uv[6] = {0, 0, 1, 0, 0, 1};
+    int32_t face[3] = {0, 1, 2};
+    m.nverts = 3, m.nfaces = 1, m.pos = pos, m.faces = face, m.nuv = 3, m.uv = uv, m.face_uv = face;
+    CHECK(mx_image_alloc(&tex, 16, 16, 3, &st) == 0);
+    volatile sig_atomic_t stop = 1;
+    CHECK(mx_outdir_commit(&od, &m, &tex, 1, "{}", &stop, &st) == -1 && st.code == MX_ECANCEL);
+    CHECK(exists(old) && no_staging(full)); /* interrupted before the swap: the old folder stays */
+    CHECK(mx_outdir_open(&od, full, 1, &st) == 0);
+    stop = 0;
+    CHECK(mx_outdir_commit(&od, &m, &tex, 1, "{}", &stop, &st) == 0);
+    CHECK(!exists(old) && count_entries(full) == 6 && no_staging(full));
+    mx_image_free(&tex);
+}
+
+typedef struct {
+    volatile sig_atomic_t *flag;
+    long delay_us;
+} stopper;
+
+static void *stop_later(void *arg) {
+    const stopper *s = arg;
+    struct timespec ts = {s->delay_us / 1000000, (s->delay_us % 1000000) * 1000};
+    nanosleep(&ts, NULL);
+    *s->flag = 1;
+    return NULL;
+}
+
+static void test_cancel(const char *weights, const char *tmp) {
+    char mesh[1024], out[1024];
+    if (!mx_test_need(mesh, sizeof mesh, "assets/fedora_hat/fedora.obj")) return;
+    /* -1: set before the run; LONG_MAX: never */
+    static const long delays_us[] = {-1, 0, 50000, 200000, 500000, 900000, 1400000, LONG_MAX};
+    int stopped = 0, n = (int)(sizeof delays_us / sizeof *delays_us);
+    for (int i = 0; i < n; i++) {
+        snprintf(out, sizeof out, "%s/cancel%d", tmp, i);
+        volatile sig_atomic_t flag = delays_us[i] < 0; /* set before the run */
+        mx_texture_opts o;
+        base_opts(&o, weights, out);
+        o.mesh_path = mesh;
+        o.steps = 2, o.candidates = 12, o.tex_size = 512, o.render_size = 256, o.image_size = 64;
+        o.quiet = 1, o.cancel = &flag;
+        stopper s = {&flag, delays_us[i]};
+        pthread_t th;
+        int threaded = delays_us[i] >= 0 && delays_us[i] < LONG_MAX && pthread_create(&th, NULL, stop_later, &s) == 0;
+        mx_status st;
+        mx_status_clear(&st);
+        int rc = mx_texture_run(&o, NULL, &st);
+        if (threaded) pthread_join(th, NULL);
+        if (delays_us[i] == LONG_MAX) printf("never cancelled: %s\n", rc ? st.msg : "finished");
+        else printf("cancel after %ld us: %s\n", delays_us[i], rc ? st.msg : "finished first");
+        if (rc) {
+            stopped++;
+            CHECK(st.code == MX_ECANCEL && !strcmp(st.msg, "interrupted"));
+            CHECK(!exists(out));
+        } else {
+            CHECK(count_entries(out) == 6);
+        }
+        CHECK(no_staging(out));
+    }
+    CHECK(stopped >= 2 && stopped < n); /* at least the flag set before and at the start; not the last */
+}
+
+int main(void) {
+    mx_log_set_level(MX_LOG_ERROR);
+    char tmp[] = "/tmp/matex_opts_XXXXXX";
+    if (!mkdtemp(tmp)) return 1;
+    test_options();
+    test_outdir(tmp);
+    const char *weights = getenv("MATEX_DEMO_WEIGHTS");
+    if (weights && access(weights, R_OK) == 0) test_cancel(weights, tmp);
+    else fprintf(stderr, "MATEX_DEMO_WEIGHTS not set: the cancel test did not run\n"), mx_test_failures++;
+    char cmd[256];
+    snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
+    if (mx_test_failures == 0 && system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);
+    return mx_test_finish("test_tex_options");
+}
