@@ -22,8 +22,9 @@
  *
  * Conventions: every call that can fail returns 0 on success and -1 on failure with one line
  * naming the file and the problem in err->message (err may be NULL). A failed or cancelled
- * run writes nothing. The library has no global state; a model set may be used by one run at a
- * time (runs on different model sets may go on in parallel threads). */
+ * run writes nothing. The library keeps no global state of its own (only the level of its
+ * stderr log is process-wide); a model set may be used by one run at a time (runs on different
+ * model sets may go on in parallel threads). */
 #ifndef MATEX_H
 #define MATEX_H
 

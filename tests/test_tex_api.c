@@ -184,6 +184,8 @@ int main(void) {
         printf("no demo weights (MATEX_DEMO_WEIGHTS; make test builds them)\n");
         return MX_TEST_SKIP;
     }
+    printf("matex_version() %s, MATEX_VERSION %s\n", matex_version(), MATEX_VERSION);
+    CHECK(!strcmp(matex_version(), MATEX_VERSION));
     char tmp[] = "/tmp/matex_test_api.XXXXXX";
     if (!mkdtemp(tmp)) return 1;
     matex_error err;

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../runtime/version.h"
 #include "../geom/masks.h"
 #include "api_opts.h"
 #include "job.h"
@@ -34,7 +35,8 @@ typedef struct api_result {
     mx_texture_result in;
 } api_result;
 
-const char *matex_version(void) { return MATEX_VERSION; }
+/* The library's version (runtime/version.h); test_tex_api checks that the header's MATEX_VERSION agrees. */
+const char *matex_version(void) { return MX_VERSION; }
 
 static void clear_error(matex_error *err) {
     if (!err) return;
