@@ -25,6 +25,11 @@ ifeq ($(CUDA),1)
 CFLAGS  += -DMX_WITH_CUDA
 LDLIBS  += $(BUILD)/libmx_cuda.a $(BUILD)/libmx_core.a $(CUDA_LIBS)
 endif
+ifeq ($(SAN),fuzz)
+CFLAGS   += -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+CXXFLAGS += -fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDFLAGS  += -fsanitize=address,undefined
+endif
 
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
@@ -131,14 +136,47 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 	@mkdir -p $(dir $@)
 	sh tools/make_demo_weights.sh $(BUILD)/matex $@
 
+# ---- fuzzing: one harness per input surface, tests/fuzz/fuzz_<H>.c. `make test` replays its seeds and
+# every crash ever found (tests/fuzz/regress/<H>) through replay_<H>; `make fuzz FUZZ_SECONDS=N` runs
+# each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz ----
+FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
+FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+              $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+FUZZ_SECONDS ?= 20
+$(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)
+	$(CXX) $(LDFLAGS) -fsanitize=fuzzer -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+.PHONY: fuzz fuzz-run
+fuzz:
+	$(MAKE) BUILD=build-fuzz CC=clang CXX=clang++ SAN=fuzz OPT=-O1 fuzz-run
+fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
+	sh tests/fuzz/run.sh $(BUILD) $(FUZZ_SECONDS) $(FUZZ_NAMES)
+
+# ---- fault injection: a test-only matex failing the k-th allocation or write (tests/faults/fault.c);
+# `make test` samples k (tests/cli_faults.sh), `make faults` tries every k under ASan
+# (FAULTS_SWEEP=sites: the first allocation of each allocation site) ----
+MATEX_FAULTS = $(BUILD)/tests/faults/matex_faults
+FAULT_WRAP   = $(foreach f,malloc calloc realloc aligned_alloc posix_memalign strdup strndup _Znwm _Znam,-Wl,--wrap=$(f))
+$(MATEX_FAULTS): $(call obj,tools/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
+                 $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS) -ldl
+.PHONY: faults faults-run
+faults:
+	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 faults-run
+FAULTS_SWEEP ?= full
+faults-run: $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+	$(TEST_ENV) MATEX_FAULTS_SWEEP=$(FAULTS_SWEEP) sh tests/cli_faults.sh
+
 # The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
 # activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
 MX_TEST_DEVICE ?= cpu-strict
 TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
-           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw \
+           MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
            MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
-test: all core $(TEST_BINS) $(DEMO_WEIGHTS)
-	$(TEST_ENV) sh tests/run.sh $(TEST_BINS)
+test: all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: all core $(TEST_BINS) $(DEMO_WEIGHTS)
@@ -192,7 +230,7 @@ install: all
 	    > $(DESTDIR)$(PREFIX)/lib/pkgconfig/matex.pc
 
 clean:
-	rm -rf build build-asan matex
+	rm -rf build build-asan build-fuzz matex
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
 

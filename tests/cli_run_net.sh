@@ -14,6 +14,8 @@ check "run-net --device names the choices" grep -q "cpu, cpu-strict or cuda" "$T
 check "run-net --device cuda without a usable CUDA backend fails" [ "$(rc_of "$M" run-net unet --weights a --inputs b --out c --device cuda)" != 0 ]
 check "... in one line that names cuda" [ "$(grep -c cuda "$T/err")" = 1 ]
 check "run-net unknown NET exits 2" [ "$(rc_of "$M" run-net resnet --weights a --inputs b --out c)" = 2 ]
+check "run-net bad --precision exits 2" [ "$(rc_of "$M" run-net unet --precision fp8 --weights a --inputs b --out c)" = 2 ]
+check "bad --precision is named" grep -q "precision must be fp32 or bf16" "$T/err"
 check "gen-weights --help exits 0" [ "$(rc_of "$M" gen-weights --help)" = 0 ]
 check "gen-weights bad dtype exits 2" [ "$(rc_of "$M" gen-weights "$G/unet_tiny/config.json" -o "$T/x" --dtype f8)" = 2 ]
 
@@ -48,6 +50,9 @@ cp "$G/unet_tiny/config.json" "$T/gen/config.json"
 check "gen-weights f16" [ "$(rc_of "$M" gen-weights "$T/gen/config.json" --seed 3 -o "$T/gen/diffusion_pytorch_model.safetensors" --dtype f16)" = 0 ]
 check "convert generated" [ "$(rc_of "$M" convert "$T/gen" -o "$T/g.mxw" --quiet)" = 0 ]
 check "run-net on generated" [ "$(rc_of "$M" run-net unet --weights "$T/g.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/g.safetensors")" = 0 ]
+# bf16 arithmetic where the CPU has it (else fp32 with a warning): runs and writes its output
+check "run-net --precision bf16" [ "$(rc_of "$M" run-net unet --precision bf16 --weights "$T/g.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/g16.safetensors")" = 0 ]
+check "bf16 output written" [ -s "$T/g16.safetensors" ]
 check "gen-weights is deterministic" sh -c ""$M" gen-weights '$T/gen/config.json' --seed 3 -o '$T/again.safetensors' --dtype f16 2>/dev/null && cmp -s '$T/again.safetensors' '$T/gen/diffusion_pytorch_model.safetensors'"
 check "gen-weights bad config exits 1" [ "$(rc_of "$M" gen-weights "$G/README.md" -o "$T/x.safetensors")" = 1 ]
 check "no output for a bad config" [ ! -e "$T/x.safetensors" ]

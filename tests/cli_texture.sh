@@ -16,6 +16,7 @@ check "unknown option exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulate
 check "bad number exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps ten)" = 2 ]
 check "--device cuda exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --device cuda)" = 2 ]
 check "steps out of range exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps 0)" = 2 ]
+check "bad --precision exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --precision fp16)" = 2 ]
 check "missing weights exits 1" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$T/none.mxw" -o "$T/a")" = 1 ]
 check "the message names the weights" grep -q "none.mxw" "$T/err"
 check "missing mesh exits 1" [ "$(rc_of "$M" texture "$T/none.obj" x --weights "$W" -o "$T/a" $SMALL)" = 1 ]
@@ -23,6 +24,10 @@ check "the message names the mesh" grep -q "none.obj" "$T/err"
 check "no output after a failure" [ ! -e "$T/a" ]
 check "texture runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a grey felt hat" --weights "$W" -o "$T/hat" --json $SMALL)" = 0 ]
 check "--json summary" grep -q '"ok":true' "$T/out"
+# the report names the arithmetic: bf16 by default where the CPU has AVX512_BF16
+want=fp32
+if grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null && [ "${MATEX_ISA:-avx512bf16}" = avx512bf16 ]; then want=bf16; fi
+check "report names the precision ($want)" grep -q "\"precision\": *\"$want\"" "$T/hat/report.json"
 for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do
     check "texture wrote $f" [ -s "$T/hat/$f" ]
 done

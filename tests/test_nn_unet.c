@@ -87,7 +87,7 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
         char tag[64];
         golden_label(tag, sizeof tag, c, net);
         snprintf(label, sizeof label, "%s %s %s", tag, outfile, oname);
-        if (want) mx_check_close(label, got, want, nw, golden_bound(c));
+        if (want) mx_check_close(label, got, want, nw, golden_bound(c, GOLDEN_BF16));
         free(want);
         for (int i = 0; i <= nres; i++) free(res[i]);
     }

@@ -30,11 +30,20 @@ static int cmp_double(const void *a, const void *b) {
 /* Median seconds of one UNet call per precision (fp32, bf16), the calls alternated; secs[1] = 0
  * without bf16. */
 static int time_unet(const char *weights, int threads, double secs[2], mx_status *st) {
-    mx_models m;
-    if (mx_models_load(&m, weights, 0, st)) return -1;
+    /* host-memory contexts: the weights bound through the fp32 one serve both */
     mx_ctx c[2];
     mx_isa bf16_isa = mx_cpu_isa_for(MX_PREC_BF16);
     int nprec = mx_isa_precision(bf16_isa) == MX_PREC_BF16 ? 2 : 1, rc = -1;
+    if (mx_ctx_create(&c[0], threads, mx_cpu_isa_for(MX_PREC_FP32), (size_t)64 << 20, st)) return -1;
+    if (nprec == 2 && mx_ctx_create(&c[1], threads, bf16_isa, (size_t)64 << 20, st)) {
+        mx_ctx_destroy(&c[0]);
+        return -1;
+    }
+    mx_models m;
+    if (mx_models_load(&m, &c[0], weights, 0, st)) {
+        for (int p = 0; p < nprec; p++) mx_ctx_destroy(&c[p]);
+        return -1;
+    }
     int B = 2, H = 64, W = 64, T = 77, D = mx_unet_cfg(m.unet)->cross_attention_dim;
     size_t ns = (size_t)B * mx_unet_cfg(m.unet)->in_channels * H * W, nt = (size_t)B * T * D, bytes;
     float *x = malloc(ns * sizeof *x), *e = malloc(nt * sizeof *e), *out = malloc(ns * sizeof *out), ts[2] = {981, 37};
@@ -46,11 +55,6 @@ static int time_unet(const char *weights, int threads, double secs[2], mx_status
     }
     for (size_t i = 0; i < ns; i++) x[i] = (float)((i * 2654435761u) % 2001) / 1000.0f - 1.0f;
     for (size_t i = 0; i < nt; i++) e[i] = (float)((i * 40503u) % 2001) / 1000.0f - 1.0f;
-    if (mx_ctx_create(&c[0], threads, mx_cpu_isa_for(MX_PREC_FP32), (size_t)64 << 20, st)) goto done;
-    if (nprec == 2 && mx_ctx_create(&c[1], threads, bf16_isa, (size_t)64 << 20, st)) {
-        mx_ctx_destroy(&c[0]);
-        goto done;
-    }
     mx_unet_input in = {x, ts, e, B, H, W, T, NULL, NULL};
     rc = mx_unet_arena_bytes(m.unet, B, H, W, T, &bytes, st) || mx_arena_create(&a, bytes, st) ? -1 : 0;
     for (int r = 0; r < UNET_REPEATS && rc == 0; r++)
@@ -64,10 +68,10 @@ static int time_unet(const char *weights, int threads, double secs[2], mx_status
         secs[p] = p < nprec ? t[p][UNET_REPEATS / 2] : 0;
     }
     mx_arena_destroy(&a);
-    for (int p = 0; p < nprec; p++) mx_ctx_destroy(&c[p]);
 done:
     free(x), free(e), free(out);
     mx_models_free(&m);
+    for (int p = 0; p < nprec; p++) mx_ctx_destroy(&c[p]);
     return rc;
 }
 

@@ -62,7 +62,9 @@ int main(int argc, char **argv) {
     }
     mx_status st;
     mx_models m;
-    if (mx_models_load(&m, weights, MX_MODELS_NEED_DEPTH | MX_MODELS_NEED_INPAINT, &st)) {
+    mx_ctx c; /* only to bind the networks for their FLOP counts */
+    if (mx_ctx_create(&c, 1, MX_ISA_SCALAR, 0, &st) ||
+        mx_models_load(&m, &c, weights, MX_MODELS_NEED_DEPTH | MX_MODELS_NEED_INPAINT, &st)) {
         fprintf(stderr, "bench_texture: %s\n", st.msg);
         return 1;
     }
@@ -70,6 +72,7 @@ int main(int argc, char **argv) {
     step_flops(&m, 64, 128, 1, &step_gf[0], &dec_gf[0]); /* grid: 1024x512 image, depth only */
     step_flops(&m, 64, 64, 2, &step_gf[1], &dec_gf[1]);  /* a view: 512x512, depth + inpaint */
     mx_models_free(&m);
+    mx_ctx_destroy(&c);
     for (int k = 0; k < 2; k++) {
         step_gf[k] *= 1e-9;
         dec_gf[k] *= 1e-9;

@@ -23,10 +23,41 @@ static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 /* 16-bit weight rows widened per transpose call (8 × KC_MAX floats of stack). */
 #define WIDEN_ROWS 8
 
+/* bf16 pairs: each row converted to kc/2 words of pairs (16-bit weights widened first),
+ * WIDEN_ROWS rows at a time, then transposed as 32-bit words into dst[kp][width]. */
+static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
+                            int width, int k0, int kc) {
+    enum { WORDS = KC_MAX / 2 };
+    uint32_t tmp[WIDEN_ROWS * WORDS];
+    float row[KC_MAX];
+    int kp = (kc + 1) / 2;
+    for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
+        int n = min_int(WIDEN_ROWS, valid - r0);
+        for (int i = 0; i < n; i++) {
+            size_t off = (size_t)(first + r0 + i) * ld + (size_t)k0;
+            const float *f = (const float *)src.data + off;
+            if (src.dtype != MX_F32) {
+                g->widen(row, src, off, (size_t)kc);
+                f = row;
+            }
+            g->row_pairs(tmp + (size_t)i * WORDS, f, kc);
+        }
+        /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
+        g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
+    }
+    for (int k = 0; k < kp && valid < width; k++)
+        memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
+}
+
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
- * weights are widened WIDEN_ROWS rows at a time first. */
-static void pack_rows(const mx_gemm_kernel *g, float *dst, mx_wptr src, size_t ld, int first, int valid,
+ * weights are widened WIDEN_ROWS rows at a time first. bf16 kernels: pack_rows_pairs. */
+static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int valid,
                       int width, int k0, int kc) {
+    if (g->to_pairs) {
+        pack_rows_pairs(g, dstv, src, ld, first, valid, width, k0, kc);
+        return;
+    }
+    float *dst = dstv;
     size_t base = (size_t)first * ld + (size_t)k0;
     if (src.dtype == MX_F32)
         g->transpose(dst, (size_t)width, (const float *)src.data + base, ld, valid, kc);
@@ -43,12 +74,12 @@ static void pack_rows(const mx_gemm_kernel *g, float *dst, mx_wptr src, size_t l
         memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
 }
 
-void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
     pack_rows(g, dst, p->a_mat, p->a_ld, first, min_int(rows, p->M - first), rows, k0, kc);
 }
 
-void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
     pack_rows(g, dst, p->b_mat, p->b_ld, first, min_int(rows, p->N - first), rows, k0, kc);
 }
@@ -75,9 +106,8 @@ static void im2col_run(const mx_gemm_problem *p, float *d, int ci, int ky, int k
     }
 }
 
-void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int cols,
-                           int k0, int kc) {
-    (void)g;
+/* The fp32 im2col panel dst[k][cols]. */
+static void im2col_panel(const mx_gemm_problem *p, float *dst, int first, int cols, int k0, int kc) {
     int taps = p->kh * p->kw;
     for (int k = 0; k < kc; k++) {
         int kk = k0 + k, ci = kk / taps, ky = kk % taps / p->kw, kx = kk % p->kw;
@@ -94,6 +124,17 @@ void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, fl
             j += run;
         }
     }
+}
+
+void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
+                           int k0, int kc) {
+    if (!g->to_pairs) {
+        im2col_panel(p, dst, first, cols, k0, kc);
+        return;
+    }
+    float staging[KC_MAX * MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
+    im2col_panel(p, staging, first, cols, k0, kc);
+    g->to_pairs(dst, staging, cols, kc);
 }
 
 /* Outer blocks of columns bound the shared B buffer (≤ OUTER_MAX columns per K block, ~5 MiB),
@@ -120,24 +161,13 @@ typedef struct {
 /* 32-bit words per k of a packed panel row: 1 for fp32, 1/2 for bf16 pairs (rounded up). */
 static size_t panel_words(const mx_gemm_kernel *g, int kc) { return g->to_pairs ? (size_t)(kc + 1) / 2 : (size_t)kc; }
 
-/* Packs one panel of `width` rows (A) or columns (B) from `first` into dst: straight for fp32,
- * through an fp32 staging panel on the stack for bf16 pairs. */
-static void pack_panel(const gemm_job *j, mx_gemm_pack_fn fn, float *dst, int first, int width) {
-    if (!j->g->to_pairs) {
-        fn(j->p, j->g, dst, first, width, j->k0, j->kc);
-        return;
-    }
-    float staging[KC_MAX * MX_GEMM_PANEL_MAX];
-    fn(j->p, j->g, staging, first, width, j->k0, j->kc);
-    j->g->to_pairs((uint32_t *)(void *)dst, staging, width, j->kc);
-}
-
 static void pack_b_task(void *arg, int task, int thread) {
     (void)thread;
     const gemm_job *j = arg;
     int nr = j->g->nr;
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
-        pack_panel(j, j->p->pack_b, j->bpack + (size_t)np * panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr);
+        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr, j->k0,
+                     j->kc);
 }
 
 /* The packed A panels of row block mb in this thread's buffer; packed only when the thread's
@@ -148,7 +178,8 @@ static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
     if (j->ablock_mb[thread] != mb) {
         int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
         for (int mp = mp0; mp < mp1; mp++)
-            pack_panel(j, j->p->pack_a, buf + (size_t)(mp - mp0) * panel_words(j->g, j->kc) * mr, mp * mr, mr);
+            j->p->pack_a(j->p, j->g, buf + (size_t)(mp - mp0) * panel_words(j->g, j->kc) * mr, mp * mr, mr, j->k0,
+                         j->kc);
         j->ablock_mb[thread] = mb;
     }
     return buf;

@@ -6,9 +6,10 @@
  * are k-major and zero-padded at the edges. Packing is pluggable, so conv2d packs its B panels
  * straight from the image (tiled im2col, never a full copy). Every split depends on the
  * problem size only, so results do not depend on the thread count.
- * bf16 levels: the packers still write fp32 panels, which the kernel's to_pairs turns into
- * panels of k-pairs (one 32-bit word = bf16 of k and k+1, an odd last k paired with zero):
- * the operand layout of vdpbf16ps, so the micro-kernel does two k per instruction. */
+ * bf16 levels: panels of k-pairs (one 32-bit word = bf16 of k and k+1, an odd last k paired
+ * with zero), the operand layout of vdpbf16ps, so the micro-kernel does two k per instruction.
+ * The row packers convert each row to pairs (adjacent in a row) and transpose words; the im2col
+ * packer builds an fp32 panel and turns it into pairs. */
 #ifndef MX_OPS_CPU_GEMM_H
 #define MX_OPS_CPU_GEMM_H
 
@@ -30,6 +31,8 @@ typedef struct mx_gemm_kernel {
     /* NULL for fp32 panels; else dst[kp][c] = bf16(src[2kp][c]) | bf16(src[2kp+1][c]) << 16 for
      * c < width, kp < (kc+1)/2 (src[kc][·] read as zero), rounding to nearest even. */
     void (*to_pairs)(uint32_t *dst, const float *src, int width, int kc);
+    /* With to_pairs: dst[0 .. (n+1)/2) = pairs of the row src[0 .. n). */
+    void (*row_pairs)(uint32_t *dst, const float *src, int n);
 } mx_gemm_kernel;
 
 /* Widest panel (MR or NR) of any kernel: bounds the fp32 staging panel of the bf16 levels. */
@@ -37,8 +40,8 @@ typedef struct mx_gemm_kernel {
 
 typedef struct mx_gemm_problem mx_gemm_problem;
 /* dst[k][r] for k < kc, r < rows: a panel starting at row (A) or column (B) `first`, rows past
- * the matrix edge zero. */
-typedef void (*mx_gemm_pack_fn)(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first,
+ * the matrix edge zero; in the kernel's format (fp32, or k-pairs with to_pairs). */
+typedef void (*mx_gemm_pack_fn)(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first,
                                 int rows, int k0, int kc);
 
 struct mx_gemm_problem {
@@ -62,12 +65,12 @@ struct mx_gemm_problem {
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
  * r*ld + k), transposed into k-major panels. For A of linear (x) and conv (weights), and for
  * B of linear (weights [N, K], i.e. B^T). */
-void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc);
-void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int rows,
+void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc);
 /* Packs B = im2col(image) columns [first, first+cols) for rows k0..k0+kc of (ci, ky, kx). */
-void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *dst, int first, int cols,
+void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
                            int k0, int kc);
 
 /* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 level. */

@@ -4,6 +4,7 @@
  * zero; the networks' activations and weights are far from that range. */
 #include <immintrin.h>
 
+#include "bf16_avx512.h"
 #include "gemm.h"
 
 #define MICRO_NAME micro_12x32_bf16
@@ -18,24 +19,20 @@
 
 /* Word c of pair row kp: bf16(src[2kp][c]) in the low half, bf16(src[2kp+1][c]) in the high. */
 static void to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc) {
-    /* vcvtne2ps2bf16(odd, even) puts even in bf16 lanes 0-15 and odd in 16-31; interleave them */
-    const __m512i interleave = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7,
-                                                22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
     for (int kp = 0; kp < (kc + 1) / 2; kp++) {
         const float *even = src + (size_t)(2 * kp) * width, *odd = even + width;
         int has_odd = 2 * kp + 1 < kc;
         for (int c = 0; c < width; c += 16) {
-            __mmask16 m = (__mmask16)(width - c >= 16 ? 0xffff : (1u << (width - c)) - 1);
+            __mmask16 m = bf16_mask(width - c);
             __m512 e = _mm512_maskz_loadu_ps(m, even + c);
             __m512 o = has_odd ? _mm512_maskz_loadu_ps(m, odd + c) : _mm512_setzero_ps();
-            __m512i both = (__m512i)_mm512_cvtne2ps_pbh(o, e);
-            _mm512_mask_storeu_epi32(dst + (size_t)kp * width + c, m, _mm512_permutexvar_epi16(interleave, both));
+            _mm512_mask_storeu_epi32(dst + (size_t)kp * width + c, m, bf16_pairs_of_rows(e, o));
         }
     }
 }
 
 static const mx_gemm_kernel kernel_avx512bf16 = {MR, NR, micro_12x32_bf16, mx_gemm_widen_avx512, mx_gemm_transpose,
-                                                 to_pairs_avx512bf16};
+                                                 to_pairs_avx512bf16, bf16_pairs_row};
 
 void mx_linear_avx512bf16(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512bf16, y, x, w, bias, M, N, K);

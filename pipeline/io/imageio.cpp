@@ -9,10 +9,15 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
+#include <sys/stat.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -50,11 +55,67 @@ int read_opened(OIIO::ImageInput &in, const char *what, mx_image *out, mx_status
     return 0;
 }
 
-// Guesses the format of an in-memory image from its magic bytes, as a file name for OIIO.
+// Guesses the format of an image from its magic bytes, as a file name for OIIO.
 const char *sniff_name(const unsigned char *p, size_t n) {
     if (n >= 8 && !memcmp(p, "\x89PNG\r\n\x1a\n", 8)) return "embedded.png";
     if (n >= 3 && p[0] == 0xFF && p[1] == 0xD8 && p[2] == 0xFF) return "embedded.jpg";
+    if (n >= 4 && !memcmp(p, "\x76\x2f\x31\x01", 4)) return "embedded.exr";
     return nullptr;
+}
+
+uint32_t be32(const unsigned char *p) { return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3]; }
+
+// Walks the chunks of a PNG (lengths and CRCs) up to IEND. libpng would catch the same damage,
+// but OIIO 2.4's PNG reader leaks its error string whenever libpng bails out; this keeps
+// damaged data away from it and names the broken chunk.
+int check_png_chunks(const unsigned char *p, size_t n, const char *what, mx_status *st) {
+    uint32_t table[256];
+    for (uint32_t i = 0; i < 256; i++) {
+        uint32_t c = i;
+        for (int k = 0; k < 8; k++) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+        table[i] = c;
+    }
+    for (size_t pos = 8;;) {
+        if (n - pos < 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk)", what);
+        size_t len = be32(p + pos);
+        if (len > n - pos - 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG chunk at byte %zu", what, pos);
+        uint32_t crc = 0xFFFFFFFFu;
+        for (size_t i = pos + 4; i < pos + 8 + len; i++) crc = table[(crc ^ p[i]) & 0xFF] ^ (crc >> 8);
+        if ((crc ^ 0xFFFFFFFFu) != be32(p + pos + 8 + len))
+            return mx_fail(st, MX_EINPUT, "%s: corrupt PNG chunk '%.4s' at byte %zu (CRC mismatch)", what,
+                           (const char *)p + pos + 4, pos);
+        if (!memcmp(p + pos + 4, "IEND", 4)) return 0;
+        pos += 12 + len;
+    }
+}
+
+// Opens `name` (a file, or a name for the data of `proxy`) with the reader of `format` only:
+// OIIO's own open() tries every reader it has (HEIF, RAW, ...) when the named one fails, and
+// some of those allocate gigabytes for hostile data.
+int open_as(const char *format, const char *name, OIIO::Filesystem::IOProxy *proxy, const char *what,
+            std::unique_ptr<OIIO::ImageInput> &in, mx_status *st) {
+    in = OIIO::ImageInput::create(format, false, nullptr, proxy);
+    if (!in) {
+        std::string err = OIIO::geterror();
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image format: %s", what, err.c_str());
+    }
+    OIIO::ImageSpec spec;
+    if ((proxy && !in->set_ioproxy(proxy)) || !in->open(name, spec)) {
+        std::string err = in->geterror();
+        in.reset();
+        return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, err.c_str());
+    }
+    return 0;
+}
+
+// Decodes a PNG/JPEG/EXR held in memory (its format already sniffed as `name`).
+int decode_memory(const char *name, const unsigned char *data, size_t len, const char *what, mx_image *out,
+                  mx_status *st) {
+    if (!strcmp(name, "embedded.png") && check_png_chunks(data, len, what, st)) return -1;
+    OIIO::Filesystem::IOMemReader mem(data, len);
+    std::unique_ptr<OIIO::ImageInput> in;
+    if (open_as(name, name, &mem, what, in, st)) return -1;
+    return read_opened(*in, what, out, st);
 }
 
 int check_writable(const mx_image *img, const char *what, mx_status *st) {
@@ -96,12 +157,24 @@ int rename_into_place(const std::string &tmp, const char *path, mx_status *st) {
 
 extern "C" int mx_io_read_image(const char *path, mx_image *out, mx_status *st) {
     *out = mx_image{};
+    struct stat sb;
+    if (stat(path, &sb)) return mx_fail(st, MX_EINPUT, "%s: cannot open image: %s", path, strerror(errno));
+    if (!S_ISREG(sb.st_mode)) return mx_fail(st, MX_EINPUT, "%s: cannot open image: not a regular file", path);
     try {
-        auto in = OIIO::ImageInput::open(path);
-        if (!in) {
-            std::string err = OIIO::geterror();
-            return mx_fail(st, MX_EINPUT, "%s: cannot open image: %s", path, err.c_str());
+        std::vector<unsigned char> head(8);
+        FILE *f = fopen(path, "rb");
+        head.resize(f ? fread(head.data(), 1, head.size(), f) : 0);
+        const char *name = sniff_name(head.data(), head.size());
+        if (f && name && !strcmp(name, "embedded.png")) { // whole file: its chunks are checked first
+            head.resize((size_t)sb.st_size);
+            head.resize(8 + fread(head.data() + 8, 1, head.size() - 8, f));
         }
+        if (f) fclose(f);
+        if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open image: %s", path, strerror(errno));
+        if (name && !strcmp(name, "embedded.png")) return decode_memory(name, head.data(), head.size(), path, out, st);
+        std::unique_ptr<OIIO::ImageInput> in; // other formats by their magic, else by extension
+        std::string format = name ? strrchr(name, '.') + 1 : strrchr(path, '.') ? strrchr(path, '.') + 1 : "";
+        if (open_as(format.c_str(), path, nullptr, path, in, st)) return -1;
         return read_opened(*in, path, out, st);
     } catch (const std::exception &e) {
         return mx_fail(st, MX_EINPUT, "%s: cannot read image: %s", path, e.what());
@@ -112,19 +185,9 @@ extern "C" int mx_io_decode_image(const void *data, size_t len, const char *what
                                   mx_status *st) {
     *out = mx_image{};
     const char *name = sniff_name((const unsigned char *)data, len);
-    if (!name) return mx_fail(st, MX_EINPUT, "%s: not a PNG or JPEG image", what);
-    // A PNG ends with its IEND chunk. Checking it first gives a clear message and keeps truncated
-    // data away from OIIO 2.4's PNG reader, which leaks its error string when libpng bails out.
-    if (!strcmp(name, "embedded.png") && (len < 20 || memcmp((const char *)data + len - 8, "IEND", 4)))
-        return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk at the end)", what);
+    if (!name || !strcmp(name, "embedded.exr")) return mx_fail(st, MX_EINPUT, "%s: not a PNG or JPEG image", what);
     try {
-        OIIO::Filesystem::IOMemReader mem(data, len);
-        auto in = OIIO::ImageInput::open(name, nullptr, &mem);
-        if (!in) {
-            std::string err = OIIO::geterror();
-            return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, err.c_str());
-        }
-        return read_opened(*in, what, out, st);
+        return decode_memory(name, (const unsigned char *)data, len, what, out, st);
     } catch (const std::exception &e) {
         return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, e.what());
     }

@@ -347,9 +347,69 @@ int read_obj(const char *path, mx_mesh *m, mx_status *st) {
     return obj_to_mesh(path, d, m, st);
 }
 
+// OpenMesh's PLY reader loops forever on some malformed headers (no end_header, a keyword
+// where a name should be), so the header is checked here first: every line must be one
+// OpenMesh reads the way the PLY format means it, and end_header must come.
+bool ply_header_line_ok(const std::string &line) {
+    std::vector<std::string> w;
+    for (size_t i = 0; i < line.size();) {
+        while (i < line.size() && (line[i] == ' ' || line[i] == '\t' || line[i] == '\r')) i++;
+        size_t j = i;
+        while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != '\r') j++;
+        if (j > i) w.push_back(line.substr(i, j - i));
+        i = j;
+    }
+    static const char *const kws[] = {"format", "element", "property", "end_header", "ply"};
+    static const char *const types[] = {"char",   "uchar",  "short", "ushort",  "int",     "uint",
+                                        "float",  "double", "int8",  "uint8",   "int16",   "uint16",
+                                        "int32",  "uint32", "float32", "float64"};
+    auto is_type = [&](const std::string &t) {
+        for (const char *k : types)
+            if (t == k) return true;
+        return false;
+    };
+    if (w.empty()) return false;
+    if (w[0] == "comment" || w[0] == "obj_info") return true;
+    for (const char *k : kws)
+        for (size_t i = 1; i < w.size(); i++)
+            if (w[i] == k) return false; // a keyword in a name's place makes OpenMesh lose its way
+    if (w[0] == "format")
+        return w.size() == 3 && w[2] == "1.0" &&
+               (w[1] == "ascii" || w[1] == "binary_little_endian" || w[1] == "binary_big_endian");
+    if (w[0] == "element") return w.size() == 3 && w[2].find_first_not_of("0123456789") == std::string::npos;
+    if (w[0] == "property")
+        return (w.size() == 3 && is_type(w[1])) || (w.size() == 5 && w[1] == "list" && is_type(w[2]) && is_type(w[3]));
+    return false;
+}
+
+int check_ply_header(const char *path, mx_status *st) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
+    std::string head(65536, '\0');
+    head.resize(fread(&head[0], 1, head.size(), f));
+    fclose(f);
+    size_t pos = 0;
+    for (int line_no = 1;; line_no++) {
+        size_t nl = head.find('\n', pos);
+        if (nl == std::string::npos)
+            return mx_fail(st, MX_EINPUT, "%s: PLY header without end_header in its first 64 KiB", path);
+        std::string line = head.substr(pos, nl - pos);
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        pos = nl + 1;
+        if (line_no == 1) {
+            if (line != "ply") return mx_fail(st, MX_EINPUT, "%s: not a PLY file (first line is not 'ply')", path);
+        } else if (line == "end_header") {
+            return 0;
+        } else if (!ply_header_line_ok(line)) {
+            return mx_fail(st, MX_EINPUT, "%s: PLY header line %d is malformed", path, line_no);
+        }
+    }
+}
+
 // PLY / OFF / STL through OpenMesh. Vertex order is the file's (OpenMesh appends vertices it
 // must duplicate to represent non-manifold faces at the end).
 int read_openmesh(const char *path, mx_mesh *m, mx_status *st) {
+    if (lower_ext(path) == "ply" && check_ply_header(path, st)) return -1;
     typedef OpenMesh::PolyMesh_ArrayKernelT<> Mesh;
     Mesh mesh;
     mesh.request_vertex_texcoords2D();

@@ -1,0 +1,33 @@
+/* bf16 pair packing for the AVX512_BF16 kernels (gemm_avx512bf16.c, attention_avx512bf16.c): one
+ * 32-bit word holds two bf16 (the lower index in the low half), the operand layout of vdpbf16ps.
+ * Rounding to nearest even by vcvtne2ps2bf16 (which, like vdpbf16ps, reads denormals as zero). */
+#ifndef MX_BF16_AVX512_H
+#define MX_BF16_AVX512_H
+
+#include <immintrin.h>
+#include <stdint.h>
+
+static inline __mmask16 bf16_mask(int n) { return (__mmask16)(n >= 16 ? 0xffff : n <= 0 ? 0 : (1u << n) - 1); }
+
+/* 16 words of pairs from the first n (<= 32) floats of src, zeros after; reads nothing past n. */
+static inline __m512i bf16_pairs16(const float *src, int n) {
+    __m512 lo = _mm512_maskz_loadu_ps(bf16_mask(n), src);
+    __m512 hi = n > 16 ? _mm512_maskz_loadu_ps(bf16_mask(n - 16), src + 16) : _mm512_setzero_ps();
+    return (__m512i)_mm512_cvtne2ps_pbh(hi, lo);
+}
+
+/* dst[0 .. (n+1)/2) = pairs of src[0 .. n) (an odd last value paired with zero). */
+static inline void bf16_pairs_row(uint32_t *dst, const float *src, int n) {
+    for (int i = 0; i < n; i += 32)
+        _mm512_mask_storeu_epi32(dst + i / 2, bf16_mask((n - i + 1) / 2), bf16_pairs16(src + i, n - i));
+}
+
+/* Words pairing lanes of two rows: w[c] = bf16(even[c]) | bf16(odd[c]) << 16 for 16 columns. */
+static inline __m512i bf16_pairs_of_rows(__m512 even, __m512 odd) {
+    /* vcvtne2ps2bf16(odd, even) holds even's 16 values, then odd's: interleave them */
+    const __m512i interleave = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7,
+                                                22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
+    return _mm512_permutexvar_epi16(interleave, (__m512i)_mm512_cvtne2ps_pbh(odd, even));
+}
+
+#endif
