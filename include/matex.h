@@ -132,6 +132,8 @@ typedef struct matex_options {
     float frontal_threshold;      /* 0.3 */
     float coverage_stop;          /* 0.995 */
     float strength;               /* enhance: SDEdit strength in (0, 1]: 0.5 */
+    int fast;                     /* few-step path (LCM + TAESD; the weight file must hold both);
+                                     set steps 4 and guidance 1 with it, as `matex texture --fast` does */
     int geometric_normals;        /* 0: normals from depth (the paper) */
     int z_up;                     /* 0: the mesh is y-up */
     const char *front_back_words; /* "front and back view of" */

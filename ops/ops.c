@@ -135,6 +135,7 @@ void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, c
 void mx_gelu(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, gelu(c, x, n)); }
 void mx_quick_gelu(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, quick_gelu(c, x, n)); }
 void mx_silu(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, silu(c, x, n)); }
+void mx_tanh(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, tanh(c, x, n)); }
 
 void mx_geglu(const mx_ctx *c, float *y, const float *x, int M, int N) {
     if (M > 0 && N > 0) RUN_OP(c, geglu(c, y, x, M, N));
@@ -172,6 +173,11 @@ void mx_transpose_chw_hwc(const mx_ctx *c, float *y, const float *x, int B, int 
 
 void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
     RUN_OP(c, transpose_hwc_chw(c, y, x, B, C, HW));
+}
+
+void mx_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
+                  int sx0, int BC, int h, int w) {
+    if (BC > 0 && h > 0 && w > 0) RUN_OP(c, copy_rect(c, y, Hy, Wy, y0, x0, x, Hx, Wx, sy0, sx0, BC, h, w));
 }
 
 void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,

@@ -85,6 +85,8 @@ struct mx_kernels {
     void (*transpose_hwc_chw)(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
     void (*resize_bilinear)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+    void (*copy_rect)(const mx_ctx *, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w);
     void (*pad2d)(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
                   int right);
     void (*copy)(const mx_ctx *, float *y, const float *x, size_t n);
@@ -92,6 +94,7 @@ struct mx_kernels {
     void (*axpy)(const mx_ctx *, float *y, const float *x, float s, size_t n);
     void (*lincomb)(const mx_ctx *, float *y, int k, const float *coef, const float *const *x, size_t n);
     void (*clamp)(const mx_ctx *, float *y, const float *x, float lo, float hi, size_t n);
+    void (*tanh)(const mx_ctx *, float *x, size_t n);
     void (*affine)(const mx_ctx *, float *y, const float *x, float a, float b, size_t n);
     void (*timestep_embedding)(const mx_ctx *, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
                                float downscale_freq_shift, float max_period);
@@ -138,6 +141,8 @@ void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, c
 void mx_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_quick_gelu(const mx_ctx *c, float *x, size_t n);
 void mx_silu(const mx_ctx *c, float *x, size_t n);
+/* In place: tanh (TAESD's latent clamp 3 tanh(x / 3)). */
+void mx_tanh(const mx_ctx *c, float *x, size_t n);
 /* GEGLU (diffusers): x[M, 2N] = [h | g]; y[M, N] = h * gelu(g). */
 void mx_geglu(const mx_ctx *c, float *y, const float *x, int M, int N);
 /* y = a op b with numpy broadcasting over ndim (1..5) dims; y has the broadcast shape.
@@ -160,6 +165,10 @@ void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int 
  * (0: half-pixel centres, no antialias). */
 void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                         int align_corners);
+/* Rectangle copy over BC planes: y[p, y0 + r, x0 + q] = x[p, sy0 + r, sx0 + q] for r < h, q < w, with
+ * y planes Hy×Wy and x planes Hx×Wx (the rectangle must lie inside both). Crops, pastes, tiles. */
+void mx_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
+                  int sx0, int BC, int h, int w);
 /* Zero padding of BC planes H×W by (top, bottom, left, right) rows/columns, each >= 0
  * (diffusers' asymmetric Downsample2D pad is (0, 1, 0, 1)). */
 void mx_pad2d(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,

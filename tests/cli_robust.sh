@@ -134,6 +134,11 @@ check "a non-empty folder: left alone" [ "$(ls "$T/full")" = old_texture.png ]
 check "--force replaces it" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL --force)" = 0 ]
 check "--force: only the new files" complete "$T/full"
 check "--force: no staging or old folder left" no_staging "$T/full"
+mkdir -p "$T/home/docs" && echo keep > "$T/home/docs/letter.txt"
+check "--force refuses a folder with sub-folders" \
+    [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/home" $SMALL --force)" = 1 ]
+check "... says why" grep -q "holds sub-folders" "$T/err"
+check "... and leaves it alone" [ -s "$T/home/docs/letter.txt" ] && check "... no staging" no_staging "$T/home"
 ln -s "$T/full" "$T/link"
 check "--force through a link to a folder" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/link" $SMALL --force)" = 0 ]
 check "--force through a link: the link stays a link" [ -L "$T/link" ] && check "... to a complete folder" complete "$T/full"

@@ -31,6 +31,15 @@ check "report names the precision ($want)" grep -q "\"precision\": *\"$want\"" "
 for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do
     check "texture wrote $f" [ -s "$T/hat/$f" ]
 done
+# --fast: refused clearly without the LCM-LoRA mark and TAESD, runs 4 LCM steps with them
+WF=${MATEX_DEMO_FAST_WEIGHTS:-build/demo/demo_fast.mxw}
+check "--fast without LCM/TAESD exits 1" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]
+check "--fast says what it needs" grep -q -- "--fast needs .*--lcm-lora.*--taesd" "$T/err"
+check "no output after --fast is refused" [ ! -e "$T/f" ]
+check "texture --fast runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$WF" -o "$T/fast" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
+check "--fast report: 4 steps, guidance 1" grep -q '"steps":4,"fast":true,"guidance":1,' "$T/fast/report.json"
+check "--fast ran the LCM timesteps" grep -q "step 4/4 (t=259)" "$T/err"
+check "enhance --fast exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" x --weights "$WF" -o "$T/f" --fast)" = 2 ]
 check "enhance runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$W" -o "$T/hat2" $SMALL)" = 0 ]
 check "enhance wrote mesh.glb" [ -s "$T/hat2/mesh.glb" ]
 check "bad strength exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" --strength 2 --weights "$W" -o "$T/b")" = 2 ]

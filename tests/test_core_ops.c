@@ -452,8 +452,25 @@ static void test_known_layout(const mx_ctx *c) {
     mx_check_close("known concat_channels", cat, cat_want, 12, 0);
 }
 
+/* tanh (TAESD's latent clamp) and the rectangle copy (tiled VAE decode). */
+static void test_known_tanh_copy_rect(const mx_ctx *c) {
+    float t[3] = {0.0f, 1.0f, -20.0f};
+    mx_tanh(c, t, 3);
+    CHECK(t[0] == 0.0f && fabsf(t[1] - 0.76159416f) < 1e-7f && t[2] == -1.0f);
+    /* 2 planes of 4x5 -> the 2x3 rectangle at (1, 2) into 3x4 planes at (1, 0) */
+    float x[2 * 20], y[2 * 12], want[2 * 12];
+    for (int i = 0; i < 40; i++) x[i] = (float)i;
+    for (int i = 0; i < 24; i++) y[i] = want[i] = -1.0f;
+    for (int p = 0; p < 2; p++)
+        for (int r = 0; r < 2; r++)
+            for (int q = 0; q < 3; q++) want[p * 12 + (1 + r) * 4 + q] = x[p * 20 + (1 + r) * 5 + 2 + q];
+    mx_copy_rect(c, y, 3, 4, 1, 0, x, 4, 5, 1, 2, 2, 2, 3);
+    mx_check_close("known copy_rect 2x3 of 4x5 into 3x4", y, want, 24, 0);
+}
+
 int main(void) {
     mx_ctx c = {.k = mx_kernels_scalar()};
+    test_known_tanh_copy_rect(&c);
     test_simd_levels();
     test_known_linear(&c);
     test_known_conversions();

@@ -243,7 +243,7 @@ static void test_sharded(void) {
 typedef struct {
     const char *target; /* tensor in the network, e.g. "down_blocks.0....to_q.weight" */
     const char *down_key, *up_key, *alpha_key;
-    int rank, conv_shaped; /* conv_shaped: up/down stored as [.., .., 1, 1] */
+    int rank, conv_shaped; /* conv_shaped 1: up/down stored as [.., .., 1, 1]; 3: down [r, in, 3, 3] */
     float alpha;
 } lora_case;
 
@@ -259,7 +259,9 @@ static void write_lora(const char *path, const lora_case *cases, int n, const in
         up[c] = malloc((size_t)(o * r) * sizeof(float));
         mx_fill_random(down[c], (size_t)(r * in), 100 + (uint64_t)c, -1, 1);
         mx_fill_random(up[c], (size_t)(o * r), 200 + (uint64_t)c, -1, 1);
-        outs[k++] = (mx_st_out){cases[c].down_key, MX_ST_F32, cases[c].conv_shaped ? 4 : 2, {r, in, 1, 1}, down[c]};
+        int k3 = cases[c].conv_shaped == 3;
+        outs[k++] = (mx_st_out){cases[c].down_key, MX_ST_F32, cases[c].conv_shaped ? 4 : 2,
+                                {r, k3 ? in / 9 : in, k3 ? 3 : 1, k3 ? 3 : 1}, down[c]};
         outs[k++] = (mx_st_out){cases[c].up_key, MX_ST_F32, cases[c].conv_shaped ? 4 : 2, {o, r, 1, 1}, up[c]};
         if (cases[c].alpha_key) {
             alphas[c] = cases[c].alpha;
@@ -384,6 +386,35 @@ static void test_lora(void) {
          "text_encoder.text_model.encoder.layers.1.self_attn.v_proj.lora_B.weight", NULL, 5, 0, 0},
     };
     check_lora("clip_tiny", "model.safetensors", "text_encoder", peft_te, 1, 0.5f);
+    /* the module kinds of the LCM-LoRA for SD1.5 (its trainer targets to_q/k/v/out.0, proj_in/out,
+     * ff.net.0.proj/ff.net.2, conv1/conv2/conv_shortcut, down/upsampler convs, time_emb_proj; 3x3
+     * convs get a 3x3 down and a 1x1 up), in the kohya keys with alpha of the published file */
+    const lora_case lcm_kohya[] = {
+        {"down_blocks.0.resnets.0.conv1.weight", "lora_unet_down_blocks_0_resnets_0_conv1.lora_down.weight",
+         "lora_unet_down_blocks_0_resnets_0_conv1.lora_up.weight", "lora_unet_down_blocks_0_resnets_0_conv1.alpha", 4, 3,
+         8.0f},
+        {"down_blocks.1.resnets.0.time_emb_proj.weight", "lora_unet_down_blocks_1_resnets_0_time_emb_proj.lora_down.weight",
+         "lora_unet_down_blocks_1_resnets_0_time_emb_proj.lora_up.weight",
+         "lora_unet_down_blocks_1_resnets_0_time_emb_proj.alpha", 4, 0, 8.0f},
+        {"up_blocks.0.upsamplers.0.conv.weight", "lora_unet_up_blocks_0_upsamplers_0_conv.lora_down.weight",
+         "lora_unet_up_blocks_0_upsamplers_0_conv.lora_up.weight", "lora_unet_up_blocks_0_upsamplers_0_conv.alpha", 2, 3,
+         1.0f},
+        {"up_blocks.0.resnets.1.conv_shortcut.weight", "lora_unet_up_blocks_0_resnets_1_conv_shortcut.lora_down.weight",
+         "lora_unet_up_blocks_0_resnets_1_conv_shortcut.lora_up.weight",
+         "lora_unet_up_blocks_0_resnets_1_conv_shortcut.alpha", 3, 1, 8.0f},
+    };
+    check_lora("unet_tiny", "diffusion_pytorch_model.safetensors", "unet", lcm_kohya, 4, 1.0f);
+    /* the same kinds in diffusers/PEFT keys (lora_A / lora_B, no alpha) */
+    const lora_case lcm_peft[] = {
+        {"mid_block.resnets.0.conv1.weight", "unet.mid_block.resnets.0.conv1.lora_A.weight",
+         "unet.mid_block.resnets.0.conv1.lora_B.weight", NULL, 4, 3, 0},
+        {"down_blocks.0.downsamplers.0.conv.weight", "unet.down_blocks.0.downsamplers.0.conv.lora_A.weight",
+         "unet.down_blocks.0.downsamplers.0.conv.lora_B.weight", NULL, 2, 3, 0},
+        {"mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.weight",
+         "unet.mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.lora_A.weight",
+         "unet.mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.lora_B.weight", NULL, 4, 0, 0},
+    };
+    check_lora("unet_tiny", "diffusion_pytorch_model.safetensors", "unet", lcm_peft, 3, 1.0f);
 }
 
 /* ---- bad input: an error naming the problem and no output file ---- */
@@ -486,6 +517,51 @@ static void test_bad_inputs(void) {
     expect_fail(&o, "expected a controlnet");
 }
 
+/* The few-step path's parts: --taesd adds taesd.* and its config; --lcm-lora merges like --lora
+ * and records unet.lcm_lora (only one LCM-LoRA allowed). */
+static void test_fast_path_parts(void) {
+    char unet[600], taesd[600], lora[600], out[600];
+    golden_path(unet, sizeof unet, "unet_tiny");
+    golden_path(taesd, sizeof taesd, "taesd_tiny");
+    in_tmp(lora, sizeof lora, "lcm.safetensors");
+    in_tmp(out, sizeof out, "fast.mxw");
+    float down[2 * 128], up[32 * 2];
+    mx_fill_random(down, 2 * 128, 1, -1, 1);
+    mx_fill_random(up, 32 * 2, 2, -1, 1);
+    mx_st_out t[2] = {{"lora_unet_down_blocks_0_resnets_0_time_emb_proj.lora_down.weight", MX_ST_F32, 2, {2, 128}, down},
+                      {"lora_unet_down_blocks_0_resnets_0_time_emb_proj.lora_up.weight", MX_ST_F32, 2, {32, 2}, up}};
+    mx_status st;
+    CHECK(mx_st_write(lora, t, 2, &st) == 0);
+    mx_convert_opts o;
+    memset(&o, 0, sizeof o);
+    o.input = unet;
+    o.output = out;
+    o.dtype = MX_F16;
+    o.taesd = taesd;
+    o.n_loras = 1;
+    o.loras[0].path = lora;
+    o.loras[0].scale = 1.0f;
+    o.loras[0].lcm = 1;
+    mx_convert_result res;
+    int rc = mx_convert(&o, &res, &st);
+    if (rc) fprintf(stderr, "%s\n", st.msg);
+    CHECK(rc == 0 && res.networks == 2 && res.lora_merged == 1);
+    mx_weightfile *wf;
+    if (!rc && mx_wf_open(&wf, out, &st) == 0) {
+        const char *mark = mx_wf_meta(wf, "unet.lcm_lora");
+        CHECK(mark && strstr(mark, "lcm.safetensors"));
+        CHECK(mx_wf_meta(wf, "taesd.config") && mx_wf_find(wf, "taesd.decoder.layers.18.weight"));
+        mx_wf_close(wf);
+    }
+    o.n_loras = 2;
+    o.loras[1] = o.loras[0];
+    CHECK(mx_convert(&o, &res, &st) == -1 && strstr(st.msg, "more than one LCM-LoRA"));
+    o.n_loras = 0;
+    o.input = NULL;
+    o.taesd = unet; /* a UNet folder is not a TAESD */
+    CHECK(mx_convert(&o, &res, &st) == -1 && strstr(st.msg, "expected a taesd"));
+}
+
 int main(void) {
     snprintf(tmp, sizeof tmp, "/tmp/mx_test_convert_XXXXXX");
     if (!mkdtemp(tmp)) return 1;
@@ -495,6 +571,7 @@ int main(void) {
     free(abs);
     mx_log_set_level(MX_LOG_WARN);
     test_single_networks();
+    test_fast_path_parts();
     test_model_set();
     test_sharded();
     test_lora();

@@ -1,6 +1,6 @@
 /* `matex convert` + `matex run-net` end to end (the binary ./matex, run from the repo root):
- * unet_tiny, controlnet_tiny (scale 0.5, inputs written here) and vae_tiny decode against the
- * golden outputs. */
+ * unet_tiny, controlnet_tiny (scale 0.5, inputs written here), vae_tiny and taesd encode/decode
+ * against the golden outputs. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -124,6 +124,15 @@ int main(void) {
     CHECK(run_net(args, "enc.safetensors") == 0);
     compare("enc.safetensors", "mean", "vae_tiny", "outputs.safetensors", "encode.mean");
     compare("enc.safetensors", "logvar", "vae_tiny", "outputs.safetensors", "encode.logvar");
+
+    CHECK(convert("taesd") == 0);
+    golden_path(gin, sizeof gin, "taesd", "inputs.safetensors");
+    snprintf(args, sizeof args, "taesd-decode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
+    CHECK(run_net(args, "tdec.safetensors") == 0);
+    compare("tdec.safetensors", "image", "taesd", "outputs.safetensors", "image_dec");
+    snprintf(args, sizeof args, "taesd-encode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
+    CHECK(run_net(args, "tenc.safetensors") == 0);
+    compare("tenc.safetensors", "latents", "taesd", "outputs.safetensors", "latents_enc");
 
     sh("rm -rf %s%s", tmpdir, "");
     return mx_test_finish("test_nn_run_net");

@@ -76,6 +76,8 @@ static void test_options(void) {
     REFUSE(out_dir, "", "no output folder");
     REFUSE(weights_path, NULL, "--weights");
     REFUSE(normal_source, 7, "--normals");
+    REFUSE(precision, (mx_precision)5, "--precision");
+    REFUSE(device, (mx_backend_kind)9, "--device");
 #undef REFUSE
     /* enhance: the prompt may be empty and one view is enough */
     base_opts(&o, "w.mxw", "out");

@@ -4,6 +4,7 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../pipeline/geom/masks.h"
 #include "../runtime/buf.h"
@@ -15,7 +16,7 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --weights FILE           matex weight file (matex convert); required\n"
             "  -o, --output DIR         output folder: texture.png/.exr, mesh.obj/.mtl, mesh.glb, report.json\n"
             "  --seed N                 noise seed (default 0); the same seed gives the same texture\n"
-            "  --steps N                denoising steps (default 10)\n"
+            "  --steps N                denoising steps (default 10; 4 with --fast)\n"
             "  --views N                view budget, front and back included (default 6)\n"
             "  --candidates N           candidate cameras on a Fibonacci sphere (default 40)\n"
             "  --texture-size N         texture side in texels (default 1024)\n"
@@ -23,7 +24,9 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --image-size N           side of one generated image, multiple of 8 (default 512)\n"
             "  --batch N                most views generated in one batch (default 4)\n"
             "  --negative TEXT          negative prompt (default empty)\n"
-            "  --guidance G             classifier-free guidance scale (default 7.5)\n"
+            "  --guidance G             classifier-free guidance scale (default 7.5; 1 with --fast: none, batch not doubled)\n"
+            "  --fast                   few-step path (texture only): LCM scheduler, TAESD decoder; needs a weight file\n"
+            "                           made with convert --lcm-lora FILE --taesd DIR\n"
             "  --grid-depth-weight W    depth control weight of the front+back grid (default 1.0)\n"
             "  --depth-weight A[,B]     depth control weight of the first[,last] later view (default 1.0,0.7)\n"
             "  --inpaint-weight A[,B]   inpainting control weight of the first[,last] later view (default 0.8,1.0)\n"
@@ -125,7 +128,7 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
     memset(c, 0, sizeof *c);
     mx_texture_opts_default(&c->o);
     for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
-    int npos = 0;
+    int npos = 0, steps_given = 0, guidance_given = 0;
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
@@ -140,6 +143,12 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             c->json = 1;
             continue;
         }
+        if (!strcmp(arg, "--fast")) {
+            c->o.fast = 1;
+            continue;
+        }
+        steps_given |= !strcmp(arg, "--steps");
+        guidance_given |= !strcmp(arg, "--guidance");
         if (!strcmp(arg, "--force")) {
             c->o.force = 1;
             continue;
@@ -162,6 +171,8 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             return usage_error(c, verb, "unexpected argument", arg);
         npos++;
     }
+    if (c->o.fast && !steps_given) c->o.steps = 4;
+    if (c->o.fast && !guidance_given) c->o.guidance = 1.0f;
     if (!c->o.mesh_path) return usage_error(c, verb, "missing MESH", NULL);
     if (!c->o.prompt) {
         if (!prompt_optional) return usage_error(c, verb, "missing PROMPT", NULL);
@@ -179,6 +190,11 @@ static volatile sig_atomic_t interrupted;
 
 static void on_signal(int sig) {
     (void)sig;
+    static const char note[] = "matex: interrupted, stopping after the current step\n";
+    if (!interrupted) {
+        ssize_t n = write(STDERR_FILENO, note, sizeof note - 1); /* async-signal-safe, unlike stdio */
+        (void)n;                                                  /* nothing to do if stderr is gone */
+    }
     interrupted = 1;
 }
 

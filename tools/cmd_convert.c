@@ -16,8 +16,8 @@ static void convert_usage(FILE *f) {
             "Converts diffusers folders into one matex weight file.\n"
             "INPUT is a model-set folder (subfolders unet/, controlnet/, vae/, text_encoder/, tokenizer/,\n"
             "scheduler/; each one present is converted) or a single network folder whose config.json\n"
-            "names a UNet2DConditionModel, ControlNetModel, AutoencoderKL or CLIPTextModel.\n"
-            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, text_encoder.*\n"
+            "names a UNet2DConditionModel, ControlNetModel, AutoencoderKL, AutoencoderTiny or CLIPTextModel.\n"
+            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, taesd.*, text_encoder.*\n"
             "\n"
             "options:\n"
             "  -o, --output FILE        weight file to write (written to a temporary name, then renamed)\n"
@@ -26,6 +26,8 @@ static void convert_usage(FILE *f) {
             "  --controlnet NAME=DIR    add a ControlNet as controlnet_NAME.* (repeatable; NAME in [a-z0-9_])\n"
             "  --lora FILE              merge a LoRA (diffusers/PEFT or kohya keys) into UNet and text encoder\n"
             "  --lora-scale S           scale of the preceding --lora (default 1.0)\n"
+            "  --lcm-lora FILE          merge the LCM-LoRA (a --lora, recorded so that `texture --fast` may run)\n"
+            "  --taesd DIR              add TAESD (AutoencoderTiny folder) as taesd.*, the fast decoder\n"
             "  --json                   print a JSON summary on stdout\n"
             "  --quiet                  no progress lines\n"
             "  -h, --help               this help\n"
@@ -33,7 +35,8 @@ static void convert_usage(FILE *f) {
             "examples:\n"
             "  matex convert stable-diffusion-v1-5 --controlnet depth=control_v11f1p_sd15_depth \\\n"
             "      --controlnet inpaint=control_v11p_sd15_inpaint -o sd15.mxw\n"
-            "  matex convert tests/data/golden/unet_tiny -o unet_tiny.mxw --dtype f32   (in the source tree)\n");
+            "  matex convert tests/data/golden/unet_tiny -o unet_tiny.mxw --dtype f32   (in the source tree)\n"
+            "  fast path: ... --lcm-lora pytorch_lora_weights.safetensors --taesd taesd (then texture --fast)\n");
 }
 
 static int parse_dtype(const char *s, mx_dtype *dt) {
@@ -60,7 +63,7 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         const char *arg = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
         int takes = !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--dtype") ||
                     !strcmp(arg, "--variant") || !strcmp(arg, "--controlnet") || !strcmp(arg, "--lora") ||
-                    !strcmp(arg, "--lora-scale");
+                    !strcmp(arg, "--lora-scale") || !strcmp(arg, "--lcm-lora") || !strcmp(arg, "--taesd");
         if (takes && !val) return usage_error("missing value after", arg);
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
             convert_usage(stdout);
@@ -80,12 +83,15 @@ static int parse_args(int argc, char **argv, convert_args *a) {
             argv[i + 1][eq - val] = 0; /* split NAME=DIR in place */
             a->o.controlnets[k].name = val;
             a->o.controlnets[k].dir = eq + 1;
-        } else if (!strcmp(arg, "--lora")) {
+        } else if (!strcmp(arg, "--lora") || !strcmp(arg, "--lcm-lora")) {
             if (a->o.n_loras == MX_CONVERT_MAX_EXTRA) return usage_error("too many --lora", NULL);
             a->o.loras[a->o.n_loras].path = val;
+            a->o.loras[a->o.n_loras].lcm = !strcmp(arg, "--lcm-lora");
             a->o.loras[a->o.n_loras++].scale = 1.0f;
+        } else if (!strcmp(arg, "--taesd")) {
+            a->o.taesd = val;
         } else if (!strcmp(arg, "--lora-scale")) {
-            if (a->o.n_loras == 0) return usage_error("--lora-scale must follow a --lora", NULL);
+            if (a->o.n_loras == 0) return usage_error("--lora-scale must follow a --lora or --lcm-lora", NULL);
             if (mx_parse_float(val, &a->o.loras[a->o.n_loras - 1].scale))
                 return usage_error("--lora-scale wants a finite number, not", val);
         } else if (!strcmp(arg, "--json")) {
@@ -102,7 +108,7 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         if (takes) i++;
     }
     if (!a->o.output) return usage_error("no output file (-o OUT.mxw)", NULL);
-    if (!a->o.input && a->o.n_controlnets == 0) return usage_error("no INPUT folder", NULL);
+    if (!a->o.input && a->o.n_controlnets == 0 && !a->o.taesd) return usage_error("no INPUT folder", NULL);
     return -1;
 }
 

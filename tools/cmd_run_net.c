@@ -7,6 +7,7 @@
 #include "../ops/ops.h"
 #include "../pipeline/nn/clip.h"
 #include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/taesd.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
 #include "../runtime/log.h"
@@ -31,9 +32,11 @@ static void usage(FILE *f) {
             "  vae-encode  image [B,3,H,W] in [-1,1]                  -> mean, logvar\n"
             "  vae-decode  latents [B,4,h,w] (unscaled)               -> image\n"
             "  clip        input_ids [B,T] (I64 or I32)               -> last_hidden_state, pooler_output, hidden_states.{i}\n"
+            "  taesd-encode  image [B,3,H,W] in [-1,1]                -> latents (SD latents, scaling factor 1)\n"
+            "  taesd-decode  latents [B,4,h,w]                        -> image (in about [-1,1], unclamped)\n"
             "\n"
             "options:\n"
-            "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., text_encoder.;\n"
+            "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., taesd., text_encoder.;\n"
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
             "  --device D      cpu (default), cpu-strict (activations guarded: tests) or cuda (`make cuda` builds)\n"
@@ -324,6 +327,34 @@ done:
     return rc;
 }
 
+/* TAESD: image -> latents (encode) or latents -> image (decode), one input and one output. */
+static int run_taesd(run_io *io, const char *prefix, int decode, mx_status *st) {
+    char key[96];
+    mx_taesd_config cfg;
+    mx_taesd *t = NULL;
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_taesd_config_parse(&cfg, text, strlen(text), key, st)) return -1;
+    if (bind_weights(io, prefix, st) || mx_taesd_load(&t, &cfg, &io->b, st)) return -1;
+    int rc = -1, f = mx_taesd_factor(t), cin = decode ? cfg.latent_channels : cfg.in_channels;
+    int cout = decode ? cfg.out_channels : cfg.latent_channels;
+    int64_t is[4] = {-1, cin, -1, -1};
+    float *x = input(io, decode ? "latents" : "image", 4, is, 1, st), *y;
+    size_t bytes;
+    if (!x) goto done;
+    int B = (int)is[0], H = (int)is[2], W = (int)is[3], Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
+    int64_t os[4] = {B, cout, Ho, Wo};
+    if ((decode ? mx_taesd_decode_arena_bytes(t, B, H, W, &bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, &bytes, st)) ||
+        make_arena(io, bytes, st) || !(x = on_device(io, x, (size_t)B * cin * H * W, st)) ||
+        !(y = dev_output(io, decode ? "image" : "latents", 4, os, st)) ||
+        (decode ? mx_taesd_decode(&io->ctx, t, x, B, H, W, y, &io->arena, st)
+                : mx_taesd_encode(&io->ctx, t, x, B, H, W, y, &io->arena, st)))
+        goto done;
+    rc = 0;
+done:
+    mx_taesd_free(t);
+    return rc;
+}
+
 static int run_clip(run_io *io, const char *prefix, mx_status *st) {
     char key[96];
     mx_clip_config cfg;
@@ -386,6 +417,7 @@ static const char *default_prefix(const char *net) {
     if (!strcmp(net, "controlnet")) return "controlnet.";
     if (!strcmp(net, "vae-encode") || !strcmp(net, "vae-decode")) return "vae.";
     if (!strcmp(net, "clip")) return "text_encoder.";
+    if (!strcmp(net, "taesd-encode") || !strcmp(net, "taesd-decode")) return "taesd.";
     return NULL;
 }
 
@@ -403,6 +435,8 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
              : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
              : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
              : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
+             : !strcmp(net, "taesd-encode") ? run_taesd(io, prefix, 0, st)
+             : !strcmp(net, "taesd-decode") ? run_taesd(io, prefix, 1, st)
                                           : run_clip(io, prefix, st);
     if (rc || fetch_outputs(io, st)) return -1;
     mx_info("run-net %s on %s: %.3f s", net, mx_backend_name(device), mx_now() - t0);
@@ -444,7 +478,7 @@ int cmd_run_net(int argc, char **argv) {
     }
     if (!net || !weights || !io.in_path || !io.out_path || !default_prefix(net)) {
         fprintf(stderr, "matex run-net: %s\n", !net || default_prefix(net) ? "NET, --weights, --inputs and --out are required"
-                                                                         : "NET must be clip, unet, controlnet, vae-encode or vae-decode");
+                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, taesd-encode or taesd-decode");
         usage(stderr);
         return 2;
     }

@@ -4,6 +4,8 @@
 # tests/data/golden/tokenizer (MIT, see LICENSE there), assembled as a diffusers model folder
 # and converted with `matex convert`. Random weights paint noise: this only exercises the whole
 # pipeline. Run from the repository root.
+# Also OUT_unet_only.mxw (a UNet alone) and OUT_fast.mxw (the same set plus a TAESD and a small
+# LoRA converted as the LCM-LoRA: what `texture --fast` requires, not a real LCM distillation).
 # usage: sh tools/make_demo_weights.sh MATEX OUT.mxw
 set -eu
 MATEX=$1
@@ -22,9 +24,29 @@ net controlnet_depth controlnet.json 12 diffusion_pytorch_model.safetensors
 net controlnet_inpaint controlnet.json 13 diffusion_pytorch_model.safetensors
 net vae vae.json 14 diffusion_pytorch_model.safetensors
 net text_encoder clip.json 15 model.safetensors
+mkdir -p "$DIR/taesd"
+net taesd taesd.json 16 diffusion_pytorch_model.safetensors
 cp tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt "$DIR/tokenizer/"
 cp "$CFG/scheduler_config.json" "$DIR/scheduler/scheduler_config.json"
 "$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \
     --dtype f32 --quiet -o "$OUT"
+# A kohya-keyed LoRA of one module (time_embedding.linear_1 of the demo UNet, [128, 32], rank 1),
+# every value the float of bytes 0x3c3c3c3c (about 0.0115), as safetensors: 8-byte LE header size,
+# the JSON header padded with spaces, the data.
+lora_file() {
+    k=lora_unet_time_embedding_linear_1
+    h="{\"$k.lora_down.weight\":{\"dtype\":\"F32\",\"shape\":[1,32],\"data_offsets\":[0,128]},"
+    h="$h\"$k.lora_up.weight\":{\"dtype\":\"F32\",\"shape\":[128,1],\"data_offsets\":[128,640]}}"
+    while [ $((${#h} % 8)) -ne 0 ]; do h="$h "; done
+    n=${#h}
+    {
+        printf "$(printf '\\%03o\\%03o' $((n % 256)) $((n / 256)))\\0\\0\\0\\0\\0\\0"
+        printf '%s' "$h"
+        head -c 640 /dev/zero | tr '\0' '<'
+    } > "$1"
+}
+lora_file "$DIR/lcm_lora.safetensors"
+"$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \
+    --lcm-lora "$DIR/lcm_lora.safetensors" --taesd "$DIR/taesd" --dtype f32 --quiet -o "${OUT%.mxw}_fast.mxw"
 # A file with only a UNet: the pipeline tests check that a wrong file is refused clearly.
 "$MATEX" convert "$DIR/unet" --dtype f32 --quiet -o "${OUT%.mxw}_unet_only.mxw"

@@ -106,6 +106,7 @@ static const char *network_kind(const mx_json *cfg) {
     if (!strcmp(cls, "UNet2DConditionModel")) return "unet";
     if (!strcmp(cls, "ControlNetModel")) return "controlnet";
     if (!strcmp(cls, "AutoencoderKL")) return "vae";
+    if (!strcmp(cls, "AutoencoderTiny")) return "taesd";
     if (json_array_has(mx_json_get(cfg, "architectures"), "CLIPTextModel") ||
         !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model"))
         return "text_encoder";
@@ -278,7 +279,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
     else if (!kind)
         rc = mx_fail(st, MX_EINPUT,
                      "%s: unknown network type (need _class_name UNet2DConditionModel, ControlNetModel, "
-                     "AutoencoderKL or architectures CLIPTextModel)",
+                     "AutoencoderKL, AutoencoderTiny or architectures CLIPTextModel)",
                      cfg_path);
     else if (want_kind && strcmp(kind, want_kind))
         rc = mx_fail(st, MX_EINPUT, "%s: holds a %s, expected a %s", cfg_path, kind, want_kind);
@@ -391,6 +392,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
         snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
         if (add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st)) return -1;
     }
+    if (o->taesd && add_network(cv, o->taesd, "taesd", "taesd", st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -426,6 +428,21 @@ static int add_provenance(converter *cv, mx_status *st) {
     return rc;
 }
 
+/* "unet.lcm_lora": {"file": ..., "scale": ...} of the LoRA marked as the LCM-LoRA. */
+static int add_lcm_mark(converter *cv, mx_status *st) {
+    for (size_t k = 0; k < cv->o->n_loras; k++) {
+        if (!cv->o->loras[k].lcm) continue;
+        text_buf p = {0};
+        mx_buf_put(&p, "{\"file\": ", 9);
+        mx_buf_json_str(&p, cv->o->loras[k].path);
+        mx_buf_printf(&p, ", \"scale\": %.9g}", (double)cv->o->loras[k].scale);
+        int rc = p.oom ? mx_fail(st, MX_ENOMEM, "convert: out of memory") : mx_wf_writer_meta(cv->w, "unet.lcm_lora", p.p, st);
+        free(p.p);
+        return rc;
+    }
+    return 0;
+}
+
 static void converter_free(converter *cv) {
     mx_wf_writer_free(cv->w);
     for (size_t i = 0; i < cv->n_files; i++) {
@@ -445,12 +462,16 @@ int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) 
     if (o->n_controlnets > MX_CONVERT_MAX_EXTRA || o->n_loras > MX_CONVERT_MAX_EXTRA)
         return mx_fail(st, MX_EUSAGE, "convert: at most %d ControlNets and %d LoRAs", MX_CONVERT_MAX_EXTRA,
                        MX_CONVERT_MAX_EXTRA);
+    size_t n_lcm = 0;
+    for (size_t k = 0; k < o->n_loras; k++) n_lcm += o->loras[k].lcm != 0;
+    if (n_lcm > 1) return mx_fail(st, MX_EUSAGE, "convert: more than one LCM-LoRA");
     converter cv = {.o = o};
     int rc = (cv.w = mx_wf_writer_create(st)) ? 0 : -1;
     if (!rc) rc = open_loras(&cv, st);
     if (!rc) rc = convert_inputs(&cv, st);
     if (!rc) rc = check_loras_used(&cv, st);
     if (!rc) rc = add_provenance(&cv, st);
+    if (!rc) rc = add_lcm_mark(&cv, st);
     if (!rc) rc = mx_wf_writer_finish(cv.w, o->output, st);
     if (!rc && res) *res = cv.res;
     converter_free(&cv);

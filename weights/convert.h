@@ -1,8 +1,9 @@
 /* `matex convert`: diffusers / transformers folders -> one matex weight file (FORMAT.md).
  * Input is either a model-set folder (subfolders unet/, controlnet/, vae/, text_encoder/,
  * tokenizer/, scheduler/; each present one is converted) or a single network folder whose
- * config.json names its type. Extra ControlNets come as NAME=DIR. LoRA files are merged into
- * the UNet and text-encoder weights. */
+ * config.json names its type. Extra ControlNets come as NAME=DIR, a TAESD (AutoencoderTiny)
+ * folder as `taesd`. LoRA files are merged into the UNet and text-encoder weights; one marked as
+ * the LCM-LoRA is recorded (metadata "unet.lcm_lora") so that the few-step path can require it. */
 #ifndef MX_CONVERT_H
 #define MX_CONVERT_H
 
@@ -23,10 +24,12 @@ typedef struct mx_convert_opts {
         const char *name; /* [a-z0-9_]+, gives the prefix "controlnet_<name>." */
         const char *dir;
     } controlnets[MX_CONVERT_MAX_EXTRA];
+    const char *taesd;  /* AutoencoderTiny folder -> taesd.*, or NULL */
     size_t n_loras;
     struct {
         const char *path;
         float scale;
+        int lcm; /* the LCM-LoRA (distils the UNet for the LCM scheduler) */
     } loras[MX_CONVERT_MAX_EXTRA];
 } mx_convert_opts;
 

@@ -1,4 +1,4 @@
-/* Scalar references of GELU (erf), quick-GELU (CLIP), SiLU and GEGLU, computed in double. */
+/* Scalar references of GELU (erf), quick-GELU (CLIP), SiLU, GEGLU and tanh, computed in double. */
 #include <math.h>
 
 #include "kernels.h"
@@ -50,3 +50,7 @@ void mx_geglu_ref(const mx_ctx *c, float *y, const float *x, int M, int N) {
     geglu_args a = {y, x, N};
     mx_par_for(c, M, geglu_row, &a);
 }
+
+static float tanh_one(float v) { return (float)tanh((double)v); }
+
+void mx_tanh_ref(const mx_ctx *c, float *x, size_t n) { unary_run(c, x, n, tanh_one); }

@@ -7,7 +7,8 @@
     .transpose_chw_hwc = mx_transpose_chw_hwc_ref, .transpose_hwc_chw = mx_transpose_hwc_chw_ref,            \
     .resize_bilinear = mx_resize_bilinear_ref, .pad2d = mx_pad2d_ref, .copy = mx_copy_ref, .fill = mx_fill_ref,  \
     .axpy = mx_axpy_ref, .lincomb = mx_lincomb_ref, .clamp = mx_clamp_ref, .affine = mx_affine_ref,           \
-    .timestep_embedding = mx_timestep_embedding_ref, .embed_tokens = mx_embed_tokens_ref
+    .timestep_embedding = mx_timestep_embedding_ref, .embed_tokens = mx_embed_tokens_ref,       \
+    .copy_rect = mx_copy_rect_ref, .tanh = mx_tanh_ref
 
 static const mx_kernels scalar_table = {
     .isa = MX_ISA_SCALAR,

@@ -79,6 +79,11 @@ void mx_transpose_chw_hwc_ref(const mx_ctx *, float *y, const float *x, int B, i
 void mx_transpose_hwc_chw_ref(const mx_ctx *, float *y, const float *x, int B, int C, int HW);
 void mx_resize_bilinear_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
                             int align_corners);
+void mx_copy_rect_ref(const mx_ctx *, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w);
+
+/* tanh has only a reference (TAESD's latent clamp: memory-bound, small). */
+void mx_tanh_ref(const mx_ctx *, float *x, size_t n);
 
 /* The seam ops (pad, copy, fill, vector combinations, embeddings): memory-bound or tiny,
  * one reference for every level. */

@@ -27,6 +27,15 @@ void mx_upsample_nearest2x_ref(const mx_ctx *c, float *y, const float *x, int BC
     mx_par_for(c, BC, upsample_plane, &a);
 }
 
+void mx_copy_rect_ref(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w) {
+    (void)c;
+    for (int p = 0; p < BC; p++)
+        for (int r = 0; r < h; r++)
+            memcpy(y + ((size_t)p * Hy + y0 + r) * Wy + x0, x + ((size_t)p * Hx + sy0 + r) * Wx + sx0,
+                   (size_t)w * sizeof *y);
+}
+
 void mx_concat_channels_ref(const mx_ctx *c, float *y, const float *a, int Ca, const float *b, int Cb, int B,
                             int HW) {
     (void)c;

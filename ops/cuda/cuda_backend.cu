@@ -97,6 +97,11 @@ static void k_timestep(const mx_ctx *c, float *y, const float *t, int B, int dim
 static void k_embed(const mx_ctx *c, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tok, mx_wptr pos) {
     CUDA_OP(c, mx_cuda_embed_tokens(b_->cc, y, ids, B, T, C, tok, pos, st_));
 }
+static void k_tanh(const mx_ctx *c, float *x, size_t n) { CUDA_OP(c, mx_cuda_tanh(b_->cc, x, n, st_)); }
+static void k_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                        int sy0, int sx0, int BC, int h, int w) {
+    CUDA_OP(c, mx_cuda_copy_rect(b_->cc, y, Hy, Wy, y0, x0, x, Hx, Wx, sy0, sx0, BC, h, w, st_));
+}
 static void k_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) {
     CUDA_OP(c, mx_cuda_f16_to_f32(b_->cc, y, x, n, st_));
 }
@@ -139,6 +144,8 @@ static void fill_table(mx_kernels *k) {
     k->affine = k_affine;
     k->timestep_embedding = k_timestep;
     k->embed_tokens = k_embed;
+    k->tanh = k_tanh;
+    k->copy_rect = k_copy_rect;
     k->f16_to_f32 = k_f16_to_f32;
     k->f32_to_f16 = k_f32_to_f16;
     k->bf16_to_f32 = k_bf16_to_f32;

@@ -98,6 +98,10 @@ int mx_cuda_clamp(mx_cuda_ctx *c, float *y, const float *x, float lo, float hi, 
 int mx_cuda_affine(mx_cuda_ctx *c, float *y, const float *x, float a, float b, size_t n, mx_status *st);
 int mx_cuda_timestep_embedding(mx_cuda_ctx *c, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
                                float downscale_freq_shift, float max_period, mx_status *st);
+/* TAESD's tanh (in place) and the tiled VAE decode's rectangle copy (cuda_fast.cu). */
+int mx_cuda_tanh(mx_cuda_ctx *c, float *x, size_t n, mx_status *st);
+int mx_cuda_copy_rect(mx_cuda_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w, mx_status *st);
 int mx_cuda_embed_tokens(mx_cuda_ctx *c, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
                          mx_wptr positions, mx_status *st);
 

@@ -8,6 +8,7 @@
 #include "../../runtime/json.h"
 #include "clip.h"
 #include "controlnet.h"
+#include "taesd.h"
 #include "unet.h"
 #include "vae.h"
 
@@ -273,6 +274,57 @@ int mx_vae_config_parse(mx_vae_config *cfg, const char *text, size_t len, const 
     return with_config(text, len, what, st, cfg, parse_vae);
 }
 
+/* Equal per-level arrays of the same length (the encoder's, decoder's and the shared one). */
+static int taesd_channels(const cfg_reader *r, mx_taesd_config *c) {
+    static const char *const keys[3] = {"block_out_channels", "encoder_block_out_channels", "decoder_block_out_channels"};
+    for (int k = 0; k < 3; k++) {
+        int ch[MX_NET_MAX_LEVELS], n;
+        if (k > 0 && is_null(mx_json_get(r->root, keys[k]))) continue;
+        if (get_int_array(r, keys[k], MX_NET_MAX_LEVELS, 1, MAX_CHANNELS, ch, &n)) return -1;
+        if (k == 0) {
+            c->nlevels = n;
+            c->channels = ch[0];
+        }
+        for (int i = 0; i < n; i++)
+            if (n != c->nlevels || ch[i] != c->channels)
+                return mx_fail(r->st, MX_EINPUT, "%s: \"%s\": TAESD needs one channel count on every level", r->what,
+                               keys[k]);
+    }
+    return 0;
+}
+
+static int taesd_blocks(const cfg_reader *r, const char *key, const mx_taesd_config *c, int *vals) {
+    int n;
+    if (get_int_array(r, key, MX_NET_MAX_LEVELS, 1, MAX_LAYERS, vals, &n)) return -1;
+    if (n != c->nlevels)
+        return mx_fail(r->st, MX_EINPUT, "%s: \"%s\" has %d entries, block_out_channels has %d", r->what, key, n,
+                       c->nlevels);
+    return 0;
+}
+
+static int parse_taesd(const cfg_reader *r, void *out) {
+    mx_taesd_config *c = out;
+    memset(c, 0, sizeof *c);
+    if (strcmp(mx_json_get_str(r->root, "_class_name", "AutoencoderTiny"), "AutoencoderTiny"))
+        return mx_fail(r->st, MX_EINPUT, "%s: \"_class_name\" must be AutoencoderTiny", r->what);
+    float up = 2;
+    if (taesd_channels(r, c) || taesd_blocks(r, "num_encoder_blocks", c, c->enc_blocks) ||
+        taesd_blocks(r, "num_decoder_blocks", c, c->dec_blocks) ||
+        get_int(r, "in_channels", 3, 1, 64, &c->in_channels) || get_int(r, "out_channels", 3, 1, 64, &c->out_channels) ||
+        get_int(r, "latent_channels", 4, 1, 64, &c->latent_channels) ||
+        get_float(r, "scaling_factor", 1.0, -1e6, 1e6, &c->scaling_factor) ||
+        get_float(r, "upsampling_scaling_factor", 2.0, 2.0, 2.0, &up) || require_str(r, "act_fn", "relu") ||
+        require_str(r, "upsample_fn", "nearest"))
+        return -1;
+    if (c->nlevels < 2) return mx_fail(r->st, MX_EINPUT, "%s: TAESD needs at least 2 levels", r->what);
+    if (c->scaling_factor == 0.0f) return mx_fail(r->st, MX_EINPUT, "%s: \"scaling_factor\" must not be 0", r->what);
+    return 0;
+}
+
+int mx_taesd_config_parse(mx_taesd_config *cfg, const char *text, size_t len, const char *what, mx_status *st) {
+    return with_config(text, len, what, st, cfg, parse_taesd);
+}
+
 int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, const char *what, mx_status *st) {
     mx_json *root = mx_json_parse(text, len, what, st);
     if (!root) return -1;
@@ -312,6 +364,14 @@ int mx_net_enumerate(mx_binder *b, const char *text, size_t len, const char *wha
         mx_vae_free(v);
         return rc;
     }
+    if (!strcmp(cls, "AutoencoderTiny")) {
+        mx_taesd_config c;
+        mx_taesd *t = NULL;
+        if (mx_taesd_config_parse(&c, text, len, what, st)) return -1;
+        int rc = mx_taesd_load(&t, &c, b, st);
+        mx_taesd_free(t);
+        return rc;
+    }
     if (!strcmp(cls, "CLIPTextModel")) {
         mx_clip_config c;
         mx_clip m;
@@ -322,5 +382,5 @@ int mx_net_enumerate(mx_binder *b, const char *text, size_t len, const char *wha
         return rc;
     }
     return mx_fail(st, MX_EINPUT, "%s: \"_class_name\" \"%s\" is not one of UNet2DConditionModel, ControlNetModel, "
-                   "AutoencoderKL, CLIPTextModel", what, cls);
+                   "AutoencoderKL, AutoencoderTiny, CLIPTextModel", what, cls);
 }

@@ -52,17 +52,29 @@ typedef struct mx_vae_config {
     float scaling_factor;         /* informational: not applied by the VAE calls */
 } mx_vae_config;
 
+/* AutoencoderTiny (TAESD). diffusers' EncoderTiny/DecoderTiny only run when every level has
+ * the same channel count, so one `channels` describes them. */
+typedef struct mx_taesd_config {
+    int in_channels, out_channels, latent_channels;
+    int nlevels;
+    int channels;                           /* block_out_channels (all equal) */
+    int enc_blocks[MX_NET_MAX_LEVELS];      /* num_encoder_blocks */
+    int dec_blocks[MX_NET_MAX_LEVELS];      /* num_decoder_blocks */
+    float scaling_factor;                   /* informational: 1.0 for TAESD */
+} mx_taesd_config;
+
 /* Parse text[0..len) (config.json contents); `what` names the source in messages. A UNet
  * parser accepts UNet2DConditionModel and ControlNetModel configs. */
 int mx_unet_config_parse(mx_unet_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
 int mx_vae_config_parse(mx_vae_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
+int mx_taesd_config_parse(mx_taesd_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
 
 /* Class of a config text ("_class_name", else "architectures"[0], else CLIPTextModel for
  * model_type clip_text_model), copied into buf (empty when none). */
 int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, const char *what, mx_status *st);
 
 /* Enumerates the parameter list (names without prefix, shapes) of the network a config text
- * describes (UNet2DConditionModel, ControlNetModel, AutoencoderKL or CLIPTextModel) into an
+ * describes (UNet2DConditionModel, ControlNetModel, AutoencoderKL, AutoencoderTiny or CLIPTextModel) into an
  * enumerating binder (mx_binder_enum), through the networks' own load code. */
 struct mx_binder;
 int mx_net_enumerate(struct mx_binder *b, const char *text, size_t len, const char *what, mx_status *st);

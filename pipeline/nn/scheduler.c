@@ -86,6 +86,8 @@ static int parse_fields(mx_sched_config *c, const mx_json *root, const char *wha
     c->set_alpha_to_one = mx_json_get_bool(root, "set_alpha_to_one", c->set_alpha_to_one);
     c->clip_sample = mx_json_get_bool(root, "clip_sample", c->clip_sample);
     c->clip_sample_range = mx_json_get_num(root, "clip_sample_range", c->clip_sample_range);
+    c->original_inference_steps = (int)mx_json_get_num(root, "original_inference_steps", c->original_inference_steps);
+    c->timestep_scaling = mx_json_get_num(root, "timestep_scaling", c->timestep_scaling);
     e = (int)c->beta_schedule;
     if (parse_enum(root, "beta_schedule", betas, 2, &e, what, st)) return -1;
     c->beta_schedule = (mx_beta_schedule)e;
@@ -120,6 +122,11 @@ static int validate(const mx_sched_config *c, const char *what, mx_status *st) {
         return mx_fail(st, MX_EINPUT, "%s: solver_order %d outside 1..3", what, c->solver_order);
     if (c->steps_offset < 0 || c->steps_offset >= c->num_train_timesteps)
         return mx_fail(st, MX_EINPUT, "%s: steps_offset %d out of range", what, c->steps_offset);
+    if (c->kind == MX_SCHED_LCM &&
+        (c->original_inference_steps < 1 || c->original_inference_steps > c->num_train_timesteps ||
+         !(c->timestep_scaling > 0 && c->timestep_scaling < 1e6)))
+        return mx_fail(st, MX_EINPUT, "%s: LCM original_inference_steps %d or timestep_scaling %g out of range", what,
+                       c->original_inference_steps, c->timestep_scaling);
     return 0;
 }
 
@@ -127,10 +134,15 @@ int mx_sched_config_from_json(mx_sched_config *cfg, const mx_json *obj, const ch
     if (mx_json_kind(obj) != MX_JSON_OBJ)
         return mx_fail(st, MX_EINPUT, "%s: scheduler config is not a JSON object", what);
     const char *cls = mx_json_get_str(obj, "_class_name", "");
-    if (strcmp(cls, "DDIMScheduler") == 0)
+    if (strcmp(cls, "DDIMScheduler") == 0) {
         mx_sched_config_sd15_ddim(cfg);
-    else
+    } else if (strcmp(cls, "LCMScheduler") == 0) {
+        mx_sched_config sd15;
+        mx_sched_config_sd15(&sd15);
+        mx_sched_config_lcm(cfg, &sd15);
+    } else {
         mx_sched_config_sd15(cfg);
+    }
     if (parse_fields(cfg, obj, what, st)) return -1;
     return validate(cfg, what, st);
 }
@@ -331,6 +343,8 @@ int mx_sched_init(mx_sched *s, const mx_ctx *c, const mx_sched_config *cfg, int 
     compute_alphas_cumprod(cfg, s->alphas_cumprod);
     if (cfg->kind == MX_SCHED_DDIM) {
         s->n_steps = ddim_timesteps(cfg, num_inference_steps, s->timesteps);
+    } else if (cfg->kind == MX_SCHED_LCM) {
+        if ((s->n_steps = mx_sched_lcm_timesteps(cfg, num_inference_steps, s->timesteps, st)) < 0) return -1;
     } else if (dpm_schedule(s, num_inference_steps, st)) {
         return -1;
     }
@@ -340,18 +354,24 @@ int mx_sched_init(mx_sched *s, const mx_ctx *c, const mx_sched_config *cfg, int 
     for (int i = 0; i < 3; i++) s->model_outputs[i] = s->buf + (size_t)i * numel;
     s->work[0] = s->buf + 3 * numel;
     s->work[1] = s->buf + 4 * numel;
+    if (cfg->kind == MX_SCHED_LCM && !(s->noise_host = malloc(numel * sizeof(float))))
+        return mx_fail(st, MX_ENOMEM, "scheduler: out of memory for %zu noise values", numel);
     return 0;
 }
 
 void mx_sched_free(mx_sched *s) {
     mx_dev_free(s->c, s->buf);
+    free(s->noise_host);
     s->buf = NULL;
+    s->noise_host = NULL;
 }
 
 int mx_sched_set_strength(mx_sched *s, float strength, mx_status *st) {
     if (!(strength >= 0.0f && strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "scheduler: strength %g outside [0, 1]", (double)strength);
     if (s->step_index != s->begin) return mx_fail(st, MX_EUSAGE, "scheduler: strength set after stepping");
+    if (s->cfg.kind == MX_SCHED_LCM && strength != 1.0f)
+        return mx_fail(st, MX_EUSAGE, "scheduler: LCM with img2img strength is not supported");
     int init = (int)((float)s->num_inference_steps * strength);
     if (init > s->num_inference_steps) init = s->num_inference_steps;
     int t_start = s->num_inference_steps - init;
@@ -516,6 +536,7 @@ int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_stat
     int64_t t = s->timesteps[s->step_index];
     if (t < 0 || t >= s->cfg.num_train_timesteps)
         return mx_fail(st, MX_EINTERNAL, "scheduler: timestep %lld out of range", (long long)t);
+    if (s->cfg.kind == MX_SCHED_LCM) return mx_sched_lcm_step(s, model_output, sample, st);
     if (s->cfg.kind == MX_SCHED_DDIM)
         ddim_step(s, model_output, sample);
     else
@@ -527,7 +548,7 @@ int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_stat
 void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n) {
     float a, b;
     int i = s->step_index < s->n_steps ? s->step_index : s->n_steps - 1;
-    if (s->cfg.kind == MX_SCHED_DDIM) {
+    if (s->cfg.kind == MX_SCHED_DDIM || s->cfg.kind == MX_SCHED_LCM) {
         float acp = s->alphas_cumprod[s->timesteps[i]];
         a = sqrtf(acp);
         b = sqrtf(1.0f - acp);

@@ -7,7 +7,10 @@
  *
  * Use: mx_sched_init(&s, ctx, &cfg, steps, numel); for i in 0..mx_sched_steps(&s): run the model
  * at timestep mx_sched_timestep(&s, i), then mx_sched_step(&s, eps, latents). The step runs as ops
- * on ctx: eps, latents and the history are memory of ctx's backend. */
+ * on ctx: eps, latents and the history are memory of ctx's backend.
+ *
+ * LCMScheduler (scheduler_lcm.c) shares the schedule and this state; its steps draw fresh noise
+ * from s->noise_fn (matex's seeded generator, or given noise in tests). */
 #ifndef MX_SCHEDULER_H
 #define MX_SCHEDULER_H
 
@@ -20,7 +23,7 @@
 #define MX_SCHED_MAX_TRAIN 4000
 #define MX_SCHED_MAX_STEPS 1000
 
-typedef enum { MX_SCHED_DPMPP = 0, MX_SCHED_DDIM = 1 } mx_sched_kind;
+typedef enum { MX_SCHED_DPMPP = 0, MX_SCHED_DDIM = 1, MX_SCHED_LCM = 2 } mx_sched_kind;
 typedef enum { MX_BETA_SCALED_LINEAR = 0, MX_BETA_LINEAR = 1 } mx_beta_schedule;
 typedef enum { MX_PRED_EPSILON = 0, MX_PRED_V = 1, MX_PRED_SAMPLE = 2 } mx_prediction;
 typedef enum { MX_SOLVER_MIDPOINT = 0, MX_SOLVER_HEUN = 1 } mx_solver_type;
@@ -47,20 +50,30 @@ typedef struct mx_sched_config {
     int set_alpha_to_one;     /* SD1.5 scheduler_config: 0 */
     int clip_sample;          /* SD1.5: 0 */
     double clip_sample_range; /* 1.0 */
+    /* LCM (scheduler_lcm.c) */
+    int original_inference_steps; /* 50 */
+    double timestep_scaling;      /* 10.0 */
 } mx_sched_config;
 
 /* DPM-Solver++ (2M) with the SD1.5 schedule: the matex default. */
 void mx_sched_config_sd15(mx_sched_config *cfg);
 /* DDIM (eta 0) with the SD1.5 schedule. */
 void mx_sched_config_sd15_ddim(mx_sched_config *cfg);
+/* LCMScheduler (the few-step sampler of an LCM-LoRA) over the training schedule of base
+ * (betas, train steps, offset): original_inference_steps 50, timestep_scaling 10, epsilon. */
+void mx_sched_config_lcm(mx_sched_config *cfg, const mx_sched_config *base);
 /* Parses a diffusers scheduler_config.json text over the SD1.5 defaults; "_class_name"
- * DDIMScheduler selects DDIM, anything else DPM-Solver++. Unsupported options (another
+ * DDIMScheduler selects DDIM, LCMScheduler LCM, anything else DPM-Solver++. Unsupported options (another
  * algorithm_type, thresholding, other sigma kinds) are errors naming `what` and the key. */
 int mx_sched_config_parse(mx_sched_config *cfg, const char *json_text, size_t len, const char *what,
                           mx_status *st);
 /* The same from an already parsed JSON object (e.g. a member of a manifest). */
 struct mx_json;
 int mx_sched_config_from_json(mx_sched_config *cfg, const struct mx_json *obj, const char *what, mx_status *st);
+
+/* Fills noise[0..numel) (HOST memory) with the fresh noise of step `step` (0-based among the
+ * steps run); returns non-zero on failure. */
+typedef int (*mx_sched_noise_fn)(void *user, int step, float *noise, size_t numel);
 
 typedef struct mx_sched {
     mx_sched_config cfg;
@@ -76,7 +89,10 @@ typedef struct mx_sched {
     const mx_ctx *c;                      /* the context the step's ops run on */
     float *model_outputs[3];              /* DPM history of converted outputs (x0), newest last */
     float *buf;                           /* backend memory: owns model_outputs and work */
-    float *work[2];
+    float *work[2];                       /* LCM: work[0] holds the last step's denoised prediction */
+    mx_sched_noise_fn noise_fn;           /* LCM: the fresh noise of a step (set after init) */
+    void *noise_user;
+    float *noise_host;                    /* LCM: numel host floats noise_fn fills */
 } mx_sched;
 
 /* Computes the schedule for num_inference_steps and allocates history for latents of numel
@@ -99,6 +115,12 @@ float mx_sched_init_noise_sigma(const mx_sched *s);
 /* One step: sample (numel floats, backend memory) is replaced by the previous sample given the
  * model output (epsilon, v or x0 per prediction_type) at the current timestep. */
 int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_status *st);
+
+/* LCM (scheduler_lcm.c): 1 when the next step draws fresh noise (every step but the last); the
+ * timesteps of LCMScheduler.set_timesteps (strength 1), the count or -1; mx_sched_step's LCM case. */
+int mx_sched_needs_noise(const mx_sched *s);
+int mx_sched_lcm_timesteps(const mx_sched_config *cfg, int steps, int64_t *ts, mx_status *st);
+int mx_sched_lcm_step(mx_sched *s, const float *model_output, float *sample, mx_status *st);
 
 /* Start latents, on HOST arrays before they enter the denoise loop:
  * noising for the first timestep still to run (SDEdit): y = a·x0 + b·noise with

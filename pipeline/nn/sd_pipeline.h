@@ -4,6 +4,8 @@
  * the residuals of all ControlNets are summed; the UNet predicts eps on x_in with the summed
  * residuals; CFG combines eps_u + g·(eps_c − eps_u); the scheduler steps.
  * With guidance <= 1 there is no unconditional half (diffusers' do_classifier_free_guidance).
+ * The networks run on one latent (its CFG pair) at a time: they are batch-independent, so this
+ * changes no result and bounds a step's memory to that of one latent.
  *
  * Also the small helpers around the loop: latents <-> images through the VAE with the SD1.5
  * scaling factor, as the pipelines do it. */

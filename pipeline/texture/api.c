@@ -112,6 +112,7 @@ static const struct {
     SAME_FIELD(front_back_words, grid_word),
     SAME_FIELD(threads, threads),
     SAME_FIELD(cancel, cancel),
+    SAME_FIELD(fast, fast),
 };
 
 int mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t, mx_status *st) {

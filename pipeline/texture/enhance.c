@@ -113,6 +113,8 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
 
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_ENHANCE, st)) return -1;
+    if (o->fast)
+        return mx_fail(st, MX_EUSAGE, "enhance: --fast is not supported (the LCM scheduler has no img2img strength yet)");
     mx_job j;
     int rc = mx_job_open(&j, o, 0, 1, st);
     mx_image *orig = NULL, *out = NULL;

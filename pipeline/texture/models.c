@@ -66,6 +66,16 @@ static int load_vae(mx_models *m, mx_status *st) {
     return mx_vae_load(&m->vae, &cfg, &m->b_vae, st);
 }
 
+static int load_taesd(mx_models *m, mx_status *st) {
+    m->lcm = mx_wf_meta(m->wf, "unet.lcm_lora") != NULL;
+    if (!has_network(m->wf, "taesd.")) return 0;
+    const char *text = config_text(m->wf, "taesd.", st);
+    mx_taesd_config cfg;
+    if (mx_taesd_config_parse(&cfg, text, strlen(text), mx_wf_path(m->wf), st)) return -1;
+    if (bind_net(m, 5, &m->b_taesd, "taesd.", st)) return -1;
+    return mx_taesd_load(&m->taesd, &cfg, &m->b_taesd, st);
+}
+
 static int load_scheduler(mx_models *m, mx_status *st) {
     const char *text = mx_wf_meta(m->wf, "scheduler.config");
     if (!text) {
@@ -104,7 +114,7 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
     if (mx_wf_open(&m->wf, path, st)) return -1;
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_clip(m, st) ||
         load_unet_like(m, "unet.", 0, 1, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
-        load_vae(m, st) || load_scheduler(m, st)) {
+        load_vae(m, st) || load_taesd(m, st) || load_scheduler(m, st)) {
         mx_models_free(m);
         return -1;
     }
@@ -125,12 +135,13 @@ void mx_models_free(mx_models *m) {
     mx_controlnet_free(m->cn_depth);
     mx_controlnet_free(m->cn_inpaint);
     mx_vae_free(m->vae);
+    mx_taesd_free(m->taesd);
     mx_binder_free(&m->b_clip);
     mx_binder_free(&m->b_unet);
     mx_binder_free(&m->b_depth);
     mx_binder_free(&m->b_inpaint);
     mx_binder_free(&m->b_vae);
-    for (int i = 0; i < 5; i++) mx_binder_free(&m->wf_binders[i]);
+    for (int i = 0; i < 6; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);

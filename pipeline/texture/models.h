@@ -1,7 +1,8 @@
 /* The model set of the texturing method, loaded from one matex weight file: tokenizer, CLIP
  * text encoder, UNet, ControlNet depth, ControlNet inpaint, VAE and the scheduler config.
  * Tensor prefixes are those `matex convert` writes: "text_encoder.", "unet.",
- * "controlnet_depth." (or a single "controlnet."), "controlnet_inpaint.", "vae.". */
+ * "controlnet_depth." (or a single "controlnet."), "controlnet_inpaint.", "vae.", and for the
+ * few-step path "taesd." (optional). */
 #ifndef MX_MODELS_H
 #define MX_MODELS_H
 
@@ -11,6 +12,7 @@
 #include "../nn/controlnet.h"
 #include "../nn/params.h"
 #include "../nn/scheduler.h"
+#include "../nn/taesd.h"
 #include "../nn/tokenizer.h"
 #include "../nn/unet.h"
 #include "../nn/vae.h"
@@ -25,10 +27,12 @@ typedef struct mx_models {
     mx_controlnet *cn_depth;   /* NULL when not in the file and not needed */
     mx_controlnet *cn_inpaint; /* NULL when not in the file and not needed */
     mx_vae *vae;
+    mx_taesd *taesd;           /* NULL when the file has no taesd.* */
+    int lcm;                   /* the UNet has a merged LCM-LoRA (metadata unet.lcm_lora) */
     mx_sched_config sched;
     const mx_ctx *c;                           /* the weights live on c's backend */
-    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae; /* weights on the device */
-    mx_binder wf_binders[5];                   /* the weight file's binders behind them */
+    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd; /* weights on the device */
+    mx_binder wf_binders[6];                   /* the weight file's binders behind them */
     int clip_loaded;
     char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;

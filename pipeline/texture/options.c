@@ -75,5 +75,9 @@ int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_sta
     if (o->normal_source != MX_NORMAL_FROM_DEPTH && o->normal_source != MX_NORMAL_GEOMETRIC)
         return mx_fail(st, MX_EUSAGE, "--normals must be depth or geometric");
     if (o->up != MX_UP_Y && o->up != MX_UP_Z) return mx_fail(st, MX_EUSAGE, "--up must be y or z");
+    if (o->precision != MX_PREC_FP32 && o->precision != MX_PREC_BF16)
+        return mx_fail(st, MX_EUSAGE, "--precision must be fp32 or bf16");
+    if ((int)o->device < 0 || (int)o->device >= MX_BACKEND_KINDS)
+        return mx_fail(st, MX_EUSAGE, "--device must be cpu, cpu-strict or cuda");
     return 0;
 }

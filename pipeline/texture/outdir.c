@@ -43,14 +43,20 @@ static int make_parents(const char *dir, mx_status *st) {
     return make_folder(path, st);
 }
 
-static int folder_is_empty(const char *dir, mx_status *st) {
+/* What an existing folder holds: 0 nothing, 1 only files (or links), 2 a sub-folder; -1 unreadable. */
+static int folder_content(const char *dir, mx_status *st) {
     DIR *d = opendir(dir);
     if (!d) return mx_fail(st, MX_EIO, "%s: cannot read folder: %s", dir, strerror(errno));
     struct dirent *e;
-    int empty = 1;
-    while (empty && (e = readdir(d)) != NULL) empty = !strcmp(e->d_name, ".") || !strcmp(e->d_name, "..");
+    int content = 0;
+    while (content < 2 && (e = readdir(d)) != NULL) {
+        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
+        struct stat sb;
+        int is_dir = fstatat(dirfd(d), e->d_name, &sb, AT_SYMLINK_NOFOLLOW) == 0 && S_ISDIR(sb.st_mode);
+        content = is_dir ? 2 : 1;
+    }
     closedir(d);
-    return empty;
+    return content;
 }
 
 /* od->dir: an existing path resolved (links, ".", trailing "/"), a new one without trailing "/". */
@@ -90,12 +96,14 @@ int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st) {
     memset(od, 0, sizeof *od);
     if (!dir || !*dir) return mx_fail(st, MX_EUSAGE, "no output folder given");
     if (resolve_dir(od, dir, st)) return -1;
-    if (od->exists && !force) {
-        int empty = folder_is_empty(od->dir, st);
-        if (empty < 0) return -1;
-        if (!empty)
-            return mx_fail(st, MX_EINPUT, "%s: the output folder exists and is not empty (--force replaces it)", dir);
-    }
+    int content = od->exists ? folder_content(od->dir, st) : 0;
+    if (content < 0) return -1;
+    if (content && !force)
+        return mx_fail(st, MX_EINPUT, "%s: the output folder exists and is not empty (--force replaces it)", dir);
+    /* a guard against a slip like "-o ~ --force": an earlier output holds files only */
+    if (content == 2)
+        return mx_fail(st, MX_EINPUT, "%s: holds sub-folders; --force replaces only a folder of files (an earlier output)",
+                       dir);
     int n = snprintf(od->stage, sizeof od->stage, "%s.partial-%ld", od->dir, (long)getpid());
     if (n < 0 || (size_t)n >= sizeof od->stage) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
     if (make_parents(od->dir, st)) return -1;

@@ -1,7 +1,8 @@
 /* The output folder of a run, checked and staged before any expensive work, so that a failure
  * or an interrupt at any moment leaves either what was there before or the complete new folder:
  *   mx_outdir_open: resolves DIR (a link to a folder is followed), refuses a path that is not a
- *     folder and, unless force, a non-empty folder; creates missing parents and the staging
+ *     folder, a non-empty folder unless force, and (even with force) a folder holding sub-folders,
+ *     which no earlier output does; creates missing parents and the staging
  *     folder "DIR.partial-PID" beside DIR (same file system, so the final move cannot be
  *     cross-device): an unwritable location fails at once, not after the generation;
  *   mx_outdir_commit: writes the files into the staging folder, then puts it in place with one

@@ -81,6 +81,8 @@ typedef struct mx_texture_opts {
     volatile sig_atomic_t *cancel;
     int force;               /* replace an existing non-empty output folder (atomically) */
     const char *source_path; /* transfer: the textured mesh whose texture moves onto mesh_path */
+    int fast;                /* few-step path: LCM scheduler + TAESD decoder; the weight file must hold
+                                a merged LCM-LoRA (unet.lcm_lora) and taesd.* (texture only) */
 } mx_texture_opts;
 
 void mx_texture_opts_default(mx_texture_opts *o);

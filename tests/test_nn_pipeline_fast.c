@@ -1,0 +1,153 @@
+/* The few-step fast path against diffusers (golden/pipeline_controlnet_lcm_taesd_tiny):
+ * StableDiffusionControlNetPipeline with the tiny UNet and ControlNet, LCMScheduler (4 steps, the
+ * noise of each step given), guidance 1.0 (no classifier-free guidance: the batch is not doubled),
+ * ControlNet scale 0.8 and taesd_tiny as the VAE. Timesteps exactly equal; latents after every
+ * step and the image <= 1e-4 rel L2. Also: an LCM loop without a noise source is refused. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../pipeline/nn/sd_pipeline.h"
+#include "../pipeline/nn/taesd.h"
+#include "nn_golden.h"
+
+#define PIPE "pipeline_controlnet_lcm_taesd_tiny"
+
+typedef struct nets {
+    mx_safetensors wf[3];
+    mx_binder b[3];
+    mx_unet_config ucfg, ccfg;
+    mx_taesd_config tcfg;
+    mx_unet *unet;
+    mx_controlnet *cnet;
+    mx_taesd *taesd;
+} nets;
+
+static int bind_golden(nets *n, int i, const char *net, mx_status *st) {
+    if (golden_open(&n->wf[i], net, "diffusion_pytorch_model.safetensors"))
+        return mx_fail(st, MX_EINPUT, "%s: cannot open its weights", net);
+    return mx_binder_st(&n->b[i], &n->wf[i], "", st);
+}
+
+static int load_nets(nets *n, mx_status *st) {
+    memset(n, 0, sizeof *n);
+    size_t lu, lc, lt;
+    char *tu = golden_text("unet_tiny", "config.json", &lu), *tc = golden_text("controlnet_tiny", "config.json", &lc);
+    char *tt = golden_text("taesd_tiny", "config.json", &lt);
+    int rc = -1;
+    if (!tu || !tc || !tt)
+        mx_fail(st, MX_EINPUT, "a tiny network config.json is missing");
+    else if (!mx_unet_config_parse(&n->ucfg, tu, lu, "unet_tiny", st) &&
+             !mx_unet_config_parse(&n->ccfg, tc, lc, "controlnet_tiny", st) &&
+             !mx_taesd_config_parse(&n->tcfg, tt, lt, "taesd_tiny", st) && !bind_golden(n, 0, "unet_tiny", st) &&
+             !mx_unet_load(&n->unet, &n->ucfg, &n->b[0], st) && !bind_golden(n, 1, "controlnet_tiny", st) &&
+             !mx_controlnet_load(&n->cnet, &n->ccfg, &n->b[1], st) && !bind_golden(n, 2, "taesd_tiny", st) &&
+             !mx_taesd_load(&n->taesd, &n->tcfg, &n->b[2], st))
+        rc = 0;
+    free(tu);
+    free(tc);
+    free(tt);
+    return rc;
+}
+
+static void free_nets(nets *n) {
+    mx_unet_free(n->unet);
+    mx_controlnet_free(n->cnet);
+    mx_taesd_free(n->taesd);
+    for (int i = 0; i < 3; i++) {
+        mx_binder_free(&n->b[i]);
+        if (n->wf[i].map) mx_st_close(&n->wf[i]);
+    }
+}
+
+typedef struct step_io {
+    const float *noises; /* [steps - 1, numel] */
+    const float *want;   /* [steps, numel] */
+    int steps_seen;
+} step_io;
+
+static int give_noise(void *user, int step, float *noise, size_t numel) {
+    const step_io *io = user;
+    memcpy(noise, io->noises + (size_t)step * numel, numel * sizeof *noise);
+    return 0;
+}
+
+static int on_step(void *user, int step, int n_steps, int64_t t, const float *latents, size_t numel) {
+    step_io *io = user;
+    char name[64];
+    io->steps_seen++;
+    snprintf(name, sizeof name, "LCM latents after step %d/%d (t=%lld)", step + 1, n_steps, (long long)t);
+    mx_check_close(name, latents, io->want + (size_t)step * numel, numel, 1e-4);
+    return 0;
+}
+
+static void test_pipeline(const nets *n, const mx_ctx *c) {
+    mx_safetensors in, out;
+    if (golden_open(&in, PIPE, "inputs.safetensors") || golden_open(&out, PIPE, "outputs.safetensors")) {
+        CHECK(0);
+        return;
+    }
+    size_t nlat, nctl, ncond, nnoise, nts, nafter, nimg;
+    float *lat = golden_f32(&in, "latents", &nlat), *ctl = golden_f32(&in, "control_image", &nctl);
+    float *cond = golden_f32(&in, "prompt_embeds", &ncond), *noises = golden_f32(&in, "noises", &nnoise);
+    float *ts = golden_f32(&out, "timesteps", &nts), *after = golden_f32(&out, "latents_after_step", &nafter);
+    float *img_want = golden_f32(&out, "image", &nimg);
+    mx_status st = {0};
+    mx_sched_config base, scfg;
+    mx_sched s;
+    mx_sched_config_sd15(&base);
+    mx_sched_config_lcm(&scfg, &base);
+    int ok = lat && ctl && cond && noises && ts && after && img_want && nlat == 2 * 4 * 8 * 8 && nts == 4 &&
+             nnoise == 3 * nlat && nafter == 4 * nlat && mx_sched_init(&s, c, &scfg, 4, nlat, &st) == 0;
+    if (!ok) fprintf(stderr, "fast pipeline setup: %s\n", st.msg);
+    CHECK(ok);
+    if (ok) {
+        int ts_equal = mx_sched_steps(&s) == 4;
+        for (int i = 0; ts_equal && i < 4; i++) ts_equal = (float)mx_sched_timestep(&s, i) == ts[i];
+        printf("LCM timesteps %s\n", ts_equal ? "equal" : "DIFFER");
+        CHECK(ts_equal);
+        mx_sd_control control = {n->cnet, ctl, 0.8f};
+        step_io io = {noises, after, 0};
+        /* no negative embeddings: guidance 1 must not need them */
+        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, on_step, &io};
+        s.noise_fn = give_noise;
+        s.noise_user = &io;
+        CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) == 0);
+        CHECK(io.steps_seen == 4);
+        float *img = malloc(sizeof(float) * nimg);
+        int dec = img && mx_taesd_decode_image(c, n->taesd, lat, 2, 8, 8, img, &st) == 0;
+        if (!dec) fprintf(stderr, "decode: %s\n", st.msg);
+        CHECK(dec);
+        if (dec) mx_check_close("LCM + TAESD image", img, img_want, nimg, 1e-4);
+        free(img);
+        mx_sched_free(&s);
+        /* the LCM scheduler without a noise source is refused at its first step */
+        CHECK(mx_sched_init(&s, c, &scfg, 4, nlat, &st) == 0);
+        rq.progress = NULL;
+        CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) != 0 && strstr(st.msg, "noise source"));
+        mx_sched_free(&s);
+    }
+    free(lat);
+    free(ctl);
+    free(cond);
+    free(noises);
+    free(ts);
+    free(after);
+    free(img_want);
+    mx_st_close(&in);
+    mx_st_close(&out);
+}
+
+int main(void) {
+    mx_ctx c;
+    mx_status st = {0};
+    nets n;
+    if (golden_ctx(&c)) return 1;
+    int ok = load_nets(&n, &st) == 0;
+    if (!ok) fprintf(stderr, "%s\n", st.msg);
+    CHECK(ok);
+    if (ok) test_pipeline(&n, &c);
+    free_nets(&n);
+    mx_ctx_destroy(&c);
+    return mx_test_finish("test_nn_pipeline_fast");
+}
