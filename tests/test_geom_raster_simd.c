@@ -174,8 +174,8 @@ static void check_view_cache(const mx_mesh *m, mx_pool *pool3) {
     mx_camera_ortho(&tmpl, 0, 0, 3, 1.3f);
     mx_camera_fibonacci(cands, 12, &tmpl);
     mx_view_cache a, b;
-    CHECK(mx_view_cache_build(&a, m, NULL, cands, 12, 96, 128, 128, 1, 0.1f, NULL, &st) == 0);
-    CHECK(mx_view_cache_build(&b, m, NULL, cands, 12, 96, 128, 128, 1, 0.1f, pool3, &st) == 0);
+    CHECK(mx_view_cache_build(&a, m, NULL, cands, 12, 96, 128, 128, 1, MX_NORMAL_GEOMETRIC, 0.1f, 0, NULL, &st) == 0);
+    CHECK(mx_view_cache_build(&b, m, NULL, cands, 12, 96, 128, 128, 1, MX_NORMAL_GEOMETRIC, 0.1f, 0, pool3, &st) == 0);
     int equal = 0;
     int64_t total = 0;
     for (int c = 0; c < 12; c++) {

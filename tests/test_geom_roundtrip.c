@@ -96,7 +96,7 @@ static int roundtrip(const char *path, mx_pool *pool, result *r, mx_status *st) 
     mx_view_plan plan = {0};
     int rc = nlayers > 64 || mx_mesh_normalized(&m, MX_UP_Y, &pos, NULL, NULL, st) ||
              make_textures(tex, nlayers, st) ||
-             mx_view_cache_build(&vc, &m, pos, cands, 2 + NCAND, CACHE, TEX, TEX, nlayers, 0.1f, pool, st) ||
+             mx_view_cache_build(&vc, &m, pos, cands, 2 + NCAND, CACHE, TEX, TEX, nlayers, MX_NORMAL_GEOMETRIC, 0.1f, 0, pool, st) ||
              mx_view_buffers_init(&vb, VIEW, st) || mx_bake_init(&bake, TEX, TEX, nlayers, st);
     for (int k = 0; !rc && k < 2; k++) rc = bake_view(&bake, &vb, &m, pos, &cands[k], tex, nlayers, pool, st);
     rc = rc || mx_view_plan_make(&vc, bake.known, NCAND, 0.995, 16, &plan, st);

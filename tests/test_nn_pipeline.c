@@ -122,6 +122,50 @@ static int on_step(void *user, int step, int n_steps, int64_t t, const float *la
     return step == sc->cancel_at;
 }
 
+/* Per-item ControlNet weights: a batch of two copies of the golden start at weights 0.8 and
+ * 0.5 (plus a second ControlNet at 0 and 0.3): item 0 must end as the golden run at 0.8, item
+ * 1 as a plain run at 0.5 + 0.3 = 0.8 too (the golden run at 0.8). */
+static void check_item_weights(mx_sd_request *rq, const mx_ctx *c, const mx_sched_config *scfg,
+                               const mx_safetensors *in, const float *ctl, const float *cond, const float *unc,
+                               const float *want_last, size_t nlat, const mx_controlnet *net) {
+    mx_status st = {0};
+    mx_sched s;
+    float *start = golden_f32(in, "latents", NULL), *lat = malloc(2 * nlat * sizeof(float));
+    float *ctl2 = malloc(2 * 3 * 64 * 64 * sizeof(float)), *text2 = malloc(4 * 77 * 32 * sizeof(float));
+    if (!start || !lat || !ctl2 || !text2) {
+        CHECK(0);
+        goto done;
+    }
+    for (int b = 0; b < 2; b++) {
+        memcpy(lat + b * nlat, start, nlat * sizeof(float));
+        memcpy(ctl2 + b * 3 * 64 * 64, ctl, 3 * 64 * 64 * sizeof(float));
+        memcpy(text2 + b * 77 * 32, cond, 77 * 32 * sizeof(float));
+        memcpy(text2 + (2 + b) * 77 * 32, unc, 77 * 32 * sizeof(float));
+    }
+    float w_a[2] = {0.8f, 0.5f}, w_b[2] = {0.0f, 0.3f};
+    mx_sd_control two[2] = {{net, ctl2, 0.0f, w_a}, {net, ctl2, 0.0f, w_b}};
+    mx_sd_request r = *rq;
+    r.controls = two;
+    r.n_controls = 2;
+    r.progress = NULL;
+    r.cond_text = text2;
+    r.uncond_text = text2 + 2 * 77 * 32;
+    r.sched = &s;
+    int ok = mx_sched_init(&s, c, scfg, 6, 2 * nlat, &st) == 0 && mx_sd_denoise(&r, c, lat, 2, 8, 8, &st) == 0;
+    if (!ok) fprintf(stderr, "item weights: %s\n", st.msg);
+    CHECK(ok);
+    if (ok) {
+        mx_check_close("item weights: item 0 at 0.8 + 0", lat, want_last, nlat, 1e-4);
+        mx_check_close("item weights: item 1 at 0.5 + 0.3", lat + nlat, want_last, nlat, 1e-4);
+    }
+    mx_sched_free(&s);
+done:
+    free(start);
+    free(lat);
+    free(ctl2);
+    free(text2);
+}
+
 static void test_pipeline(const nets *n, const mx_ctx *c) {
     mx_safetensors in, out;
     if (golden_open(&in, PIPE, "inputs.safetensors") || golden_open(&out, PIPE, "outputs.safetensors")) {
@@ -147,9 +191,9 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         int ts_equal = (size_t)mx_sched_steps(&s) == nts;
         for (size_t i = 0; ts_equal && i < nts; i++) ts_equal = (float)mx_sched_timestep(&s, (int)i) == ts[i];
         CHECK(ts_equal);
-        mx_sd_control control = {n->cnet, ctl, 0.8f};
+        mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
         step_check sc = {after, 0, -1};
-        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc};
+        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc, NULL, NULL};
         CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) == 0);
         CHECK(sc.steps_seen == 6);
         float *img = malloc(sizeof(float) * nimg);
@@ -162,13 +206,14 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         /* two ControlNets at 0.5 and 0.3 sum to the one at 0.8 (residuals are linear in the scale) */
         float *lat2 = golden_f32(&in, "latents", NULL);
         CHECK(lat2 && mx_sched_init(&s, c, &scfg, 6, nlat, &st) == 0);
-        mx_sd_control two[2] = {{n->cnet, ctl, 0.5f}, {n->cnet, ctl, 0.3f}};
+        mx_sd_control two[2] = {{n->cnet, ctl, 0.5f, NULL}, {n->cnet, ctl, 0.3f, NULL}};
         rq.controls = two;
         rq.n_controls = 2;
         rq.progress = NULL;
         CHECK(lat2 && mx_sd_denoise(&rq, c, lat2, 1, 8, 8, &st) == 0);
         if (lat2) mx_check_close("two ControlNets, 0.5 + 0.3", lat2, after + 5 * nlat, nlat, 1e-4);
         free(lat2);
+        check_item_weights(&rq, c, &scfg, &in, ctl, cond, unc, after + 5 * nlat, nlat, n->cnet);
         rq.controls = &control;
         rq.n_controls = 1;
         rq.progress = on_step;

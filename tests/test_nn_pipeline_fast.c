@@ -106,10 +106,10 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         for (int i = 0; ts_equal && i < 4; i++) ts_equal = (float)mx_sched_timestep(&s, i) == ts[i];
         printf("LCM timesteps %s\n", ts_equal ? "equal" : "DIFFER");
         CHECK(ts_equal);
-        mx_sd_control control = {n->cnet, ctl, 0.8f};
+        mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
         step_io io = {noises, after, 0};
         /* no negative embeddings: guidance 1 must not need them */
-        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, on_step, &io};
+        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, on_step, &io, NULL, NULL};
         s.noise_fn = give_noise;
         s.noise_user = &io;
         CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) == 0);

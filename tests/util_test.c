@@ -91,3 +91,16 @@ int mx_test_finish(const char *name) {
         printf("%s: all checks passed\n", name);
     return 0;
 }
+
+const char *const mx_test_assets[MX_TEST_NASSETS] = {
+    "spot/spot_triangulated.obj",   "spot_ply/spot.ply",
+    "bob/bob_tri.obj",              "blub/blub_triangulated.obj",
+    "garment_female_casual/female_casualsuit01.obj",
+    "garment_female_elegant/female_elegantsuit01.obj",
+    "shoes_pair/shoes03.obj",       "fedora_hat/fedora.obj",
+    "boot/boot.obj",                "koala/koala.obj",
+    "mountain/mountain.obj",        "hammer/hammer.obj",
+    "wooden_stool/painted_wooden_stool_1k.gltf",
+    "flight_helmet/FlightHelmet.gltf",
+    "cesium_milk_truck/CesiumMilkTruck.glb",
+};

@@ -37,6 +37,9 @@ int mx_test_path(char *buf, size_t cap, const char *rel);
 int mx_test_need(char *buf, size_t cap, const char *rel_fmt, ...) MX_PRINTF(3, 4);
 /* mx_test_need without the path. */
 int mx_test_have(const char *rel);
+/* The 15 shared meshes, paths under assets/ (mx_test_need "assets/%s"); MX_TEST_NASSETS of them. */
+#define MX_TEST_NASSETS 15
+extern const char *const mx_test_assets[MX_TEST_NASSETS];
 /* Prints the summary (with the number of skipped cases) and returns the exit code (0 when no
  * failures). */
 int mx_test_finish(const char *name);

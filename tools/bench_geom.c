@@ -82,7 +82,7 @@ static int time_loop(bench_env *e, double *cache_ms, double *loop_ms, double *cp
     mx_bake_reset(&e->bake);
     double c0 = cpu_seconds(), t0 = mx_now();
     mx_view_cache vc;
-    if (mx_view_cache_build(&vc, &e->m, e->pos, e->cands, 2 + NCAND, CACHE_SIZE, TEX, TEX, 1, 0.1f,
+    if (mx_view_cache_build(&vc, &e->m, e->pos, e->cands, 2 + NCAND, CACHE_SIZE, TEX, TEX, 1, MX_NORMAL_GEOMETRIC, 0.1f, 0,
                             e->pool, st))
         return -1;
     *cache_ms = 1e3 * (mx_now() - t0);

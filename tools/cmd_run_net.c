@@ -7,6 +7,8 @@
 #include "../ops/ops.h"
 #include "../pipeline/nn/clip.h"
 #include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/sd_edit.h"
+#include "../pipeline/texture/models.h"
 #include "../pipeline/nn/taesd.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
@@ -34,11 +36,20 @@ static void usage(FILE *f) {
             "  clip        input_ids [B,T] (I64 or I32)               -> last_hidden_state, pooler_output, hidden_states.{i}\n"
             "  taesd-encode  image [B,3,H,W] in [-1,1]                -> latents (SD latents, scaling factor 1)\n"
             "  taesd-decode  latents [B,4,h,w]                        -> image (in about [-1,1], unclamped)\n"
+            "  inpaint-pipeline  (W: a model set with controlnet_depth and controlnet_inpaint; --steps N [--guidance G])\n"
+            "              prompt_embeds, negative_prompt_embeds [B,T,D], image [B,3,H,W] in [0,1], mask [B,1,H,W]\n"
+            "              (1 = paint), control_depth, control_inpaint [B,3,H,W], noise [B,4,H/8,W/8],\n"
+            "              conditioning_scales [2] (depth, inpaint)  -> timesteps, latents_after_step, image\n"
+            "  img2img-pipeline  (W: a model set with a depth ControlNet; --steps N [--guidance G])\n"
+            "              prompt_embeds, negative_prompt_embeds, image, control_depth, noise, strength [1],\n"
+            "              optional conditioning_scales [1] (default 1)  -> timesteps, latents_after_step, image\n"
             "\n"
             "options:\n"
             "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., taesd., text_encoder.;\n"
             "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
+            "  --steps N       pipelines: scheduler steps before strength (required)\n"
+            "  --guidance G    pipelines: classifier-free guidance scale (default 7.5)\n"
             "  --device D      cpu (default), cpu-strict (activations guarded: tests) or cuda (`make cuda` builds)\n"
             "  --precision P   fp32 (default) or bf16: bf16 products with fp32 sums where the CPU has\n"
             "                  AVX512_BF16 (linear, conv, attention); elsewhere fp32 with a warning\n"
@@ -401,6 +412,95 @@ done:
     return rc;
 }
 
+/* ---- inpaint-pipeline / img2img-pipeline: the view step and the enhancement step on tensors ---- */
+typedef struct pipe_opts {
+    int inpaint, steps;
+    float guidance;
+} pipe_opts;
+
+typedef struct step_record {
+    float *after; /* [steps, numel] */
+    int64_t *timesteps;
+} step_record;
+
+static int record_step(void *user, int step, int n_steps, int64_t t, const float *lat, size_t numel) {
+    (void)n_steps;
+    step_record *r = user;
+    memcpy(r->after + (size_t)step * numel, lat, numel * sizeof *lat);
+    r->timesteps[step] = t;
+    return 0;
+}
+
+/* The pipeline's tensors, shapes checked against each other and the networks. */
+typedef struct pipe_inputs {
+    float *cond, *uncond, *image, *mask, *depth, *inpaint, *noise, *scales, *strength;
+    int B, T, H, W;
+} pipe_inputs;
+
+static int pipe_read_inputs(run_io *io, const mx_models *m, const pipe_opts *po, pipe_inputs *p, mx_status *st) {
+    int D = mx_unet_cfg(m->unet)->cross_attention_dim, f = mx_vae_factor(m->vae);
+    int64_t es[3] = {-1, -1, D}, is[4] = {-1, 3, -1, -1}, one[1] = {1}, two[1] = {2};
+    if (!(p->cond = input(io, "prompt_embeds", 3, es, 1, st)) ||
+        !(p->uncond = input(io, "negative_prompt_embeds", 3, es, 1, st)))
+        return -1;
+    is[0] = es[0];
+    if (!(p->image = input(io, "image", 4, is, 1, st))) return -1;
+    p->B = (int)is[0], p->T = (int)es[1], p->H = (int)is[2], p->W = (int)is[3];
+    if (p->H % f || p->W % f)
+        return mx_fail(st, MX_EINPUT, "%s: image is %dx%d, not a multiple of the VAE factor %d", io->in_path, p->W,
+                       p->H, f);
+    int64_t ms[4] = {p->B, 1, p->H, p->W}, cs[4] = {p->B, 3, p->H, p->W}, ns[4] = {p->B, 4, p->H / f, p->W / f};
+    if (!(p->depth = input(io, "control_depth", 4, cs, 1, st)) || !(p->noise = input(io, "noise", 4, ns, 1, st)))
+        return -1;
+    if (po->inpaint)
+        return !(p->mask = input(io, "mask", 4, ms, 1, st)) || !(p->inpaint = input(io, "control_inpaint", 4, cs, 1, st)) ||
+                       !(p->scales = input(io, "conditioning_scales", 1, two, 1, st))
+                   ? -1
+                   : 0;
+    if (!(p->strength = input(io, "strength", 1, one, 1, st))) return -1;
+    if (mx_st_find(&io->in, "conditioning_scales") && !(p->scales = input(io, "conditioning_scales", 1, one, 1, st)))
+        return -1;
+    return 0;
+}
+
+static int pipe_denoise(run_io *io, const mx_models *m, const pipe_opts *po, const pipe_inputs *p, mx_status *st) {
+    int f = mx_vae_factor(m->vae), h = p->H / f, w = p->W / f, rc = -1;
+    size_t numel = (size_t)p->B * 4 * h * w;
+    mx_sched s;
+    if (mx_unet_check_sizes(mx_unet_cfg(m->unet), 2 * p->B, h, w, p->T, st) ||
+        mx_sched_init(&s, &io->ctx, &m->sched, po->steps, numel, st))
+        return -1;
+    mx_sd_control ctl[2] = {{m->cn_depth, p->depth, p->scales ? p->scales[0] : 1.0f, NULL},
+                            {m->cn_inpaint, p->inpaint, po->inpaint ? p->scales[1] : 0.0f, NULL}};
+    float *lat = new_floats(io, numel, st), *image = new_floats(io, (size_t)p->B * 3 * p->H * p->W, st);
+    step_record r = {new_floats(io, (size_t)po->steps * numel, st), (int64_t *)new_floats(io, 2 * (size_t)po->steps, st)};
+    mx_sd_request rq = {m->unet, ctl, po->inpaint ? 2 : 1, p->cond, p->uncond, p->T, po->guidance, &s,
+                        record_step, &r, NULL, NULL};
+    mx_sd_edit e = {m->vae, p->image, p->mask, p->noise, po->inpaint ? 1.0f : p->strength[0]};
+    if (lat && image && r.after && r.timesteps && mx_sd_edit_run(&rq, &e, &io->ctx, p->B, h, w, lat, st) == 0 &&
+        mx_sd_decode_latents(&io->ctx, m->vae, lat, p->B, h, w, image, st) == 0) {
+        int n = mx_sched_steps(&s);
+        int64_t ts[1] = {n}, as[5] = {n, p->B, 4, h, w}, is[4] = {p->B, 3, p->H, p->W};
+        rc = add_output(io, "timesteps", 1, ts, (const float *)r.timesteps, st) ||
+                     add_output(io, "latents_after_step", 5, as, r.after, st) || add_output(io, "image", 4, is, image, st)
+                 ? -1
+                 : 0;
+        io->outs[0].dtype = MX_ST_I64;
+    }
+    mx_sched_free(&s);
+    return rc;
+}
+
+static int run_pipeline(run_io *io, const char *weights, const pipe_opts *po, mx_status *st) {
+    mx_models m;
+    pipe_inputs p;
+    memset(&p, 0, sizeof p);
+    if (mx_models_load(&m, &io->ctx, weights, MX_MODELS_NEED_DEPTH | (po->inpaint ? MX_MODELS_NEED_INPAINT : 0), st)) return -1;
+    int rc = pipe_read_inputs(io, &m, po, &p, st) || pipe_denoise(io, &m, po, &p, st) ? -1 : 0;
+    mx_models_free(&m);
+    return rc;
+}
+
 static void io_free(run_io *io) {
     if (io->arena_ok) mx_arena_destroy(&io->arena);
     mx_binder_free(&io->b);
@@ -418,20 +518,23 @@ static const char *default_prefix(const char *net) {
     if (!strcmp(net, "vae-encode") || !strcmp(net, "vae-decode")) return "vae.";
     if (!strcmp(net, "clip")) return "text_encoder.";
     if (!strcmp(net, "taesd-encode") || !strcmp(net, "taesd-decode")) return "taesd.";
+    if (!strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline")) return "";
     return NULL;
 }
 
 static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
-               mx_backend_kind device, mx_status *st) {
+               mx_backend_kind device, const pipe_opts *po, mx_status *st) {
+    int pipeline = !*default_prefix(net);
     if (mx_ctx_create_on(&io->ctx, device, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
     io->ctx_ok = 1;
     if (device != MX_BACKEND_CUDA && mx_isa_precision(io->ctx.k->isa) != prec)
         mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
-    if (mx_wf_open(&io->wf, weights, st)) return -1;
+    if (!pipeline && mx_wf_open(&io->wf, weights, st)) return -1;
     double t0 = mx_now();
-    int rc = !strcmp(net, "unet")         ? run_unet(io, prefix, st)
+    int rc = pipeline                     ? run_pipeline(io, weights, po, st)
+             : !strcmp(net, "unet")       ? run_unet(io, prefix, st)
              : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
              : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
              : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
@@ -446,6 +549,7 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
 int cmd_run_net(int argc, char **argv) {
     const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu";
     int threads = 0;
+    pipe_opts po = {0, 0, 7.5f};
     mx_precision prec = MX_PREC_FP32;
     run_io io;
     memset(&io, 0, sizeof io);
@@ -462,6 +566,13 @@ int cmd_run_net(int argc, char **argv) {
         else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
         else if (!strcmp(a, "--threads") && has_val) {
             if (mx_arg_int("run-net", a, argv[++i], 0, 1024, &threads)) return 2;
+        } else if (!strcmp(a, "--steps") && has_val) {
+            if (mx_arg_int("run-net", a, argv[++i], 1, MX_SCHED_MAX_STEPS, &po.steps)) return 2;
+        } else if (!strcmp(a, "--guidance") && has_val) {
+            if (mx_parse_float(argv[++i], &po.guidance)) {
+                fprintf(stderr, "matex run-net: bad value for --guidance: '%s'\n", argv[i]);
+                return 2;
+            }
         } else if (!strcmp(a, "--device") && has_val) {
             device = argv[++i];
         } else if (!strcmp(a, "--precision") && has_val) {
@@ -478,8 +589,13 @@ int cmd_run_net(int argc, char **argv) {
     }
     if (!net || !weights || !io.in_path || !io.out_path || !default_prefix(net)) {
         fprintf(stderr, "matex run-net: %s\n", !net || default_prefix(net) ? "NET, --weights, --inputs and --out are required"
-                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, taesd-encode or taesd-decode");
+                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, taesd-encode, taesd-decode, inpaint-pipeline or img2img-pipeline");
         usage(stderr);
+        return 2;
+    }
+    po.inpaint = !strcmp(net, "inpaint-pipeline");
+    if (!*default_prefix(net) && (po.steps < 1 || po.steps > MX_SCHED_MAX_STEPS || !(po.guidance >= 0.0f))) {
+        fprintf(stderr, "matex run-net: %s needs --steps in 1..%d and a guidance >= 0\n", net, MX_SCHED_MAX_STEPS);
         return 2;
     }
     char pfx[80];
@@ -497,7 +613,7 @@ int cmd_run_net(int argc, char **argv) {
         fprintf(stderr, "matex run-net: --device: %s\n", st.msg);
         return 2;
     }
-    int rc = run(&io, net, weights, pfx, threads, prec, kind, &st);
+    int rc = run(&io, net, weights, pfx, threads, prec, kind, &po, &st);
     io_free(&io);
     if (rc) {
         fprintf(stderr, "matex run-net: %s\n", st.msg);

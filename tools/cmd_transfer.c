@@ -22,6 +22,11 @@ static void usage(FILE *f) {
                "  --size S                 texture side and render side, 16..8192 (default 1024)\n"
                "  --frontal-threshold T    min |n.v| of a backprojected pixel (default 0.3)\n"
                "  --normals depth|geometric  normal used by the frontal mask (default depth)\n"
+               "  --write angle-aware|first-wins  a later view that sees a texel with |n.v| higher by 0.15\n"
+               "                           restarts it (default), or the first writer keeps it\n"
+               "  --image-size M           send each render through the texture job's model image (crop to\n"
+               "                           the object, M x M, back): its resampling at the silhouettes\n"
+               "  --background R,G,B       colour behind the source in its renders (default 0,0,0)\n"
                "  --up y|z                 up axis of the meshes (default y)\n"
                "  --threads N              CPU threads (default: all)\n"
                "  --force                  replace an existing non-empty output folder (atomically)\n"
@@ -48,6 +53,19 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
     if (!strcmp(arg, "--normals")) {
         if (!strcmp(val, "depth")) return o->normal_source = MX_NORMAL_FROM_DEPTH, 1;
         if (!strcmp(val, "geometric")) return o->normal_source = MX_NORMAL_GEOMETRIC, 1;
+        return -1;
+    }
+    if (!strcmp(arg, "--image-size")) return o->through_model_image = 1, parse_int(val, &o->image_size) ? -1 : 1;
+    if (!strcmp(arg, "--background")) {
+        float *b = o->background;
+        return sscanf(val, "%f,%f,%f", &b[0], &b[1], &b[2]) == 3 && b[0] >= 0 && b[0] <= 1 && b[1] >= 0 && b[1] <= 1 &&
+                       b[2] >= 0 && b[2] <= 1
+                   ? 1
+                   : -1;
+    }
+    if (!strcmp(arg, "--write")) {
+        if (!strcmp(val, "angle-aware")) return o->first_wins = 0, 1;
+        if (!strcmp(val, "first-wins")) return o->first_wins = 1, 1;
         return -1;
     }
     if (!strcmp(arg, "--up")) {

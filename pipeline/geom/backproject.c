@@ -4,6 +4,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "masks.h"
+
 #define BAND_ROWS 16  /* texture rows per band task */
 #define CHUNK_ROWS 16 /* image rows per list-building task */
 
@@ -30,7 +32,7 @@ int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
     b->w = w;
     b->h = h;
     b->nlayers = nlayers;
-    b->eps = 1e-3f;
+    b->eps = MX_BAKE_KNOWN_WEIGHT;
     b->overwrite_margin = 0.15f;
     b->sum_wc = calloc(3 * n, sizeof *b->sum_wc);
     b->sum_w = calloc(n, sizeof *b->sum_w);
@@ -342,6 +344,21 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
     mx_pool_for(pool, j.nchunks, fill_task, &j);
     mx_pool_for(pool, j.nbins, splat_band_task, &j);
     return 0;
+}
+
+void mx_bake_open_texels(const mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *mask,
+                         uint8_t *out) {
+    size_t plane = (size_t)b->w * b->h;
+    memcpy(out, b->known, plane * (size_t)b->nlayers);
+    if (!gb->uv) return;
+    bp_job j = {(mx_bake *)b, gb, m, NULL, mask, 0, 0, 0, 0, NULL, mx_gbuffer_face_normals(gb),
+                {-gb->cam.forward[0], -gb->cam.forward[1], -gb->cam.forward[2]}};
+    for (size_t i = 0; i < (size_t)gb->w * gb->h; i++) {
+        if (!pixel_used(&j, i)) continue;
+        size_t t = (size_t)mx_face_layer(m, gb->face[i], b->nlayers) * plane +
+                   (size_t)mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], b->w, b->h);
+        if (b->known[t] && pixel_quality(&j, i) > b->quality[t] + b->overwrite_margin) out[t] = 0;
+    }
 }
 
 int mx_bake_texture(const mx_bake *b, int layer, const float fill[3], mx_image *out, mx_status *st) {

@@ -2,7 +2,9 @@
  * splatted into the 4 texels around its UV; texels accumulate sum(w * colour) and sum(w).
  * The texture is T = sum(w c) / sum(w), and T^B (`known`) marks texels with sum(w) > eps.
  * A view writes only texels that were not in T^B before it (MX_BACKPROJECT_OVERWRITE also
- * lets it restart texels it sees at a clearly better angle than the views that wrote them).
+ * lets it restart texels it sees at a clearly better angle than the views that wrote them:
+ * |n.v| higher by overwrite_margin = 0.15, the angle-aware policy of `matex texture` and
+ * `matex transfer`; |n.v| from the face normals).
  *
  * Meshes whose materials keep their own UV sets get one layer per material (nlayers =
  * max(1, nmat)); a pixel goes to the layer of its face's material.
@@ -21,9 +23,14 @@
 
 enum { MX_BACKPROJECT_OVERWRITE = 1 };
 
+/* A texel enters T^B (is "known") only with at least this much splat weight: a quarter of one
+ * pixel's full weight. A texel grazed by the corner of a single pixel (typically at a
+ * silhouette or a seam) stays open for a view that sees it properly. */
+#define MX_BAKE_KNOWN_WEIGHT 0.25f
+
 typedef struct mx_bake {
     int w, h, nlayers;
-    float eps;       /* T^B threshold on sum(w); 1e-3 by default */
+    float eps;       /* T^B threshold on sum(w); MX_BAKE_KNOWN_WEIGHT by default */
     float overwrite_margin; /* |n.v| gain needed to restart a texel (OVERWRITE); 0.15 */
     float *sum_wc;   /* [nlayers][h][w][3] */
     float *sum_w;    /* [nlayers][h][w] */
@@ -42,6 +49,13 @@ void mx_bake_reset(mx_bake *b);
  * pixel), then updates T^B. */
 int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_image *img,
                    const uint8_t *mask, int flags, mx_pool *pool, mx_status *st);
+
+/* T^B as the view in gb would leave it open for painting: out = b->known without the texels
+ * that mx_backproject with MX_BACKPROJECT_OVERWRITE would restart for this view (its |n.v|
+ * at a pixel over the texel exceeds the texel's quality by overwrite_margin; nearest texel of
+ * each pixel where mask != 0, NULL: every foreground pixel). out has b's size. */
+void mx_bake_open_texels(const mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *mask,
+                         uint8_t *out);
 
 /* The texture of one layer: out (w x h x 3, allocated here) = sum(w c)/sum(w) where known,
  * `fill` elsewhere. */

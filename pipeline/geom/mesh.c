@@ -12,19 +12,6 @@
 #include "gltf.h"
 #include "image.h"
 
-void mx_mesh_free(mx_mesh *m) {
-    if (!m) return;
-    free(m->pos);
-    free(m->faces);
-    free(m->uv);
-    free(m->face_uv);
-    free(m->nrm);
-    free(m->face_nrm);
-    free(m->mats);
-    free(m->face_mat);
-    memset(m, 0, sizeof *m);
-}
-
 /* malloc'ed copy of n bytes of p (NULL stays NULL); *fail set when the copy fails. */
 static void *dup_bytes(const void *p, size_t n, int *fail) {
     if (!p) return NULL;
@@ -254,6 +241,10 @@ static int cmp_weld(const void *x, const void *y) {
 }
 
 /* canon[v] = smallest vertex index with bit-identical position (or v itself without weld). */
+static int weld_map(const mx_mesh *m, int weld, int32_t *canon, mx_status *st);
+
+int mx_mesh_weld_map(const mx_mesh *m, int32_t *canon, mx_status *st) { return weld_map(m, 1, canon, st); }
+
 static int weld_map(const mx_mesh *m, int weld, int32_t *canon, mx_status *st) {
     for (int v = 0; v < m->nverts; v++) canon[v] = v;
     if (!weld) return 0;

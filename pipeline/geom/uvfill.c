@@ -1,19 +1,23 @@
 #include "uvfill.h"
 
+#include "masks.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-static void mark_texel(uint8_t *chart, int w, int h, int x, int y) {
+static void mark_texel(uint8_t *chart, int32_t *face_map, int32_t face, int w, int h, int x, int y) {
     x %= w;
     y %= h;
     if (x < 0) x += w;
     if (y < 0) y += h;
     chart[(size_t)y * w + x] = 1;
+    if (face_map) face_map[(size_t)y * w + x] = face;
 }
 
-/* Marks texels whose centre lies within half a texel of the triangle (texel coordinates). */
-static void mark_triangle(uint8_t *chart, int w, int h, const float p[3][2]) {
+/* Marks texels whose centre lies within half a texel of the triangle (texel coordinates), and
+ * records the face in face_map (may be NULL; the last face marking a texel wins). */
+static void mark_triangle(uint8_t *chart, int32_t *face_map, int32_t face, int w, int h, const float p[3][2]) {
     float minx = fminf(p[0][0], fminf(p[1][0], p[2][0])), maxx = fmaxf(p[0][0], fmaxf(p[1][0], p[2][0]));
     float miny = fminf(p[0][1], fminf(p[1][1], p[2][1])), maxy = fmaxf(p[0][1], fmaxf(p[1][1], p[2][1]));
     /* NaN, absurdly far (int conversion) or absurdly large (loop length): skip */
@@ -37,18 +41,30 @@ static void mark_triangle(uint8_t *chart, int w, int h, const float p[3][2]) {
                 /* signed distance (positive inside); degenerate edges only test the others */
                 in = len[k] == 0 || e / len[k] >= -0.5;
             }
-            if (in && area != 0) mark_texel(chart, w, h, x, y);
+            if (in && area != 0) mark_texel(chart, face_map, face, w, h, x, y);
         }
+}
+
+/* 1 when face f belongs to texture layer `layer` (every face does with one layer). */
+static int face_in_layer(const mx_mesh *m, int f, int layer, int nlayers) {
+    int mat = m->face_mat ? m->face_mat[f] : 0;
+    if (mat < 0 || mat >= nlayers) mat = 0;
+    return nlayers <= 1 || mat == layer;
 }
 
 int mx_uv_chart_mask(const mx_mesh *m, int layer, int nlayers, int w, int h, uint8_t *chart,
                      mx_status *st) {
+    return mx_uv_chart_faces(m, layer, nlayers, w, h, chart, NULL, st);
+}
+
+int mx_uv_chart_faces(const mx_mesh *m, int layer, int nlayers, int w, int h, uint8_t *chart, int32_t *face_map,
+                      mx_status *st) {
     if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: no UVs to find charts in", m->source_path);
     memset(chart, 0, (size_t)w * h);
+    if (face_map)
+        for (size_t i = 0; i < (size_t)w * h; i++) face_map[i] = -1;
     for (int f = 0; f < m->nfaces; f++) {
-        int mat = m->face_mat ? m->face_mat[f] : 0;
-        if (mat < 0 || mat >= nlayers) mat = 0;
-        if (nlayers > 1 && mat != layer) continue;
+        if (!face_in_layer(m, f, layer, nlayers)) continue;
         const int32_t *fu = m->face_uv + 3 * (size_t)f;
         if (fu[0] < 0 || fu[1] < 0 || fu[2] < 0 || fu[0] >= m->nuv || fu[1] >= m->nuv || fu[2] >= m->nuv)
             continue;
@@ -57,7 +73,7 @@ int mx_uv_chart_mask(const mx_mesh *m, int layer, int nlayers, int w, int h, uin
             p[k][0] = m->uv[2 * (size_t)fu[k]] * (float)w;
             p[k][1] = (1.0f - m->uv[2 * (size_t)fu[k] + 1]) * (float)h;
         }
-        mark_triangle(chart, w, h, p);
+        mark_triangle(chart, face_map, f, w, h, p);
     }
     return 0;
 }
@@ -195,5 +211,243 @@ int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gu
         for (int g = 0; g < gutter; g++) dilate_once(tex, valid, next);
     }
     free(colour), free(valid), free(next);
+    return rc;
+}
+
+int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st) {
+    if (tex->c != 3) return mx_fail(st, MX_EINPUT, "uv dilate: texture must be RGB (has %d channels)", tex->c);
+    size_t n = (size_t)tex->w * tex->h;
+    uint8_t *valid = malloc(n), *next = malloc(n);
+    if (!valid || !next) {
+        free(valid), free(next);
+        return mx_fail(st, MX_ENOMEM, "uv dilate: out of memory");
+    }
+    memcpy(valid, known, n);
+    for (int r = 0; r < rings; r++) dilate_once(tex, valid, next);
+    free(valid), free(next);
+    return 0;
+}
+
+/* ---- harmonic fill over a texel graph that crosses UV seams ---- */
+
+typedef struct texel_link {
+    int32_t from, to;
+} texel_link;
+
+typedef struct link_list {
+    texel_link *v;
+    size_t n, cap;
+} link_list;
+
+static int link_push(link_list *l, int32_t a, int32_t b) {
+    if (l->n + 2 > l->cap) {
+        size_t cap = l->cap ? 2 * l->cap : 4096;
+        texel_link *v = realloc(l->v, cap * sizeof *v);
+        if (!v) return -1;
+        l->v = v;
+        l->cap = cap;
+    }
+    l->v[l->n++] = (texel_link){a, b};
+    l->v[l->n++] = (texel_link){b, a};
+    return 0;
+}
+
+static int cmp_link(const void *x, const void *y) {
+    const texel_link *a = x, *b = y;
+    if (a->from != b->from) return a->from < b->from ? -1 : 1;
+    return (a->to > b->to) - (a->to < b->to);
+}
+
+/* One face edge under welded vertex ids a < b, with the UV indices at a and b. */
+typedef struct edge_rec {
+    int32_t a, b, face, ua, ub;
+} edge_rec;
+
+static int cmp_edge(const void *x, const void *y) {
+    const edge_rec *e = x, *f = y;
+    if (e->a != f->a) return e->a < f->a ? -1 : 1;
+    if (e->b != f->b) return e->b < f->b ? -1 : 1;
+    return (e->face > f->face) - (e->face < f->face);
+}
+
+static int same_uv(const mx_mesh *m, int32_t i, int32_t j) {
+    return i == j || (m->uv[2 * (size_t)i] == m->uv[2 * (size_t)j] && m->uv[2 * (size_t)i + 1] == m->uv[2 * (size_t)j + 1]);
+}
+
+static int64_t texel_at(const mx_mesh *m, int32_t u0, int32_t u1, float t, int w, int h) {
+    const float *p = m->uv + 2 * (size_t)u0, *q = m->uv + 2 * (size_t)u1;
+    return mx_uv_texel(p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]), w, h);
+}
+
+/* Links, along a seam edge seen by faces e and f, the texels at the same points of the edge. */
+static int link_seam(const mx_mesh *m, const edge_rec *e, const edge_rec *f, int w, int h, const uint8_t *chart,
+                     link_list *l) {
+    float len = 0;
+    const edge_rec *side[2] = {e, f};
+    for (int s = 0; s < 2; s++) {
+        const float *p = m->uv + 2 * (size_t)side[s]->ua, *q = m->uv + 2 * (size_t)side[s]->ub;
+        float d = hypotf((q[0] - p[0]) * (float)w, (q[1] - p[1]) * (float)h);
+        if (d > len) len = d;
+    }
+    if (!(len < 4.0f * (float)(w + h))) return 0; /* NaN or absurd */
+    int K = (int)ceilf(2.0f * len) + 1;
+    for (int k = 0; k < K; k++) {
+        float t = ((float)k + 0.5f) / (float)K;
+        int64_t ta = texel_at(m, e->ua, e->ub, t, w, h), tb = texel_at(m, f->ua, f->ub, t, w, h);
+        if (ta != tb && chart[ta] && chart[tb] && link_push(l, (int32_t)ta, (int32_t)tb)) return -1;
+    }
+    return 0;
+}
+
+/* Seam links of one layer: every welded edge whose faces give it different UVs. */
+static int seam_links(const mx_mesh *m, const int32_t *canon, int layer, int nlayers, int w, int h,
+                      const uint8_t *chart, link_list *l, mx_status *st) {
+    edge_rec *e = malloc(3 * (size_t)m->nfaces * sizeof *e + 1);
+    if (!e) return mx_fail(st, MX_ENOMEM, "uv fill: out of memory");
+    size_t n = 0;
+    for (int f = 0; f < m->nfaces; f++) {
+        const int32_t *fv = m->faces + 3 * (size_t)f, *fu = m->face_uv + 3 * (size_t)f;
+        if (!face_in_layer(m, f, layer, nlayers) || fu[0] < 0 || fu[1] < 0 || fu[2] < 0) continue;
+        for (int k = 0; k < 3; k++) {
+            int32_t a = canon[fv[k]], b = canon[fv[(k + 1) % 3]], ua = fu[k], ub = fu[(k + 1) % 3];
+            if (a == b) continue;
+            e[n++] = a < b ? (edge_rec){a, b, f, ua, ub} : (edge_rec){b, a, f, ub, ua};
+        }
+    }
+    qsort(e, n, sizeof *e, cmp_edge);
+    int rc = 0;
+    for (size_t i = 0; i < n && !rc;) {
+        size_t j = i + 1;
+        while (j < n && e[j].a == e[i].a && e[j].b == e[i].b) j++;
+        for (size_t p = i; p < j && !rc; p++)
+            for (size_t q = p + 1; q < j && !rc; q++)
+                if (!same_uv(m, e[p].ua, e[q].ua) || !same_uv(m, e[p].ub, e[q].ub))
+                    rc = link_seam(m, &e[p], &e[q], w, h, chart, l) ? mx_fail(st, MX_ENOMEM, "uv fill: out of memory") : 0;
+        i = j;
+    }
+    free(e);
+    return rc;
+}
+
+/* Faces f and g touch in 3D: the same face, or a shared welded vertex. */
+static int faces_touch(const mx_mesh *m, const int32_t *canon, int32_t f, int32_t g) {
+    if (f == g) return 1;
+    if (f < 0 || g < 0) return 0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            if (canon[m->faces[3 * (size_t)f + i]] == canon[m->faces[3 * (size_t)g + j]]) return 1;
+    return 0;
+}
+
+/* The graph's neighbours of every unknown chart texel, as CSR over the unknown texels. */
+typedef struct fill_graph {
+    int32_t *unknown; /* [nu] texel ids */
+    int32_t *start;   /* [nu + 1] */
+    int32_t *nbr;     /* neighbour texel ids */
+    size_t nu;
+} fill_graph;
+
+static void fill_graph_free(fill_graph *g) {
+    free(g->unknown);
+    free(g->start);
+    free(g->nbr);
+}
+
+/* Neighbours of texel t (x, y): written to out (NULL: only counted). */
+static int texel_neighbours(const mx_mesh *m, const int32_t *canon, const int32_t *face, const uint8_t *chart,
+                            const link_list *l, const size_t *link_start, int w, int h, int32_t t, int32_t *out) {
+    int x = t % w, y = t / w, n = 0;
+    int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+    for (int k = 0; k < 4; k++) {
+        if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
+        int32_t o = ny[k] * w + nx[k];
+        if (!chart[o] || !faces_touch(m, canon, face[t], face[o])) continue;
+        if (out) out[n] = o;
+        n++;
+    }
+    for (size_t i = link_start[t]; i < link_start[t + 1]; i++) {
+        if (out) out[n] = l->v[i].to;
+        n++;
+    }
+    return n;
+}
+
+static int build_graph(const mx_mesh *m, const int32_t *canon, const int32_t *face, const uint8_t *chart,
+                       const uint8_t *known, const link_list *l, int w, int h, fill_graph *g, mx_status *st) {
+    size_t n = (size_t)w * h, nu = 0, nn = 0;
+    size_t *link_start = calloc(n + 1, sizeof *link_start);
+    memset(g, 0, sizeof *g);
+    if (!link_start) return mx_fail(st, MX_ENOMEM, "uv fill: out of memory");
+    for (size_t i = 0; i < l->n; i++) link_start[l->v[i].from + 1]++;
+    for (size_t t = 0; t < n; t++) link_start[t + 1] += link_start[t];
+    for (size_t t = 0; t < n; t++)
+        if (chart[t] && !known[t]) {
+            nu++;
+            nn += (size_t)texel_neighbours(m, canon, face, chart, l, link_start, w, h, (int32_t)t, NULL);
+        }
+    g->unknown = malloc((nu + 1) * sizeof *g->unknown);
+    g->start = malloc((nu + 1) * sizeof *g->start);
+    g->nbr = malloc((nn + 1) * sizeof *g->nbr);
+    if (!g->unknown || !g->start || !g->nbr || nn > INT32_MAX) {
+        free(link_start);
+        fill_graph_free(g);
+        return mx_fail(st, MX_ENOMEM, "uv fill: out of memory");
+    }
+    size_t u = 0, k = 0;
+    for (size_t t = 0; t < n; t++)
+        if (chart[t] && !known[t]) {
+            g->unknown[u] = (int32_t)t;
+            g->start[u++] = (int32_t)k;
+            k += (size_t)texel_neighbours(m, canon, face, chart, l, link_start, w, h, (int32_t)t, g->nbr + k);
+        }
+    g->start[u] = (int32_t)k;
+    g->nu = nu;
+    free(link_start);
+    return 0;
+}
+
+/* Successive over-relaxation of the graph Laplace equation over the unknown texels. */
+static void solve_harmonic(const fill_graph *g, float *col) {
+    const float omega = 1.9f;
+    for (int it = 0; it < MX_UV_HARMONIC_ITERS; it++)
+        for (size_t u = 0; u < g->nu; u++) {
+            int32_t s = g->start[u], e = g->start[u + 1];
+            if (s == e) continue;
+            float sum[3] = {0, 0, 0};
+            for (int32_t k = s; k < e; k++)
+                for (int c = 0; c < 3; c++) sum[c] += col[3 * (size_t)g->nbr[k] + c];
+            float *x = col + 3 * (size_t)g->unknown[u];
+            for (int c = 0; c < 3; c++) x[c] += omega * (sum[c] / (float)(e - s) - x[c]);
+        }
+}
+
+int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, int layer, int nlayers, int gutter,
+                        mx_status *st) {
+    if (tex->c != 3) return mx_fail(st, MX_EINPUT, "uv fill: texture must be RGB (has %d channels)", tex->c);
+    if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: no UVs to fill along", m->source_path);
+    int w = tex->w, h = tex->h;
+    size_t n = (size_t)w * h;
+    uint8_t *chart = malloc(n), *valid = malloc(n), *next = malloc(n);
+    int32_t *face = malloc(n * sizeof *face), *canon = malloc(((size_t)m->nverts + 1) * sizeof *canon);
+    link_list links = {0};
+    fill_graph g = {0};
+    int rc = -1;
+    if (!chart || !valid || !next || !face || !canon) {
+        mx_fail(st, MX_ENOMEM, "uv fill: out of memory");
+        goto done;
+    }
+    if (mx_uv_chart_faces(m, layer, nlayers, w, h, chart, face, st) || mx_mesh_weld_map(m, canon, st) ||
+        seam_links(m, canon, layer, nlayers, w, h, chart, &links, st) || mx_uv_fill(tex, known, chart, 0, st))
+        goto done;
+    qsort(links.v, links.n, sizeof *links.v, cmp_link);
+    if (build_graph(m, canon, face, chart, known, &links, w, h, &g, st)) goto done;
+    solve_harmonic(&g, tex->data);
+    for (size_t i = 0; i < n; i++) valid[i] = known[i] || chart[i];
+    for (int r = 0; r < gutter; r++) dilate_once(tex, valid, next);
+    rc = 0;
+done:
+    fill_graph_free(&g);
+    free(links.v);
+    free(chart), free(valid), free(next), free(face), free(canon);
     return rc;
 }

@@ -16,9 +16,30 @@
 int mx_uv_chart_mask(const mx_mesh *m, int layer, int nlayers, int w, int h, uint8_t *chart,
                      mx_status *st);
 
+/* The same, and face_map[t] = a face whose UV triangle marks texel t (-1 outside charts). */
+int mx_uv_chart_faces(const mx_mesh *m, int layer, int nlayers, int w, int h, uint8_t *chart, int32_t *face_map,
+                      mx_status *st);
+
 /* Fills tex (RGB, w x h) in place: texels with known == 0 and chart != 0 by push-pull,
  * then `gutter` rings of dilation outside the charts. Texels in neither stay as they are.
  * When nothing is known, chart texels are left unchanged. */
 int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gutter, mx_status *st);
+
+/* Fill by harmonic inpainting across UV seams (layer `layer` of nlayers, as mx_uv_chart_mask):
+ * unknown chart texels are solved so that each is the mean of its neighbours in a texel graph
+ * (known texels fixed): the 4-neighbours in the texture whose faces touch in 3D (same face or
+ * a shared, position-welded vertex: texels of unrelated charts that lie side by side in the
+ * atlas are not linked), and, along every UV seam (a mesh edge whose two faces map it to
+ * different UVs), the texels on the two sides of the seam at the same point of the edge.
+ * Push-pull gives the start; successive over-relaxation (MX_UV_HARMONIC_ITERS sweeps, omega
+ * 1.9) solves. Then `gutter` rings of dilation outside the charts, as mx_uv_fill. */
+#define MX_UV_HARMONIC_ITERS 300
+int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, int layer, int nlayers, int gutter,
+                        mx_status *st);
+
+/* Spreads the colour of known texels `rings` texels into the unknown ones around them (each
+ * ring: an unknown texel takes the mean of its already filled 8-neighbours), so that bilinear
+ * sampling at the border of the known region does not mix in the colour of unknown texels. */
+int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st);
 
 #endif

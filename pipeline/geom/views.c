@@ -36,10 +36,12 @@ static int collect_texels(mx_view_cache *vc, int c, const mx_mesh *m, const mx_g
     return 0;
 }
 
+static int erode_mask(const mx_gbuffer *gb, uint8_t *mask, uint8_t *tmp, int radius, mx_status *st);
+
 /* usable = foreground, finite UV, not internal, frontal. */
-static void usable_pixels(const mx_gbuffer *gb, float thr, uint8_t *usable, uint8_t *tmp) {
+static void usable_pixels(const mx_gbuffer *gb, int normal_source, float thr, uint8_t *usable, uint8_t *tmp) {
     size_t n = (size_t)gb->w * gb->h;
-    mx_mask_frontal(gb, MX_NORMAL_GEOMETRIC, thr, usable);
+    mx_mask_frontal(gb, normal_source, thr, usable);
     mx_mask_internal(gb->depth, gb->depth_unculled, (int64_t)n, tmp);
     for (size_t i = 0; i < n; i++)
         usable[i] = usable[i] && !tmp[i] && isfinite(gb->uv[2 * i]) && isfinite(gb->uv[2 * i + 1]);
@@ -60,7 +62,9 @@ typedef struct cache_job {
     mx_view_cache *vc;
     const mx_mesh *m;
     const float *pos;
+    int normal_source;
     float frontal_threshold;
+    int erode_radius;
     mx_pool *inner_pool; /* pool for the rasterizer: NULL when candidates run in parallel */
     cache_worker *workers;
     int *failed;         /* [ncand] */
@@ -76,7 +80,11 @@ static void render_candidate_task(void *ctx, int c, int thread) {
         j->failed[c] = 1;
         return;
     }
-    usable_pixels(&w->gb, j->frontal_threshold, w->usable, w->tmp);
+    usable_pixels(&w->gb, j->normal_source, j->frontal_threshold, w->usable, w->tmp);
+    if (j->erode_radius > 0 && erode_mask(&w->gb, w->usable, w->tmp, j->erode_radius, &j->status[c])) {
+        j->failed[c] = 1;
+        return;
+    }
     j->failed[c] = collect_texels(vc, c, j->m, &w->gb, w->usable, &j->status[c]) != 0;
 }
 
@@ -101,7 +109,8 @@ static void workers_free(cache_worker *w, int n) {
 
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
                         const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
-                        int nlayers, float frontal_threshold, mx_pool *pool, mx_status *st) {
+                        int nlayers, int normal_source, float frontal_threshold, int erode_radius, mx_pool *pool,
+                        mx_status *st) {
     memset(vc, 0, sizeof *vc);
     if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: view selection needs UVs", m->source_path);
     if (ncand <= 0 || (size_t)tex_w * tex_h * nlayers > INT32_MAX)
@@ -115,7 +124,7 @@ int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
     int parallel = mx_pool_threads(pool) > 1 &&
                    (int64_t)m->nfaces * mx_pool_threads(pool) <= CACHE_PARALLEL_FACE_BUDGET;
     int nworkers = parallel ? mx_pool_threads(pool) : 1;
-    cache_job j = {vc, m, pos, frontal_threshold, parallel ? NULL : pool, NULL, NULL, NULL};
+    cache_job j = {vc, m, pos, normal_source, frontal_threshold, erode_radius, parallel ? NULL : pool, NULL, NULL, NULL};
     vc->cams = malloc((size_t)ncand * sizeof *vc->cams);
     vc->texels = calloc((size_t)ncand, sizeof *vc->texels);
     vc->ntexels = calloc((size_t)ncand, sizeof *vc->ntexels);
@@ -316,4 +325,73 @@ int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, con
     if (mx_rasterize(m, pos, cam, MX_VIEW_RASTER_FLAGS, pool, &vb->gb, st)) return -1;
     mx_view_masks(vb, normal_source, frontal_threshold, pool);
     return 0;
+}
+
+int mx_view_erode_radius(int render_size, int image_size) {
+    float ratio = image_size > 0 ? (float)render_size / (float)image_size : 1.0f;
+    int r = (int)ceilf(MX_VIEW_ERODE_MODEL_PX * ratio - 1e-4f);
+    return r < 1 ? 1 : r;
+}
+
+/* World size of one pixel at depth d (orthographic: the same everywhere). */
+static float pixel_footprint(const mx_camera *cam, int h, float d) {
+    if (cam->ortho) return 2.0f * cam->half_extent / (float)h;
+    return d * 2.0f * tanf(cam->fov_y * 0.5f * 3.14159265f / 180.0f) / (float)h;
+}
+
+static void mark_edges(const mx_gbuffer *gb, uint8_t *edge) {
+    int w = gb->w, h = gb->h;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            edge[i] = 0;
+            if (gb->face[i] < 0) continue;
+            float d = gb->depth[i], jump = MX_VIEW_DEPTH_JUMP * pixel_footprint(&gb->cam, h, d);
+            int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+            for (int k = 0; k < 4 && !edge[i]; k++) {
+                if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
+                size_t o = (size_t)ny[k] * w + nx[k];
+                edge[i] = gb->face[o] < 0 || fabsf(gb->depth[o] - d) > jump;
+            }
+        }
+}
+
+/* out[i] = 1 when some in[j] is set with |j - i| <= r along rows (stride 1, n per line,
+ * `lines` lines of `line_stride`) or columns: one pass of a separable square dilation. */
+static void dilate_lines(const uint8_t *in, uint8_t *out, int n, int lines, size_t step, size_t line_stride, int r) {
+    for (int l = 0; l < lines; l++) {
+        const uint8_t *a = in + (size_t)l * line_stride;
+        uint8_t *b = out + (size_t)l * line_stride;
+        int last = -1 - r; /* position of the latest set pixel seen, looking ahead r */
+        for (int i = 0; i < n + r; i++) {
+            if (i < n && a[(size_t)i * step]) last = i;
+            int o = i - r;
+            if (o >= 0) b[(size_t)o * step] = 0;
+            if (o >= 0 && last >= o - r) b[(size_t)o * step] = 1;
+        }
+    }
+}
+
+/* mask &= not within radius of an edge pixel of gb; tmp: scratch of the image size. */
+static int erode_mask(const mx_gbuffer *gb, uint8_t *mask, uint8_t *tmp, int radius, mx_status *st) {
+    int w = gb->w, h = gb->h;
+    size_t n = (size_t)w * h;
+    uint8_t *edge = malloc(n);
+    if (!edge) return mx_fail(st, MX_ENOMEM, "edge erosion: out of memory");
+    mark_edges(gb, edge);
+    dilate_lines(edge, tmp, w, h, 1, (size_t)w, radius);
+    dilate_lines(tmp, edge, h, w, (size_t)w, 1, radius);
+    for (size_t i = 0; i < n; i++) mask[i] = mask[i] && !edge[i];
+    free(edge);
+    return 0;
+}
+
+int mx_view_erode_edges(mx_view_buffers *vb, int radius, mx_status *st) {
+    return erode_mask(&vb->gb, vb->mask, vb->tmp, radius, st);
+}
+
+int mx_view_scale_radius(int radius, int from, int to) {
+    if (radius <= 0 || from <= 0) return 0;
+    int r = (int)lroundf((float)radius * (float)to / (float)from);
+    return r < 1 ? 1 : r;
 }

@@ -23,11 +23,17 @@ typedef struct mx_view_cache {
 } mx_view_cache;
 
 /* Renders every candidate at size x size (culled, with the unculled depth for the
- * internal-face mask; geometric normals against frontal_threshold, 0 keeps every visible
- * pixel). */
+ * internal-face mask; normals of normal_source (MX_NORMAL_*, the same as the backprojection
+ * of the chosen views uses) against frontal_threshold, 0 keeps every visible pixel; edges
+ * eroded by erode_radius pixels of this size as mx_view_erode_edges, 0 = none), so that
+ * selection counts the pixels backprojection will use. */
 int mx_view_cache_build(mx_view_cache *vc, const mx_mesh *m, const float *pos,
                         const mx_camera *cams, int ncand, int size, int tex_w, int tex_h,
-                        int nlayers, float frontal_threshold, mx_pool *pool, mx_status *st);
+                        int nlayers, int normal_source, float frontal_threshold, int erode_radius, mx_pool *pool,
+                        mx_status *st);
+/* An erosion radius of `radius` pixels at render size `from`, at render size `to` (0 stays 0,
+ * otherwise at least 1). */
+int mx_view_scale_radius(int radius, int from, int to);
 void mx_view_cache_free(mx_view_cache *vc);
 
 /* Pixels of candidate c whose texel is not in `known` ([nlayers][tex_h][tex_w]). */
@@ -81,5 +87,21 @@ int mx_view_prepare(mx_view_buffers *vb, const mx_mesh *m, const float *pos, con
  * frontal (normal_source and threshold as in mx_mask_frontal; 0 keeps every foreground
  * pixel) & not internal. */
 void mx_view_masks(mx_view_buffers *vb, int normal_source, float frontal_threshold, mx_pool *pool);
+
+/* Edge erosion of the backprojection mask. Generated images are resampled (crop to the
+ * object, model size, back) and painted by a network that does not end exactly at the
+ * silhouette: pixels next to the background or to a depth discontinuity (an occluding edge)
+ * carry background or occluder colour. mx_view_erode_edges clears vb->mask within `radius`
+ * pixels (square neighbourhood) of every edge pixel: a foreground pixel with a 4-neighbour
+ * that is background, or whose depth differs from a 4-neighbour's by more than
+ * MX_VIEW_DEPTH_JUMP pixel footprints (a surface steeper than ~76°, which the frontal filter
+ * rejects anyway, or a jump between surfaces). The radius is MX_VIEW_ERODE_MODEL_PX pixels of
+ * the model image in render pixels, ceil(1.5 · render_size / image_size): 3 pixels at the
+ * default 1024 render / 512 model size (image_size 0: no resampling, 2 pixels). Measured by
+ * tests/test_geom_bleed.c: 2 render pixels at a 2:1 ratio still let background through. */
+#define MX_VIEW_ERODE_MODEL_PX 1.5f
+#define MX_VIEW_DEPTH_JUMP 4.0f
+int mx_view_erode_radius(int render_size, int image_size);
+int mx_view_erode_edges(mx_view_buffers *vb, int radius, mx_status *st);
 
 #endif

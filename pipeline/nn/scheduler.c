@@ -545,18 +545,22 @@ int mx_sched_step(mx_sched *s, const float *model_output, float *sample, mx_stat
     return 0;
 }
 
-void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n) {
-    float a, b;
+void mx_sched_noise_coeffs(const mx_sched *s, float *a, float *b) {
     int i = s->step_index < s->n_steps ? s->step_index : s->n_steps - 1;
     if (s->cfg.kind == MX_SCHED_DDIM || s->cfg.kind == MX_SCHED_LCM) {
         float acp = s->alphas_cumprod[s->timesteps[i]];
-        a = sqrtf(acp);
-        b = sqrtf(1.0f - acp);
+        *a = sqrtf(acp);
+        *b = sqrtf(1.0f - acp);
     } else {
         dpm_point p = dpm_point_at(s->sigmas[i]);
-        a = p.alpha;
-        b = p.sigma;
+        *a = p.alpha;
+        *b = p.sigma;
     }
+}
+
+void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n) {
+    float a, b;
+    mx_sched_noise_coeffs(s, &a, &b);
     for (size_t k = 0; k < n; k++) y[k] = a * x0[k] + b * noise[k];
 }
 

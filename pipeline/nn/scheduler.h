@@ -127,6 +127,9 @@ int mx_sched_lcm_step(mx_sched *s, const float *model_output, float *sample, mx_
  * a = sqrt(acp[t]), b = sqrt(1-acp[t]) for DDIM and a = 1/sqrt(sigma^2+1), b = sigma·a
  * for DPM-Solver++ (sigma of the current step), as diffusers' add_noise. y may equal x0 or noise. */
 void mx_sched_add_noise(const mx_sched *s, float *y, const float *x0, const float *noise, size_t n);
+/* The a, b of mx_sched_add_noise at the current step (the inpaint pipeline noises the known
+ * latents with them on the device after every step). */
+void mx_sched_noise_coeffs(const mx_sched *s, float *a, float *b);
 /* lat *= the initial noise sigma (text-to-image start). */
 void mx_sched_scale_initial(const mx_sched *s, float *lat, size_t n);
 

@@ -143,17 +143,18 @@ static int upload_inputs(const mx_sd_request *rq, const mx_ctx *c, const sd_dims
     return 0;
 }
 
-/* Sum over the ControlNets of their scaled residuals into wk->res for latent i's call; returns 1
- * when any ran. */
+/* Sum over the ControlNets of their scaled residuals (scale: the ControlNet's weight, or its
+ * weight for latent i) into wk->res for latent i's call; returns 1 when any ran. */
 static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int i,
                            mx_status *st) {
     int ran = 0;
     for (int k = 0; k < rq->n_controls; k++) {
         const mx_sd_control *ctl = &rq->controls[k];
-        if (ctl->weight == 0.0f) continue;
+        float weight = ctl->item_weights ? ctl->item_weights[i] : ctl->weight;
+        if (weight == 0.0f) continue;
         float *cond = wk->cond[k] + (size_t)i * d->B * control_numel(ctl->net, d->h, d->w);
         mx_controlnet_input in = {wk->x_in, wk->timesteps, wk->text + (size_t)i * d->B * d->text, cond, d->B, d->h,
-                                  d->w, d->T, ctl->weight};
+                                  d->w, d->T, weight};
         if (mx_controlnet_forward(c, ctl->net, &in, wk->res, wk->res[d->n_res], ran, &wk->arena, st))
             return mx_fail_prefix(st, "ControlNet %d: ", k), -1;
         ran = 1;
@@ -204,6 +205,7 @@ int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int 
     for (int i = 0; i < steps && rc == 0; i++) {
         int64_t t = mx_sched_timestep(rq->sched, i);
         rc = denoise_step(rq, c, &d, &wk, t, st);
+        if (rc == 0 && rq->after_step) rc = rq->after_step(rq->after_step_user, c, i, steps, wk.lat, st);
         if (rc == 0 && rq->progress && (rc = mx_download(c, latents, wk.lat, d.lat, st)) == 0 &&
             rq->progress(rq->progress_user, i, steps, t, latents, d.lat))
             rc = mx_fail(st, MX_EUSAGE, "sd pipeline: cancelled at step %d of %d", i + 1, steps);

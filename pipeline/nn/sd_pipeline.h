@@ -31,6 +31,7 @@ typedef struct mx_sd_control {
     const mx_controlnet *net;
     const float *image; /* [n, cond_ch, 8h, 8w] in the range the ControlNet expects, one per latent */
     float weight;       /* conditioning scale (w_D, w_I); 0 skips the ControlNet */
+    const float *item_weights; /* [n] one scale per latent (both CFG halves), or NULL: weight for all */
 } mx_sd_control;
 
 /* Called after each step with the step index (0-based), the number of steps, the timestep
@@ -38,6 +39,11 @@ typedef struct mx_sd_control {
  * fails with "cancelled"). */
 typedef int (*mx_sd_progress)(void *user, int step, int n_steps, int64_t timestep, const float *latents,
                               size_t numel);
+/* Called after each scheduler step (before progress) and may change the latents [n, 4, h, w]
+ * (memory of c's backend) in place through ops (the inpaint pipeline puts the known region
+ * back here); non-zero is an error already recorded in st. */
+typedef int (*mx_sd_after_step)(void *user, const mx_ctx *c, int step, int n_steps, float *latents,
+                                mx_status *st);
 
 typedef struct mx_sd_request {
     const mx_unet *unet;
@@ -50,6 +56,8 @@ typedef struct mx_sd_request {
     mx_sched *sched;          /* initialised for numel = n*4*h*w, strength applied, not yet stepped */
     mx_sd_progress progress;  /* may be NULL */
     void *progress_user;
+    mx_sd_after_step after_step; /* may be NULL */
+    void *after_step_user;
 } mx_sd_request;
 
 /* Runs every remaining scheduler step in place on latents [n, C, h, w] (C = the UNet's

@@ -35,7 +35,7 @@ typedef struct api_result {
     mx_texture_result in;
 } api_result;
 
-/* The library's version (runtime/version.h); test_tex_api checks that the header's MATEX_VERSION agrees. */
+/* The library's version (runtime/version.h); test_texture_api checks that the header's MATEX_VERSION agrees. */
 const char *matex_version(void) { return MX_VERSION; }
 
 static void clear_error(matex_error *err) {

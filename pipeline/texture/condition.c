@@ -1,6 +1,7 @@
 #include "condition.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 int mx_depth_image(const mx_gbuffer *gb, mx_image *out, mx_status *st) {
@@ -33,6 +34,33 @@ int mx_inpaint_image(const mx_image *rgb, const mx_image *mask, mx_image *out, m
     if (mx_image_alloc(out, rgb->w, rgb->h, 3, st)) return -1;
     for (int64_t i = 0; i < (int64_t)rgb->w * rgb->h; i++)
         for (int k = 0; k < 3; k++) out->data[3 * i + k] = mask->data[i] >= 0.5f ? -1.0f : rgb->data[rgb->c * i + k];
+    return 0;
+}
+
+int mx_paint_mask_cells(const mx_image *mask, int cell, int dilate, mx_image *out, mx_status *st) {
+    if (mask->c != 1 || cell < 1 || dilate < 0)
+        return mx_fail(st, MX_EINTERNAL, "paint mask: bad mask (%d channels) or cell size %d", mask->c, cell);
+    int cw = (mask->w + cell - 1) / cell, ch = (mask->h + cell - 1) / cell;
+    uint8_t *any = calloc((size_t)cw * ch, 1);
+    if (!any) return mx_fail(st, MX_ENOMEM, "paint mask: out of memory");
+    if (mx_image_alloc(out, mask->w, mask->h, 1, st)) {
+        free(any);
+        return -1;
+    }
+    for (int y = 0; y < mask->h; y++)
+        for (int x = 0; x < mask->w; x++)
+            if (mask->data[(size_t)y * mask->w + x] > 0.0f) any[(size_t)(y / cell) * cw + x / cell] = 1;
+    for (int y = 0; y < mask->h; y++)
+        for (int x = 0; x < mask->w; x++) {
+            int cy = y / cell, cx = x / cell, hit = 0;
+            for (int dy = -dilate; dy <= dilate && !hit; dy++)
+                for (int dx = -dilate; dx <= dilate && !hit; dx++) {
+                    int ny = cy + dy, nx = cx + dx;
+                    hit = ny >= 0 && nx >= 0 && ny < ch && nx < cw && any[(size_t)ny * cw + nx];
+                }
+            out->data[(size_t)y * mask->w + x] = hit ? 1.0f : 0.0f;
+        }
+    free(any);
     return 0;
 }
 

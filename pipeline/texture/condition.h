@@ -17,6 +17,13 @@ int mx_mask_image(const uint8_t *mask, int w, int h, mx_image *out, mx_status *s
  * (the pixels to paint). rgb (3+ channels) and mask (1 channel) have the same size. */
 int mx_inpaint_image(const mx_image *rgb, const mx_image *mask, mx_image *out, mx_status *st);
 
+/* The paint mask the inpaint pipeline gets: the pipeline keeps or repaints whole latent cells
+ * (cell x cell pixels, its nearest resize reads one pixel per cell), so a cell is painted
+ * (1 in all its pixels) when any pixel of it, or of the cells within `dilate` cells, has
+ * mask > 0: no untextured pixel is kept from the current render, whose unknown texels are
+ * only a stand-in colour. mask: 1 channel; out: 1 channel, same size. */
+int mx_paint_mask_cells(const mx_image *mask, int cell, int dilate, mx_image *out, mx_status *st);
+
 /* Writes the channels of img (HWC) into planes [c][plane_h][plane_w] at column x0
  * (plane_h = img->h; the image must fit). */
 void mx_image_to_planes(const mx_image *img, float *planes, int plane_w, int x0);

@@ -1,13 +1,19 @@
 /* `matex enhance` (paper §4.4, texture enhancement): SDEdit over views of a textured mesh.
- * Views: front, back, then the candidates that Algorithm 1 picks from an empty T^B. Each view's
- * render of the ORIGINAL texture is VAE-encoded, noised to `strength`, denoised under the
- * prompt (with depth control when the file has a depth ControlNet) and backprojected; texels
- * that no view reached keep the original texture. */
+ * Views: front and back, then the candidates Algorithm 1 picks over the whole texture, with
+ * the texels front and back will reach already counted as painted. The views run one after
+ * the other on the texture as enhanced so far (the original where no view has been): each
+ * view's render is the init image of the inpaint pipeline at `strength` (noised to strength,
+ * SDEdit), the pixels of texels an earlier view already enhanced are the known region put back
+ * after every step (latent blending), so each view continues its neighbours at the border;
+ * the rest is repainted and backprojected. Texels that no view reached keep the original. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "../../runtime/log.h"
+#include "../geom/backproject.h"
+#include "../geom/masks.h"
 #include "../geom/raster.h"
 #include "condition.h"
 #include "job.h"
@@ -50,54 +56,78 @@ static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
     return rc;
 }
 
-/* Cameras: front, back, then the plan of Algorithm 1 from an empty T^B. */
+/* Marks in `known` the texels under the backprojection mask of a prepared view. */
+static void mark_view_texels(const mx_job *j, const mx_job_view *v, uint8_t *known) {
+    const mx_gbuffer *gb = &v->vb.gb;
+    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    for (size_t i = 0; i < (size_t)gb->w * gb->h; i++)
+        if (v->vb.mask[i] && isfinite(gb->uv[2 * i]) && isfinite(gb->uv[2 * i + 1]))
+            known[(size_t)mx_face_layer(&j->mesh, gb->face[i], j->nlayers) * plane +
+                  (size_t)mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], j->o->tex_size, j->o->tex_size)] = 1;
+}
+
+/* Cameras: front, back, then the plan of Algorithm 1 over the whole texture, front and back
+ * counted as painted. */
 static int enhance_cameras(mx_job *j, mx_camera *cams, int *n, mx_status *st) {
     mx_job_camera(&cams[0], 0.0f, 0.0f);
     mx_job_camera(&cams[1], 180.0f, 0.0f);
     *n = 2;
     if (j->o->views <= 2) return 0;
+    uint8_t *sim = calloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size, 1);
+    if (!sim) return mx_fail(st, MX_ENOMEM, "enhance: out of memory");
+    int rc = 0;
+    for (int k = 0; k < 2 && !rc; k++) {
+        mx_job_view v;
+        memset(&v, 0, sizeof v);
+        v.cam = cams[k];
+        rc = mx_job_view_prepare(j, &v, st);
+        if (!rc) mark_view_texels(j, &v, sim);
+        mx_job_view_free(&v);
+    }
     mx_view_plan plan;
-    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->views - 2, j->o->coverage_stop,
-                          MX_JOB_MIN_UNTEXTURED_PIXELS, &plan, st))
+    if (rc || mx_view_plan_make(&j->vc, sim, j->o->views - 2, j->o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
+                                &plan, st)) {
+        free(sim);
         return -1;
+    }
     for (int i = 0; i < plan.n && *n < j->o->views; i++) cams[(*n)++] = j->vc.cams[plan.cand[i]];
     mx_view_plan_free(&plan);
+    free(sim);
     return 0;
 }
 
-/* One view: render the original texture, SDEdit it, backproject. */
+static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_status *st);
+
+/* One view on the texture enhanced so far: SDEdit of its render with the already enhanced
+ * pixels kept (latent blending), backprojected into the texels not enhanced yet. */
 static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int index, mx_status *st) {
     const mx_texture_opts *o = j->o;
-    int S = o->image_size, rc = -1;
+    int S = o->image_size, rc = -1, merged = 0;
     size_t per = (size_t)3 * S * S;
-    float *depth = malloc(sizeof(float) * per), *init = malloc(sizeof(float) * per);
-    float *image = malloc(sizeof(float) * per);
-    mx_image rgb = {0}, small = {0};
-    const float grey[3] = {0.5f, 0.5f, 0.5f};
-    if (!depth || !init || !image) {
+    float *buf = malloc(sizeof(float) * (4 * per + (size_t)S * S));
+    mx_image *current = calloc((size_t)j->nlayers, sizeof *current);
+    if (!buf || !current) {
         mx_fail(st, MX_ENOMEM, "enhance: out of memory");
         goto done;
     }
+    float *depth = buf, *inpaint = buf + per, *init = buf + 2 * per, *image = buf + 3 * per, *paint = buf + 4 * per;
     snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->prompt);
-    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, depth, NULL, NULL, S, 0, st) ||
-        mx_render_textured(&v->vb.gb, &j->mesh, orig, j->nlayers, grey, j->ctx->pool, &rgb, st) ||
-        mx_crop_resize(&rgb, v->crop, S, &small, st))
-        goto done;
-    mx_image_to_planes(&small, init, S, 0);
+    mx_view_planes vp = {depth, inpaint, init, paint, S, 0};
+    if (merge_textures(j, orig, current, st)) goto done;
+    merged = 1;
+    if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, &vp, current, st)) goto done;
     const char *prompts[1] = {v->prompt};
     char stage[32];
     snprintf(stage, sizeof stage, "enhance view %d", index + 1);
-    mx_gen_batch b = {1, S, S, prompts, depth, NULL, o->depth_weight[0], 0.0f, init, o->strength, (uint64_t)index,
-                      stage};
+    mx_gen_batch b = {1,     S,     S, prompts, depth, NULL, o->depth_weight[0], 0.0f, NULL, NULL, init,
+                      paint, o->strength, (uint64_t)index, stage};
     if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
     mx_job_report_view(j, v, "enhance", index, j->models->cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
     rc = 0;
 done:
-    mx_image_free(&rgb);
-    mx_image_free(&small);
-    free(depth);
-    free(init);
-    free(image);
+    for (int l = 0; merged && l < j->nlayers; l++) mx_image_free(&current[l]);
+    free(current);
+    free(buf);
     return rc;
 }
 
@@ -126,6 +156,8 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         cams = calloc((size_t)(o->views > 2 ? o->views : 2), sizeof *cams);
         if (!orig || !out || !cams) rc = mx_fail(st, MX_ENOMEM, "enhance: out of memory");
     }
+    j.keep_unreached = 1;
+    j.write_flags = 0; /* the first enhanced view of a texel keeps it: later views blend it in */
     if (!rc) rc = original_textures(&j, orig, st);
     if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
     double t = mx_now();

@@ -11,7 +11,7 @@
 #include "../geom/export.h"
 #include "../geom/masks.h"
 #include "../geom/uvfill.h"
-#include "../nn/sd_pipeline.h"
+#include "../nn/sd_edit.h"
 #include "../nn/vae_tiled.h"
 #include "condition.h"
 #include "digest.h"
@@ -23,6 +23,13 @@
 #define CAMERA_HALF_EXTENT 1.02f /* the normalised mesh lies in the unit sphere */
 #define CROP_MARGIN 0.05f
 #define UV_GUTTER 4
+/* I′ (the current texture rendered into a view) samples texels bilinearly: known colours are
+ * spread this many texels into the unknown ones so that no grey fringe appears at the border
+ * of the painted region (the unknown pixels are repainted anyway). */
+#define CURRENT_DILATE_TEXELS 4
+/* The inpaint pipeline keeps or repaints whole latent cells; a cell is repainted when it or a
+ * neighbouring cell holds an untextured pixel (mx_paint_mask_cells). */
+#define PAINT_DILATE_CELLS 1
 /* VAE decode in tiles of this many latents (384 pixels), one image at a time: bounds the decode's
  * memory (SD1.5: ~0.5 GB instead of ~0.94 GB per 512x512 image and ~1.9 GB for the 1024x512
  * grid) at ~1.4x its work; blend as diffusers' tiled_decode (pipeline/nn/vae_tiled.h). */
@@ -97,7 +104,10 @@ static int build_candidates(mx_job *j, mx_status *st) {
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
     int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
-                                 j->o->tex_size, j->nlayers, j->o->frontal_threshold, j->ctx->pool, st);
+                                 j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold,
+                                 mx_view_scale_radius(mx_view_erode_radius(j->o->render_size, j->o->image_size),
+                                                      j->o->render_size, CANDIDATE_RENDER_SIZE),
+                                 j->ctx->pool, st);
     free(cams);
     if (rc) return -1;
     j->vc_ready = 1;
@@ -184,6 +194,7 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->t0 = mx_now();
     mx_job_set_phase(j, "load");
     j->psnr_db = NAN;
+    j->write_flags = o->first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
     if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
     if (o->models) { /* an opened model set computes on its own context */
         j->models = o->models;
@@ -293,24 +304,19 @@ static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float
     return 0;
 }
 
-/* Start latents: seeded noise per item, or (enhance) the encoded images noised to strength. */
-static int start_latents(mx_job *j, const mx_gen_batch *b, mx_sched *s, float *lat, size_t per_item, int h, int w,
-                         mx_status *st) {
-    size_t numel = per_item * b->n;
+/* Runs the denoising of a batch from seeded noise (item i: stream first_stream + i): plain
+ * text-to-image, or the inpaint / img2img pipeline when the batch has init images. */
+static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, float *lat, float *noise,
+                         size_t per_item, int h, int w, mx_status *st) {
     for (int i = 0; i < b->n; i++)
-        mx_rng_fill_normal(lat + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
+        mx_rng_fill_normal(noise + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
-        mx_sched_scale_initial(s, lat, numel);
-        return 0;
+        memcpy(lat, noise, per_item * b->n * sizeof *lat);
+        mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
+        return mx_sd_denoise(rq, j->ctx, lat, b->n, h, w, st);
     }
-    if (mx_sched_set_strength(s, b->strength, st)) return -1;
-    float *x0 = malloc(numel * sizeof *x0);
-    if (!x0) return mx_fail(st, MX_ENOMEM, "latents: out of memory");
-    int rc = mx_sd_encode_image(j->ctx, j->models->vae, b->init_images, b->n, h * mx_vae_factor(j->models->vae),
-                                w * mx_vae_factor(j->models->vae), x0, st);
-    if (!rc) mx_sched_add_noise(s, lat, x0, lat, numel);
-    free(x0);
-    return rc;
+    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength};
+    return mx_sd_edit_run(rq, &e, j->ctx, b->n, h, w, lat, st);
 }
 
 /* LCM step noise: item i draws from its own stream (first_stream + i) after its start latents,
@@ -342,11 +348,11 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                        b->image_h, f);
     int h = b->image_h / f, w = b->image_w / f;
     size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
-    float *lat = malloc(per_item * b->n * sizeof *lat);
+    float *lat = malloc(2 * per_item * b->n * sizeof *lat), *noise = lat + per_item * b->n;
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
     mx_sched_config scfg = j->models->sched;
-    lcm_noise noise = {j->o->seed, b->first_stream, b->n, per_item};
+    lcm_noise lcm = {j->o->seed, b->first_stream, b->n, per_item};
     memset(&s, 0, sizeof s);
     int rc = -1, sched_ready = 0;
     if (j->o->fast) mx_sched_config_lcm(&scfg, &j->models->sched);
@@ -358,19 +364,18 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     if (mx_sched_init(&s, j->ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     s.noise_fn = fill_lcm_noise;
-    s.noise_user = &noise;
-    if (start_latents(j, b, &s, lat, per_item, h, w, st)) goto done;
+    s.noise_user = &lcm;
     mx_sd_control controls[2];
     int nc = 0;
-    if (b->depth_planes && j->models->cn_depth && b->w_depth != 0)
-        controls[nc++] = (mx_sd_control){j->models->cn_depth, b->depth_planes, b->w_depth};
-    if (b->inpaint_planes && j->models->cn_inpaint && b->w_inpaint != 0)
-        controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint};
+    if (b->depth_planes && j->models->cn_depth && (b->w_depth != 0 || b->w_depth_items))
+        controls[nc++] = (mx_sd_control){j->models->cn_depth, b->depth_planes, b->w_depth, b->w_depth_items};
+    if (b->inpaint_planes && j->models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
+        controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
     mx_job_set_phase(j, b->stage);
     mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
-                        report_step, j};
+                        report_step, j, NULL, NULL};
     double t = mx_now();
-    if (mx_sd_denoise(&rq, j->ctx, lat, b->n, h, w, st)) {
+    if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
         goto done;
     }
@@ -391,7 +396,8 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
     if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx->pool,
-                        st))
+                        st) ||
+        mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->image_size), st))
         return -1;
     uint8_t *fg = malloc((size_t)R * R);
     if (!fg) return mx_fail(st, MX_ENOMEM, "view mask: out of memory");
@@ -408,9 +414,11 @@ void mx_job_view_free(mx_job_view *v) {
 }
 
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
+    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
     for (int l = 0; l < j->nlayers; l++)
-        if (mx_bake_texture(&j->bake, l, GREY, &tex[l], st)) {
-            for (int k = 0; k < l; k++) mx_image_free(&tex[k]);
+        if (mx_bake_texture(&j->bake, l, GREY, &tex[l], st) ||
+            mx_uv_dilate(&tex[l], j->bake.known + l * plane, CURRENT_DILATE_TEXELS, st)) {
+            for (int k = 0; k <= l; k++) mx_image_free(&tex[k]);
             return -1;
         }
     return 0;
@@ -426,37 +434,54 @@ static int place_control(const mx_image *full, mx_crop crop, int S, float *plane
     return 0;
 }
 
-static int inpaint_control(mx_job *j, mx_job_view *v, const mx_image *tex, float *planes, int plane_w, int x0,
-                           mx_status *st) {
+/* Inpainting inputs of a view at the model size: the render of the current textures I′ (init),
+ * the paint mask (untextured pixels, grown to whole latent cells) and the inpaint control (I′
+ * with the painted pixels at -1). */
+static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const mx_view_planes *p, mx_status *st) {
     int R = j->o->render_size, S = j->o->image_size, rc = -1;
-    mx_image rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, ctl = {0};
-    uint8_t *mask = malloc((size_t)R * R);
+    mx_image rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, paint = {0}, ctl = {0};
+    uint8_t *mask = malloc((size_t)R * R), *open = NULL;
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
-    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, j->bake.known, j->o->tex_size, j->o->tex_size, mask);
+    const uint8_t *known = j->bake.known;
+    if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will restart are repainted */
+        if (!(open = malloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size))) {
+            free(mask);
+            return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
+        }
+        mx_bake_open_texels(&j->bake, &v->vb.gb, &j->mesh, v->vb.mask, open);
+        known = open;
+    }
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->tex_size, j->o->tex_size, mask);
+    free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx->pool, &rgb, st) &&
         !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
-        !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) && !mx_inpaint_image(&rgb_s, &mask_s, &ctl, st)) {
-        mx_image_to_planes(&ctl, planes, plane_w, x0);
+        !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) &&
+        !mx_paint_mask_cells(&mask_s, mx_vae_factor(j->models->vae), PAINT_DILATE_CELLS, &paint, st) &&
+        !mx_inpaint_image(&rgb_s, &paint, &ctl, st)) {
+        mx_image_to_planes(&ctl, p->inpaint, p->plane_w, p->x0);
+        if (p->init) mx_image_to_planes(&rgb_s, p->init, p->plane_w, p->x0);
+        if (p->paint) mx_image_to_planes(&paint, p->paint, p->plane_w, p->x0);
         rc = 0;
     }
     mx_image_free(&rgb);
     mx_image_free(&mask_img);
     mx_image_free(&rgb_s);
     mx_image_free(&mask_s);
+    mx_image_free(&paint);
     mx_image_free(&ctl);
     free(mask);
     return rc;
 }
 
-int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes,
-                         const mx_image *current, int plane_w, int x0, mx_status *st) {
+int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, const mx_image *current,
+                         mx_status *st) {
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
-    int rc = place_control(&depth, v->crop, j->o->image_size, depth_planes, plane_w, x0, st);
+    int rc = place_control(&depth, v->crop, j->o->image_size, p->depth, p->plane_w, p->x0, st);
     mx_image_free(&depth);
-    if (rc || !inpaint_planes) return rc;
-    return inpaint_control(j, v, current, inpaint_planes, plane_w, x0, st);
+    if (rc || !p->inpaint) return rc;
+    return inpaint_inputs(j, v, current, p, st);
 }
 
 int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st) {
@@ -468,7 +493,7 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         return -1;
     }
     mx_crop_paste(&gen, v->crop, &canvas);
-    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, 0, j->ctx->pool, st);
+    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, j->write_flags, j->ctx->pool, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
     j->views_done++;
@@ -509,24 +534,18 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_end_obj(w);
 }
 
+/* Harmonic fill across UV seams of every layer's unreached chart texels, gutter dilation. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
-    int T = j->o->tex_size;
-    uint8_t *chart = malloc((size_t)T * T);
-    if (!chart) return mx_fail(st, MX_ENOMEM, "UV fill: out of memory");
-    int rc = 0;
-    for (int l = 0; l < j->nlayers && !rc; l++) {
-        const uint8_t *known = j->bake.known + (size_t)l * T * T;
-        rc = mx_uv_chart_mask(&j->mesh, l, j->nlayers, T, T, chart, st) ||
-             mx_uv_fill(&tex[l], known, chart, UV_GUTTER, st);
-    }
-    free(chart);
-    return rc ? -1 : 0;
+    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    for (int l = 0; l < j->nlayers; l++)
+        if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, st)) return -1;
+    return 0;
 }
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
     mx_job_set_phase(j, "finish");
-    if (mx_job_check_cancel(j, st) || mx_job_fill_textures(j, tex, st)) return -1;
+    if (mx_job_check_cancel(j, st) || (!j->keep_unreached && mx_job_fill_textures(j, tex, st))) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));

@@ -10,7 +10,7 @@
 #include "../geom/camera.h"
 #include "../geom/uvatlas.h"
 #include "../geom/views.h"
-#include "jsonw.h"
+#include "../../runtime/jsonw.h"
 #include "models.h"
 #include "outdir.h"
 #include "texture.h"
@@ -42,6 +42,8 @@ typedef struct mx_job {
     float *pos;  /* normalised positions for rendering: (R p - center) * scale */
     float center[3], scale;
     int nlayers; /* textures: one per material keeping its own UVs, else 1 */
+    int keep_unreached; /* enhance: texels no view reached keep their colour (mx_job_finish does not fill) */
+    int write_flags;    /* backprojection policy: MX_BACKPROJECT_OVERWRITE (angle-aware) or 0 (first wins), from o->first_wins */
     mx_bake bake;
     int bake_ready;
     mx_view_cache vc;
@@ -74,14 +76,19 @@ typedef struct mx_job_view {
 } mx_job_view;
 
 /* What one diffusion call generates: n items of image_h x image_w, with their control
- * planes [n][3][image_h][image_w] (NULL: that ControlNet is off) and prompts. */
+ * planes [n][3][image_h][image_w] (NULL: that ControlNet is off) and prompts. With
+ * init_images it is the inpaint pipeline (paint_masks given, latent blending of the rest; the
+ * view step at strength 1, enhance below 1) or the img2img pipeline (paint_masks NULL, SDEdit
+ * at `strength`), sd_edit.h. */
 typedef struct mx_gen_batch {
     int n, image_h, image_w;
     const char *const *prompts;
     const float *depth_planes;
     const float *inpaint_planes;
     float w_depth, w_inpaint;
-    const float *init_images; /* enhance: [n][3][h][w] in [0,1] to encode and noise, else NULL */
+    const float *w_depth_items, *w_inpaint_items; /* [n] per-item weights, or NULL: w_depth, w_inpaint */
+    const float *init_images; /* [n][3][h][w] in [0,1]: the current render (views) or the texture (enhance) */
+    const float *paint_masks; /* [n][1][h][w], 1 = paint; NULL: img2img */
     float strength;
     uint64_t first_stream; /* item i uses noise stream first_stream + i */
     const char *stage;     /* for progress lines */
@@ -106,12 +113,22 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st);
 void mx_job_view_free(mx_job_view *v);
 /* The orthographic camera every view uses, at (azimuth, elevation) degrees. */
 void mx_job_camera(mx_camera *cam, float azimuth, float elevation);
-/* Control planes of a view at the model image size S, written at column x0 of planes with
- * row width plane_w: depth into depth_planes, and (when inpaint_planes is not NULL) the render
- * of `current` (mx_job_current_textures, one per layer) with the untextured pixels set to -1. */
-int mx_job_view_controls(mx_job *j, mx_job_view *v, float *depth_planes, float *inpaint_planes,
-                         const mx_image *current, int plane_w, int x0, mx_status *st);
-/* The current textures (one per layer), unknown texels mid grey. Free each with mx_image_free. */
+/* Where a view's model-size planes go: each [c][S][plane_w], the view at column x0. */
+typedef struct mx_view_planes {
+    float *depth;   /* depth control, always */
+    float *inpaint; /* inpaint control (NULL: none, and no init/paint either) */
+    float *init;    /* I′, the current textures rendered (may be NULL) */
+    float *paint;   /* 1 channel: the paint mask (may be NULL) */
+    int plane_w, x0;
+} mx_view_planes;
+
+/* The control planes of a view at the model image size S: depth, and (when p->inpaint is not
+ * NULL) the render I′ of `current` (mx_job_current_textures, one per layer) with the pixels
+ * to paint set to -1, I′ itself and the paint mask. */
+int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, const mx_image *current,
+                         mx_status *st);
+/* The current textures (one per layer): unknown texels mid grey, except the ring of
+ * CURRENT_DILATE_TEXELS around known texels, which repeats their colours. Free each with mx_image_free. */
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Pastes a generated image (planes [3][S][plane_w] from column x0) back into the view's crop
  * and backprojects it into the untextured texels. */
@@ -121,7 +138,8 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
                         float w_inpaint);
 /* Fraction of candidate-visible texels in T^B. */
 double mx_job_coverage(const mx_job *j);
-/* Fills unreached texels (push-pull inside the charts, gutter dilation) of every layer. */
+/* Fills unreached texels (harmonic fill across UV seams inside the charts, mx_uv_fill_harmonic;
+ * gutter dilation) of every layer. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Fills unreached texels, writes the output folder (staged, then moved into place) when
  * o->out_dir is set. Fails without writing anything once the run is cancelled. */

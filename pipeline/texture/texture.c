@@ -25,7 +25,7 @@ void mx_texture_opts_default(mx_texture_opts *o) {
     o->depth_weight[1] = 0.7f;
     o->inpaint_weight[0] = 0.8f;
     o->inpaint_weight[1] = 1.0f;
-    o->frontal_threshold = 0.3f;
+    o->frontal_threshold = MX_FRONTAL_THRESHOLD_DEFAULT;
     o->normal_source = MX_NORMAL_FROM_DEPTH;
     o->coverage_stop = 0.995f;
     o->up = MX_UP_Y;
@@ -54,13 +54,14 @@ static int grid_stage(mx_job *j, mx_status *st) {
     }
     for (int i = 0; i < 2; i++) {
         snprintf(v[i].prompt, sizeof v[i].prompt, "%s %s", o->grid_word, o->prompt);
-        if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], planes, NULL, NULL, W, i * S, st))
-            goto done;
+        mx_view_planes vp = {planes, NULL, NULL, NULL, W, i * S};
+        if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, NULL, st)) goto done;
     }
     prompts[0] = v[0].prompt;
     mx_job_set_phase(j, "grid");
     mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->grid_depth_weight);
-    mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->grid_depth_weight, 0.0f, NULL, 0.0f, 0, "grid"};
+    mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->grid_depth_weight, 0.0f, NULL, NULL, NULL, NULL, 0.0f, 0,
+                      "grid"};
     if (mx_job_generate(j, &b, image, st)) goto done;
     for (int i = 0; i < 2; i++) {
         if (mx_job_backproject(j, &v[i], image, W, i * S, st)) goto done;
@@ -89,22 +90,51 @@ static int first_group(const mx_view_plan *plan, int max_batch, int *cand) {
     return n;
 }
 
-/* One batch of later views: depth + inpainting control, then backprojection. */
+/* Buffers of one batch of n views at model size S. */
+typedef struct batch_buffers {
+    float *depth, *inpaint, *init, *paint, *image, *wd, *wi;
+    const char **prompts;
+} batch_buffers;
+
+static void batch_free(batch_buffers *bb) {
+    free(bb->depth);
+    free(bb->wd);
+    free(bb->prompts);
+}
+
+static int batch_alloc(batch_buffers *bb, int n, int S, mx_status *st) {
+    size_t per = (size_t)3 * S * S, one = (size_t)S * S;
+    bb->depth = malloc(sizeof(float) * (4 * per + one) * n);
+    bb->wd = malloc(sizeof(float) * 2 * n);
+    bb->prompts = calloc((size_t)n, sizeof *bb->prompts);
+    if (!bb->depth || !bb->wd || !bb->prompts) {
+        batch_free(bb);
+        return mx_fail(st, MX_ENOMEM, "views: out of memory");
+    }
+    bb->inpaint = bb->depth + per * n;
+    bb->init = bb->inpaint + per * n;
+    bb->image = bb->init + per * n;
+    bb->paint = bb->image + per * n;
+    bb->wi = bb->wd + n;
+    return 0;
+}
+
+/* One batch of later views: the inpaint pipeline with depth + inpainting control (each view
+ * its own weights, by its order k + i among the later views), then backprojection. */
 static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int batch_id, mx_status *st) {
     const mx_texture_opts *o = j->o;
     int S = o->image_size, rc = -1;
     size_t per = (size_t)3 * S * S;
-    float wd = lerp_schedule(o->depth_weight, k, n_later), wi = lerp_schedule(o->inpaint_weight, k, n_later);
+    batch_buffers bb;
     mx_job_view *v = calloc((size_t)n, sizeof *v);
-    float *depth = malloc(sizeof(float) * per * n), *inpaint = malloc(sizeof(float) * per * n);
-    float *image = malloc(sizeof(float) * per * n);
-    const char **prompts = calloc((size_t)n, sizeof *prompts);
     mx_image *current = calloc((size_t)j->nlayers, sizeof *current);
     int have_current = 0;
-    if (!v || !depth || !inpaint || !image || !prompts || !current) {
+    memset(&bb, 0, sizeof bb);
+    if (!v || !current) {
         mx_fail(st, MX_ENOMEM, "views: out of memory");
         goto done;
     }
+    if (batch_alloc(&bb, n, S, st)) goto done;
     /* the views of a batch all see T as it is before the batch */
     if (mx_job_current_textures(j, current, st)) goto done;
     have_current = 1;
@@ -114,19 +144,21 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     for (int i = 0; i < n; i++) {
         v[i].cam = j->vc.cams[cand[i]];
         snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->prompt);
-        prompts[i] = v[i].prompt;
-        if (mx_job_view_prepare(j, &v[i], st) ||
-            mx_job_view_controls(j, &v[i], depth + i * per, inpaint + i * per, current, S, 0, st))
-            goto done;
+        bb.prompts[i] = v[i].prompt;
+        bb.wd[i] = lerp_schedule(o->depth_weight, k + i, n_later);
+        bb.wi[i] = lerp_schedule(o->inpaint_weight, k + i, n_later);
+        mx_view_planes vp = {bb.depth + i * per, bb.inpaint + i * per, bb.init + i * per, bb.paint + i * per / 3, S, 0};
+        if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, current, st)) goto done;
         mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->views,
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
                         (long long)v[i].untextured_pixels);
     }
-    mx_gen_batch b = {n, S, S, prompts, depth, inpaint, wd, wi, NULL, 0.0f, (uint64_t)(k + 1), stage};
-    if (mx_job_generate(j, &b, image, st)) goto done;
+    mx_gen_batch b = {n, S, S, bb.prompts, bb.depth, bb.inpaint, bb.wd[0], bb.wi[0], bb.wd, bb.wi, bb.init,
+                      bb.paint, 1.0f, (uint64_t)(k + 1), stage};
+    if (mx_job_generate(j, &b, bb.image, st)) goto done;
     for (int i = 0; i < n; i++) {
-        if (mx_job_backproject(j, &v[i], image + i * per, S, 0, st)) goto done;
-        mx_job_report_view(j, &v[i], "inpaint", batch_id, wd, wi);
+        if (mx_job_backproject(j, &v[i], bb.image + i * per, S, 0, st)) goto done;
+        mx_job_report_view(j, &v[i], "inpaint", batch_id, bb.wd[i], bb.wi[i]);
     }
     rc = 0;
 done:
@@ -134,10 +166,7 @@ done:
     for (int l = 0; have_current && l < j->nlayers; l++) mx_image_free(&current[l]);
     free(current);
     free(v);
-    free(depth);
-    free(inpaint);
-    free(image);
-    free(prompts);
+    batch_free(&bb);
     return rc;
 }
 

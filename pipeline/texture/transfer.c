@@ -57,8 +57,18 @@ static int source_place(mx_job *j, source *s, mx_status *st) {
 
 /* One view: the destination's render and mask (mx_job_view_prepare), the source's textured
  * render, backprojected where both are seen. */
+/* The render through the model image, as every generated image of the texture job: cropped
+ * to the destination's object, resized to image_size, pasted back bilinearly. */
+static int through_model_image(const mx_job *j, const mx_job_view *v, mx_image *img, mx_status *st) {
+    mx_image small = {0};
+    if (mx_crop_resize(img, v->crop, j->o->image_size, &small, st)) return -1;
+    memset(img->data, 0, (size_t)img->w * img->h * (size_t)img->c * sizeof *img->data);
+    mx_crop_paste(&small, v->crop, img);
+    mx_image_free(&small);
+    return 0;
+}
+
 static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, mx_status *st) {
-    const float black[3] = {0, 0, 0};
     mx_job_view v;
     memset(&v, 0, sizeof v);
     v.cam = *cam;
@@ -66,10 +76,11 @@ static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, 
     mx_image img = {0};
     int rc = mx_job_view_prepare(j, &v, st) ||
              mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->ctx->pool, &s->gb, st) ||
-             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, black, j->ctx->pool, &img, st);
+             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->background, j->ctx->pool, &img, st) ||
+             (j->o->through_model_image && through_model_image(j, &v, &img, st));
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) v.vb.mask[i] &= s->gb.face[i] >= 0;
-        rc = mx_backproject(&j->bake, &v.vb.gb, &j->mesh, &img, v.vb.mask, 0, j->ctx->pool, st);
+        rc = mx_backproject(&j->bake, &v.vb.gb, &j->mesh, &img, v.vb.mask, j->write_flags, j->ctx->pool, st);
     }
     if (!rc) {
         j->views_done++;

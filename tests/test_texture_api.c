@@ -205,5 +205,5 @@ int main(void) {
     char cmd[1200];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmp);
     if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmp);
-    return mx_test_finish("test_tex_api");
+    return mx_test_finish("test_texture_api");
 }
