@@ -11,6 +11,7 @@
 
 #include "../../pipeline/geom/backproject.h"
 #include "../../pipeline/geom/camera.h"
+#include "../../pipeline/geom/masks.h"
 #include "../../pipeline/geom/uvatlas.h"
 #include "../../pipeline/geom/uvfill.h"
 #include "../../pipeline/geom/views.h"
@@ -134,7 +135,8 @@ static void bake_view(const mx_mesh *m, const float *pos, const mx_camera *cam, 
 static void plan_views(const mx_mesh *m, const float *pos, const mx_camera *cams, int nlayers) {
     mx_status st;
     mx_view_cache vc;
-    if (mx_view_cache_build(&vc, m, pos, cams, NCAND, VIEW, TEX, TEX, nlayers, 0.3f, NULL, &st)) return;
+    if (mx_view_cache_build(&vc, m, pos, cams, NCAND, VIEW, TEX, TEX, nlayers, MX_NORMAL_GEOMETRIC, 0.3f, 0, NULL, &st))
+        return;
     uint8_t *known = calloc((size_t)nlayers * TEX * TEX, 1);
     mx_view_plan plan;
     if (known && !mx_view_plan_make(&vc, known, 4, 0.99, 1, &plan, &st)) mx_view_plan_free(&plan);
