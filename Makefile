@@ -35,11 +35,15 @@ AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
 AVX512BF16_FLAGS = $(AVX512_FLAGS) -mavx512bf16
 
-# x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones.
-ifneq ($(filter x86_64 i686 i386,$(shell uname -m)),)
+# x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones
+# (`make ARCH=aarch64 BUILD=build-noarch` builds that way here, to check it).
+ARCH ?= $(shell uname -m)
+ifneq ($(filter x86_64 i686 i386,$(ARCH)),)
 SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c)
+GEOM_SIMD_SRC = $(wildcard pipeline/geom/*_avx2.c)
 else
 SIMD_SRC    =
+GEOM_SIMD_SRC =
 CFLAGS     += -DMX_NO_X86_SIMD
 endif
 
@@ -47,7 +51,7 @@ endif
 CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
-GEOM_SRC    = $(wildcard pipeline/geom/*.c)
+GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
 TEX_SRC     = $(wildcard pipeline/texture/*.c)
 IO_SRC      = $(wildcard pipeline/io/*.cpp)
 TOOL_SRC    = $(wildcard tools/cmd_*.c tools/cli_*.c)
@@ -111,18 +115,28 @@ $(BUILD)/%.o: %.cpp
 	@mkdir -p $(dir $@)
 	$(CXX) $(CXXFLAGS) -c -o $@ $<
 
-# ---- tests: tests/test_<module>_<name>.c, linked with that module and those below it ----
+# ---- tests: tests/test_<folder>_<name>.c tests that folder (runtime, ops, weights, nn, geom, io,
+# texture, tools) and links with its module and those below it ----
 TEST_SRC   = $(wildcard tests/test_*.c)
 TEST_BINS  = $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
 TEST_UTIL  = $(call obj,$(wildcard tests/util_*.c))
+TEST_ALL_LIBS = $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 
-$(BUILD)/tests/test_core_%: $(BUILD)/tests/test_core_%.o $(TEST_UTIL) $(LIB_CORE)
+$(BUILD)/tests/test_runtime_%: $(BUILD)/tests/test_runtime_%.o $(TEST_UTIL) $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+$(BUILD)/tests/test_ops_%: $(BUILD)/tests/test_ops_%.o $(TEST_UTIL) $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+$(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_nn_%: $(BUILD)/tests/test_nn_%.o $(TEST_UTIL) $(LIB_NN) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
-$(BUILD)/tests/test_tex_%: $(BUILD)/tests/test_tex_%.o $(TEST_UTIL) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+$(BUILD)/tests/test_io_%: $(BUILD)/tests/test_io_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/tests/test_texture_%: $(BUILD)/tests/test_texture_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/tests/test_tools_%: $(BUILD)/tests/test_tools_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 
 # Tiny random networks of the SD1.5 family for the pipeline tests and `make demo`.

@@ -8,51 +8,6 @@
 
 #include "cpu/kernels.h"
 
-static uint32_t f32_bits(float f) {
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return u;
-}
-
-static float bits_f32(uint32_t u) {
-    float f;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
-
-float mx_half_to_float(uint16_t h) {
-    uint32_t sign = (uint32_t)(h & 0x8000) << 16, e = (h >> 10) & 0x1f, m = h & 0x3ff;
-    if (e == 0) {
-        float v = (float)m * (1.0f / 16777216.0f); /* subnormal: m · 2^-24 */
-        return bits_f32(f32_bits(v) | sign);
-    }
-    if (e == 31) return bits_f32(sign | 0x7f800000u | (m ? 0x400000u | (m << 13) : 0)); /* NaN comes out quiet */
-    return bits_f32(sign | ((e + 112) << 23) | (m << 13));
-}
-
-uint16_t mx_float_to_half(float f) {
-    uint32_t x = f32_bits(f), sign = (x >> 16) & 0x8000;
-    x &= 0x7fffffffu;
-    if (x > 0x7f800000u) return (uint16_t)(sign | 0x7e00 | ((x >> 13) & 0x3ff)); /* NaN stays NaN */
-    if (x >= 0x477ff000u) return (uint16_t)(sign | 0x7c00); /* >= 65520 rounds to infinity */
-    if (x < 0x38800000u) {
-        /* half subnormal: adding 0.5 puts the 2^-24 grid in the low mantissa bits; the FPU rounds */
-        float t = bits_f32(x) + 0.5f;
-        return (uint16_t)(sign | (f32_bits(t) - 0x3f000000u));
-    }
-    uint32_t odd = (x >> 13) & 1;
-    x += 0xc8000fffu + odd; /* rebias exponent (127 -> 15) and round to nearest even */
-    return (uint16_t)(sign | (x >> 13));
-}
-
-float mx_bf16_to_float(uint16_t h) { return bits_f32((uint32_t)h << 16); }
-
-uint16_t mx_float_to_bf16(float f) {
-    uint32_t x = f32_bits(f);
-    if ((x & 0x7fffffffu) > 0x7f800000u) return (uint16_t)((x >> 16) | 0x40); /* quiet NaN */
-    return (uint16_t)((x + 0x7fffu + ((x >> 16) & 1)) >> 16);
-}
-
 float mx_w_get(mx_wptr w, size_t i) {
     switch (w.dtype) {
     case MX_F16: return mx_half_to_float(((const uint16_t *)w.data)[i]);
@@ -303,7 +258,10 @@ int mx_ctx_create_on(mx_ctx *c, mx_backend_kind kind, int nthreads, mx_isa isa, 
     if (mx_backend_create(&c->be, kind, isa, st)) return -1;
     c->k = c->be->k;
     c->pool = mx_pool_create(nthreads, st);
-    if (!c->pool) return -1;
+    if (!c->pool) {
+        mx_ctx_destroy(c); /* the backend is already made */
+        return -1;
+    }
     c->scratch = malloc(sizeof *c->scratch);
     if (!c->scratch) {
         mx_ctx_destroy(c);

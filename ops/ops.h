@@ -32,6 +32,7 @@
 
 #include "../runtime/arena.h"
 #include "../runtime/backend.h"
+#include "../runtime/half.h"
 #include "../runtime/tensor.h"
 #include "../runtime/threadpool.h"
 
@@ -197,11 +198,7 @@ void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n);
 void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n);
 void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n);
 void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n);
-/* Scalar conversions, usable anywhere. */
-float mx_half_to_float(uint16_t h);
-uint16_t mx_float_to_half(float f);
-float mx_bf16_to_float(uint16_t h);
-uint16_t mx_float_to_bf16(float f);
+/* Scalar conversions, usable anywhere: runtime/half.h (included above). */
 
 /* ---- the edges: backend memory and host copies ---- */
 

@@ -33,35 +33,6 @@ int64_t mx_shape_numel(int ndim, const int64_t *shape) {
     return n;
 }
 
-int mx_tensor_init(mx_tensor *t, mx_dtype dt, int ndim, const int64_t *shape, void *data,
-                   const char *what, mx_status *st) {
-    if (ndim < 1 || ndim > MX_MAX_DIMS)
-        return mx_fail(st, MX_EINPUT, "%s: %d dimensions (1..%d supported)", what, ndim, MX_MAX_DIMS);
-    if (mx_dtype_size(dt) == 0) return mx_fail(st, MX_EINPUT, "%s: unknown dtype %d", what, (int)dt);
-    int64_t n = mx_shape_numel(ndim, shape);
-    if (n < 0 || n > INT64_MAX / 8) {
-        char buf[128];
-        return mx_fail(st, MX_EINPUT, "%s: bad shape %s", what, mx_shape_str(ndim, shape, buf, sizeof buf));
-    }
-    memset(t, 0, sizeof *t);
-    t->dtype = dt;
-    t->ndim = ndim;
-    memcpy(t->shape, shape, (size_t)ndim * sizeof *shape);
-    t->data = data;
-    return 0;
-}
-
-int64_t mx_tensor_numel(const mx_tensor *t) { return mx_shape_numel(t->ndim, t->shape); }
-
-size_t mx_tensor_nbytes(const mx_tensor *t) { return (size_t)mx_tensor_numel(t) * mx_dtype_size(t->dtype); }
-
-int mx_tensor_same_shape(const mx_tensor *a, const mx_tensor *b) {
-    if (a->ndim != b->ndim) return 0;
-    for (int i = 0; i < a->ndim; i++)
-        if (a->shape[i] != b->shape[i]) return 0;
-    return 1;
-}
-
 const char *mx_shape_str(int ndim, const int64_t *shape, char *buf, size_t cap) {
     size_t off = 0;
     off += (size_t)snprintf(buf + off, cap - off, "[");

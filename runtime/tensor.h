@@ -1,6 +1,6 @@
-/* Tensors: a dtype, up to 5 dimensions, contiguous row-major (C order) data.
- * A tensor does not own its data: it points into an arena, an mmapped weight file
- * or a caller's buffer. */
+/* Element types and shapes (up to 5 dimensions, row-major) of the tensors of weight files,
+ * safetensors files and the ops. Activations are `float *` handles (ops/ops.h); weights are
+ * mx_wptr (data + dtype). */
 #ifndef MX_TENSOR_H
 #define MX_TENSOR_H
 
@@ -13,24 +13,8 @@
 
 typedef enum { MX_F32 = 0, MX_F16 = 1, MX_BF16 = 2, MX_I32 = 3 } mx_dtype;
 
-typedef struct mx_tensor {
-    mx_dtype dtype;
-    int ndim;
-    int64_t shape[MX_MAX_DIMS];
-    void *data;
-} mx_tensor;
-
 size_t mx_dtype_size(mx_dtype dt);
 const char *mx_dtype_name(mx_dtype dt);
-
-/* Builds a tensor header; fails (bad shape: ndim outside 1..5, a negative dim,
- * or an element count that overflows) with a message naming `what`. */
-int mx_tensor_init(mx_tensor *t, mx_dtype dt, int ndim, const int64_t *shape, void *data,
-                   const char *what, mx_status *st);
-int64_t mx_tensor_numel(const mx_tensor *t);
-size_t mx_tensor_nbytes(const mx_tensor *t);
-/* 1 when both have the same ndim and dims. */
-int mx_tensor_same_shape(const mx_tensor *a, const mx_tensor *b);
 /* Formats "[2, 4, 64, 64]" into buf. */
 const char *mx_shape_str(int ndim, const int64_t *shape, char *buf, size_t cap);
 

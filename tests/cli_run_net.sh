@@ -1,7 +1,7 @@
 #!/bin/sh
 # matex run-net / gen-weights: usage errors (exit 2), bad input (exit 1, one message naming the
 # file and tensor, no output file), a clip run, gen-weights -> convert -> run-net round trip.
-# Numerical parity of run-net is checked by tests/test_nn_run_net.c.
+# Numerical parity of run-net is checked by tests/test_tools_run_net.c.
 NAME=run_net
 . "$(dirname "$0")/lib_cli.sh"
 G=$(data golden)

@@ -15,6 +15,8 @@ check "missing prompt exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulate
 check "unknown option exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --frob 1)" = 2 ]
 check "bad number exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps ten)" = 2 ]
 check "--device cuda exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --device cuda)" = 2 ]
+check "--device cuda names the backend it lacks" grep -q "built without that backend" "$T/err"
+check "--device tpu exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --device tpu)" = 2 ]
 check "steps out of range exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps 0)" = 2 ]
 check "bad --precision exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --precision fp16)" = 2 ]
 check "missing weights exits 1" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$T/none.mxw" -o "$T/a")" = 1 ]

@@ -106,7 +106,7 @@ static inline int golden_bf16_ctx(mx_ctx *c, const char *test) {
  * up to 1.33e-2, decode up to 2.07e-2) do not; they are held to GOLDEN_BF16_DEEP, and an encode
  * followed by a decode (two networks, the decoder amplifying the encoder's error; measured up
  * to 5.6e-2) to GOLDEN_BF16_CHAIN. These catch a broken bf16 path (errors of order 1), while
- * the kernels themselves are held to fp32-tight bounds by test_core_ops. */
+ * the kernels themselves are held to fp32-tight bounds by test_ops_kernels. */
 #define GOLDEN_BF16 1e-2
 #define GOLDEN_BF16_DEEP 2.5e-2
 #define GOLDEN_BF16_CHAIN 7.5e-2

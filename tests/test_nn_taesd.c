@@ -1,4 +1,4 @@
-/* AutoencoderTiny (TAESD) against the golden vectors of ../shared/golden/taesd (the public TAESD
+/* AutoencoderTiny (TAESD) against the golden vectors of golden/taesd (MATEX_TESTDATA; the public TAESD
  * architecture, random weights): encode(image).latents and decode(latents).sample, fp32 weights
  * (rel. L2 <= 1e-4) and fp16 weights widened (<= 1e-2 against the fp32 outputs: the weights
  * themselves differ). taesd_tiny (no outputs shipped): batch independence and the config checks. */

@@ -7,7 +7,8 @@
  * - default_s, peak_rss_mb: a default `matex texture` run (10 steps, 6 views, 1024², its default
  *   precision), timed as a child process whose peak RSS wait4 reports. About 10-15 minutes on
  *   2 cores, so only with BENCH_E2E=1; otherwise "na".
- * - fast_s: the same with `--fast` when this matex has it (and BENCH_E2E=1), else "na".
+ * - fast_s: the same with `--fast` when this matex has it, the weight file has its networks (LCM-LoRA,
+ *   TAESD: not yet in the random model set) and BENCH_E2E=1, else "na".
  * - isa: the kernel level a default `matex texture` uses.
  * Usage: bench_e2e [--threads N] (MATEX: the matex binary, default ./matex). */
 #include <stdio.h>
@@ -106,12 +107,12 @@ static int run_texture(const char *matex, const char *weights, int threads, int 
     }
     int status = 0;
     struct rusage ru;
-    if (pid < 0 || wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status)) return -1;
+    int ok = pid > 0 && wait4(pid, &status, 0, &ru) == pid && WIFEXITED(status) && !WEXITSTATUS(status);
     *secs = mx_now() - t0;
-    *rss_mb = ru.ru_maxrss / 1024.0;
+    *rss_mb = ok ? ru.ru_maxrss / 1024.0 : 0;
     char cmd[128];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", out);
-    return system(cmd) == 0 ? 0 : -1;
+    return system(cmd) == 0 && ok ? 0 : -1;
 }
 
 static void fmt(char *buf, size_t cap, double v, const char *f) {
@@ -150,9 +151,11 @@ int main(int argc, char **argv) {
         fprintf(stderr, "bench_e2e: the default matex texture run failed\n");
         return 1;
     }
+    /* --fast needs a file converted with --lcm-lora and --taesd, which the random model set lacks
+     * so far: then fast_s stays na */
     if (run_e2e && matex_has_fast(matex) && run_texture(matex, weights, threads, 1, &fast_s, &fast_rss)) {
-        fprintf(stderr, "bench_e2e: the matex texture --fast run failed\n");
-        return 1;
+        fprintf(stderr, "bench_e2e: matex texture --fast did not run on %s (no LCM-LoRA/TAESD in it?)\n", weights);
+        fast_s = fast_rss = 0;
     }
     if (!run_e2e) printf("bench_e2e: the matex texture runs are opt-in (BENCH_E2E=1, ~10-15 min on 2 cores)\n");
     char d[32], f[32], u0[32], u1[32], r[32];

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "../ops/ops.h"
 #include "../runtime/log.h"
@@ -67,20 +68,32 @@ typedef struct {
     const mx_ctx *ctx;
 } side;
 
-/* Median seconds of `repeats` runs of each side after one warm-up run each; the sides run in
- * turn, so a change in machine load hits all of them alike. */
-static void time_sides(const side *sides, int n, bench_args *a, int repeats, double *med) {
-    double t[4][64];
+static double process_cpu_seconds(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Median wall seconds (med) and process CPU seconds (cpu, may be NULL) of `repeats` runs of each
+ * side after one warm-up run each; the sides run in turn, so a change in machine load hits all
+ * of them alike. On a shared machine CPU time is the steadier measure for matex (its idle
+ * workers sleep), not for OpenBLAS (its idle workers spin). */
+static void time_sides(const side *sides, int n, bench_args *a, int repeats, double *med, double *cpu) {
+    double t[4][64], c[4][64];
     if (repeats > 64) repeats = 64;
     for (int i = 0; i < n; i++) a->ctx = sides[i].ctx, sides[i].fn(a);
     for (int r = 0; r < repeats; r++)
         for (int i = 0; i < n; i++) {
             a->ctx = sides[i].ctx;
-            double s = mx_now();
+            double s = mx_now(), sc = process_cpu_seconds();
             sides[i].fn(a);
             t[i][r] = mx_now() - s;
+            c[i][r] = process_cpu_seconds() - sc;
         }
-    for (int i = 0; i < n; i++) med[i] = median(t[i], repeats);
+    for (int i = 0; i < n; i++) {
+        med[i] = median(t[i], repeats);
+        if (cpu) cpu[i] = median(c[i], repeats);
+    }
 }
 
 static void run_matex_gemm(void *arg) {
@@ -126,25 +139,26 @@ static void run_attention(void *arg) {
     mx_attention(a->ctx, a->y, a->x, a->w, a->col, 1, 8, 4096, 4096, 40, 320, 320, 320, 0, 0.15811388f);
 }
 
-/* One line of GFLOP/s: matex fp32, OpenBLAS, their ratio, and matex bf16 with its ratio to
- * matex fp32 ("-" without bf16). Returns the fp32/OpenBLAS ratio; *bf16_ratio the bf16/fp32 one. */
+/* One line of GFLOP/s (wall): matex fp32, OpenBLAS, their ratio, and matex bf16 with its speed-up
+ * over matex fp32 in wall and in CPU time ("-" without bf16). Returns the fp32/OpenBLAS ratio;
+ * *bf16_ratio the bf16 speed-up in CPU time. */
 static double report_line(const char *name, double flop, bench_args *a, bench_fn matex, bench_fn blas, int repeats,
                           double *bf16_ratio) {
     side sides[3] = {{matex, a->fp32}, {blas, NULL}, {matex, a->bf16}};
-    double t[3];
-    time_sides(sides, a->bf16 ? 3 : 2, a, repeats, t);
+    double t[3], cpu[3];
+    time_sides(sides, a->bf16 ? 3 : 2, a, repeats, t, cpu);
     double gm = flop / t[0] * 1e-9, gb = flop / t[1] * 1e-9;
     printf("%-28s %10.1f %10.1f %7.3f", name, gm, gb, gm / gb);
     if (a->bf16)
-        printf(" %10.1f %7.3f   GFLOP/s\n", flop / t[2] * 1e-9, t[0] / t[2]);
+        printf(" %10.1f %7.3f %7.3f   GFLOP/s\n", flop / t[2] * 1e-9, t[0] / t[2], cpu[0] / cpu[2]);
     else
-        printf(" %10s %7s   GFLOP/s\n", "-", "-");
-    *bf16_ratio = a->bf16 ? t[0] / t[2] : 0;
+        printf(" %10s %7s %7s   GFLOP/s\n", "-", "-", "-");
+    *bf16_ratio = a->bf16 ? cpu[0] / cpu[2] : 0;
     return gm / gb;
 }
 
 static void print_header(const char *what) {
-    printf("%-28s %10s %10s %7s %10s %7s\n", what, "fp32", "openblas", "ratio", "bf16", "bf/fp");
+    printf("%-28s %10s %10s %7s %10s %7s %7s\n", what, "fp32", "openblas", "ratio", "bf16", "bf/fp", "(cpu)");
 }
 
 /* Worst matex fp32 / OpenBLAS ratio over the shapes; *bf16_min the worst bf16 / fp32 ratio. */
@@ -195,16 +209,20 @@ static void bench_attention(bench_args *base, int repeats, double ms[2]) {
     bench_args a = *base;
     a.x = random_floats(n, 8), a.w = random_floats(n, 9), a.y = random_floats(n, 10), a.col = random_floats(n, 11);
     side sides[2] = {{run_attention, a.fp32}, {run_attention, a.bf16}};
-    time_sides(sides, a.bf16 ? 2 : 1, &a, repeats, ms);
+    double cpu[2];
+    time_sides(sides, a.bf16 ? 2 : 1, &a, repeats, ms, cpu);
     ms[0] *= 1e3;
     ms[1] = a.bf16 ? ms[1] * 1e3 : 0;
-    /* 4·T²·D multiply-adds per head: q·k and p·v */
-    double gflop = 4.0 * 4096 * 4096 * 40 * 8 * 1e-9;
-    printf("attention 4096x4096 tokens, 8 heads x 40: fp32 %.1f ms (%.0f GFLOP/s)", ms[0], gflop / ms[0] * 1e3);
+    /* 4·T²·D multiply-adds per head: q·k and p·v; CPU time per thread gives the rate on cores of
+     * its own */
+    double gflop = 4.0 * 4096 * 4096 * 40 * 8 * 1e-9, nth = mx_pool_threads(a.fp32->pool);
+    printf("attention 4096x4096 tokens, 8 heads x 40: fp32 %.1f ms wall, %.0f GFLOP/s over CPU time", ms[0],
+           gflop / (cpu[0] / nth));
     if (a.bf16)
-        printf(", bf16 %.1f ms (%.0f GFLOP/s), bf16/fp32 speed-up %.2fx\n", ms[1], gflop / ms[1] * 1e3, ms[0] / ms[1]);
+        printf("; bf16 %.1f ms wall, %.0f GFLOP/s over CPU time; bf16/fp32 speed-up %.2fx wall, %.2fx CPU\n", ms[1],
+               gflop / (cpu[1] / nth), ms[0] / ms[1], cpu[0] / cpu[1]);
     else
-        printf(", bf16 not available on this CPU\n");
+        printf("; bf16 not available on this CPU\n");
     free(a.x), free(a.w), free(a.y), free(a.col);
 }
 

@@ -1,6 +1,6 @@
 /* bench_rss: peak memory (RSS) of the stages of an SD1.5-size `matex texture`, each stage in a child
  * process of its own (so each peak is that stage's), on the fp16 golden-v1 weight file that
- * bench_nets generates (/tmp/matex_bench_sd15_f16.mxw; run build/tools/bench_nets once first).
+ * the benchmarks share (bench_sd15.h: cached outside the repository, made on first use).
  * Per stage: VmHWM (peak RSS), RssFile (weight pages mapped in) and VmHWM - RssFile (about the
  * peak of anonymous memory: arenas, buffers), against the weight file's size.
  * Stages: the VAE decode of one 512x512 view and of the 1024x512 front+back grid, untiled
@@ -20,8 +20,8 @@
 #include "../pipeline/nn/vae_tiled.h"
 #include "../weights/weights.h"
 #include "../runtime/log.h"
+#include "bench_sd15.h"
 
-#define DEFAULT_WEIGHTS "/tmp/matex_bench_sd15_f16.mxw"
 
 typedef struct bench_cfg {
     const char *weights;
@@ -140,7 +140,8 @@ static int run_stage(const bench_cfg *o, const stage *sg) {
 }
 
 int main(int argc, char **argv) {
-    bench_cfg o = {DEFAULT_WEIGHTS, 0, 48, 1, 0, 0, 0};
+    char cached[1100];
+    bench_cfg o = {NULL, 0, 48, 1, 0, 0, 0};
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
@@ -155,9 +156,10 @@ int main(int argc, char **argv) {
             return 2;
         }
     }
+    if (!o.weights && bench_sd15_weights(cached, sizeof cached) == 0) o.weights = cached;
     struct stat sb;
-    if (stat(o.weights, &sb)) {
-        fprintf(stderr, "bench_rss: %s missing: run build/tools/bench_nets once to generate it\n", o.weights);
+    if (!o.weights || stat(o.weights, &sb)) {
+        fprintf(stderr, "bench_rss: the SD1.5 weight file %s is missing and could not be made\n", o.weights ? o.weights : cached);
         return 1;
     }
     mx_log_set_level(MX_LOG_WARN);

@@ -6,7 +6,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "halfbits.h"
+#include "../runtime/half.h"
 
 #define GOLDEN 0x9E3779B97F4A7C15ull
 
@@ -73,7 +73,7 @@ void mx_golden_checksum_add(mx_golden_checksum *c, const float *x, size_t n) {
     for (size_t k = 0; k < n; k++, c->count++) {
         uint32_t bits;
         memcpy(&bits, &x[k], 4);
-        uint16_t h = mx_hb_f32_to_f16(x[k]);
+        uint16_t h = mx_float_to_half(x[k]);
         if (c->count < 4) {
             c->first4[c->count] = bits;
             c->f16_first4[c->count] = h;

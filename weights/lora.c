@@ -55,6 +55,7 @@ static char *module_key(const char *stem, int processor_style) {
     char *k = malloc(strlen(net) + strlen(m) + 8);
     if (!k) return NULL;
     sprintf(k, "%s%s", net, m);
+    remove_all(k, "base_model.model."); /* a PEFT model's own wrapping inside the network prefix */
     if (processor_style) {
         remove_all(k, ".processor");
         size_t n = strlen(k);

@@ -2,7 +2,8 @@
  * Key styles read (safetensors, F32/F16/BF16):
  *   diffusers / PEFT: "unet.<module>.lora_A.weight" (down) / ".lora_B.weight" (up),
  *                     "<module>.lora.down.weight" / ".lora.up.weight", attention-processor
- *                     style "<...>.processor.to_q_lora.down.weight", optional "<module>.alpha";
+ *                     style "<...>.processor.to_q_lora.down.weight", optional "<module>.alpha",
+ *                     PEFT's "base_model.model." wrapping dropped wherever it sits;
  *                     a module without "unet." / "text_encoder." is a text-encoder module when
  *                     it starts with "text_model.", else a UNet module;
  *   kohya:            "lora_unet_<module with _>.lora_down.weight" / ".lora_up.weight",

@@ -16,7 +16,7 @@
 #include "../runtime/atomic_file.h"
 #include "../runtime/buf.h"
 #include "../runtime/json.h"
-#include "halfbits.h"
+#include "../runtime/half.h"
 
 #define ST_MAX_HEADER ((uint64_t)100 << 20) /* the reference implementation's limit */
 #define ST_MAX_DIMS 8
@@ -274,13 +274,13 @@ float *mx_st_to_f32(const mx_safetensors *f, const mx_st_tensor *t, mx_status *s
         case MX_ST_F16: {
             uint16_t h;
             memcpy(&h, p, 2);
-            out[i] = mx_hb_f16_to_f32(h);
+            out[i] = mx_half_to_float(h);
             break;
         }
         case MX_ST_BF16: {
             uint16_t h;
             memcpy(&h, p, 2);
-            out[i] = mx_hb_bf16_to_f32(h);
+            out[i] = mx_bf16_to_float(h);
             break;
         }
         case MX_ST_I64: {

@@ -10,7 +10,7 @@
 #include <unistd.h>
 
 #include "../runtime/atomic_file.h"
-#include "halfbits.h"
+#include "../runtime/half.h"
 #include "weights.h"
 
 #define WF_MAGIC "MATEXWF"
@@ -473,8 +473,8 @@ static float load_as_f32(const uint8_t *p, mx_dtype src) {
     uint16_t h;
     float f;
     switch (src) {
-    case MX_F16: memcpy(&h, p, 2); return mx_hb_f16_to_f32(h);
-    case MX_BF16: memcpy(&h, p, 2); return mx_hb_bf16_to_f32(h);
+    case MX_F16: memcpy(&h, p, 2); return mx_half_to_float(h);
+    case MX_BF16: memcpy(&h, p, 2); return mx_bf16_to_float(h);
     default: memcpy(&f, p, 4); return f;
     }
 }
@@ -490,8 +490,8 @@ static void convert_chunk(const wf_entry *e, const uint8_t *src, size_t count, u
         float f = load_as_f32(src + i * ss, e->src_dtype);
         uint16_t h;
         switch (e->dtype) {
-        case MX_F16: h = mx_hb_f32_to_f16(f); memcpy(out + 2 * i, &h, 2); break;
-        case MX_BF16: h = mx_hb_f32_to_bf16(f); memcpy(out + 2 * i, &h, 2); break;
+        case MX_F16: h = mx_float_to_half(f); memcpy(out + 2 * i, &h, 2); break;
+        case MX_BF16: h = mx_float_to_bf16(f); memcpy(out + 2 * i, &h, 2); break;
         default: memcpy(out + 4 * i, &f, 4); break;
         }
     }

@@ -134,6 +134,13 @@ static float *vertex_normals(const mx_mesh *m) {
     return vn;
 }
 
+static void glb_verts_free(glb_verts *g) {
+    free(g->pos);
+    free(g->nrm);
+    free(g->uv);
+    free(g->corner_vert);
+}
+
 static int split_vertices(const mx_mesh *m, glb_verts *g, mx_status *st) {
     size_t nc = (size_t)m->nfaces * 3;
     corner_rec *c = malloc(nc * sizeof *c + 1);
@@ -168,16 +175,10 @@ static int split_vertices(const mx_mesh *m, glb_verts *g, mx_status *st) {
     }
     rc = 0;
 done:
+    if (rc) glb_verts_free(g);
     free(c);
     free(vn);
     return rc;
-}
-
-static void glb_verts_free(glb_verts *g) {
-    free(g->pos);
-    free(g->nrm);
-    free(g->uv);
-    free(g->corner_vert);
 }
 
 typedef struct {

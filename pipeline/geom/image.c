@@ -16,10 +16,3 @@ int mx_image_alloc(mx_image *img, int w, int h, int c, mx_status *st) {
     img->c = c;
     return 0;
 }
-
-void mx_image_free(mx_image *img) {
-    if (!img) return;
-    free(img->data);
-    img->data = NULL;
-    img->w = img->h = img->c = 0;
-}

@@ -4,13 +4,8 @@
 #define MX_IMAGE_H
 
 #include "../../runtime/status.h"
-
-typedef struct mx_image {
-    int w, h, c; /* c = 1, 3 or 4 */
-    float *data; /* [h][w][c] */
-} mx_image;
+#include "mesh_types.h"
 
 int mx_image_alloc(mx_image *img, int w, int h, int c, mx_status *st);
-void mx_image_free(mx_image *img);
 
 #endif

@@ -12,19 +12,6 @@
 #include "gltf.h"
 #include "image.h"
 
-void mx_mesh_free(mx_mesh *m) {
-    if (!m) return;
-    free(m->pos);
-    free(m->faces);
-    free(m->uv);
-    free(m->face_uv);
-    free(m->nrm);
-    free(m->face_nrm);
-    free(m->mats);
-    free(m->face_mat);
-    memset(m, 0, sizeof *m);
-}
-
 static int has_ext(const char *path, const char *ext) {
     const char *dot = strrchr(path, '.');
     if (!dot || strchr(dot, '/')) return 0;

@@ -364,10 +364,15 @@ static void draw_face(const raster_job *j, int32_t slot, int tx0, int ty0, int t
     t.face = slot;
     raster_target o = {j->gb->w, j->gb->face, j->gb->depth, j->gb->depth_unculled};
     int one_pixel = t.x0 == t.x1 && t.y0 == t.y1; /* there the vector setup would dominate */
-    if (j->simd && f->small && !one_pixel)
+#ifndef MX_NO_X86_SIMD /* non-x86 builds have no raster_avx2.c (Makefile): the scalar kernel only */
+    if (j->simd && f->small && !one_pixel) {
         mx_raster_draw_small_avx2(&t, &o);
-    else
-        draw_tri_scalar(&t, &o);
+        return;
+    }
+#else
+    (void)one_pixel;
+#endif
+    draw_tri_scalar(&t, &o);
 }
 
 /* Barycentrics (perspective-correct) of pixel i for its face, in the face's corner order,

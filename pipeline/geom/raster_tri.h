@@ -31,7 +31,8 @@ typedef struct raster_target {
  * box is at most this many sub-pixel units wide and high (64 pixels). */
 #define RASTER_SMALL_EXTENT (1 << 14)
 
-/* Draws a triangle whose snapped box is within RASTER_SMALL_EXTENT (AVX2 + FMA build). */
+/* Draws a triangle whose snapped box is within RASTER_SMALL_EXTENT (AVX2 + FMA build; x86
+ * only: the Makefile leaves raster_avx2.c out of other builds, and raster.c does not call it). */
 void mx_raster_draw_small_avx2(const raster_tri *t, const raster_target *o);
 
 #endif

@@ -1,7 +1,8 @@
 /* The file I/O adapter: the only code that touches third-party file-format libraries
  * (OpenMesh for PLY/OFF/STL, OpenImageIO for PNG/JPEG/TIFF, OpenEXR for float output).
  * Implemented in C++ (pipeline/io, .cpp files) behind this C interface; it depends only on
- * runtime/ (status, log), never on pipeline/geom, so it links after libmx_geom.
+ * runtime/ (status, log) and the types-only header pipeline/geom/mesh_types.h, never on
+ * pipeline/geom's code, so it links after libmx_geom.
  *
  * Most callers want the higher-level entry points instead:
  *   mx_mesh_load / mx_mesh_load_textures (pipeline/geom/mesh.h): any mesh by extension,
@@ -23,8 +24,7 @@ extern "C" {
 #endif
 
 #include "../../runtime/status.h"
-#include "../geom/image.h"
-#include "../geom/mesh.h"
+#include "../geom/mesh_types.h"
 
 /* ---- meshes ---- */
 

@@ -280,18 +280,6 @@ template <class T> T *copy_array(const std::vector<T> &v) {
     return p;
 }
 
-void free_arrays(mx_mesh *m) {
-    free(m->pos);
-    free(m->faces);
-    free(m->uv);
-    free(m->face_uv);
-    free(m->nrm);
-    free(m->face_nrm);
-    free(m->mats);
-    free(m->face_mat);
-    *m = mx_mesh{};
-}
-
 int check_indices(const std::vector<int32_t> &idx, size_t count, bool allow_missing, const char *what,
                   const char *path, mx_status *st) {
     for (size_t i = 0; i < idx.size(); i++) {
@@ -389,6 +377,7 @@ int check_ply_header(const char *path, mx_status *st) {
     head.resize(fread(&head[0], 1, head.size(), f));
     fclose(f);
     size_t pos = 0;
+    bool seen_element = false; // OpenMesh crashes on a property before any element
     for (int line_no = 1;; line_no++) {
         size_t nl = head.find('\n', pos);
         if (nl == std::string::npos)
@@ -400,9 +389,11 @@ int check_ply_header(const char *path, mx_status *st) {
             if (line != "ply") return mx_fail(st, MX_EINPUT, "%s: not a PLY file (first line is not 'ply')", path);
         } else if (line == "end_header") {
             return 0;
-        } else if (!ply_header_line_ok(line)) {
+        } else if (!ply_header_line_ok(line) || (line_no == 2) != (line.compare(0, 7, "format ") == 0) ||
+                   (!seen_element && line.compare(0, 9, "property ") == 0)) {
             return mx_fail(st, MX_EINPUT, "%s: PLY header line %d is malformed", path, line_no);
         }
+        seen_element |= line.compare(0, 8, "element ") == 0;
     }
 }
 
@@ -483,7 +474,7 @@ extern "C" int mx_io_read_mesh(const char *path, mx_mesh *out, mx_status *st) {
         rc = mx_fail(st, MX_EINPUT, "%s: cannot read mesh: %s", path, e.what());
     }
     if (rc) {
-        free_arrays(out);
+        mx_mesh_free(out);
         return -1;
     }
     copy_name(out->source_path, sizeof out->source_path, path);

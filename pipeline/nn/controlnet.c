@@ -6,7 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "blocks.h"
+#include "unet_encoder.h"
 
 /* ControlNetConditioningEmbedding: conv_in, SiLU, pairs of (conv, SiLU, stride-2 conv, SiLU),
  * conv_out (a zero convolution in the original). */

@@ -5,7 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "blocks.h"
+#include "unet_encoder.h"
 
 /* One up level: layers_per_block + 1 resnets over [h | skip] (+ transformers for
  * CrossAttnUpBlock2D), then an Upsample2D unless it is the last level. */
@@ -26,26 +26,6 @@ struct mx_unet {
 };
 
 const mx_unet_config *mx_unet_cfg(const mx_unet *u) { return &u->enc.cfg; }
-
-int mx_unet_num_residuals(const mx_unet_config *cfg) {
-    return 1 + cfg->nlevels * cfg->layers_per_block + (cfg->nlevels - 1);
-}
-
-void mx_unet_residual_shape(const mx_unet_config *cfg, int i, int H, int W, int *C, int *h, int *w) {
-    int k = 0; /* residual 0: conv_in output */
-    *C = cfg->block_out_channels[0];
-    *h = H;
-    *w = W;
-    for (int lv = 0; lv < cfg->nlevels && k < i; lv++) {
-        for (int j = 0; j < cfg->layers_per_block && k < i; j++, k++) *C = cfg->block_out_channels[lv];
-        if (lv < cfg->nlevels - 1 && k < i) {
-            *h /= 2;
-            *w /= 2;
-            k++;
-        }
-    }
-    if (i >= mx_unet_num_residuals(cfg)) *C = cfg->block_out_channels[cfg->nlevels - 1]; /* mid */
-}
 
 static int up_level_load(up_level *lv, mx_binder *b, const mx_unet_config *c, int i, mx_status *st) {
     int n = c->nlevels, L = c->layers_per_block;

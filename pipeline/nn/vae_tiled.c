@@ -130,13 +130,12 @@ int mx_vae_decode_tiled(const mx_ctx *c, const mx_vae *v, const float *latents, 
     int rc = 0;
     if (h <= tile && w <= tile) { /* one tile: untiled, as diffusers; still one item at a time */
         for (int b = 0; !rc && b < B; b++)
-            rc = mx_vae_decode(c, v, a->measuring ? latents : latents + b * lat, 1, h, w,
-                               a->measuring ? image : image + b * img, a, st);
+            rc = mx_vae_decode(c, v, latents + b * lat, 1, h, w, image + b * img, a, st);
         return rc;
     }
     rc = alloc_run(&r);
     for (int b = 0; !rc && b < B; b++)
-        rc = decode_item(&r, a->measuring ? latents : latents + b * lat, a->measuring ? image : image + b * img);
+        rc = decode_item(&r, latents + b * lat, image + b * img);
     mx_arena_reset(a, mark);
     free(r.tiles);
     free(r.host_ramp);
@@ -146,7 +145,7 @@ int mx_vae_decode_tiled(const mx_ctx *c, const mx_vae *v, const float *latents, 
 int mx_vae_decode_tiled_arena_bytes(const mx_vae *v, int h, int w, int tile, size_t *bytes, mx_status *st) {
     mx_arena a;
     mx_arena_measure(&a);
-    if (mx_vae_decode_tiled(NULL, v, NULL, 1, h, w, tile, NULL, &a, st)) return -1;
+    if (mx_vae_decode_tiled(NULL, v, mx_act_placeholder(), 1, h, w, tile, mx_act_placeholder(), &a, st)) return -1;
     *bytes = a.peak + 8 * MX_ARENA_ALIGN;
     return 0;
 }

@@ -10,7 +10,7 @@
 #include "../geom/camera.h"
 #include "../geom/uvatlas.h"
 #include "../geom/views.h"
-#include "jsonw.h"
+#include "../../runtime/jsonw.h"
 #include "models.h"
 #include "outdir.h"
 #include "texture.h"

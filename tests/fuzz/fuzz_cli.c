@@ -1,6 +1,7 @@
-/* The command-line parser of `matex texture` / `matex enhance` (tools/cli_texture_opts.c):
- * the input is argv, NUL-separated, after the verb; the first byte picks whether the prompt
- * is optional (enhance). */
+/* The command-line parser of `matex texture` / `matex enhance` (tools/cli_texture_opts.c)
+ * and the option check that follows it (mx_texture_opts_check): the input is argv,
+ * NUL-separated, after the verb; the first byte picks the verb (bit 0: enhance, prompt optional)
+ * and the check's mode. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,6 +26,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     mx_cli_texture c;
     int rc = mx_cli_texture_parse(&c, argc, argv, data[0] & 1, no_usage);
     if (rc == -1 && (!c.o.mesh_path || !c.o.prompt || !c.o.weights_path || !c.o.out_dir)) abort();
+    mx_status st;
+    if (rc == -1) mx_texture_opts_check(&c.o, (mx_texture_mode)(data[0] % 3), &st);
     free(text);
     return 0;
 }

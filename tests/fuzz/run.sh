@@ -2,7 +2,8 @@
 # `make fuzz`: runs each harness SECONDS seconds under libFuzzer, starting from its seeds and
 # regression inputs; the growing corpus stays in BUILD/fuzz-corpus/<H>. Prints one line per
 # harness (executions, coverage) and exits non-zero if any crashed, naming the input to copy
-# into tests/fuzz/regress/<H>/ once the bug is fixed.
+# into tests/fuzz/regress/<H>/ once the bug is fixed. The harnesses' own stdout/stderr are closed
+# (error messages of rejected inputs); libFuzzer and sanitizer reports still reach the log.
 # usage: sh tests/fuzz/run.sh BUILD SECONDS HARNESS...
 set -u
 build=$1
@@ -17,7 +18,7 @@ for h in "$@"; do
     regress=tests/fuzz/regress/$h
     [ -d "$regress" ] || regress=
     "$build/tests/fuzz/fuzz_$h" -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=2048 \
-        -timeout=30 -print_final_stats=1 -artifact_prefix="$crashes/" \
+        -timeout=30 -close_fd_mask=3 -print_final_stats=1 -artifact_prefix="$crashes/" \
         "$corpus" "tests/fuzz/seeds/$h" $regress > "$log" 2>&1
     rc=$?
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")

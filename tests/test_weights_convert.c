@@ -408,8 +408,8 @@ static void test_lora(void) {
     const lora_case lcm_peft[] = {
         {"mid_block.resnets.0.conv1.weight", "unet.mid_block.resnets.0.conv1.lora_A.weight",
          "unet.mid_block.resnets.0.conv1.lora_B.weight", NULL, 4, 3, 0},
-        {"down_blocks.0.downsamplers.0.conv.weight", "unet.down_blocks.0.downsamplers.0.conv.lora_A.weight",
-         "unet.down_blocks.0.downsamplers.0.conv.lora_B.weight", NULL, 2, 3, 0},
+        {"down_blocks.0.downsamplers.0.conv.weight", "unet.base_model.model.down_blocks.0.downsamplers.0.conv.lora_A.weight",
+         "unet.base_model.model.down_blocks.0.downsamplers.0.conv.lora_B.weight", NULL, 2, 3, 0},
         {"mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.weight",
          "unet.mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.lora_A.weight",
          "unet.mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.lora_B.weight", NULL, 4, 0, 0},
@@ -579,5 +579,5 @@ int main(void) {
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);
-    return mx_test_finish("test_nn_convert");
+    return mx_test_finish("test_weights_convert");
 }

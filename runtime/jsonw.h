@@ -1,9 +1,9 @@
-/* A JSON writer over mx_buf, for report.json: objects, arrays, members with commas placed.
- * Out-of-memory is sticky: mx_jw_text then returns NULL. */
+/* The JSON writer (the reader is json.h) over mx_buf, for report.json: objects, arrays, members
+ * with commas placed. Out-of-memory is sticky: mx_jw_text then returns NULL. */
 #ifndef MX_JSONW_H
 #define MX_JSONW_H
 
-#include "../../runtime/buf.h"
+#include "buf.h"
 
 typedef struct mx_jw {
     mx_buf b;

@@ -125,15 +125,17 @@ int main(void) {
     compare("enc.safetensors", "mean", "vae_tiny", "outputs.safetensors", "encode.mean");
     compare("enc.safetensors", "logvar", "vae_tiny", "outputs.safetensors", "encode.logvar");
 
-    CHECK(convert("taesd") == 0);
-    golden_path(gin, sizeof gin, "taesd", "inputs.safetensors");
-    snprintf(args, sizeof args, "taesd-decode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
-    CHECK(run_net(args, "tdec.safetensors") == 0);
-    compare("tdec.safetensors", "image", "taesd", "outputs.safetensors", "image_dec");
-    snprintf(args, sizeof args, "taesd-encode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
-    CHECK(run_net(args, "tenc.safetensors") == 0);
-    compare("tenc.safetensors", "latents", "taesd", "outputs.safetensors", "latents_enc");
+    if (golden_have("taesd", "outputs.safetensors")) { /* the full-size TAESD lives outside the repository */
+        CHECK(convert("taesd") == 0);
+        golden_path(gin, sizeof gin, "taesd", "inputs.safetensors");
+        snprintf(args, sizeof args, "taesd-decode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
+        CHECK(run_net(args, "tdec.safetensors") == 0);
+        compare("tdec.safetensors", "image", "taesd", "outputs.safetensors", "image_dec");
+        snprintf(args, sizeof args, "taesd-encode --weights %s/taesd.mxw --inputs %s", tmpdir, gin);
+        CHECK(run_net(args, "tenc.safetensors") == 0);
+        compare("tenc.safetensors", "latents", "taesd", "outputs.safetensors", "latents_enc");
+    }
 
     sh("rm -rf %s%s", tmpdir, "");
-    return mx_test_finish("test_nn_run_net");
+    return mx_test_finish("test_tools_run_net");
 }

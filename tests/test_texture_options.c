@@ -228,5 +228,5 @@ int main(void) {
     char cmd[256];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
     if (mx_test_failures == 0 && system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);
-    return mx_test_finish("test_tex_options");
+    return mx_test_finish("test_texture_options");
 }

@@ -189,5 +189,5 @@ int main(void) {
     test_truncations();
     test_mutations();
     test_large_object();
-    return mx_test_finish("test_nn_json");
+    return mx_test_finish("test_runtime_json");
 }

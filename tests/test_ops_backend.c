@@ -141,5 +141,5 @@ int main(void) {
     }
     test_seam_ops(&c);
     mx_ctx_destroy(&c);
-    return mx_test_finish("test_core_backend");
+    return mx_test_finish("test_ops_backend");
 }

@@ -238,5 +238,5 @@ int main(void) {
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmpdir);
-    return mx_test_finish("test_nn_safetensors");
+    return mx_test_finish("test_weights_safetensors");
 }

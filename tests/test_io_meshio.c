@@ -304,5 +304,5 @@ int main(void) {
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     if (system(cmd) != 0) printf("warning: could not remove %s\n", tmpdir);
-    return mx_test_finish("test_geom_meshio");
+    return mx_test_finish("test_io_meshio");
 }

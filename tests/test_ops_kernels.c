@@ -478,5 +478,5 @@ int main(void) {
     test_known_group_norm(&c);
     test_known_timestep_embedding();
     test_known_layout(&c);
-    return mx_test_finish("test_core_ops");
+    return mx_test_finish("test_ops_kernels");
 }

@@ -1,7 +1,7 @@
 /* golden-v1 rule: the README's worked example, then the checksums of
  * golden/sd15_{clip,vae,unet,controlnet}/weights_checksums.json (streamed per tensor
  * in chunks). This program checks every CLIP and VAE tensor, every 1-D tensor and a
- * deterministic sample of the large UNet/ControlNet tensors; test_nn_golden_rule_full (the
+ * deterministic sample of the large UNet/ControlNet tensors; test_weights_golden_rule_full (the
  * same source with GOLDEN_FULL) checks every tensor when MATEX_FULL=1. */
 #include <math.h>
 #include <stdio.h>
@@ -150,7 +150,7 @@ static void check_network(const char *folder, int small_net, int full, float *bu
 int main(void) {
     int full = GOLDEN_FULL;
     if (full && !(getenv("MATEX_FULL") && !strcmp(getenv("MATEX_FULL"), "1"))) {
-        printf("test_nn_golden_rule_full: the complete check runs with MATEX_FULL=1 (make test-full)\n");
+        printf("test_weights_golden_rule_full: the complete check runs with MATEX_FULL=1 (make test-full)\n");
         return MX_TEST_SKIP;
     }
     float *buf = malloc(CHUNK * sizeof *buf);
@@ -160,5 +160,5 @@ int main(void) {
     check_network("sd15_unet", 0, full, buf);
     check_network("sd15_controlnet", 0, full, buf);
     free(buf);
-    return mx_test_finish(full ? "test_nn_golden_rule_full" : "test_nn_golden_rule");
+    return mx_test_finish(full ? "test_weights_golden_rule_full" : "test_weights_golden_rule");
 }
