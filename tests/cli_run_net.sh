@@ -16,6 +16,9 @@ check "... in one line that names cuda" [ "$(grep -c cuda "$T/err")" = 1 ]
 check "run-net unknown NET exits 2" [ "$(rc_of "$M" run-net resnet --weights a --inputs b --out c)" = 2 ]
 check "run-net bad --precision exits 2" [ "$(rc_of "$M" run-net unet --precision fp8 --weights a --inputs b --out c)" = 2 ]
 check "bad --precision is named" grep -q "precision must be fp32 or bf16" "$T/err"
+check "inpaint-pipeline without --steps exits 2" [ "$(rc_of "$M" run-net inpaint-pipeline --weights a --inputs b --out c)" = 2 ]
+check "... and says so" grep -q "needs --steps" "$T/err"
+check "img2img-pipeline with a bad --guidance exits 2" [ "$(rc_of "$M" run-net img2img-pipeline --weights a --inputs b --out c --steps 4 --guidance x)" = 2 ]
 check "gen-weights --help exits 0" [ "$(rc_of "$M" gen-weights --help)" = 0 ]
 check "gen-weights bad dtype exits 2" [ "$(rc_of "$M" gen-weights "$G/unet_tiny/config.json" -o "$T/x" --dtype f8)" = 2 ]
 

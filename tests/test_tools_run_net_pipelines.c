@@ -103,5 +103,5 @@ int main(void) {
     char cmd[512];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     sh(cmd);
-    return mx_test_finish("test_nn_pipeline_edit");
+    return mx_test_finish("test_tools_run_net_pipelines");
 }
