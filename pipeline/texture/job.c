@@ -8,6 +8,7 @@
 
 #include "../../runtime/log.h"
 #include "../../runtime/rng.h"
+#include "../../runtime/version.h"
 #include "../geom/export.h"
 #include "../geom/masks.h"
 #include "../geom/uvfill.h"
@@ -137,7 +138,7 @@ static void report_header(mx_job *j) {
     mx_jw *w = &j->report;
     mx_jw_init(w);
     mx_jw_begin_obj(w, NULL);
-    mx_jw_str(w, "matex_version", "0.1");
+    mx_jw_str(w, "matex_version", MX_VERSION);
     mx_jw_str(w, "mesh", j->mesh.source_path);
     if (o->source_path) mx_jw_str(w, "source", o->source_path);
     if (j->models) {
