@@ -65,10 +65,11 @@ LIB_GEOM    = $(BUILD)/libmx_geom.a
 LIB_TEX     = $(BUILD)/libmx_tex.a
 LIB_IO      = $(BUILD)/libmatex_io.a
 LIBMATEX    = $(BUILD)/libmatex.a
+LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install deps
+.PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -86,6 +87,9 @@ $(LIB_GEOM):    $(call obj,$(GEOM_SRC))
 $(LIB_TEX):     $(call obj,$(TEX_SRC))
 $(LIB_IO):      $(call obj,$(IO_SRC))
 $(LIBMATEX):    $(ALL_C_OBJ)
+# The core library: everything in C, the I/O adapter replaced by one that refuses files.
+$(LIB_MATEX_CORE): $(ALL_C_OBJ) $(BUILD)/pipeline/io/io_none.o
+core: $(LIB_MATEX_CORE)
 $(BUILD)/%.a: | $(BUILD)/empty.o
 	@mkdir -p $(dir $@)
 	rm -f $@
@@ -184,13 +188,19 @@ faults-run: $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 MX_TEST_DEVICE ?= cpu-strict
 TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
-           MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw
-test: all $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+           MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
+           MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
+test: all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
-test-full: all $(TEST_BINS) $(DEMO_WEIGHTS)
+test-full: all core $(TEST_BINS) $(DEMO_WEIGHTS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS)
+
+# A one-node Slurm cluster on localhost (munged, slurmctld, slurmd; slurm-wlm and munge installed when
+# missing) runs tools/slurm/matex-array.sbatch over tiny-weight jobs: submit, cancel, resume.
+test-slurm: all $(DEMO_WEIGHTS)
+	$(TEST_ENV) timeout 300 sh tests/slurm_cluster.sh
 
 # End to end in seconds with tiny random weights (they paint noise: see README): the shipped
 # Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
@@ -220,10 +230,19 @@ bench: all $(BENCH_BINS)
 	sh tools/bench.sh $(BUILD)
 
 PREFIX ?= /usr/local
+# matex.pc: the static libraries and what they need (the I/O adapter and libmatex refer to
+# each other, hence the group).
+PC_LIBS = -L$${libdir} -Wl,--start-group -lmatex -lmatex_io -Wl,--end-group $(IOLIBS) $(LDLIBS) -pthread $(LDFLAGS)
 install: all
 	install -D -m 755 $(BUILD)/matex $(DESTDIR)$(PREFIX)/bin/matex
 	install -D -m 644 $(LIBMATEX) $(DESTDIR)$(PREFIX)/lib/libmatex.a
 	install -D -m 644 $(LIB_IO) $(DESTDIR)$(PREFIX)/lib/libmatex_io.a
+	install -D -m 644 include/matex.h $(DESTDIR)$(PREFIX)/include/matex.h
+	@mkdir -p $(DESTDIR)$(PREFIX)/lib/pkgconfig
+	printf 'prefix=%s\nlibdir=$${prefix}/lib\nincludedir=$${prefix}/include\n\nName: matex\nDescription: %s\nVersion: %s\nCflags: -I$${includedir}\nLibs: %s\n' \
+	    '$(PREFIX)' 'text-to-texture for 3D meshes (Make-A-Texture)' \
+	    "$$(sed -n 's/^#define MATEX_VERSION "\(.*\)"/\1/p' include/matex.h)" '$(PC_LIBS)' \
+	    > $(DESTDIR)$(PREFIX)/lib/pkgconfig/matex.pc
 
 clean:
 	rm -rf build build-asan build-fuzz matex

@@ -215,9 +215,10 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
     mx_status st;
     mx_status_clear(&st);
     mx_texture_result res;
-    mx_texture_mode mode = run == mx_enhance_run    ? MX_TEXTURE_MODE_ENHANCE
-                           : run == mx_transfer_run ? MX_TEXTURE_MODE_TRANSFER
-                                                    : MX_TEXTURE_MODE_TEXTURE;
+    /* by the verb: run may be the pipeline's function or the API's (tools/cli_api.h) */
+    mx_texture_mode mode = !strcmp(verb, "enhance")    ? MX_TEXTURE_MODE_ENHANCE
+                           : !strcmp(verb, "transfer") ? MX_TEXTURE_MODE_TRANSFER
+                                                       : MX_TEXTURE_MODE_TEXTURE;
     int rc = mx_texture_opts_check(&c->o, mode, &st);
     if (!rc) {
         interrupted = 0;

@@ -2,6 +2,7 @@
 #include <stdio.h>
 
 #include "cli.h"
+#include "cli_api.h"
 #include "cli_texture_opts.h"
 
 static void enhance_usage(FILE *f) {
@@ -18,5 +19,5 @@ int cmd_enhance(int argc, char **argv) {
     mx_cli_texture c;
     int rc = mx_cli_texture_parse(&c, argc, argv, 1, enhance_usage);
     if (rc >= 0) return rc;
-    return mx_cli_texture_run(&c, "enhance", mx_enhance_run);
+    return mx_cli_texture_run(&c, "enhance", mx_cli_api_enhance);
 }

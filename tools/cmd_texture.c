@@ -2,6 +2,7 @@
 #include <stdio.h>
 
 #include "cli.h"
+#include "cli_api.h"
 #include "cli_texture_opts.h"
 
 static void texture_usage(FILE *f) {
@@ -17,5 +18,5 @@ int cmd_texture(int argc, char **argv) {
     mx_cli_texture c;
     int rc = mx_cli_texture_parse(&c, argc, argv, 0, texture_usage);
     if (rc >= 0) return rc;
-    return mx_cli_texture_run(&c, "texture", mx_texture_run);
+    return mx_cli_texture_run(&c, "texture", mx_cli_api_texture);
 }

@@ -12,6 +12,32 @@
 #include "gltf.h"
 #include "image.h"
 
+/* malloc'ed copy of n bytes of p (NULL stays NULL); *fail set when the copy fails. */
+static void *dup_bytes(const void *p, size_t n, int *fail) {
+    if (!p) return NULL;
+    void *q = malloc(n ? n : 1);
+    if (!q) *fail = 1;
+    else memcpy(q, p, n);
+    return q;
+}
+
+int mx_mesh_clone(const mx_mesh *src, mx_mesh *dst, mx_status *st) {
+    size_t nf = (size_t)src->nfaces;
+    int fail = 0;
+    *dst = *src;
+    dst->pos = dup_bytes(src->pos, (size_t)src->nverts * 3 * sizeof(float), &fail);
+    dst->faces = dup_bytes(src->faces, nf * 3 * sizeof(int32_t), &fail);
+    dst->uv = dup_bytes(src->uv, (size_t)src->nuv * 2 * sizeof(float), &fail);
+    dst->face_uv = dup_bytes(src->face_uv, nf * 3 * sizeof(int32_t), &fail);
+    dst->nrm = dup_bytes(src->nrm, (size_t)src->nnrm * 3 * sizeof(float), &fail);
+    dst->face_nrm = dup_bytes(src->face_nrm, nf * 3 * sizeof(int32_t), &fail);
+    dst->mats = dup_bytes(src->mats, (size_t)src->nmat * sizeof(mx_material), &fail);
+    dst->face_mat = dup_bytes(src->face_mat, nf * sizeof(int32_t), &fail);
+    if (!fail) return 0;
+    mx_mesh_free(dst);
+    return mx_fail(st, MX_ENOMEM, "%s: out of memory copying the mesh", src->source_path);
+}
+
 static int has_ext(const char *path, const char *ext) {
     const char *dot = strrchr(path, '.');
     if (!dot || strchr(dot, '/')) return 0;

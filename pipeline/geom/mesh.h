@@ -9,6 +9,9 @@
 #include "../../runtime/status.h"
 #include "mesh_types.h"
 
+/* A deep copy of src into dst (dst's arrays are its own; free with mx_mesh_free). */
+int mx_mesh_clone(const mx_mesh *src, mx_mesh *dst, mx_status *st);
+
 /* ---- mesh utilities (pipeline/geom/mesh.c) ---- */
 
 /* Loads any supported mesh, chosen by extension: .obj .ply .off .stl (pipeline/io/io.h),

@@ -17,6 +17,7 @@
 #pragma GCC diagnostic pop
 #endif
 
+#include <cctype>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -397,10 +398,57 @@ int check_ply_header(const char *path, mx_status *st) {
     }
 }
 
+// OpenMesh's OFF reader trusts each face's corner count and reads (and stores) that many
+// indices even past the end of the data: a count of 10^9 costs gigabytes. Checked here first
+// for ASCII OFF (one vertex and one face per line, as OFF writers do); binary OFF is refused.
+int check_off_counts(const char *path, mx_status *st) {
+    std::string text;
+    if (read_text_file(path, text, st)) return -1;
+    std::vector<std::vector<std::string>> lines; // non-empty, non-comment lines as words
+    for (size_t pos = 0; pos < text.size();) {
+        size_t nl = text.find('\n', pos);
+        if (nl == std::string::npos) nl = text.size();
+        std::vector<std::string> w;
+        for (size_t i = pos; i < nl;) {
+            while (i < nl && isspace((unsigned char)text[i])) i++;
+            size_t j = i;
+            while (j < nl && !isspace((unsigned char)text[j])) j++;
+            if (j > i && text[i] == '#') break;
+            if (j > i) w.push_back(text.substr(i, j - i));
+            i = j;
+        }
+        if (!w.empty()) lines.push_back(w);
+        pos = nl + 1;
+    }
+    if (lines.empty() || lines[0][0].size() < 3 || lines[0][0].compare(lines[0][0].size() - 3, 3, "OFF"))
+        return mx_fail(st, MX_EINPUT, "%s: not an OFF file (no OFF header)", path);
+    for (const std::string &w : lines[0])
+        if (w == "BINARY") return mx_fail(st, MX_EINPUT, "%s: binary OFF is not supported", path);
+    std::vector<std::string> counts(lines[0].begin() + 1, lines[0].end()); // "OFF nv nf ne" or next line
+    size_t first = 1;
+    if (counts.empty() && lines.size() > 1) counts = lines[first++];
+    char *end;
+    unsigned long long nv = counts.size() >= 2 ? strtoull(counts[0].c_str(), &end, 10) : 0, nf = 0;
+    if (counts.size() < 2 || *end || (nf = strtoull(counts[1].c_str(), &end, 10), *end) || nv > kMaxElements ||
+        nf > kMaxElements)
+        return mx_fail(st, MX_EINPUT, "%s: OFF vertex and face counts missing or too large", path);
+    for (size_t f = 0; f < nf; f++) {
+        size_t li = first + (size_t)nv + f;
+        if (li >= lines.size()) return mx_fail(st, MX_EINPUT, "%s: OFF file ends before face %zu", path, f);
+        const std::vector<std::string> &w = lines[li];
+        unsigned long long n = strtoull(w[0].c_str(), &end, 10);
+        if (*end || w[0][0] == '-' || n + 1 > w.size())
+            return mx_fail(st, MX_EINPUT, "%s: OFF face %zu: corner count '%s' does not match its line", path, f,
+                           w[0].c_str());
+    }
+    return 0;
+}
+
 // PLY / OFF / STL through OpenMesh. Vertex order is the file's (OpenMesh appends vertices it
 // must duplicate to represent non-manifold faces at the end).
 int read_openmesh(const char *path, mx_mesh *m, mx_status *st) {
     if (lower_ext(path) == "ply" && check_ply_header(path, st)) return -1;
+    if (lower_ext(path) == "off" && check_off_counts(path, st)) return -1;
     typedef OpenMesh::PolyMesh_ArrayKernelT<> Mesh;
     Mesh mesh;
     mesh.request_vertex_texcoords2D();

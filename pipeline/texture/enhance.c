@@ -19,12 +19,25 @@
 #include "job.h"
 #include "texture.h"
 
+/* Copies of the textures given in memory (one per material). */
+static int copy_textures(const mx_image *in, mx_image *out, int n, mx_status *st) {
+    for (int i = 0; i < n; i++) {
+        if (!in[i].data) continue;
+        if (mx_image_alloc(&out[i], in[i].w, in[i].h, in[i].c, st)) return -1;
+        memcpy(out[i].data, in[i].data, sizeof(float) * (size_t)in[i].w * in[i].h * in[i].c);
+    }
+    return 0;
+}
+
 /* The original textures resampled to the bake's size, one per layer (grey where missing). */
 static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
     int T = j->o->tex_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
     mx_image *src = calloc((size_t)nm, sizeof *src);
     if (!src) return mx_fail(st, MX_ENOMEM, "textures: out of memory");
-    int rc = j->mesh.nmat > 0 ? mx_mesh_load_textures(&j->mesh, src, st) : 0, have = 0;
+    int rc = j->o->mesh_textures ? copy_textures(j->o->mesh_textures, src, nm, st)
+             : j->mesh.nmat > 0  ? mx_mesh_load_textures(&j->mesh, src, st)
+                                 : 0;
+    int have = 0;
     for (int l = 0; !rc && l < j->nlayers; l++) {
         if ((rc = mx_image_alloc(&out[l], T, T, 3, st))) break;
         const mx_image *s = l < nm ? &src[l] : NULL;
@@ -39,7 +52,7 @@ static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
     }
     for (int i = 0; i < nm; i++) mx_image_free(&src[i]);
     free(src);
-    if (!rc && !have) rc = mx_fail(st, MX_EINPUT, "%s: the mesh has no texture to enhance", j->o->mesh_path);
+    if (!rc && !have) rc = mx_fail(st, MX_EINPUT, "%s: the mesh has no texture to enhance", j->mesh.source_path);
     return rc;
 }
 
@@ -109,7 +122,7 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
     mx_gen_batch b = {1,     S,     S, prompts, depth, NULL, o->depth_weight[0], 0.0f, NULL, NULL, init,
                       paint, o->strength, (uint64_t)index, stage};
     if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
-    mx_job_report_view(j, v, "enhance", index, j->models.cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
+    mx_job_report_view(j, v, "enhance", index, j->models->cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
     rc = 0;
 done:
     for (int l = 0; merged && l < j->nlayers; l++) mx_image_free(&current[l]);
@@ -130,8 +143,6 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
 
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_ENHANCE, st)) return -1;
-    if (o->fast)
-        return mx_fail(st, MX_EUSAGE, "enhance: --fast is not supported (the LCM scheduler has no img2img strength yet)");
     mx_job j;
     int rc = mx_job_open(&j, o, 0, 1, st);
     mx_image *orig = NULL, *out = NULL;
@@ -160,12 +171,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         mx_job_stage_done(&j, "views", mx_now() - t);
         rc = merge_textures(&j, orig, out, st);
     }
-    if (!rc) rc = mx_job_finish(&j, out, st);
-    if (!rc && res) {
-        res->coverage = mx_job_coverage(&j);
-        res->views = j.views_done;
-        res->seconds = mx_now() - j.t0;
-    }
+    if (!rc) rc = mx_job_finish(&j, out, st) || mx_job_result(&j, out, res, st) ? -1 : 0;
     for (int l = 0; orig && l < j.nlayers; l++) mx_image_free(&orig[l]);
     for (int l = 0; out && l < j.nlayers; l++) mx_image_free(&out[l]);
     free(orig);

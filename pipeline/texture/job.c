@@ -36,14 +36,31 @@
 #define VAE_TILE 48
 static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 
-void mx_job_progress(const mx_job *j, const char *fmt, ...) {
-    if (j->o->quiet) return;
+/* Sends one event to the progress callback; a non-zero answer stops the run. */
+static void emit_progress(mx_job *j, int step, int steps, const char *message) {
+    const mx_texture_opts *o = j->o;
+    if (!o->progress) return;
+    mx_texture_progress p = {j->phase, step, steps, j->views_done, o->views,
+                             j->visible ? mx_job_coverage(j) : 0.0, mx_now() - j->t0, message};
+    if (o->progress(o->progress_user, &p)) j->stop = 1;
+}
+
+void mx_job_progress(mx_job *j, const char *fmt, ...) {
+    if (j->o->quiet && !j->o->progress) return;
     char line[512];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(line, sizeof line, fmt, ap);
     va_end(ap);
-    fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    emit_progress(j, 0, 0, line);
+}
+
+void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->phase, sizeof j->phase, "%s", stage); }
+
+int mx_job_check_cancel(const mx_job *j, mx_status *st) {
+    if (j->stop || (j->o->cancel && *j->o->cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
+    return 0;
 }
 
 /* A mesh with UVs keeps them (faces without get an atlas and a texture of their own: one
@@ -60,7 +77,7 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
         return 0;
     }
     if (need_uvs)
-        return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", j->o->mesh_path);
+        return mx_fail(st, MX_EINPUT, "%s: the mesh has no UVs (a textured mesh is needed)", m->source_path);
     if (mx_uvatlas_build(m, &ao, &j->atlas, st)) return -1;
     j->atlas_built = 1;
     /* one atlas for the whole mesh: every face renders and exports with material 0 */
@@ -70,6 +87,10 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_job_progress(j, "UV atlas: %d charts, utilisation %.3f, %.2fs", j->atlas.charts, j->atlas.utilisation,
                     j->atlas.seconds);
     return 0;
+}
+
+int mx_job_ctx_create(mx_ctx *c, const mx_texture_opts *o, mx_status *st) {
+    return mx_ctx_create_on(c, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st);
 }
 
 void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
@@ -86,7 +107,7 @@ static int build_candidates(mx_job *j, mx_status *st) {
                                  j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold,
                                  mx_view_scale_radius(mx_view_erode_radius(j->o->render_size, j->o->image_size),
                                                       j->o->render_size, CANDIDATE_RENDER_SIZE),
-                                 j->ctx.pool, st);
+                                 j->ctx->pool, st);
     free(cams);
     if (rc) return -1;
     j->vc_ready = 1;
@@ -102,11 +123,11 @@ static int build_candidates(mx_job *j, mx_status *st) {
 }
 
 static int encode_negative(mx_job *j, mx_status *st) {
-    int C = mx_models_text_dim(&j->models);
+    int C = mx_models_text_dim(j->models);
     j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
     if (!j->uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
-    if (mx_models_encode_text(&j->models, &j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
+    if (mx_models_encode_text(j->models, j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
@@ -117,9 +138,9 @@ static void report_header(mx_job *j) {
     mx_jw_init(w);
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", "0.1");
-    mx_jw_str(w, "mesh", o->mesh_path);
+    mx_jw_str(w, "mesh", j->mesh.source_path);
     if (o->source_path) mx_jw_str(w, "source", o->source_path);
-    if (j->models_ready) {
+    if (j->models) {
         mx_jw_str(w, "prompt", o->prompt);
         mx_jw_str(w, "negative_prompt", o->negative_prompt);
         mx_jw_int(w, "seed", (long long)o->seed);
@@ -130,14 +151,12 @@ static void report_header(mx_job *j) {
     }
     mx_jw_int(w, "texture_size", o->tex_size);
     mx_jw_int(w, "render_size", o->render_size);
-    mx_jw_int(w, "threads", mx_pool_threads(j->ctx.pool));
-    if (j->models_ready) {
-        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx.k->isa)));
-        mx_jw_str(w, "kernels", mx_isa_name(j->ctx.k->isa));
-        mx_jw_str(w, "weights", o->weights_path);
-        char digest[32];
-        mx_file_digest_hex(o->weights_path, digest);
-        mx_jw_str(w, "weights_digest", digest);
+    mx_jw_int(w, "threads", mx_pool_threads(j->ctx->pool));
+    if (j->models) {
+        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx->k->isa)));
+        mx_jw_str(w, "kernels", mx_isa_name(j->ctx->k->isa));
+        mx_jw_str(w, "weights", mx_models_path(j->models));
+        mx_jw_str(w, "weights_digest", j->models->digest);
     }
     mx_jw_int(w, "faces", j->mesh.nfaces);
     mx_jw_int(w, "vertices", j->mesh.nverts);
@@ -159,7 +178,7 @@ static void report_header(mx_job *j) {
 /* --fast runs the LCM scheduler on an LCM-distilled UNet and decodes with TAESD: both must be in
  * the weight file. */
 static int check_fast_models(const mx_job *j, mx_status *st) {
-    const mx_models *m = &j->models;
+    const mx_models *m = j->models;
     if (m->lcm && m->taesd) return 0;
     return mx_fail(st, MX_EINPUT,
                    "%s: --fast needs a weight file with the LCM-LoRA merged into the UNet and TAESD; this one has %s. "
@@ -173,36 +192,42 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     memset(j, 0, sizeof *j);
     j->o = o;
     j->t0 = mx_now();
-    if (mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
-    if (mx_ctx_create_on(&j->ctx, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st)) return -1;
-    j->ctx_ready = 1;
+    mx_job_set_phase(j, "load");
     j->psnr_db = NAN;
     j->write_flags = o->first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
-    if (model_needs != MX_JOB_NO_MODELS) {
-        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s",
-                        mx_backend_name(o->device), mx_precision_name(mx_isa_precision(j->ctx.k->isa)), mx_isa_name(j->ctx.k->isa),
-                        mx_isa_precision(j->ctx.k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
-        if (mx_models_load(&j->models, &j->ctx, o->weights_path, model_needs, st)) return -1;
-        j->models_ready = 1;
-        if (o->fast && check_fast_models(j, st)) return -1;
+    if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
+    if (o->models) { /* an opened model set computes on its own context */
+        j->models = o->models;
+        j->ctx = o->models->c;
+    } else {
+        if (mx_job_ctx_create(&j->own_ctx, o, st)) return -1;
+        j->own_ctx_ready = 1;
+        j->ctx = &j->own_ctx;
+    }
+    if (model_needs != MX_JOB_NO_MODELS && !j->models) {
+        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_backend_name(o->device),
+                        mx_precision_name(mx_isa_precision(j->ctx->k->isa)), mx_isa_name(j->ctx->k->isa),
+                        mx_isa_precision(j->ctx->k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+        if (mx_models_load(&j->own_models, j->ctx, o->weights_path, model_needs, st)) return -1;
+        j->own_models_ready = 1;
+        j->models = &j->own_models;
         mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
     }
-    if (mx_job_check_cancel(j, st) || mx_mesh_load(o->mesh_path, &j->mesh, st)) return -1;
+    if (model_needs == MX_JOB_NO_MODELS) j->models = NULL;
+    else if (mx_models_check(j->models, model_needs, st) || (o->fast && check_fast_models(j, st))) return -1;
+    if (mx_job_check_cancel(j, st)) return -1;
+    if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
+                : mx_mesh_load(o->mesh_path, &j->mesh, st))
+        return -1;
     if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
     if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models_ready && encode_negative(j, st)))
-        return -1;
-    mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", o->mesh_path, j->mesh.nfaces,
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models && encode_negative(j, st))) return -1;
+    mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
     mx_job_stage_done(j, "load", mx_now() - j->t0);
-    return 0;
-}
-
-int mx_job_check_cancel(const mx_job *j, mx_status *st) {
-    if (j->o->cancel && *j->o->cancel) return mx_fail(st, MX_ECANCEL, "interrupted");
     return 0;
 }
 
@@ -218,8 +243,8 @@ void mx_job_close(mx_job *j) {
     if (j->bake_ready) mx_bake_free(&j->bake);
     free(j->pos);
     mx_mesh_free(&j->mesh);
-    if (j->models_ready) mx_models_free(&j->models);
-    if (j->ctx_ready) mx_ctx_destroy(&j->ctx);
+    if (j->own_models_ready) mx_models_free(&j->own_models);
+    if (j->own_ctx_ready) mx_ctx_destroy(&j->own_ctx);
     mx_jw_free(&j->report);
     memset(j, 0, sizeof *j);
 }
@@ -236,11 +261,11 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
         memmove(pc->emb, pc->emb + 1, sizeof(pc->emb[0]) * (MX_JOB_MAX_PROMPTS - 1));
         pc->n--;
     }
-    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
     float *emb = malloc(floats * sizeof *emb);
     char *copy = strdup(text);
     int dropped = 0;
-    if (!emb || !copy || mx_models_encode_text(&j->models, &j->ctx, text, emb, &dropped, st)) {
+    if (!emb || !copy || mx_models_encode_text(j->models, j->ctx, text, emb, &dropped, st)) {
         free(emb);
         free(copy);
         if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
@@ -255,22 +280,21 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
     return pc->emb[pc->n++];
 }
 
-typedef struct {
-    const mx_job *job;
-    const char *stage;
-} progress_ctx;
-
+/* After each denoising step: the progress line and event; non-zero stops the loop. */
 static int report_step(void *user, int step, int n_steps, int64_t timestep, const float *latents, size_t numel) {
     (void)latents;
     (void)numel;
-    const progress_ctx *p = user;
-    mx_job_progress(p->job, "%s: step %d/%d (t=%lld)", p->stage, step + 1, n_steps, (long long)timestep);
-    return p->job->o->cancel && *p->job->o->cancel; /* non-zero stops the denoising loop */
+    mx_job *j = user;
+    char line[160];
+    snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->phase, step + 1, n_steps, (long long)timestep);
+    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    emit_progress(j, step + 1, n_steps, line);
+    return j->stop || (j->o->cancel && *j->o->cancel);
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
 static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float *uncond, mx_status *st) {
-    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
     for (int i = 0; i < b->n; i++) {
         const float *e = prompt_embedding(j, b->prompts[i], st);
         if (!e) return -1;
@@ -289,10 +313,10 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
     if (!b->init_images) {
         memcpy(lat, noise, per_item * b->n * sizeof *lat);
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
-        return mx_sd_denoise(rq, &j->ctx, lat, b->n, h, w, st);
+        return mx_sd_denoise(rq, j->ctx, lat, b->n, h, w, st);
     }
-    mx_sd_edit e = {j->models.vae, b->init_images, b->paint_masks, noise, b->strength};
-    return mx_sd_edit_run(rq, &e, &j->ctx, b->n, h, w, lat, st);
+    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength};
+    return mx_sd_edit_run(rq, &e, j->ctx, b->n, h, w, lat, st);
 }
 
 /* LCM step noise: item i draws from its own stream (first_stream + i) after its start latents,
@@ -313,43 +337,43 @@ static int fill_lcm_noise(void *user, int step, float *noise, size_t numel) {
 }
 
 static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float *images, mx_status *st) {
-    if (j->o->fast) return mx_taesd_decode_image(&j->ctx, j->models.taesd, lat, n, h, w, images, st);
-    return mx_vae_decode_image_tiled(&j->ctx, j->models.vae, lat, n, h, w, VAE_TILE, images, st);
+    if (j->o->fast) return mx_taesd_decode_image(j->ctx, j->models->taesd, lat, n, h, w, images, st);
+    return mx_vae_decode_image_tiled(j->ctx, j->models->vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
-    int f = j->o->fast ? mx_taesd_factor(j->models.taesd) : mx_vae_factor(j->models.vae);
+    int f = j->o->fast ? mx_taesd_factor(j->models->taesd) : mx_vae_factor(j->models->vae);
     if (b->image_h % f || b->image_w % f)
         return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
                        b->image_h, f);
     int h = b->image_h / f, w = b->image_w / f;
-    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(&j->models);
+    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
     float *lat = malloc(2 * per_item * b->n * sizeof *lat), *noise = lat + per_item * b->n;
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
-    mx_sched_config scfg = j->models.sched;
+    mx_sched_config scfg = j->models->sched;
     lcm_noise lcm = {j->o->seed, b->first_stream, b->n, per_item};
     memset(&s, 0, sizeof s);
     int rc = -1, sched_ready = 0;
-    if (j->o->fast) mx_sched_config_lcm(&scfg, &j->models.sched);
+    if (j->o->fast) mx_sched_config_lcm(&scfg, &j->models->sched);
     if (!lat || !cond || !uncond) {
         mx_fail(st, MX_ENOMEM, "generation buffers: out of memory");
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, &j->ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, j->ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     s.noise_fn = fill_lcm_noise;
     s.noise_user = &lcm;
     mx_sd_control controls[2];
     int nc = 0;
-    if (b->depth_planes && j->models.cn_depth && (b->w_depth != 0 || b->w_depth_items))
-        controls[nc++] = (mx_sd_control){j->models.cn_depth, b->depth_planes, b->w_depth, b->w_depth_items};
-    if (b->inpaint_planes && j->models.cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
-        controls[nc++] = (mx_sd_control){j->models.cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
-    progress_ctx pc = {j, b->stage};
-    mx_sd_request rq = {j->models.unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
-                        report_step, &pc, NULL, NULL};
+    if (b->depth_planes && j->models->cn_depth && (b->w_depth != 0 || b->w_depth_items))
+        controls[nc++] = (mx_sd_control){j->models->cn_depth, b->depth_planes, b->w_depth, b->w_depth_items};
+    if (b->inpaint_planes && j->models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
+        controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
+    mx_job_set_phase(j, b->stage);
+    mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
+                        report_step, j, NULL, NULL};
     double t = mx_now();
     if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
@@ -371,7 +395,7 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     int R = j->o->render_size;
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
-    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx.pool,
+    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx->pool,
                         st) ||
         mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->image_size), st))
         return -1;
@@ -430,10 +454,10 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
     mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->tex_size, j->o->tex_size, mask);
     free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
-    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx.pool, &rgb, st) &&
+    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx->pool, &rgb, st) &&
         !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
         !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) &&
-        !mx_paint_mask_cells(&mask_s, mx_vae_factor(j->models.vae), PAINT_DILATE_CELLS, &paint, st) &&
+        !mx_paint_mask_cells(&mask_s, mx_vae_factor(j->models->vae), PAINT_DILATE_CELLS, &paint, st) &&
         !mx_inpaint_image(&rgb_s, &paint, &ctl, st)) {
         mx_image_to_planes(&ctl, p->inpaint, p->plane_w, p->x0);
         if (p->init) mx_image_to_planes(&rgb_s, p->init, p->plane_w, p->x0);
@@ -469,10 +493,11 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         return -1;
     }
     mx_crop_paste(&gen, v->crop, &canvas);
-    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, j->write_flags, j->ctx.pool, st);
+    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, j->write_flags, j->ctx->pool, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
     j->views_done++;
+    if (!rc) emit_progress(j, 0, 0, "view backprojected");
     return rc;
 }
 
@@ -519,6 +544,7 @@ int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
 
 int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     double t = mx_now();
+    mx_job_set_phase(j, "finish");
     if (mx_job_check_cancel(j, st) || (!j->keep_unreached && mx_job_fill_textures(j, tex, st))) return -1;
     mx_jw *w = &j->report;
     mx_jw_end_arr(w); /* views */
@@ -533,9 +559,42 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
-    if (mx_job_check_cancel(j, st) ||
-        mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st))
-        return -1;
+    if (mx_job_check_cancel(j, st)) return -1;
+    if (!j->o->out_dir) return 0;
+    if (mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st)) return -1;
     mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
     return 0;
+}
+
+int mx_job_result(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *st) {
+    if (!res) return 0;
+    memset(res, 0, sizeof *res);
+    res->coverage = mx_job_coverage(j);
+    res->views = j->views_done;
+    res->seconds = mx_now() - j->t0;
+    if (!j->o->keep_outputs) return 0;
+    const char *report = mx_jw_text(&j->report);
+    res->textures = calloc((size_t)j->nlayers, sizeof *res->textures);
+    res->report_json = report ? strdup(report) : NULL;
+    if (!res->textures || !res->report_json) {
+        mx_texture_result_free(res);
+        return mx_fail(st, MX_ENOMEM, "result: out of memory");
+    }
+    res->ntex = j->nlayers;
+    for (int l = 0; l < j->nlayers; l++) {
+        res->textures[l] = tex[l];
+        memset(&tex[l], 0, sizeof tex[l]);
+    }
+    res->mesh = j->mesh;
+    memset(&j->mesh, 0, sizeof j->mesh);
+    return 0;
+}
+
+void mx_texture_result_free(mx_texture_result *res) {
+    if (!res) return;
+    for (int l = 0; l < res->ntex; l++) mx_image_free(&res->textures[l]);
+    free(res->textures);
+    free(res->report_json);
+    mx_mesh_free(&res->mesh);
+    memset(res, 0, sizeof *res);
 }

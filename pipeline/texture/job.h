@@ -30,10 +30,14 @@ typedef struct mx_prompt_cache {
 typedef struct mx_job {
     const mx_texture_opts *o;
     mx_outdir out; /* opened (checked, staging folder created) before anything else */
-    mx_ctx ctx;
-    int ctx_ready;
-    mx_models models;
-    int models_ready;
+    const mx_ctx *ctx; /* the model set's context (o->models), or own_ctx */
+    mx_ctx own_ctx;
+    int own_ctx_ready;
+    const mx_models *models; /* o->models, or own_models; NULL with MX_JOB_NO_MODELS */
+    mx_models own_models;
+    int own_models_ready;
+    char phase[32];    /* stage of the progress events */
+    int stop;          /* the progress callback asked to cancel */
     mx_mesh mesh;
     float *pos;  /* normalised positions for rendering: (R p - center) * scale */
     float center[3], scale;
@@ -90,12 +94,16 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Output folder (checked, staging folder created), context, models (needs:
- * MX_MODELS_NEED_*, or MX_JOB_NO_MODELS), mesh and its normalised copy, bake sized tex_size with nlayers layers,
- * candidate cache and the report's header. mx_job_close removes the staging folder of a run
- * that did not finish. */
+/* Output folder when o->out_dir is set (checked, staging folder created), context and models
+ * (o->models with its context, else loaded from o->weights_path; needs: MX_MODELS_NEED_*, or
+ * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->mesh_path) and its normalised
+ * copy, bake sized tex_size with nlayers layers, candidate cache and the report's header.
+ * mx_job_close removes the staging folder of a run that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
 void mx_job_close(mx_job *j);
+
+/* The context of a run (device, threads, precision of o), as a job or a model set makes it. */
+int mx_job_ctx_create(mx_ctx *c, const mx_texture_opts *o, mx_status *st);
 
 /* Runs one diffusion call: images out [n][3][h][w] in [0, 1]. */
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st);
@@ -133,13 +141,20 @@ double mx_job_coverage(const mx_job *j);
 /* Fills unreached texels (harmonic fill across UV seams inside the charts, mx_uv_fill_harmonic;
  * gutter dilation) of every layer. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
-/* Fills unreached texels (unless keep_unreached), writes the output folder (staged, then moved into place). */
+/* Fills unreached texels, writes the output folder (staged, then moved into place) when
+ * o->out_dir is set. Fails without writing anything once the run is cancelled. */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
-/* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set, else 0. */
+/* Fills res (may be NULL) after mx_job_finish; with o->keep_outputs it takes the textures
+ * (their data is moved: tex[l] is left empty), the mesh and the report. */
+int mx_job_result(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);
+/* Names the stage that the following progress events belong to (copied). */
+void mx_job_set_phase(mx_job *j, const char *stage);
+/* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set or the progress
+ * callback asked to stop, else 0. */
 int mx_job_check_cancel(const mx_job *j, mx_status *st);
 /* Records the time of a finished stage (name: a string literal). */
 void mx_job_stage_done(mx_job *j, const char *name, double seconds);
-/* Progress line on stderr (unless quiet). */
-void mx_job_progress(const mx_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Progress line on stderr (unless quiet) and to the progress callback. */
+void mx_job_progress(mx_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 #endif

@@ -6,6 +6,7 @@
 
 #include "../nn/netcfg.h"
 #include "../nn/sd_pipeline.h"
+#include "digest.h"
 
 static const char *config_text(const mx_weightfile *wf, const char *prefix, mx_status *st) {
     char key[96];
@@ -88,20 +89,24 @@ static int load_controlnets(mx_models *m, int needs, mx_status *st) {
     const char *depth_prefix = has_network(m->wf, "controlnet_depth.") ? "controlnet_depth."
                                : has_network(m->wf, "controlnet.")     ? "controlnet."
                                                                        : NULL;
-    if (depth_prefix) {
-        if (load_unet_like(m, depth_prefix, 1, 2, &m->b_depth, (void **)&m->cn_depth, st)) return -1;
-    } else if (needs & MX_MODELS_NEED_DEPTH) {
+    if (depth_prefix && load_unet_like(m, depth_prefix, 1, 2, &m->b_depth, (void **)&m->cn_depth, st)) return -1;
+    if (has_network(m->wf, "controlnet_inpaint.") &&
+        load_unet_like(m, "controlnet_inpaint.", 1, 3, &m->b_inpaint, (void **)&m->cn_inpaint, st))
+        return -1;
+    return mx_models_check(m, needs, st);
+}
+
+int mx_models_check(const mx_models *m, int needs, mx_status *st) {
+    if ((needs & MX_MODELS_NEED_DEPTH) && !m->cn_depth)
         return mx_fail(st, MX_EINPUT, "%s: no depth ControlNet (controlnet_depth.*) in this weight file",
                        mx_wf_path(m->wf));
-    }
-    if (has_network(m->wf, "controlnet_inpaint.")) {
-        if (load_unet_like(m, "controlnet_inpaint.", 1, 3, &m->b_inpaint, (void **)&m->cn_inpaint, st)) return -1;
-    } else if (needs & MX_MODELS_NEED_INPAINT) {
+    if ((needs & MX_MODELS_NEED_INPAINT) && !m->cn_inpaint)
         return mx_fail(st, MX_EINPUT, "%s: no inpainting ControlNet (controlnet_inpaint.*) in this weight file",
                        mx_wf_path(m->wf));
-    }
     return 0;
 }
+
+const char *mx_models_path(const mx_models *m) { return mx_wf_path(m->wf); }
 
 int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st) {
     memset(m, 0, sizeof *m);
@@ -120,6 +125,7 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
         mx_models_free(m);
         return -1;
     }
+    mx_file_digest_hex(path, m->digest);
     return 0;
 }
 
@@ -135,6 +141,7 @@ void mx_models_free(mx_models *m) {
     mx_binder_free(&m->b_depth);
     mx_binder_free(&m->b_inpaint);
     mx_binder_free(&m->b_vae);
+    mx_binder_free(&m->b_taesd);
     for (int i = 0; i < 6; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);

@@ -34,6 +34,7 @@ typedef struct mx_models {
     mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd; /* weights on the device */
     mx_binder wf_binders[6];                   /* the weight file's binders behind them */
     int clip_loaded;
+    char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;
 
 /* Opens the weight file and binds every network, its weights kept on c's backend (c must
@@ -41,6 +42,10 @@ typedef struct mx_models {
  * network is an error naming the file and the prefix it looked for. */
 int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st);
 void mx_models_free(mx_models *m);
+/* The same check for a model set already open (needs: MX_MODELS_NEED_*). */
+int mx_models_check(const mx_models *m, int needs, mx_status *st);
+/* The weight file's path. */
+const char *mx_models_path(const mx_models *m);
 
 /* Prompt -> CLIP last_hidden_state [77, C] (C = text hidden size) in host memory. *n_dropped gets
  * the number of tokens cut by truncation to 77 (the caller warns). */

@@ -27,11 +27,14 @@ static int blank(const char *s) {
 }
 
 static int check_paths(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
-    if (!o->mesh_path || !*o->mesh_path) return mx_fail(st, MX_EUSAGE, "no mesh given");
-    if (!o->out_dir || !*o->out_dir) return mx_fail(st, MX_EUSAGE, "no output folder given (-o)");
+    /* the embedding API may give the mesh in memory, an opened model set, and keep the results */
+    if (!o->mesh && (!o->mesh_path || !*o->mesh_path)) return mx_fail(st, MX_EUSAGE, "no mesh given");
+    if (!o->keep_outputs && (!o->out_dir || !*o->out_dir))
+        return mx_fail(st, MX_EUSAGE, "no output folder given (-o)");
     if (mode == MX_TEXTURE_MODE_TRANSFER)
         return !o->source_path || !*o->source_path ? mx_fail(st, MX_EUSAGE, "no source mesh given") : 0;
-    if (!o->weights_path || !*o->weights_path) return mx_fail(st, MX_EUSAGE, "no weight file given (--weights)");
+    if (!o->models && (!o->weights_path || !*o->weights_path))
+        return mx_fail(st, MX_EUSAGE, "no weight file given (--weights)");
     if (!o->prompt) return mx_fail(st, MX_EUSAGE, "no prompt given");
     if (mode == MX_TEXTURE_MODE_TEXTURE && blank(o->prompt))
         return mx_fail(st, MX_EUSAGE, "the prompt is empty: describe the texture, e.g. \"a rustic wooden chair\"");
@@ -76,5 +79,7 @@ int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_sta
         return mx_fail(st, MX_EUSAGE, "--precision must be fp32 or bf16");
     if ((int)o->device < 0 || (int)o->device >= MX_BACKEND_KINDS)
         return mx_fail(st, MX_EUSAGE, "--device must be cpu, cpu-strict or cuda");
+    if (o->fast && mode != MX_TEXTURE_MODE_TEXTURE)
+        return mx_fail(st, MX_EUSAGE, "--fast is for texture only (the LCM scheduler has no img2img strength yet)");
     return 0;
 }

@@ -58,6 +58,7 @@ static int grid_stage(mx_job *j, mx_status *st) {
         if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, NULL, st)) goto done;
     }
     prompts[0] = v[0].prompt;
+    mx_job_set_phase(j, "grid");
     mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->grid_depth_weight);
     mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->grid_depth_weight, 0.0f, NULL, NULL, NULL, NULL, 0.0f, 0,
                       "grid"};
@@ -137,6 +138,9 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     /* the views of a batch all see T as it is before the batch */
     if (mx_job_current_textures(j, current, st)) goto done;
     have_current = 1;
+    char stage[32];
+    snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
+    mx_job_set_phase(j, stage);
     for (int i = 0; i < n; i++) {
         v[i].cam = j->vc.cams[cand[i]];
         snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->prompt);
@@ -149,8 +153,6 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
                         (long long)v[i].untextured_pixels);
     }
-    char stage[32];
-    snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
     mx_gen_batch b = {n, S, S, bb.prompts, bb.depth, bb.inpaint, bb.wd[0], bb.wi[0], bb.wd, bb.wi, bb.init,
                       bb.paint, 1.0f, (uint64_t)(k + 1), stage};
     if (mx_job_generate(j, &b, bb.image, st)) goto done;
@@ -214,14 +216,9 @@ int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         mx_image tex[j.nlayers];
         rc = mx_job_current_textures(&j, tex, st);
         if (!rc) {
-            rc = mx_job_finish(&j, tex, st);
+            rc = mx_job_finish(&j, tex, st) || mx_job_result(&j, tex, res, st) ? -1 : 0;
             for (int l = 0; l < j.nlayers; l++) mx_image_free(&tex[l]);
         }
-    }
-    if (!rc && res) {
-        res->coverage = mx_job_coverage(&j);
-        res->views = j.views_done;
-        res->seconds = mx_now() - j.t0;
     }
     mx_job_close(&j);
     return rc;

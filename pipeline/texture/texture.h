@@ -23,14 +23,36 @@
 #include "../../runtime/backend.h"
 
 #include "../../runtime/status.h"
+#include "../geom/image.h"
 #include "../geom/mesh.h"
 
+struct mx_models;
+
+/* A progress event: after each denoising step (step/steps set) and at each progress line. */
+typedef struct mx_texture_progress {
+    const char *stage;   /* "load", "grid", "views 3-4", "enhance view 2", "finish" */
+    int step, steps;     /* denoising step (1-based) of the stage's diffusion call; 0, 0 outside one */
+    int views_done;      /* views backprojected so far (front and back count as two) */
+    int views_total;     /* the view budget */
+    double coverage;     /* fraction of candidate-visible texels painted so far */
+    double seconds;      /* since the run started */
+    const char *message; /* the progress line (the CLI prints it unless quiet) */
+} mx_texture_progress;
+/* Returns non-zero to cancel the run. */
+typedef int (*mx_texture_progress_fn)(void *user, const mx_texture_progress *p);
+
 typedef struct mx_texture_opts {
-    const char *mesh_path;
+    const char *mesh_path;       /* the mesh file, or NULL when `mesh` is given */
+    const mx_mesh *mesh;         /* a mesh in memory (validated, then copied), or NULL */
+    const mx_image *mesh_textures; /* enhance, mesh in memory: one texture per material, or NULL */
     const char *prompt;
     const char *negative_prompt; /* "" by default */
-    const char *weights_path;
-    const char *out_dir;
+    const char *weights_path;    /* loaded for this run when `models` is NULL */
+    const struct mx_models *models; /* a model set opened once (mx_models_load), reused by many runs */
+    const char *out_dir;         /* the output folder; NULL: results only in memory (keep_outputs) */
+    int keep_outputs;            /* the result takes the textured mesh, textures and report */
+    mx_texture_progress_fn progress; /* NULL: none */
+    void *progress_user;
     uint64_t seed;           /* 0 */
     int steps;               /* 10 */
     int views;               /* view budget, front and back included: 6 */
@@ -80,8 +102,14 @@ typedef struct mx_texture_result {
     double coverage;   /* fraction of candidate-visible texels painted by views */
     int views;         /* views generated (front and back count as two) */
     double seconds;
+    /* with keep_outputs: the mesh as exported (its UVs are the atlas when the input had none) */
+    mx_mesh mesh;
+    int ntex;            /* textures: 1, or one per material (mesh.face_mat picks) */
+    mx_image *textures;  /* [ntex], RGB in [0, 1], row 0 at the top (v = 1) */
+    char *report_json;
 } mx_texture_result;
 
+/* Both fill *res (when not NULL) on success; free it with mx_texture_result_free. */
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
 /* `matex transfer` (pipeline/texture/transfer.c): the texture of o->source_path moves onto
@@ -90,5 +118,6 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
  * destination where both meshes are seen, then the job's fill and export. No networks: the
  * weights, prompt and sampler options are unused. Both meshes share pose and units. */
 int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st);
+void mx_texture_result_free(mx_texture_result *res);
 
 #endif

@@ -75,12 +75,12 @@ static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, 
     snprintf(v.prompt, sizeof v.prompt, "%s view", mx_camera_view_word(cam));
     mx_image img = {0};
     int rc = mx_job_view_prepare(j, &v, st) ||
-             mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->ctx.pool, &s->gb, st) ||
-             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->background, j->ctx.pool, &img, st) ||
+             mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->ctx->pool, &s->gb, st) ||
+             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->background, j->ctx->pool, &img, st) ||
              (j->o->through_model_image && through_model_image(j, &v, &img, st));
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) v.vb.mask[i] &= s->gb.face[i] >= 0;
-        rc = mx_backproject(&j->bake, &v.vb.gb, &j->mesh, &img, v.vb.mask, j->write_flags, j->ctx.pool, st);
+        rc = mx_backproject(&j->bake, &v.vb.gb, &j->mesh, &img, v.vb.mask, j->write_flags, j->ctx->pool, st);
     }
     if (!rc) {
         j->views_done++;
@@ -164,6 +164,7 @@ int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status 
     if (!rc) rc = transfer_views(&j, &s, st);
     if (!rc) rc = finish(&j, &s, st);
     if (!rc && res) {
+        memset(res, 0, sizeof *res);
         res->coverage = mx_job_coverage(&j);
         res->views = j.views_done;
         res->seconds = mx_now() - j.t0;

@@ -452,6 +452,55 @@ static void test_attention_ops(env *e) {
     test_attention(e, 1, 1, 21, 35, 512, 0);
 }
 
+/* The seam ops (pad, fill, axpy, lincomb, clamp, affine, timestep and token embeddings) against
+ * the scalar references: bit-exact except the embeddings' transcendental functions. */
+static void test_seam_ops(env *e) {
+    const int BC = 3, H = 7, W = 9, Hp = H + 1, Wp = W + 2;
+    const size_t n = 4099, np = (size_t)BC * Hp * Wp;
+    float *x = rnd(n, 131, -1, 1), *y = rnd(n, 132, -1, 1), *want = malloc(n * sizeof *want);
+    float *dx = dev_copy(e, x, n * sizeof *x), *dy = dev_copy(e, y, n * sizeof *y), *dz = dev_zero(e, n * sizeof *y);
+    if (!dx || !dy || !dz) return;
+    e->cpu.k->pad2d(&e->cpu, want, x, BC, H, W, 0, 1, 2, 0);
+    if (!gpu_ok(e, mx_cuda_pad2d(e->gpu, dz, dx, BC, H, W, 0, 1, 2, 0, &e->st), "pad2d"))
+        compare_dev(e, "pad2d 3x7x9 (0,1,2,0)", dz, want, np, 0.0);
+    memcpy(want, y, n * sizeof *y);
+    e->cpu.k->axpy(&e->cpu, want, x, -0.7f, n);
+    if (!gpu_ok(e, mx_cuda_axpy(e->gpu, dy, dx, -0.7f, n, &e->st), "axpy")) compare_dev(e, "axpy n=4099", dy, want, n, 0.0);
+    const float coef[3] = {0.3f, -1.25f, 2.0f};
+    const float *const hx[3] = {x, want, x}, *const dxs[3] = {dx, dy, dx};
+    float *want2 = malloc(n * sizeof *want2);
+    e->cpu.k->lincomb(&e->cpu, want2, 3, coef, hx, n);
+    if (!gpu_ok(e, mx_cuda_lincomb(e->gpu, dz, 3, coef, dxs, n, &e->st), "lincomb"))
+        compare_dev(e, "lincomb of 3, n=4099", dz, want2, n, 0.0);
+    e->cpu.k->clamp(&e->cpu, want2, x, -0.25f, 0.5f, n);
+    if (!gpu_ok(e, mx_cuda_clamp(e->gpu, dz, dx, -0.25f, 0.5f, n, &e->st), "clamp")) compare_dev(e, "clamp", dz, want2, n, 0.0);
+    e->cpu.k->affine(&e->cpu, want2, x, 0.5f, 0.5f, n);
+    if (!gpu_ok(e, mx_cuda_affine(e->gpu, dz, dx, 0.5f, 0.5f, n, &e->st), "affine")) compare_dev(e, "affine", dz, want2, n, 0.0);
+    e->cpu.k->fill(&e->cpu, want2, 3.5f, n);
+    if (!gpu_ok(e, mx_cuda_fill(e->gpu, dz, 3.5f, n, &e->st), "fill")) compare_dev(e, "fill", dz, want2, n, 0.0);
+    const float ts[3] = {999.0f, 1.0f, 500.0f};
+    float *dts = dev_copy(e, ts, sizeof ts);
+    e->cpu.k->timestep_embedding(&e->cpu, want2, ts, 3, 321, 1, 0.0f, 10000.0f);
+    if (dts && !gpu_ok(e, mx_cuda_timestep_embedding(e->gpu, dz, dts, 3, 321, 1, 0.0f, 10000.0f, &e->st), "temb"))
+        compare_dev(e, "timestep embedding 3x321", dz, want2, 3 * 321, FP32_BOUND);
+    test_weight tok = make_weight(e, 50 * 24, 133, MX_F16), pos = make_weight(e, 5 * 24, 134, MX_F32);
+    const int32_t ids[10] = {0, 49, 7, 7, 3, 12, 1, 48, 2, 0};
+    e->cpu.k->embed_tokens(&e->cpu, want2, ids, 2, 5, 24, tok.host, pos.host);
+    if (tok.dev.data && pos.dev.data &&
+        !gpu_ok(e, mx_cuda_embed_tokens(e->gpu, dz, ids, 2, 5, 24, tok.dev, pos.dev, &e->st), "embed"))
+        compare_dev(e, "embed_tokens 2x5x24 (fp16 table)", dz, want2, 2 * 5 * 24, 0.0);
+    free_weight(&tok);
+    free_weight(&pos);
+    mx_cuda_free(dts);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    mx_cuda_free(dz);
+    free(x);
+    free(y);
+    free(want);
+    free(want2);
+}
+
 static void test_other_ops(env *e) {
     test_activations(e);
     test_geglu(e);
@@ -469,10 +518,11 @@ static void test_other_ops(env *e) {
     test_conversion(e, MX_F16);
     test_conversion(e, MX_BF16);
     test_rng(e);
+    test_seam_ops(e);
 }
 
 /* The number of checks above, for the skip line. */
-#define N_TESTS (8 + 2 + 4 + 5 + 3 + 1 + 3 + 1 + 1 + 1 + 2 + 3 + 2 + 1)
+#define N_TESTS (8 + 2 + 4 + 5 + 3 + 1 + 3 + 1 + 1 + 1 + 2 + 3 + 2 + 1 + 9)
 
 int main(void) {
     env e;

@@ -6,6 +6,8 @@
 # (error messages of rejected inputs); libFuzzer and sanitizer reports still reach the log.
 # usage: sh tests/fuzz/run.sh BUILD SECONDS HARNESS...
 set -u
+# OIIO's worker threads only add waiting to a one-image-at-a-time harness.
+export OPENIMAGEIO_OPTIONS="${OPENIMAGEIO_OPTIONS:-threads=1}"
 build=$1
 secs=$2
 shift 2

@@ -1,0 +1,68 @@
+#!/bin/sh
+# matex batch: a manifest of tiny-weight jobs in two shards, bad lines and a failing job recorded
+# with their line numbers, a rerun that skips what is complete, the shard from Slurm's array
+# variables, the same texture as `matex texture`, and SIGTERM mid-run: exit 130, nothing partial,
+# the next run completes only the missing jobs.
+NAME=batch
+. "$(dirname "$0")/lib_cli.sh"
+W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
+SMALL='"steps": 1, "image-size": 64, "texture-size": 128, "render-size": 128, "candidates": 12'
+cp "$(dirname "$0")/data/box.obj" "$T/box.obj"
+{
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"a wooden crate\", \"name\": \"crate\", $SMALL}"
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"a metal box\", \"name\": \"metal\", \"seed\": 5, \"depth-weight\": [1.0, 0.5], $SMALL}"
+    echo "{\"mesh\": \"nowhere.obj\", \"prompt\": \"a missing mesh\", $SMALL}"
+    echo ""
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"a stone block\", \"name\": \"stone\", \"negative\": \"blurry\", $SMALL}"
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"oops\" $SMALL}"
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"x\", \"name\": \"frob\", \"frobnicate\": 1}"
+} > "$T/m.jsonl"
+O="$T/outroot"
+check "shard 0/2 exits 1 (a job failed)" [ "$(rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --shard 0/2 --json)" = 1 ]
+cp "$T/out" "$T/s0.json"
+check "shard 1/2 exits 1 (bad lines)" [ "$(rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --shard 1/2 --json)" = 1 ]
+cp "$T/out" "$T/s1.json"
+cat "$T/s0.json" "$T/s1.json"
+# job lines 1 2 3 5 6 7 are jobs 0..5: shard 0 has lines 1, 3, 6 and shard 1 lines 2, 5, 7
+check "shard 0 summary" grep -q '"shard":"0/2","jobs":3,"done":1,"skipped":0,"failed":2' "$T/s0.json"
+check "shard 1 summary" grep -q '"shard":"1/2","jobs":3,"done":2,"skipped":0,"failed":1' "$T/s1.json"
+for n in crate metal stone; do
+    for f in texture.png mesh.glb report.json; do check "$n/$f" [ -s "$O/$n/$f" ]; done
+done
+cat "$O/failed.jsonl"
+check "failed.jsonl: 3 lines" [ "$(wc -l < "$O/failed.jsonl")" = 3 ]
+check "missing mesh recorded with its line" grep -q '"line":3,.*nowhere.obj' "$O/failed.jsonl"
+check "bad JSON reported with its line" grep -q '"line":6,.*m.jsonl:6: ' "$O/failed.jsonl"
+check "unknown key reported" grep -q '"line":7,.*unknown key \\"frobnicate\\"' "$O/failed.jsonl"
+check "rerun: complete jobs skipped" [ "$(rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --json)" = 1 ]
+check "rerun summary" grep -q '"jobs":6,"done":0,"skipped":3,"failed":3' "$T/out"
+check "shard from SLURM_ARRAY_TASK_*" [ "$(SLURM_ARRAY_TASK_ID=2 SLURM_ARRAY_TASK_MIN=1 SLURM_ARRAY_TASK_COUNT=2 \
+    rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --json)" = 1 ]
+check "that is shard 1/2" grep -q '"shard":"1/2"' "$T/out"
+check "bad --shard exits 2" [ "$(rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --shard 2/2)" = 2 ]
+check "missing weights exits 1" [ "$(rc_of "$M" batch "$T/m.jsonl" --weights "$T/none.mxw" -o "$T/o2")" = 1 ]
+check "naming the file" grep -q "none.mxw" "$T/err"
+check "matex texture with the same options" [ "$(rc_of "$M" texture "$T/box.obj" "a metal box" --seed 5 \
+    --depth-weight 1.0,0.5 --steps 1 --image-size 64 --texture-size 128 --render-size 128 --candidates 12 \
+    --weights "$W" -o "$T/metal_cli")" = 0 ]
+check "gives the same texture" cmp -s "$T/metal_cli/texture.exr" "$O/metal/texture.exr"
+
+# SIGTERM in the middle of a run (what scancel sends), right after the first job is complete
+for i in 1 2 3; do echo "{\"mesh\": \"box.obj\", \"prompt\": \"box $i\", \"name\": \"b$i\", $SMALL}"; done > "$T/slow.jsonl"
+"$M" batch "$T/slow.jsonl" --weights "$W" -o "$T/slow" --threads 1 --json > "$T/int.json" 2> "$T/int.err" &
+pid=$!
+i=0
+while [ ! -e "$T/slow/b1/report.json" ] && [ $i -lt 600 ]; do sleep 0.1; i=$((i + 1)); done
+kill -TERM $pid
+wait $pid
+rc=$?
+cat "$T/int.json"
+check "SIGTERM: exit 130" [ $rc = 130 ]
+check "SIGTERM: summary says interrupted" grep -q '"interrupted":true' "$T/int.json"
+check "SIGTERM: no partial folder left" [ -z "$(ls "$T/slow" | grep partial)" ]
+ndone=$(ls "$T/slow" | grep -c '^b')
+check "SIGTERM: some jobs missing ($ndone of 3 done)" [ "$ndone" -ge 1 -a "$ndone" -lt 3 ]
+check "rerun after SIGTERM" [ "$(rc_of "$M" batch "$T/slow.jsonl" --weights "$W" -o "$T/slow" --threads 1 --json)" = 0 ]
+cat "$T/out"
+check "it completes only the missing jobs" grep -q "\"done\":$((3 - ndone)),\"skipped\":$ndone,\"failed\":0" "$T/out"
+exit $fail

@@ -1,0 +1,44 @@
+#include "cli_api.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "../pipeline/texture/api_opts.h"
+
+void mx_cli_api_status(const matex_error *err, mx_status *st) {
+    st->code = err->code; /* the same numbers */
+    snprintf(st->msg, sizeof st->msg, "%s", err->message);
+}
+
+typedef int (*api_fn)(matex_models *, const matex_options *, matex_result **, matex_error *);
+
+static int run_once(api_fn fn, const mx_texture_opts *t, mx_texture_result *res, mx_status *st) {
+    matex_error err;
+    matex_options o;
+    mx_api_options_from_internal(t, &o);
+    matex_models *m = matex_models_open(t->weights_path, &o, &err);
+    if (!m) {
+        mx_cli_api_status(&err, st);
+        return -1;
+    }
+    matex_result *r = NULL;
+    int rc = fn(m, &o, res ? &r : NULL, &err);
+    if (rc) mx_cli_api_status(&err, st);
+    if (!rc && res) {
+        memset(res, 0, sizeof *res);
+        res->coverage = r->coverage;
+        res->views = r->views;
+        res->seconds = r->seconds;
+    }
+    matex_result_free(r);
+    matex_models_close(m);
+    return rc;
+}
+
+int mx_cli_api_texture(const mx_texture_opts *t, mx_texture_result *res, mx_status *st) {
+    return run_once(matex_texture, t, res, st);
+}
+
+int mx_cli_api_enhance(const mx_texture_opts *t, mx_texture_result *res, mx_status *st) {
+    return run_once(matex_enhance, t, res, st);
+}
