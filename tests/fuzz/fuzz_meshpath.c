@@ -135,7 +135,8 @@ static void bake_view(const mx_mesh *m, const float *pos, const mx_camera *cam, 
 static void plan_views(const mx_mesh *m, const float *pos, const mx_camera *cams, int nlayers) {
     mx_status st;
     mx_view_cache vc;
-    if (mx_view_cache_build(&vc, m, pos, cams, NCAND, VIEW, TEX, TEX, nlayers, MX_NORMAL_GEOMETRIC, 0.3f, 0, NULL, &st))
+    if (mx_view_cache_build(&vc, m, pos, cams, NCAND, VIEW, TEX, TEX, nlayers, MX_NORMAL_FROM_DEPTH, 0.3f, 2, NULL,
+                            &st))
         return;
     uint8_t *known = calloc((size_t)nlayers * TEX * TEX, 1);
     mx_view_plan plan;
