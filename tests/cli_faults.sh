@@ -47,7 +47,7 @@ ks() {
     sweep=${MATEX_FAULTS_SWEEP:-sample}
     if [ "$sweep" = full ] || [ "$2" -le "$SAMPLES" ] || { [ "$sweep" = sites ] && [ "$1" = write ]; }; then seq 1 "$2"
     elif [ "$sweep" = sites ]; then sed -n 's/^first //p' "$T/base/report" | sort -n
-    else seq 0 $((SAMPLES - 1)) | awk -v n="$1" -v s="$SAMPLES" '{ print 1 + int($1 * (n - 1) / (s - 1)) }'
+    else seq 0 $((SAMPLES - 1)) | awk -v n="$2" -v s="$SAMPLES" '{ print 1 + int($1 * (n - 1) / (s - 1)) }'
     fi
 }
 
