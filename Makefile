@@ -190,12 +190,13 @@ TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
            MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
            MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
-test: all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
-test-full: all core $(TEST_BINS) $(DEMO_WEIGHTS)
-	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS)
+test-full: $(TEST_DEPS)
+	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
 # A one-node Slurm cluster on localhost (munged, slurmctld, slurmd; slurm-wlm and munge installed when
 # missing) runs tools/slurm/matex-array.sbatch over tiny-weight jobs: submit, cancel, resume.
