@@ -20,7 +20,7 @@
 typedef mx_buf bytes;
 
 static void pad4(bytes *b, unsigned char fill) {
-    while (b->len % 4) mx_buf_put(b, &fill, 1);
+    while (b->len % 4 && !b->oom) mx_buf_put(b, &fill, 1); /* a failed buffer no longer grows */
 }
 
 /* ---- OBJ + MTL ---- */

@@ -238,11 +238,9 @@ static int run(pipeline_fn fn, matex_models *m, const matex_options *o, matex_re
         r = calloc(1, sizeof *r);
         if (!r) rc = mx_fail(&st, MX_ENOMEM, "out of memory");
     }
+    if (r) r->in.view_bytes = sizeof *r->pub.textures; /* the public views, reserved by the run */
     if (!rc) rc = fn(&t, r ? &r->in : NULL, &st);
-    if (!rc && r) {
-        r->pub.textures = calloc((size_t)r->in.ntex, sizeof *r->pub.textures);
-        if (!r->pub.textures) rc = mx_fail(&st, MX_ENOMEM, "out of memory");
-    }
+    if (!rc && r) r->pub.textures = r->in.views_room;
     free(mv.mats);
     free(mv.textures);
     if (rc) {
@@ -286,7 +284,6 @@ int matex_result_write(const matex_result *r, const char *out_dir, int force, ma
 void matex_result_free(matex_result *r) {
     if (!r) return;
     api_result *a = (api_result *)r;
-    mx_texture_result_free(&a->in);
-    free(a->pub.textures);
+    mx_texture_result_free(&a->in); /* pub.textures is its views_room */
     free(a);
 }

@@ -171,7 +171,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         mx_job_stage_done(&j, "views", mx_now() - t);
         rc = merge_textures(&j, orig, out, st);
     }
-    if (!rc) rc = mx_job_finish(&j, out, st) || mx_job_result(&j, out, res, st) ? -1 : 0;
+    if (!rc) rc = mx_job_finish(&j, out, res, st);
     for (int l = 0; orig && l < j.nlayers; l++) mx_image_free(&orig[l]);
     for (int l = 0; out && l < j.nlayers; l++) mx_image_free(&out[l]);
     free(orig);

@@ -543,7 +543,38 @@ int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     return 0;
 }
 
-int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
+/* The in-memory result: its containers are allocated before the folder is published, and the
+ * textures, mesh and report are moved in after it, so that nothing can fail once the output exists. */
+static int result_reserve(const mx_job *j, const char *report, mx_texture_result *res, mx_status *st) {
+    size_t view_bytes = res->view_bytes;
+    memset(res, 0, sizeof *res);
+    res->view_bytes = view_bytes;
+    if (!j->o->keep_outputs) return 0;
+    res->textures = calloc((size_t)j->nlayers, sizeof *res->textures);
+    res->report_json = strdup(report);
+    if (view_bytes) res->views_room = calloc((size_t)j->nlayers, view_bytes);
+    if (!res->textures || !res->report_json || (view_bytes && !res->views_room)) {
+        mx_texture_result_free(res);
+        return mx_fail(st, MX_ENOMEM, "result: out of memory");
+    }
+    return 0;
+}
+
+static void result_fill(mx_job *j, mx_image *tex, mx_texture_result *res) {
+    res->coverage = mx_job_coverage(j);
+    res->views = j->views_done;
+    res->seconds = mx_now() - j->t0;
+    if (!j->o->keep_outputs) return;
+    res->ntex = j->nlayers;
+    for (int l = 0; l < j->nlayers; l++) {
+        res->textures[l] = tex[l];
+        memset(&tex[l], 0, sizeof tex[l]);
+    }
+    res->mesh = j->mesh;
+    memset(&j->mesh, 0, sizeof j->mesh);
+}
+
+int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *st) {
     double t = mx_now();
     mx_job_set_phase(j, "finish");
     if (mx_job_check_cancel(j, st) || (!j->keep_unreached && mx_job_fill_textures(j, tex, st))) return -1;
@@ -560,34 +591,14 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_status *st) {
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
-    if (mx_job_check_cancel(j, st)) return -1;
-    if (!j->o->out_dir) return 0;
-    if (mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st)) return -1;
-    mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
-    return 0;
-}
-
-int mx_job_result(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *st) {
-    if (!res) return 0;
-    memset(res, 0, sizeof *res);
-    res->coverage = mx_job_coverage(j);
-    res->views = j->views_done;
-    res->seconds = mx_now() - j->t0;
-    if (!j->o->keep_outputs) return 0;
-    const char *report = mx_jw_text(&j->report);
-    res->textures = calloc((size_t)j->nlayers, sizeof *res->textures);
-    res->report_json = report ? strdup(report) : NULL;
-    if (!res->textures || !res->report_json) {
-        mx_texture_result_free(res);
-        return mx_fail(st, MX_ENOMEM, "result: out of memory");
+    if (mx_job_check_cancel(j, st) || (res && result_reserve(j, text, res, st))) return -1;
+    if (j->o->out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st)) {
+        if (res) mx_texture_result_free(res);
+        return -1;
     }
-    res->ntex = j->nlayers;
-    for (int l = 0; l < j->nlayers; l++) {
-        res->textures[l] = tex[l];
-        memset(&tex[l], 0, sizeof tex[l]);
-    }
-    res->mesh = j->mesh;
-    memset(&j->mesh, 0, sizeof j->mesh);
+    if (j->o->out_dir)
+        mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
+    if (res) result_fill(j, tex, res);
     return 0;
 }
 
@@ -596,6 +607,7 @@ void mx_texture_result_free(mx_texture_result *res) {
     for (int l = 0; l < res->ntex; l++) mx_image_free(&res->textures[l]);
     free(res->textures);
     free(res->report_json);
+    free(res->views_room);
     mx_mesh_free(&res->mesh);
     memset(res, 0, sizeof *res);
 }

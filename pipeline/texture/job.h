@@ -142,11 +142,10 @@ double mx_job_coverage(const mx_job *j);
  * gutter dilation) of every layer. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Fills unreached texels, writes the output folder (staged, then moved into place) when
- * o->out_dir is set. Fails without writing anything once the run is cancelled. */
-int mx_job_finish(mx_job *j, mx_image *textures, mx_status *st);
-/* Fills res (may be NULL) after mx_job_finish; with o->keep_outputs it takes the textures
- * (their data is moved: tex[l] is left empty), the mesh and the report. */
-int mx_job_result(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);
+ * o->out_dir is set, and fills res (may be NULL): with o->keep_outputs it takes the textures
+ * (their data is moved: textures[l] is left empty), the mesh and the report. Fails without writing
+ * anything once the run is cancelled; nothing can fail after the folder is published. */
+int mx_job_finish(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);
 /* Names the stage that the following progress events belong to (copied). */
 void mx_job_set_phase(mx_job *j, const char *stage);
 /* -1 with MX_ECANCEL "interrupted" once the caller's cancel flag is set or the progress

@@ -216,7 +216,7 @@ int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
         mx_image tex[j.nlayers];
         rc = mx_job_current_textures(&j, tex, st);
         if (!rc) {
-            rc = mx_job_finish(&j, tex, st) || mx_job_result(&j, tex, res, st) ? -1 : 0;
+            rc = mx_job_finish(&j, tex, res, st);
             for (int l = 0; l < j.nlayers; l++) mx_image_free(&tex[l]);
         }
     }

@@ -107,6 +107,10 @@ typedef struct mx_texture_result {
     int ntex;            /* textures: 1, or one per material (mesh.face_mat picks) */
     mx_image *textures;  /* [ntex], RGB in [0, 1], row 0 at the top (v = 1) */
     char *report_json;
+    /* Room a caller asks for (set before the run, kept by it): view_bytes per texture, zeroed,
+     * reserved before the output folder is published so that nothing fails after it. */
+    size_t view_bytes;
+    void *views_room;
 } mx_texture_result;
 
 /* Both fill *res (when not NULL) on success; free it with mx_texture_result_free. */

@@ -145,7 +145,7 @@ static int finish(mx_job *j, const source *s, mx_status *st) {
             j->psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->psnr_db);
         }
-        rc = mx_job_finish(j, tex, st);
+        rc = mx_job_finish(j, tex, NULL, st);
         for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
     }
     free(tex);
