@@ -439,7 +439,7 @@ int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, i
     if (mx_uv_chart_faces(m, layer, nlayers, w, h, chart, face, st) || mx_mesh_weld_map(m, canon, st) ||
         seam_links(m, canon, layer, nlayers, w, h, chart, &links, st) || mx_uv_fill(tex, known, chart, 0, st))
         goto done;
-    qsort(links.v, links.n, sizeof *links.v, cmp_link);
+    if (links.n) qsort(links.v, links.n, sizeof *links.v, cmp_link); /* links.v is NULL when there are none */
     if (build_graph(m, canon, face, chart, known, &links, w, h, &g, st)) goto done;
     solve_harmonic(&g, tex->data);
     for (size_t i = 0; i < n; i++) valid[i] = known[i] || chart[i];
