@@ -1,6 +1,7 @@
 /* Backprojection: splat weights sum to one per pixel, results identical for 1 and 3
  * threads, later views leave T^B texels alone, better-angle overwrite restarts texels,
- * UV fill reaches every chart texel. Mesh: a tilted plane of 2 x 32 triangles with UVs. */
+ * mx_bake_open_texels opens only texels the better view then restarts, UV fill reaches every chart
+ * texel. Mesh: a tilted plane of 2 x 32 triangles with UVs. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -56,6 +57,55 @@ static void bake_once(const mx_mesh *m, const mx_camera *cam, const mx_image *im
     mx_pool_destroy(pool);
 }
 
+/* mx_bake_open_texels before the overwrite pass of a better view: it opens only known texels,
+ * enough of them, and each one it opens is one the pass then restarted (sum_w changed). */
+static void check_open_texels(const uint8_t *known, const uint8_t *open, const float *sum_w_after,
+                              const float *sum_w_before) {
+    int opened = 0, opened_unknown = 0, opened_kept = 0;
+    for (int t = 0; t < T * T; t++) {
+        if (!open[t] && !known[t]) continue;
+        if (open[t] && !known[t]) opened_unknown++;
+        if (!open[t]) {
+            opened++;
+            opened_kept += sum_w_after[t] == sum_w_before[t];
+        }
+    }
+    printf("open texels: %d opened by the better view, %d not known before, %d not restarted\n", opened,
+           opened_unknown, opened_kept);
+    CHECK(opened > 100 && opened_unknown == 0 && opened_kept == 0);
+}
+
+/* mx_bake_open_texels opens nothing for the view that wrote the texels (no gain in |n.v|) nor
+ * where the mask excludes every pixel, and the known set comes back unchanged. */
+static void check_open_texels_closed(const mx_mesh *m, const mx_camera *writer, const mx_camera *better,
+                                     const uint8_t *known, mx_pool *pool) {
+    mx_status st;
+    mx_bake c;
+    mx_gbuffer gw, gbt;
+    CHECK(mx_bake_init(&c, T, T, 1, &st) == 0);
+    CHECK(mx_gbuffer_init(&gw, S, S, &st) == 0 && mx_gbuffer_init(&gbt, S, S, &st) == 0);
+    CHECK(mx_rasterize(m, NULL, writer, MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &gw, &st) == 0);
+    CHECK(mx_rasterize(m, NULL, better, MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &gbt, &st) == 0);
+    mx_image img;
+    CHECK(mx_image_alloc(&img, S, S, 3, &st) == 0);
+    mx_fill_random(img.data, 3 * S * S, 7, 0, 1);
+    CHECK(mx_backproject(&c, &gw, m, &img, NULL, 0, pool, &st) == 0);
+    CHECK(memcmp(c.known, known, T * T) == 0);
+    uint8_t *open = malloc(T * T), *none = calloc(S * S, 1);
+    mx_bake_open_texels(&c, &gw, m, NULL, open);
+    int same_view = memcmp(open, known, T * T) == 0;
+    mx_bake_open_texels(&c, &gbt, m, none, open);
+    int masked = memcmp(open, known, T * T) == 0;
+    printf("open texels: writer view opens none %d, empty mask opens none %d\n", same_view, masked);
+    CHECK(same_view && masked);
+    free(open);
+    free(none);
+    mx_image_free(&img);
+    mx_gbuffer_free(&gw);
+    mx_gbuffer_free(&gbt);
+    mx_bake_free(&c);
+}
+
 int main(void) {
     float pos[75], uv[50];
     int32_t faces[96];
@@ -109,11 +159,16 @@ int main(void) {
     /* better-angle overwrite: the front view sees the plane head-on, the oblique view at 50 deg */
     mx_pool *pool = mx_pool_create(2, &st);
     CHECK(mx_rasterize(&m, NULL, &front, MX_RASTER_CULL_BACK | MX_RASTER_UV, pool, &gb, &st) == 0);
+    uint8_t *open = malloc(T * T);
+    mx_bake_open_texels(&b, &gb, &m, NULL, open);
     CHECK(mx_backproject(&b, &gb, &m, &img2, NULL, MX_BACKPROJECT_OVERWRITE, pool, &st) == 0);
     int restarted = 0;
     for (int t = 0; t < T * T; t++) restarted += known_before[t] && b.sum_w[t] != before[t];
     printf("overwrite: %d texels restarted by the better view\n", restarted);
     CHECK(restarted > 100);
+    check_open_texels(known_before, open, b.sum_w, before);
+    check_open_texels_closed(&m, &oblique, &front, known_before, pool);
+    free(open);
 
     /* UV fill: every chart texel gets a value, gutter texels around the chart too */
     mx_image tex;

@@ -23,12 +23,34 @@
 
 #define TEX 256
 
-static const char *ASSETS[] = {
-    "spot/spot_triangulated.obj", "bob/bob_tri.obj", "blub/blub_triangulated.obj", "spot_ply/spot.ply",
-    "garment_female_casual/female_casualsuit01.obj", "garment_female_elegant/female_elegantsuit01.obj",
-    "shoes_pair/shoes03.obj", "fedora_hat/fedora.obj", "boot/boot.obj", "koala/koala.obj",
-    "mountain/mountain.obj", "hammer/hammer.obj", "wooden_stool/painted_wooden_stool_1k.gltf",
-    "flight_helmet/FlightHelmet.gltf", "cesium_milk_truck/CesiumMilkTruck.glb",
+/* Every asset with its coverage floor. Coverage counts only texels a view can use after the edge
+ * erosion (DESIGN.md §2), so a thin or self-occluding mesh stays well below 1 with 6 views. Each
+ * floor is the coverage measured on 2026-11-24 (small_opts, seed fixed: the run is deterministic)
+ * less 0.02, rounded down to 0.01: a method change that loses coverage on any asset fails here and
+ * must update this table on purpose. Measured: spot .888, bob .847, blub .877, spot_ply .910,
+ * casual .907, elegant .922, shoes .917, fedora .934, boot .871, koala .832, mountain .992,
+ * hammer .673, stool .769, helmet .710, milk truck .638. */
+typedef struct asset_case {
+    const char *path;
+    double min_coverage;
+} asset_case;
+
+static const asset_case ASSETS[] = {
+    {"spot/spot_triangulated.obj", 0.86},
+    {"bob/bob_tri.obj", 0.82},
+    {"blub/blub_triangulated.obj", 0.85},
+    {"spot_ply/spot.ply", 0.89},
+    {"garment_female_casual/female_casualsuit01.obj", 0.88},
+    {"garment_female_elegant/female_elegantsuit01.obj", 0.90},
+    {"shoes_pair/shoes03.obj", 0.89},
+    {"fedora_hat/fedora.obj", 0.91},
+    {"boot/boot.obj", 0.85},
+    {"koala/koala.obj", 0.81},
+    {"mountain/mountain.obj", 0.97},
+    {"hammer/hammer.obj", 0.65},
+    {"wooden_stool/painted_wooden_stool_1k.gltf", 0.74},
+    {"flight_helmet/FlightHelmet.gltf", 0.69},
+    {"cesium_milk_truck/CesiumMilkTruck.glb", 0.61},
 };
 
 static void small_opts(mx_texture_opts *o, const char *mesh, const char *weights, const char *out) {
@@ -128,7 +150,7 @@ static double check_outputs(const char *dir, int nfaces) {
 static void test_all_assets(const char *weights, const char *tmp) {
     for (size_t i = 0; i < sizeof ASSETS / sizeof ASSETS[0]; i++) {
         char mesh[1024], out[1024];
-        if (!mx_test_need(mesh, sizeof mesh, "assets/%s", ASSETS[i])) continue;
+        if (!mx_test_need(mesh, sizeof mesh, "assets/%s", ASSETS[i].path)) continue;
         snprintf(out, sizeof out, "%s/asset%zu", tmp, i);
         mx_texture_opts o;
         small_opts(&o, mesh, weights, out);
@@ -137,31 +159,33 @@ static void test_all_assets(const char *weights, const char *tmp) {
         mx_status_clear(&st);
         mx_mesh m;
         if (mx_mesh_load(mesh, &m, &st)) {
-            printf("%-52s cannot load: %s\n", ASSETS[i], st.msg);
+            printf("%-52s cannot load: %s\n", ASSETS[i].path, st.msg);
             mx_test_failures++;
             continue;
         }
         int nfaces = m.nfaces;
         mx_mesh_free(&m);
         if (mx_texture_run(&o, &r, &st)) {
-            printf("%-52s FAIL: %s\n", ASSETS[i], st.msg);
+            printf("%-52s FAIL: %s\n", ASSETS[i].path, st.msg);
             mx_test_failures++;
             continue;
         }
         double cov = check_outputs(out, nfaces);
-        printf("%-52s views %d coverage %.4f (report %.4f) %.1fs\n", ASSETS[i], r.views, r.coverage, cov, r.seconds);
+        printf("%-52s views %d coverage %.4f (report %.4f) %.1fs\n", ASSETS[i].path, r.views, r.coverage, cov, r.seconds);
         CHECK(r.views >= 2 && r.views <= 6);
-        CHECK(cov >= 0.60);
+        CHECK(cov >= ASSETS[i].min_coverage);
     }
 }
 
-/* With a larger view budget the coverage of candidate-usable texels nears 1. */
+/* With a larger view budget the coverage of candidate-usable texels nears 1: floors as for
+ * ASSETS (measured 2026-11-24 with 14 views: helmet .911, stool .964, koala .984). */
 static void test_large_budget(const char *weights, const char *tmp) {
-    static const char *meshes[] = {"flight_helmet/FlightHelmet.gltf", "wooden_stool/painted_wooden_stool_1k.gltf",
-                                   "koala/koala.obj"};
+    static const asset_case meshes[] = {{"flight_helmet/FlightHelmet.gltf", 0.89},
+                                        {"wooden_stool/painted_wooden_stool_1k.gltf", 0.94},
+                                        {"koala/koala.obj", 0.96}};
     for (size_t i = 0; i < sizeof meshes / sizeof meshes[0]; i++) {
         char mesh[1024], out[1024];
-        if (!mx_test_need(mesh, sizeof mesh, "assets/%s", meshes[i])) continue;
+        if (!mx_test_need(mesh, sizeof mesh, "assets/%s", meshes[i].path)) continue;
         snprintf(out, sizeof out, "%s/budget%zu", tmp, i);
         mx_texture_opts o;
         small_opts(&o, mesh, weights, out);
@@ -169,8 +193,8 @@ static void test_large_budget(const char *weights, const char *tmp) {
         mx_texture_result r;
         mx_status st;
         CHECK(mx_texture_run(&o, &r, &st) == 0);
-        printf("%-52s 14-view budget: views %d coverage %.4f\n", meshes[i], r.views, r.coverage);
-        CHECK(r.coverage >= 0.90);
+        printf("%-52s 14-view budget: views %d coverage %.4f\n", meshes[i].path, r.views, r.coverage);
+        CHECK(r.coverage >= meshes[i].min_coverage);
     }
 }
 

@@ -39,7 +39,8 @@ int mx_inpaint_image(const mx_image *rgb, const mx_image *mask, mx_image *out, m
 
 int mx_paint_mask_cells(const mx_image *mask, int cell, int dilate, mx_image *out, mx_status *st) {
     if (mask->c != 1 || cell < 1 || dilate < 0)
-        return mx_fail(st, MX_EINTERNAL, "paint mask: bad mask (%d channels) or cell size %d", mask->c, cell);
+        return mx_fail(st, MX_EINTERNAL, "paint mask: bad mask (%d channels), cell size %d or dilation %d", mask->c,
+                       cell, dilate);
     int cw = (mask->w + cell - 1) / cell, ch = (mask->h + cell - 1) / cell;
     uint8_t *any = calloc((size_t)cw * ch, 1);
     if (!any) return mx_fail(st, MX_ENOMEM, "paint mask: out of memory");
