@@ -15,6 +15,7 @@
 #include "../pipeline/io/io.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
+#include "../runtime/fileio.h"
 #include "util_test.h"
 
 static char tmpdir[256];
@@ -40,19 +41,10 @@ static void make_texture(mx_image *img, int w, int h, float seed) {
                 img->data[(y * w + x) * 3 + c] = 0.5f + 0.5f * sinf(seed + 0.3f * x + 0.7f * y + 2.f * c);
 }
 
+/* The whole file (NULL when it cannot be read). */
 static unsigned char *read_all(const char *path, size_t *n) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    *n = (size_t)ftell(f);
-    fseek(f, 0, SEEK_SET);
-    unsigned char *b = malloc(*n + 1);
-    if (b && fread(b, 1, *n, f) != *n) {
-        free(b);
-        b = NULL;
-    }
-    fclose(f);
-    return b;
+    mx_status st;
+    return (unsigned char *)mx_read_file(path, (size_t)1 << 30, n, &st);
 }
 
 static int same_ints(const int32_t *a, const int32_t *b, size_t n) { return a && b && !memcmp(a, b, n * sizeof *a); }

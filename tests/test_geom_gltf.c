@@ -10,6 +10,7 @@
 #include "../pipeline/geom/image.h"
 #include "../pipeline/geom/mesh.h"
 #include "../runtime/log.h"
+#include "../runtime/fileio.h"
 #include "util_test.h"
 
 static char tmpdir[256];
@@ -27,19 +28,10 @@ static void write_bytes(const char *name, const void *data, size_t n) {
     fclose(f);
 }
 
+/* The whole file (NULL when it cannot be read). */
 static unsigned char *read_all(const char *path, size_t *n) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    *n = (size_t)ftell(f);
-    fseek(f, 0, SEEK_SET);
-    unsigned char *b = malloc(*n + 1);
-    if (b && fread(b, 1, *n, f) != *n) {
-        free(b);
-        b = NULL;
-    }
-    fclose(f);
-    return b;
+    mx_status st;
+    return (unsigned char *)mx_read_file(path, (size_t)1 << 30, n, &st);
 }
 
 /* The binary buffer of the hand-made files: 3 positions (36 bytes), 3 UVs (24), 3 uint16 indices (6+2). */
