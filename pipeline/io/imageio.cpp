@@ -113,6 +113,43 @@ int exr_lines_per_chunk(int compression) {
     return compression >= 0 && compression < 10 ? lines[compression] : 0;
 }
 
+// OpenEXR 3.1 reads an attribute value by its type, not by its declared size: a fixed-size
+// type reads its own size, a channel list reads entries up to an empty name, a preview reads
+// its declared pixels, whatever the size field says; a size it disagrees with desynchronises
+// the rest of the header (and then some unknown "attribute" allocates gigabytes). So every
+// value must have exactly the layout of its type. Unknown types and strings are read by size.
+bool exr_value_ok(const char *type, const unsigned char *v, size_t size) {
+    static const struct { const char *type; size_t size; } fixed[] = {
+        {"box2i", 16}, {"box2f", 16}, {"chromaticities", 32}, {"compression", 1}, {"deepImageState", 1},
+        {"double", 8}, {"envmap", 1}, {"float", 4}, {"int", 4}, {"keycode", 28}, {"lineOrder", 1},
+        {"m33d", 72}, {"m33f", 36}, {"m44d", 128}, {"m44f", 64}, {"rational", 8}, {"tiledesc", 9},
+        {"timecode", 8}, {"v2d", 16}, {"v2f", 8}, {"v2i", 8}, {"v3d", 24}, {"v3f", 12}, {"v3i", 12}};
+    for (const auto &f : fixed)
+        if (!strcmp(type, f.type)) return size == f.size;
+    if (!strcmp(type, "chlist")) { // entries: name, 0, 16 bytes; then an empty name
+        size_t at = 0;
+        while (at < size && v[at]) {
+            size_t len = strnlen((const char *)v + at, std::min<size_t>(size - at, 256));
+            if (len >= 256 || at + len + 1 + 16 > size) return false;
+            at += len + 1 + 16;
+        }
+        return at + 1 == size;
+    }
+    if (!strcmp(type, "preview")) { // width, height, then 4 bytes a pixel
+        if (size < 8 || (size - 8) % 4) return false;
+        size_t w = le32(v), h = le32(v + 4), pixels = (size - 8) / 4;
+        return w && h ? pixels % w == 0 && pixels / w == h : pixels == 0;
+    }
+    if (!strcmp(type, "stringvector")) { // length-prefixed strings filling the size
+        size_t at = 0;
+        while (at < size) {
+            if (size - at < 4 || le32(v + at) > size - at - 4) return false;
+            at += 4 + le32(v + at);
+        }
+    }
+    return true;
+}
+
 // Walks the header(s) of an EXR held in memory: every attribute must fit in the file, and a
 // single-part scan-line image's offset table too. OpenEXR sizes a string attribute by its
 // declared length before reading it (a 200-byte file declaring a 2 GB "capDate" allocates
@@ -121,6 +158,7 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
     if (n < 8) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
     uint32_t flags = le32(p + 4);
     int multipart = (flags & 0x1000) != 0, tiled = (flags & 0x200) != 0;
+    size_t max_name = flags & 0x400 ? 256 : 32; // names and types of at most 31 (long names: 255) chars
     long long ymin = 0, ymax = -1;
     int compression = -1;
     size_t pos = 8;
@@ -139,7 +177,7 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
         const char *name = (const char *)p + pos;
         size_t left = n - pos, name_len = strnlen(name, std::min<size_t>(left, 256));
         size_t type_len = name_len + 1 < left ? strnlen(name + name_len + 1, std::min<size_t>(left - name_len - 1, 256)) : left;
-        if (name_len >= 256 || type_len >= 256 || name_len + type_len + 2 > left)
+        if (name_len >= max_name || type_len >= max_name || name_len + type_len + 2 > left)
             return mx_fail(st, MX_EINPUT, "%s: corrupt EXR header (attribute name at byte %zu)", what, pos);
         pos += name_len + type_len + 2;
         if (n - pos < 4) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
@@ -148,6 +186,9 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
         if (size > n - pos)
             return mx_fail(st, MX_EINPUT, "%s: EXR attribute '%s' declares %zu bytes, more than the file holds", what,
                            name, size);
+        if (!exr_value_ok(name + name_len + 1, p + pos, size))
+            return mx_fail(st, MX_EINPUT, "%s: corrupt EXR attribute '%s' (%zu bytes do not hold a %s)", what, name,
+                           size, name + name_len + 1);
         if (!strcmp(name, "dataWindow") && size == 16) {
             ymin = (int32_t)le32(p + pos + 4);
             ymax = (int32_t)le32(p + pos + 12);
