@@ -249,8 +249,8 @@ static void test_normalize(void) {
 }
 
 /* An EXR header is checked before OpenEXR sees it: an attribute declaring more bytes than the
- * file holds (OpenEXR would allocate them: 2 GB for this 40-byte file, found by fuzz_image), an
- * offset table longer than the file. `good`: a valid EXR (written by mx_io_write_exr). */
+ * file holds (OpenEXR would allocate them: 2 GB for this 40-byte file, found by fuzz_image), a
+ * value shorter than its type, an offset table longer than the file. `good`: a valid EXR (written by mx_io_write_exr). */
 static void check_hostile_exr(const char *good) {
     static const unsigned char huge_attr[] = "v/1\x01\x02\0\0\0capDate\0string\0\xff\xff\xff\x7f" "0123456789";
     char p[512];
@@ -260,6 +260,13 @@ static void check_hostile_exr(const char *good) {
     FILE *f = fopen(p, "wb");
     CHECK(f && fwrite(huge_attr, 1, sizeof huge_attr - 1, f) == sizeof huge_attr - 1 && !fclose(f));
     CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "huge_attribute.exr: EXR attribute 'capDate'") &&
+          back.data == NULL);
+    /* a float of 0 bytes: OpenEXR would read 4 and lose its place in the header */
+    static const unsigned char short_float[] = "v/1\x01\x02\0\0\0pixelAspectRatio\0float\0\0\0\0\0\0" "0123456789";
+    tmp_path(p, sizeof p, "short_float.exr");
+    f = fopen(p, "wb");
+    CHECK(f && fwrite(short_float, 1, sizeof short_float - 1, f) == sizeof short_float - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "corrupt EXR attribute 'pixelAspectRatio'") &&
           back.data == NULL);
     /* ZIP (16 lines a block), lines 0..1000000, no offset table */
     static const unsigned char tall[] = "v/1\x01\x02\0\0\0compression\0compression\0\x01\0\0\0\x03"
