@@ -248,6 +248,38 @@ static void test_normalize(void) {
     free(n);
 }
 
+/* An EXR header is checked before OpenEXR sees it: an attribute declaring more bytes than the
+ * file holds (OpenEXR would allocate them: 2 GB for this 40-byte file, found by fuzz_image), a
+ * value shorter than its type, an offset table longer than the file. `good`: a valid EXR (written by mx_io_write_exr). */
+static void check_hostile_exr(const char *good) {
+    static const unsigned char huge_attr[] = "v/1\x01\x02\0\0\0capDate\0string\0\xff\xff\xff\x7f" "0123456789";
+    char p[512];
+    mx_status st;
+    mx_image back;
+    tmp_path(p, sizeof p, "huge_attribute.exr");
+    FILE *f = fopen(p, "wb");
+    CHECK(f && fwrite(huge_attr, 1, sizeof huge_attr - 1, f) == sizeof huge_attr - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "huge_attribute.exr: EXR attribute 'capDate'") &&
+          back.data == NULL);
+    /* a float of 0 bytes: OpenEXR would read 4 and lose its place in the header */
+    static const unsigned char short_float[] = "v/1\x01\x02\0\0\0pixelAspectRatio\0float\0\0\0\0\0\0" "0123456789";
+    tmp_path(p, sizeof p, "short_float.exr");
+    f = fopen(p, "wb");
+    CHECK(f && fwrite(short_float, 1, sizeof short_float - 1, f) == sizeof short_float - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "corrupt EXR attribute 'pixelAspectRatio'") &&
+          back.data == NULL);
+    /* ZIP (16 lines a block), lines 0..1000000, no offset table */
+    static const unsigned char tall[] = "v/1\x01\x02\0\0\0compression\0compression\0\x01\0\0\0\x03"
+                                        "dataWindow\0box2i\0\x10\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x40\x42\x0f\0\0" "0123456789";
+    tmp_path(p, sizeof p, "tall.exr");
+    f = fopen(p, "wb");
+    CHECK(f && fwrite(tall, 1, sizeof tall - 1, f) == sizeof tall - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tall.exr: truncated EXR (62501 scan-line blocks") &&
+          back.data == NULL);
+    CHECK(mx_io_read_image(good, &back, &st) == 0); /* the checks pass a valid file */
+    mx_image_free(&back);
+}
+
 static void test_images(void) {
     mx_image img, back;
     mx_status st;
@@ -280,6 +312,7 @@ static void test_images(void) {
     CHECK(mx_io_read_image(p, &back, &st) == 0 && back.w == 7 && back.c == 3);
     CHECK(back.data && !memcmp(back.data, img.data, sizeof(float) * 7 * 5 * 3));
     mx_image_free(&back);
+    check_hostile_exr(p);
     tmp_path(p, sizeof p, "not_an_image.png");
     write_text("not_an_image.png", "hello");
     CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "not_an_image.png") && back.data == NULL);

@@ -10,6 +10,7 @@
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
 #include "cli_args.h"
+#include "cli_signals.h"
 
 void mx_cli_texture_options_help(FILE *f) {
     fprintf(f,
@@ -184,31 +185,6 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
 }
 
 
-/* Set by SIGINT/SIGTERM; the run checks it between stages and denoising steps. A signal
- * handler can only reach a flag with static storage. */
-static volatile sig_atomic_t interrupted;
-
-static void on_signal(int sig) {
-    (void)sig;
-    static const char note[] = "matex: interrupted, stopping after the current step\n";
-    if (!interrupted) {
-        ssize_t n = write(STDERR_FILENO, note, sizeof note - 1); /* async-signal-safe, unlike stdio */
-        (void)n;                                                  /* nothing to do if stderr is gone */
-    }
-    interrupted = 1;
-}
-
-static void catch_signals(void) {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sa.sa_flags = SA_RESTART;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-}
-
-
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
                        int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *)) {
     if (c->o.quiet) mx_log_set_level(MX_LOG_ERROR);
@@ -221,9 +197,7 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
                                                        : MX_TEXTURE_MODE_TEXTURE;
     int rc = mx_texture_opts_check(&c->o, mode, &st);
     if (!rc) {
-        interrupted = 0;
-        c->o.cancel = &interrupted;
-        catch_signals();
+        c->o.cancel = mx_cli_signals_catch();
         rc = run(&c->o, &res, &st);
     }
     if (rc) {

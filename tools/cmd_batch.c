@@ -14,6 +14,7 @@
 #include "../runtime/log.h"
 #include "cli.h"
 #include "cli_batch_manifest.h"
+#include "cli_signals.h"
 
 typedef struct batch_args {
     const char *manifest, *weights, *outroot, *device;
@@ -30,14 +31,10 @@ typedef struct batch_run {
     int count[4];
     double job_seconds; /* of the jobs done */
     mx_buf results;     /* JSON array members */
+    volatile sig_atomic_t *stop; /* set by SIGINT/SIGTERM (scancel): the running job stops, leaves
+                                    nothing, and the batch ends */
 } batch_run;
 
-/* Set by SIGINT/SIGTERM (scancel): the running job stops, leaves nothing, and the batch ends. */
-static volatile sig_atomic_t stop_requested;
-static void on_stop_signal(int sig) {
-    (void)sig;
-    stop_requested = 1;
-}
 
 static void batch_usage(FILE *f) {
     fprintf(f,
@@ -169,7 +166,7 @@ static int run_job(batch_run *r, const mx_batch_job *j, double *coverage, char *
     matex_options o;
     mx_api_options_from_internal(&j->c.o, &o);
     o.verbose = r->a->verbose;
-    o.cancel = &stop_requested;
+    o.cancel = r->stop;
     matex_result *res = NULL;
     int rc = matex_texture(r->models, &o, &res, &err);
     if (rc) snprintf(error, cap, "%s", err.message);
@@ -244,15 +241,6 @@ static void print_summary(const batch_run *r, int jobs, double seconds) {
     mx_buf_free(&b);
 }
 
-static void catch_stop_signals(void) {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_stop_signal;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-}
-
 int cmd_batch(int argc, char **argv) {
     batch_args a;
     int rc = parse_args(&a, argc, argv);
@@ -265,17 +253,16 @@ int cmd_batch(int argc, char **argv) {
         fprintf(stderr, "matex batch: %s\n", st.msg);
         return 1;
     }
-    catch_stop_signals();
-    batch_run r = {&a, NULL, 0, {0}, 0.0, {0}};
+    batch_run r = {&a, NULL, 0, {0}, 0.0, {0}, mx_cli_signals_catch()};
     double t0 = mx_now();
     int jobs = 0;
     for (int i = 0; i < m.njobs; i++) jobs += m.jobs[i].index % a.nshards == a.shard;
-    for (int i = 0; i < m.njobs && !stop_requested && !r.fatal; i++)
+    for (int i = 0; i < m.njobs && !*r.stop && !r.fatal; i++)
         if (m.jobs[i].index % a.nshards == a.shard) batch_job(&r, &m.jobs[i]);
     if (!r.fatal) print_summary(&r, jobs, mx_now() - t0);
     matex_models_close(r.models);
     mx_batch_manifest_free(&m);
     mx_buf_free(&r.results);
     if (r.fatal) return 1;
-    return stop_requested || r.count[JOB_INTERRUPTED] ? 130 : r.count[JOB_FAILED] ? 1 : 0;
+    return *r.stop || r.count[JOB_INTERRUPTED] ? 130 : r.count[JOB_FAILED] ? 1 : 0;
 }

@@ -1,7 +1,9 @@
-/* matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] -o DIR:
+/* matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] [--force] -o DIR:
  * turntable views (orthographic, 15 degrees above the horizon, the first one the front)
  * as DIR/view_NN.png, and DIR/contact_sheet.png with all of them. Textured when the mesh
- * has UVs and a texture (its own, or --texture for every material), else shaded normals. */
+ * has UVs and a texture (its own, or --texture for every material), else shaded normals.
+ * DIR is staged as for matex texture (pipeline/texture/outdir.h): an error or a signal at any
+ * moment leaves no partial folder. */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -11,21 +13,25 @@
 
 #include "../pipeline/geom/raster.h"
 #include "../pipeline/io/io.h"
+#include "../pipeline/texture/outdir.h"
 #include "../runtime/log.h"
 #include "cli.h"
 #include "cli_args.h"
+#include "cli_signals.h"
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] -o DIR\n\n"
+    fprintf(f, "usage: matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] [--force] -o DIR\n\n"
                "Renders N turntable views (default 8) of S x S pixels (default 512) into DIR/view_NN.png\n"
                "and a contact sheet DIR/contact_sheet.png. Textured when the mesh has UVs and a texture\n"
                "(its materials' own, or IMG for all), else shaded normals.\n"
-               "  --up z   the mesh is z-up (CAD, scans); default y-up (glTF, OBJ)\n");
+               "  --up z   the mesh is z-up (CAD, scans); default y-up (glTF, OBJ)\n"
+               "  --force  replace DIR when it exists and is not empty (else refused)\n"
+               "exit: 0 done, 1 bad input, 2 usage, 130 interrupted (nothing written)\n");
 }
 
 typedef struct render_args {
     const char *mesh, *texture, *out;
-    int views, size;
+    int views, size, force;
     mx_up_axis up;
 } render_args;
 
@@ -44,6 +50,7 @@ static int parse_args(int argc, char **argv, render_args *a) {
             if (mx_arg_int("render", o, argv[++i], 16, 4096, &a->size)) return 2;
         }
         else if (!strcmp(o, "-o") && has) a->out = argv[++i];
+        else if (!strcmp(o, "--force")) a->force = 1;
         else if (!strcmp(o, "--up") && has) {
             const char *u = argv[++i];
             if (strcmp(u, "y") && strcmp(u, "z")) {
@@ -91,8 +98,9 @@ static void free_textures(mx_image *tex, int ntex, int shared) {
     free(tex);
 }
 
-static int render_views(const render_args *a, const mx_mesh *m, const float *pos, const mx_image *tex,
-                        int ntex, mx_image *sheet, int cols, int tile, mx_pool *pool, mx_status *st) {
+static int render_views(const render_args *a, const char *dir, const volatile sig_atomic_t *stop, const mx_mesh *m,
+                        const float *pos, const mx_image *tex, int ntex, mx_image *sheet, int cols, int tile,
+                        mx_pool *pool, mx_status *st) {
     const float bg[3] = {1, 1, 1};
     mx_gbuffer gb;
     if (mx_gbuffer_init(&gb, a->size, a->size, st)) return -1;
@@ -100,14 +108,18 @@ static int render_views(const render_args *a, const mx_mesh *m, const float *pos
     for (int k = 0; k < ntex; k++) any_tex |= tex[k].data != NULL;
     int rc = 0;
     for (int v = 0; v < a->views && !rc; v++) {
+        if (*stop) {
+            rc = mx_fail(st, MX_ECANCEL, "interrupted");
+            break;
+        }
         mx_camera cam;
         mx_camera_ortho(&cam, 360.0f * (float)v / (float)a->views, 15, 3, 1.05f);
         mx_image img = {0}, small = {0};
         rc = mx_rasterize(m, pos, &cam, MX_RASTER_UV, pool, &gb, st);
         rc = rc || (any_tex ? mx_render_textured(&gb, m, tex, ntex, bg, pool, &img, st)
                             : mx_render_normals(&gb, bg, &img, st));
-        char path[4096];
-        snprintf(path, sizeof path, "%s/view_%02d.png", a->out, v);
+        char path[4300];
+        snprintf(path, sizeof path, "%s/view_%02d.png", dir, v);
         rc = rc || mx_io_write_png(path, &img, st);
         mx_crop full = {0, 0, a->size};
         rc = rc || mx_crop_resize(&img, full, tile, &small, st);
@@ -140,18 +152,19 @@ int cmd_render(int argc, char **argv) {
     mx_pool *pool = NULL;
     int cols = (int)ceil(sqrt((double)a.views)), rows = (a.views + cols - 1) / cols;
     int tile = a.size / 2;
+    mx_outdir od = {0};
+    volatile sig_atomic_t *stop = mx_cli_signals_catch();
     int rc = mx_mesh_load(a.mesh, &m, &st) || mx_mesh_normalized(&m, a.up, &pos, NULL, NULL, &st) ||
-             load_textures(&a, &m, &tex, &ntex, &st);
-    if (!rc && mkdir(a.out, 0777) != 0 && errno != EEXIST)
-        rc = mx_fail(&st, MX_EIO, "%s: cannot create folder: %s", a.out, strerror(errno));
+             load_textures(&a, &m, &tex, &ntex, &st) || mx_outdir_open(&od, a.out, a.force, &st);
     rc = rc || !(pool = mx_pool_create(0, &st)) || mx_image_alloc(&sheet, cols * tile, rows * tile, 3, &st);
     if (!rc) {
         for (size_t i = 0; i < (size_t)sheet.w * sheet.h * 3; i++) sheet.data[i] = 1;
-        rc = render_views(&a, &m, pos, tex, ntex, &sheet, cols, tile, pool, &st);
+        rc = render_views(&a, od.stage, stop, &m, pos, tex, ntex, &sheet, cols, tile, pool, &st);
     }
-    char path[4096];
-    snprintf(path, sizeof path, "%s/contact_sheet.png", a.out);
-    rc = rc || mx_io_write_png(path, &sheet, &st);
+    char path[4300];
+    snprintf(path, sizeof path, "%s/contact_sheet.png", od.stage);
+    rc = rc || mx_io_write_png(path, &sheet, &st) || mx_outdir_publish(&od, stop, &st);
+    mx_outdir_discard(&od);
     if (rc) fprintf(stderr, "matex render: %s\n", st.msg);
     else mx_info("matex render: %d views of %s in %s", a.views, a.mesh, a.out);
     if (tex) free_textures(tex, ntex, a.texture != NULL);
@@ -159,5 +172,5 @@ int cmd_render(int argc, char **argv) {
     mx_pool_destroy(pool);
     free(pos);
     mx_mesh_free(&m);
-    return rc ? 1 : 0;
+    return !rc ? 0 : st.code == MX_ECANCEL ? 130 : 1;
 }

@@ -5,6 +5,7 @@
 #include "../runtime/log.h"
 #include "../runtime/version.h"
 #include "cli.h"
+#include "cli_signals.h"
 
 typedef struct {
     const char *name;
@@ -29,6 +30,7 @@ static void usage(FILE *f) {
 }
 
 int main(int argc, char **argv) {
+    mx_cli_signals_block(); /* first: see cli_signals.h */
     if (argc < 2) {
         usage(stderr);
         return 2;
@@ -45,6 +47,7 @@ int main(int argc, char **argv) {
     snprintf(want, sizeof want, "%s", argv[1]);
     for (char *p = want; *p; p++)
         if (*p == '-') *p = '_';
+    if (!mx_cli_signals_verb_catches(want)) mx_cli_signals_default();
     for (size_t i = 0; i < sizeof verbs / sizeof verbs[0]; i++)
         if (!strcmp(verbs[i].name, want)) return verbs[i].fn(argc - 1, argv + 1);
     fprintf(stderr, "matex: unknown verb '%s'\n", argv[1]);

@@ -26,15 +26,30 @@ namespace {
 // Larger images than this are refused: 16k x 16k covers every texture we produce or read.
 const long long kMaxPixels = 16384LL * 16384LL;
 
+// Reads all pixels of an opened input as floats (w*h*nchannels). Reading in the file's own
+// format and converting here matters: OIIO's read_image with a type conversion goes through a
+// 64 MB scratch buffer whatever the image size (100 ms per tiny texture under ASan).
+int read_pixels(OIIO::ImageInput &in, std::vector<float> &buf) {
+    const OIIO::ImageSpec &spec = in.spec();
+    size_t values = (size_t)spec.width * spec.height * spec.nchannels;
+    if (!spec.channelformats.empty()) { // per-channel formats (mixed EXR): OIIO converts
+        buf.resize(values);
+        return in.read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, buf.data()) ? 0 : -1;
+    }
+    std::vector<unsigned char> native(values * spec.format.size());
+    if (!in.read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UNKNOWN, native.data())) return -1;
+    buf.resize(values);
+    return OIIO::convert_pixel_values(spec.format, native.data(), OIIO::TypeDesc::FLOAT, buf.data(), (int)values) ? 0 : -1;
+}
+
 // Converts an opened OIIO input into an mx_image (channels as described in io.h).
 int read_opened(OIIO::ImageInput &in, const char *what, mx_image *out, mx_status *st) {
     const OIIO::ImageSpec &spec = in.spec();
     int w = spec.width, h = spec.height, nch = spec.nchannels;
     if (w <= 0 || h <= 0 || nch <= 0 || (long long)w * h > kMaxPixels)
         return mx_fail(st, MX_EINPUT, "%s: unsupported image size %dx%d with %d channels", what, w, h, nch);
-    std::vector<float> buf((size_t)w * h * nch);
-    if (!in.read_image(0, 0, 0, nch, OIIO::TypeDesc::FLOAT, buf.data()))
-        return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, in.geterror().c_str());
+    std::vector<float> buf;
+    if (read_pixels(in, buf)) return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, in.geterror().c_str());
     int c = nch == 1 ? 1 : nch == 3 ? 3 : 4; // gray+alpha -> RGBA, >4 channels -> first 4
     float *data = (float *)malloc((size_t)w * h * c * sizeof(float));
     if (!data) return mx_fail(st, MX_ENOMEM, "%s: out of memory for a %dx%d image", what, w, h);
@@ -87,6 +102,107 @@ int check_png_chunks(const unsigned char *p, size_t n, const char *what, mx_stat
         if (!memcmp(p + pos + 4, "IEND", 4)) return 0;
         pos += 12 + len;
     }
+}
+
+uint32_t le32(const unsigned char *p) { return (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0]; }
+
+// Scan lines per chunk of an EXR compression method (the offset table has one entry per chunk);
+// 0 for a method this check does not know (OpenEXR then decides).
+int exr_lines_per_chunk(int compression) {
+    static const int lines[10] = {1, 1, 1, 16, 32, 16, 32, 32, 32, 256};
+    return compression >= 0 && compression < 10 ? lines[compression] : 0;
+}
+
+// OpenEXR 3.1 reads an attribute value by its type, not by its declared size: a fixed-size
+// type reads its own size, a channel list reads entries up to an empty name, a preview reads
+// its declared pixels, whatever the size field says; a size it disagrees with desynchronises
+// the rest of the header (and then some unknown "attribute" allocates gigabytes). So every
+// value must have exactly the layout of its type. Unknown types and strings are read by size.
+bool exr_value_ok(const char *type, const unsigned char *v, size_t size) {
+    static const struct { const char *type; size_t size; } fixed[] = {
+        {"box2i", 16}, {"box2f", 16}, {"chromaticities", 32}, {"compression", 1}, {"deepImageState", 1},
+        {"double", 8}, {"envmap", 1}, {"float", 4}, {"int", 4}, {"keycode", 28}, {"lineOrder", 1},
+        {"m33d", 72}, {"m33f", 36}, {"m44d", 128}, {"m44f", 64}, {"rational", 8}, {"tiledesc", 9},
+        {"timecode", 8}, {"v2d", 16}, {"v2f", 8}, {"v2i", 8}, {"v3d", 24}, {"v3f", 12}, {"v3i", 12}};
+    for (const auto &f : fixed)
+        if (!strcmp(type, f.type)) return size == f.size;
+    if (!strcmp(type, "chlist")) { // entries: name, 0, 16 bytes; then an empty name
+        size_t at = 0;
+        while (at < size && v[at]) {
+            size_t len = strnlen((const char *)v + at, std::min<size_t>(size - at, 256));
+            if (len >= 256 || at + len + 1 + 16 > size) return false;
+            at += len + 1 + 16;
+        }
+        return at + 1 == size;
+    }
+    if (!strcmp(type, "preview")) { // width, height, then 4 bytes a pixel
+        if (size < 8 || (size - 8) % 4) return false;
+        size_t w = le32(v), h = le32(v + 4), pixels = (size - 8) / 4;
+        return w && h ? pixels % w == 0 && pixels / w == h : pixels == 0;
+    }
+    if (!strcmp(type, "stringvector")) { // length-prefixed strings filling the size
+        size_t at = 0;
+        while (at < size) {
+            if (size - at < 4 || le32(v + at) > size - at - 4) return false;
+            at += 4 + le32(v + at);
+        }
+    }
+    return true;
+}
+
+// Walks the header(s) of an EXR held in memory: every attribute must fit in the file, and a
+// single-part scan-line image's offset table too. OpenEXR sizes a string attribute by its
+// declared length before reading it (a 200-byte file declaring a 2 GB "capDate" allocates
+// 2 GB), and its offset table by the data window's height.
+int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_status *st) {
+    if (n < 8) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
+    uint32_t flags = le32(p + 4);
+    int multipart = (flags & 0x1000) != 0, tiled = (flags & 0x200) != 0;
+    size_t max_name = flags & 0x400 ? 256 : 32; // names and types of at most 31 (long names: 255) chars
+    long long ymin = 0, ymax = -1;
+    int compression = -1;
+    size_t pos = 8;
+    for (;;) {
+        if (pos >= n) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
+        if (!p[pos]) { // end of a header; the headers of a multi-part file end with an empty one
+            pos++;
+            if (!multipart) break;
+            if (pos >= n) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
+            if (!p[pos]) {
+                pos++;
+                break;
+            }
+            continue;
+        }
+        const char *name = (const char *)p + pos;
+        size_t left = n - pos, name_len = strnlen(name, std::min<size_t>(left, 256));
+        size_t type_len = name_len + 1 < left ? strnlen(name + name_len + 1, std::min<size_t>(left - name_len - 1, 256)) : left;
+        if (name_len >= max_name || type_len >= max_name || name_len + type_len + 2 > left)
+            return mx_fail(st, MX_EINPUT, "%s: corrupt EXR header (attribute name at byte %zu)", what, pos);
+        pos += name_len + type_len + 2;
+        if (n - pos < 4) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
+        size_t size = le32(p + pos);
+        pos += 4;
+        if (size > n - pos)
+            return mx_fail(st, MX_EINPUT, "%s: EXR attribute '%s' declares %zu bytes, more than the file holds", what,
+                           name, size);
+        if (!exr_value_ok(name + name_len + 1, p + pos, size))
+            return mx_fail(st, MX_EINPUT, "%s: corrupt EXR attribute '%s' (%zu bytes do not hold a %s)", what, name,
+                           size, name + name_len + 1);
+        if (!strcmp(name, "dataWindow") && size == 16) {
+            ymin = (int32_t)le32(p + pos + 4);
+            ymax = (int32_t)le32(p + pos + 12);
+        }
+        if (!strcmp(name, "compression") && size == 1) compression = p[pos];
+        pos += size;
+    }
+    int lines = exr_lines_per_chunk(compression);
+    if (multipart || tiled || !lines || ymax < ymin) return 0; // OpenEXR checks the rest
+    long long chunks = (ymax - ymin + lines) / lines;
+    if ((unsigned long long)chunks * 8 > n - pos)
+        return mx_fail(st, MX_EINPUT, "%s: truncated EXR (%lld scan-line blocks declared, the file is too short for them)",
+                       what, chunks);
+    return 0;
 }
 
 // Opens `name` (a file, or a name for the data of `proxy`) with the reader of `format` only:
@@ -165,13 +281,15 @@ extern "C" int mx_io_read_image(const char *path, mx_image *out, mx_status *st) 
         FILE *f = fopen(path, "rb");
         head.resize(f ? fread(head.data(), 1, head.size(), f) : 0);
         const char *name = sniff_name(head.data(), head.size());
-        if (f && name && !strcmp(name, "embedded.png")) { // whole file: its chunks are checked first
+        int png = name && !strcmp(name, "embedded.png"), exr = name && !strcmp(name, "embedded.exr");
+        if (f && (png || exr) && head.size() == 8) { // whole file: its structure is checked first
             head.resize((size_t)sb.st_size);
             head.resize(8 + fread(head.data() + 8, 1, head.size() - 8, f));
         }
         if (f) fclose(f);
         if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open image: %s", path, strerror(errno));
-        if (name && !strcmp(name, "embedded.png")) return decode_memory(name, head.data(), head.size(), path, out, st);
+        if (png) return decode_memory(name, head.data(), head.size(), path, out, st);
+        if (exr && check_exr_header(head.data(), head.size(), path, st)) return -1;
         std::unique_ptr<OIIO::ImageInput> in; // other formats by their magic, else by extension
         std::string format = name ? strrchr(name, '.') + 1 : strrchr(path, '.') ? strrchr(path, '.') + 1 : "";
         if (open_as(format.c_str(), path, nullptr, path, in, st)) return -1;

@@ -157,6 +157,11 @@ int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, 
         mx_outdir_discard(od);
         return -1;
     }
+    return mx_outdir_publish(od, cancel, st);
+}
+
+int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_status *st) {
+    if (!od->staged) return mx_fail(st, MX_EINTERNAL, "%s: output folder not opened", od->dir);
     if (cancel && *cancel) {
         mx_outdir_discard(od);
         return mx_fail(st, MX_ECANCEL, "interrupted");

@@ -8,6 +8,8 @@
  *   mx_outdir_commit: writes the files into the staging folder, then puts it in place with one
  *     rename (DIR missing or empty) or one atomic exchange (--force over a non-empty DIR; its old
  *     content is then removed);
+ *   mx_outdir_publish: the same move for a staging folder filled by the caller (files written
+ *     into od->stage, e.g. by matex render);
  *   mx_outdir_discard: removes the staging folder (after a failure or an interrupt). */
 #ifndef MX_OUTDIR_H
 #define MX_OUTDIR_H
@@ -29,6 +31,7 @@ int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st);
 /* cancel (may be NULL) is checked once more after the files are written, before the move. */
 int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
                      const volatile sig_atomic_t *cancel, mx_status *st);
+int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_status *st);
 void mx_outdir_discard(mx_outdir *od);
 
 #endif

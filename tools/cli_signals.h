@@ -1,0 +1,21 @@
+/* SIGINT/SIGTERM for matex. main blocks both as its very first statement, so a signal that
+ * arrives during start-up (argument parsing, option checks) waits instead of ending the
+ * process at a moment no one chose. A verb that can stop cleanly (texture, enhance, transfer,
+ * batch, render) calls mx_cli_signals_catch: its handler is installed, the signals unblocked,
+ * and one already pending sets the flag at once, so the run stops at its first check and
+ * leaves no output. For every other verb main calls mx_cli_signals_default (the default
+ * action: the process ends). */
+#ifndef MX_CLI_SIGNALS_H
+#define MX_CLI_SIGNALS_H
+
+#include <signal.h>
+
+void mx_cli_signals_block(void);
+void mx_cli_signals_default(void);
+/* Installs the handler (it sets the returned flag and says "interrupted" once on stderr),
+ * clears the flag, then unblocks the signals. */
+volatile sig_atomic_t *mx_cli_signals_catch(void);
+/* Whether a verb calls mx_cli_signals_catch itself (main unblocks for the others). */
+int mx_cli_signals_verb_catches(const char *verb);
+
+#endif
