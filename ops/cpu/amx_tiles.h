@@ -45,6 +45,8 @@ static inline void mx_amx_cfg_uniform(mx_amx_cfg *cfg, int ntiles, int rows, int
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "../../runtime/half.h"
+
 #define MX_AMX_TILES 8
 #define MX_AMX_ROWS 16
 #define MX_AMX_COLSB 64
@@ -92,18 +94,13 @@ static inline void mx_amx_emu_zero(mx_amx_emu *s, int t) {
 
 /* bf16 -> fp32, denormals as zero (DAZ). */
 static inline float mx_amx_emu_bf16(uint16_t h) {
-    uint32_t u = (h & 0x7f80u) ? (uint32_t)h << 16 : (uint32_t)(h & 0x8000u) << 16;
-    float f;
-    memcpy(&f, &u, sizeof f);
-    return f;
+    return mx_bits_f32((h & 0x7f80u) ? (uint32_t)h << 16 : (uint32_t)(h & 0x8000u) << 16);
 }
 
+/* Denormal results flushed to (signed) zero (FTZ). */
 static inline float mx_amx_emu_ftz(float x) {
-    uint32_t u;
-    memcpy(&u, &x, sizeof u);
-    if (!(u & 0x7f800000u)) u &= 0x80000000u;
-    memcpy(&x, &u, sizeof x);
-    return x;
+    uint32_t u = mx_f32_bits(x);
+    return (u & 0x7f800000u) ? x : mx_bits_f32(u & 0x80000000u);
 }
 
 static inline void mx_amx_emu_dpbf16ps(mx_amx_emu *s, int d, int a, int b) {
