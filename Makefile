@@ -34,12 +34,13 @@ endif
 AVX2_FLAGS   = -mavx2 -mfma -mf16c
 AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
 AVX512BF16_FLAGS = $(AVX512_FLAGS) -mavx512bf16
+AMX_FLAGS    = $(AVX512BF16_FLAGS) -mamx-tile -mamx-bf16
 
 # x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones
 # (`make ARCH=aarch64 BUILD=build-noarch` builds that way here, to check it).
 ARCH ?= $(shell uname -m)
 ifneq ($(filter x86_64 i686 i386,$(ARCH)),)
-SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c)
+SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c ops/cpu/*_amx.c)
 GEOM_SIMD_SRC = $(wildcard pipeline/geom/*_avx2.c)
 else
 SIMD_SRC    =
@@ -48,7 +49,7 @@ CFLAGS     += -DMX_NO_X86_SIMD
 endif
 
 # Modules: a test links only the modules it needs, so one module's breakage stays local.
-CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
+CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c ops/cpu/*_amx.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
@@ -112,6 +113,9 @@ $(BUILD)/%_avx512.o: %_avx512.c
 $(BUILD)/%_avx512bf16.o: %_avx512bf16.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
+$(BUILD)/%_amx.o: %_amx.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AMX_FLAGS) -c -o $@ $<
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c -o $@ $<
@@ -130,6 +134,14 @@ $(BUILD)/tests/test_runtime_%: $(BUILD)/tests/test_runtime_%.o $(TEST_UTIL) $(LI
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_ops_%: $(BUILD)/tests/test_ops_%.o $(TEST_UTIL) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+# The AMX GEMM on the software emulation of its tile operations (ops/cpu/amx_tiles.h), linked
+# into test_ops_kernels: its packing, tiling and edges are tested on any AVX512_BF16 CPU.
+ifneq ($(SIMD_SRC),)
+$(BUILD)/tests/gemm_amx_emu.o: tests/gemm_amx_emu.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
+$(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/gemm_amx_emu.o
+endif
 $(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_nn_%: $(BUILD)/tests/test_nn_%.o $(TEST_UTIL) $(LIB_NN) $(LIB_WEIGHTS) $(LIB_CORE)

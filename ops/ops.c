@@ -248,6 +248,15 @@ float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st) {
 
 float *mx_act_placeholder(void) { return placeholder; }
 
+mx_ctx mx_ctx_fp32(const mx_ctx *c) {
+    mx_ctx f;
+    memset(&f, 0, sizeof f);
+    if (!c) return f;
+    f = *c;
+    if (c->k && mx_isa_precision(c->k->isa) == MX_PREC_BF16) f.k = mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32));
+    return f;
+}
+
 int mx_ctx_create(mx_ctx *c, int nthreads, mx_isa isa, size_t scratch_bytes, mx_status *st) {
     return mx_ctx_create_on(c, MX_BACKEND_CPU, nthreads, isa, scratch_bytes, st);
 }

@@ -109,6 +109,10 @@ struct mx_kernels {
 
 /* The table for an ISA level (clamped to what this CPU supports). */
 const mx_kernels *mx_kernels_for(mx_isa isa);
+/* c computing in fp32: a copy whose table is the fp32 level below c's when c's computes in bf16
+ * (avx512bf16 -> avx512), c's own otherwise (CUDA keeps its table). Same pool, scratch,
+ * backend. For the layers the precision policy keeps in fp32 (pipeline/nn/precision.h). */
+mx_ctx mx_ctx_fp32(const mx_ctx *c);
 /* The scalar reference table (the test oracle). */
 const mx_kernels *mx_kernels_scalar(void);
 /* The best fp32 table for this CPU (mx_cpu_isa_for(MX_PREC_FP32)): what a context without a

@@ -23,15 +23,22 @@ typedef enum { MX_BACKEND_CPU = 0, MX_BACKEND_CPU_STRICT = 1, MX_BACKEND_CUDA = 
 #define MX_BACKEND_KINDS 3
 
 /* Instruction-set levels of the CPU kernels, in increasing order. MX_ISA_AVX512_BF16 is the
- * AVX-512 level with linear, conv2d and attention in bf16 arithmetic (fp32 accumulation): a
- * precision choice as much as an ISA, so fp32 work asks for mx_cpu_isa_for(MX_PREC_FP32). */
-typedef enum { MX_ISA_SCALAR = 0, MX_ISA_AVX2 = 1, MX_ISA_AVX512 = 2, MX_ISA_AVX512_BF16 = 3 } mx_isa;
+ * AVX-512 level with linear, conv2d and attention in bf16 arithmetic (fp32 accumulation), and
+ * MX_ISA_AMX the same with linear and conv2d on AMX-BF16 tiles: precision choices as much as
+ * ISAs, so fp32 work asks for mx_cpu_isa_for(MX_PREC_FP32). */
+typedef enum {
+    MX_ISA_SCALAR = 0,
+    MX_ISA_AVX2 = 1,
+    MX_ISA_AVX512 = 2,
+    MX_ISA_AVX512_BF16 = 3,
+    MX_ISA_AMX = 4
+} mx_isa;
 
 /* Arithmetic of the matrix products: fp32, or bf16 inputs with fp32 accumulation. */
 typedef enum { MX_PREC_FP32 = 0, MX_PREC_BF16 = 1 } mx_precision;
 
-/* Best level this CPU and OS support (cpuid + xgetbv).
- * MATEX_ISA=scalar|avx2|avx512|avx512bf16 lowers it. */
+/* Best level this CPU and OS support (cpuid + xgetbv; for amx also Linux's permission for the
+ * tile data, asked once per process). MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx lowers it. */
 mx_isa mx_cpu_best_isa(void);
 /* Best level for a precision: fp32 never gets a bf16 level; bf16 gets the best level, which is
  * an fp32 one when the CPU has no bf16 arithmetic (check with mx_isa_precision). */

@@ -1,6 +1,8 @@
-/* mx_cpu_best_isa: cpuid for the instruction sets, xgetbv for the OS saving their registers.
- * MATEX_ISA=scalar|avx2|avx512|avx512bf16 can only lower the level (asking for more than the
- * CPU has would crash with an illegal instruction). AMX is not detected: no kernel uses it. */
+/* mx_cpu_best_isa: cpuid for the instruction sets, xgetbv for the OS saving their registers,
+ * and for AMX Linux's permission to use the tile data (Documentation/arch/x86/xstate.rst: the
+ * first tile instruction of a process without it gets SIGILL; the permission is per process and
+ * asking again is harmless). MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx can only lower the
+ * level (asking for more than the CPU has would crash with an illegal instruction). */
 #include <stdlib.h>
 #include <string.h>
 
@@ -9,11 +11,36 @@
 
 #if defined(__x86_64__) || defined(__i386__)
 #include <cpuid.h>
+#if defined(__linux__)
+#include <sys/syscall.h>
+#include <unistd.h>
+#endif
 
 static unsigned long long read_xcr0(void) {
     unsigned int lo, hi;
     __asm__ volatile("xgetbv" : "=a"(lo), "=d"(hi) : "c"(0));
     return ((unsigned long long)hi << 32) | lo;
+}
+
+/* Asks Linux for the AMX tile data (XSTATE component 18, XFEATURE_XTILEDATA) and checks that
+ * it was granted: arch_prctl(ARCH_REQ_XCOMP_PERM = 0x1023, 18), ARCH_GET_XCOMP_PERM = 0x1022. */
+static int amx_permitted(void) {
+#if defined(__linux__) && defined(SYS_arch_prctl)
+    unsigned long long perm = 0;
+    if (syscall(SYS_arch_prctl, 0x1023, 18) != 0) return 0;
+    if (syscall(SYS_arch_prctl, 0x1022, &perm) != 0) return 0;
+    return (perm >> 18) & 1;
+#else
+    return 0;
+#endif
+}
+
+/* AMX-TILE (leaf 7 EDX bit 24) and AMX-BF16 (bit 22), the tile config and data state enabled in
+ * XCR0 (bits 17, 18), and the permission. */
+static int amx_usable(unsigned int leaf7_edx, unsigned long long xcr0) {
+    if (!((leaf7_edx >> 24) & 1) || !((leaf7_edx >> 22) & 1)) return 0;
+    if ((xcr0 & 0x60000) != 0x60000) return 0;
+    return amx_permitted();
 }
 
 static mx_isa detect_isa(void) {
@@ -28,9 +55,11 @@ static mx_isa detect_isa(void) {
     if (!avx2 || !fma || !f16c) return MX_ISA_SCALAR;
     int avx512 = ((b >> 16) & 1) && ((b >> 17) & 1) && ((b >> 30) & 1) && ((b >> 31) & 1); /* F DQ BW VL */
     if (!avx512 || (xcr0 & 0xE0) != 0xE0) return MX_ISA_AVX2; /* opmask, ZMM0-15 high, ZMM16-31 */
-    /* leaf 7 subleaf 1, EAX bit 5: AVX512_BF16 (vdpbf16ps, vcvtne2ps2bf16) */
-    if (__get_cpuid_count(7, 1, &a, &b, &c, &d) && ((a >> 5) & 1)) return MX_ISA_AVX512_BF16;
-    return MX_ISA_AVX512;
+    unsigned int leaf7_edx = d;
+    /* leaf 7 subleaf 1, EAX bit 5: AVX512_BF16 (vdpbf16ps, vcvtne2ps2bf16); the AMX level also
+     * uses it (packing, attention) */
+    if (!__get_cpuid_count(7, 1, &a, &b, &c, &d) || !((a >> 5) & 1)) return MX_ISA_AVX512;
+    return amx_usable(leaf7_edx, xcr0) ? MX_ISA_AMX : MX_ISA_AVX512_BF16;
 }
 #else
 static mx_isa detect_isa(void) { return MX_ISA_SCALAR; }
@@ -48,8 +77,10 @@ static mx_isa isa_from_env(mx_isa best) {
         want = MX_ISA_AVX512;
     else if (!strcmp(e, "avx512bf16"))
         want = MX_ISA_AVX512_BF16;
+    else if (!strcmp(e, "amx"))
+        want = MX_ISA_AMX;
     else {
-        mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2, avx512 or avx512bf16); using %s", e, mx_isa_name(best));
+        mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2, avx512, avx512bf16 or amx); using %s", e, mx_isa_name(best));
         return best;
     }
     return want < best ? want : best;
@@ -62,7 +93,7 @@ mx_isa mx_cpu_isa_for(mx_precision p) {
     return p == MX_PREC_FP32 && best > MX_ISA_AVX512 ? MX_ISA_AVX512 : best;
 }
 
-mx_precision mx_isa_precision(mx_isa isa) { return isa == MX_ISA_AVX512_BF16 ? MX_PREC_BF16 : MX_PREC_FP32; }
+mx_precision mx_isa_precision(mx_isa isa) { return isa >= MX_ISA_AVX512_BF16 ? MX_PREC_BF16 : MX_PREC_FP32; }
 
 const char *mx_precision_name(mx_precision p) { return p == MX_PREC_BF16 ? "bf16" : "fp32"; }
 
@@ -82,6 +113,7 @@ const char *mx_isa_name(mx_isa isa) {
     case MX_ISA_AVX2: return "avx2";
     case MX_ISA_AVX512: return "avx512";
     case MX_ISA_AVX512_BF16: return "avx512bf16";
+    case MX_ISA_AMX: return "amx";
     }
     return "?";
 }

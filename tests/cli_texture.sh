@@ -26,9 +26,9 @@ check "the message names the mesh" grep -q "none.obj" "$T/err"
 check "no output after a failure" [ ! -e "$T/a" ]
 check "texture runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a grey felt hat" --weights "$W" -o "$T/hat" --json $SMALL)" = 0 ]
 check "--json summary" grep -q '"ok":true' "$T/out"
-# the report names the arithmetic: bf16 by default where the CPU has AVX512_BF16
+# the report names the arithmetic: bf16 by default where the CPU has AVX512_BF16 (the amx level too)
 want=fp32
-if grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null && [ "${MATEX_ISA:-avx512bf16}" = avx512bf16 ]; then want=bf16; fi
+case "${MATEX_ISA:-avx512bf16}" in avx512bf16 | amx) grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null && want=bf16 ;; esac
 check "report names the precision ($want)" grep -q "\"precision\": *\"$want\"" "$T/hat/report.json"
 for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do
     check "texture wrote $f" [ -s "$T/hat/$f" ]

@@ -112,7 +112,7 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
             char tag[64];
             golden_label(tag, sizeof tag, c, net);
             snprintf(label, sizeof label, "%s %s %s", tag, outfile, name);
-            if (want) mx_check_close(label, res[i], want, nw, golden_bound(c, GOLDEN_BF16_DEEP));
+            if (want) mx_check_close(label, res[i], want, nw, golden_bound(c, GOLDEN_BF16));
             free(want);
         }
     }

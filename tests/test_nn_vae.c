@@ -47,8 +47,7 @@ static void compare(const mx_ctx *c, const mx_safetensors *out, const char *net,
     golden_label(tag, sizeof tag, c, net);
     snprintf(label, sizeof label, "%s %s %s", tag, outfile, name);
     if (want)
-        mx_check_close(label, got, want, n,
-                       golden_bound(c, strcmp(name, "decode_of_encode_mean") ? GOLDEN_BF16_DEEP : GOLDEN_BF16_CHAIN));
+        mx_check_close(label, got, want, n, golden_bound(c, GOLDEN_BF16));
     free(want);
 }
 

@@ -2,7 +2,9 @@
  * against the scalar reference on random inputs of awkward sizes. A level the CPU lacks is
  * reported as not tested. The bf16 level (bf16 products, fp32 sums) is compared with the
  * reference run on the same inputs rounded to bf16, so the bound stays the fp32 one wherever
- * only the inputs are rounded. */
+ * only the inputs are rounded. The AMX GEMM is also run on the software emulation of its tiles
+ * (tests/gemm_amx_emu.c) wherever AVX512_BF16 is there, so its packing, tiling and edges are
+ * tested on CPUs without AMX. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -166,7 +168,33 @@ static void test_gemm_ops(const levels *lv) {
     test_linear_case(lv, 40, 37, 1500, MX_F32, 1);          /* three K blocks */
     test_linear_case(lv, 25, 70, 641, MX_F16, 1);           /* two K blocks of odd length (321, 320) */
     test_conv_case(lv, 1, 3, 8, 8, 33, 3, 1, 1, MX_F32);    /* K = 27: an odd last k-pair */
+    test_linear_case(lv, 64, 64, 64, MX_F32, 1);            /* whole AMX tiles (32×32 blocks, 16 k-pairs) */
+    test_linear_case(lv, 33, 65, 33, MX_BF16, 1);           /* one row / column / k-pair past the tiles */
+    test_conv_case(lv, 1, 16, 8, 8, 32, 3, 1, 1, MX_F16);   /* K = 144: 72 k-pairs, padded to 80 */
 }
+
+#ifndef MX_NO_X86_SIMD
+/* The AMX GEMM on emulated tiles (tests/gemm_amx_emu.c). */
+void mx_linear_amx_emu(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
+void mx_conv2d_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                       mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+
+/* The avx512bf16 table with the emulated AMX GEMM (its packing needs AVX512_BF16). */
+static void test_amx_emulated(const mx_ctx *ref, mx_pool *pool, mx_arena *scratch) {
+    const mx_kernels *bf16 = mx_kernels_for(MX_ISA_AVX512_BF16);
+    if (bf16->isa != MX_ISA_AVX512_BF16) {
+        printf("amx (emulated tiles): NOT TESTED (no AVX512_BF16 on this CPU, or lowered by MATEX_ISA)\n");
+        return;
+    }
+    mx_kernels emu = *bf16;
+    emu.linear = mx_linear_amx_emu;
+    emu.conv2d = mx_conv2d_amx_emu;
+    mx_ctx simd = {.pool = pool, .k = &emu, .scratch = scratch};
+    levels lv = {ref, &simd, "amx (emulated tiles)", 1};
+    test_gemm_ops(&lv);
+    CHECK(scratch->used == 0);
+}
+#endif
 
 /* The bf16 level's bound: the reference has the same rounded q, k, v, and the kernel rounds
  * each probability for ·V (relative error <= 2^-9), so output i is off by at most 2^-9 of
@@ -388,10 +416,12 @@ static void test_simd_levels(void) {
     CHECK(pool != NULL);
     CHECK(mx_arena_create(&scratch, (size_t)8 << 20, &st) == 0);
     mx_ctx ref = {.pool = pool, .k = mx_kernels_scalar()};
-    for (mx_isa isa = MX_ISA_AVX2; isa <= MX_ISA_AVX512_BF16; isa++) {
+    for (mx_isa isa = MX_ISA_AVX2; isa <= MX_ISA_AMX; isa++) {
         const mx_kernels *k = mx_kernels_for(isa);
         if (k->isa != isa) {
-            printf("%s: NOT TESTED (not available on this CPU, or lowered by MATEX_ISA)\n", mx_isa_name(isa));
+            printf("%s: NOT TESTED (%s)\n", mx_isa_name(isa),
+                   isa == MX_ISA_AMX ? "no AMX on this CPU, no tile permission from the OS, or lowered by MATEX_ISA"
+                                     : "not available on this CPU, or lowered by MATEX_ISA");
             continue;
         }
         mx_ctx simd = {.pool = pool, .k = k, .scratch = &scratch};
@@ -402,6 +432,9 @@ static void test_simd_levels(void) {
         test_conversion_ops(&lv);
         CHECK(scratch.used == 0);
     }
+#ifndef MX_NO_X86_SIMD
+    test_amx_emulated(&ref, pool, &scratch);
+#endif
     mx_arena_destroy(&scratch);
     mx_pool_destroy(pool);
 }

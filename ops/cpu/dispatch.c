@@ -86,6 +86,15 @@ static const mx_kernels avx512bf16_table = {
     MX_AVX512_FP32_ONLY,
 };
 
+/* AMX: the GEMMs on tiles; attention has its own kernel (not the GEMM) and stays AVX512_BF16. */
+static const mx_kernels amx_table = {
+    .isa = MX_ISA_AMX,
+    .linear = mx_linear_amx,
+    .conv2d = mx_conv2d_amx,
+    .attention = mx_attention_avx512bf16,
+    MX_AVX512_FP32_ONLY,
+};
+
 #endif
 
 const mx_kernels *mx_kernels_scalar(void) { return &scalar_table; }
@@ -95,6 +104,7 @@ const mx_kernels *mx_kernels_for(mx_isa isa) {
     if (isa > best) isa = best;
 #ifndef MX_NO_X86_SIMD
     switch (isa) {
+    case MX_ISA_AMX: return &amx_table;
     case MX_ISA_AVX512_BF16: return &avx512bf16_table;
     case MX_ISA_AVX512: return &avx512_table;
     case MX_ISA_AVX2: return &avx2_table;

@@ -23,38 +23,66 @@ static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 /* 16-bit weight rows widened per transpose call (8 × KC_MAX floats of stack). */
 #define WIDEN_ROWS 8
 
-/* bf16 pairs: each row converted to kc/2 words of pairs (16-bit weights widened first),
- * WIDEN_ROWS rows at a time, then transposed as 32-bit words into dst[kp][width]. */
+/* Zero pair rows kp..words of a k-major panel dst[words][width] (the pair_align padding). */
+static void zero_pair_rows(uint32_t *dst, int width, int kp, size_t words) {
+    for (size_t k = (size_t)kp; k < words; k++) memset(dst + k * width, 0, (size_t)width * sizeof *dst);
+}
+
+/* One row of src (element (r, k) at r*ld + k) as kc/2 words of pairs (16-bit weights widened). */
+static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int r, int k0, int kc) {
+    float row[KC_MAX];
+    size_t off = (size_t)r * ld + (size_t)k0;
+    const float *f = (const float *)src.data + off;
+    if (src.dtype != MX_F32) {
+        g->widen(row, src, off, (size_t)kc);
+        f = row;
+    }
+    g->row_pairs(dst, f, kc);
+}
+
+/* bf16 pairs, row-major (a_rows): dst[r][words], each row's pairs then zeros. */
+static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first,
+                                     int valid, int width, int k0, int kc) {
+    size_t words = mx_gemm_panel_words(g, kc), kp = (size_t)(kc + 1) / 2;
+    for (int r = 0; r < width; r++) {
+        uint32_t *d = dst + (size_t)r * words;
+        size_t done = 0;
+        if (r < valid) {
+            row_to_pairs(g, d, src, ld, first + r, k0, kc);
+            done = kp;
+        }
+        memset(d + done, 0, (words - done) * sizeof *d);
+    }
+}
+
+/* bf16 pairs, k-major: each row converted to kc/2 words of pairs, WIDEN_ROWS rows at a time,
+ * then transposed as 32-bit words into dst[kp][width]. */
 static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
                             int width, int k0, int kc) {
     enum { WORDS = KC_MAX / 2 };
     uint32_t tmp[WIDEN_ROWS * WORDS];
-    float row[KC_MAX];
     int kp = (kc + 1) / 2;
     for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
         int n = min_int(WIDEN_ROWS, valid - r0);
-        for (int i = 0; i < n; i++) {
-            size_t off = (size_t)(first + r0 + i) * ld + (size_t)k0;
-            const float *f = (const float *)src.data + off;
-            if (src.dtype != MX_F32) {
-                g->widen(row, src, off, (size_t)kc);
-                f = row;
-            }
-            g->row_pairs(tmp + (size_t)i * WORDS, f, kc);
-        }
+        for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
     }
     for (int k = 0; k < kp && valid < width; k++)
         memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
+    zero_pair_rows(dst, width, kp, mx_gemm_panel_words(g, kc));
 }
 
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
- * weights are widened WIDEN_ROWS rows at a time first. bf16 kernels: pack_rows_pairs. */
+ * weights are widened WIDEN_ROWS rows at a time first. bf16 kernels: pack_rows_pairs, or
+ * pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
 static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int valid,
-                      int width, int k0, int kc) {
+                      int width, int k0, int kc, int row_major) {
     if (g->to_pairs) {
-        pack_rows_pairs(g, dstv, src, ld, first, valid, width, k0, kc);
+        if (row_major)
+            pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc);
+        else
+            pack_rows_pairs(g, dstv, src, ld, first, valid, width, k0, kc);
         return;
     }
     float *dst = dstv;
@@ -76,12 +104,12 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
 
 void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->a_mat, p->a_ld, first, min_int(rows, p->M - first), rows, k0, kc);
+    pack_rows(g, dst, p->a_mat, p->a_ld, first, min_int(rows, p->M - first), rows, k0, kc, g->a_rows);
 }
 
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->b_mat, p->b_ld, first, min_int(rows, p->N - first), rows, k0, kc);
+    pack_rows(g, dst, p->b_mat, p->b_ld, first, min_int(rows, p->N - first), rows, k0, kc, 0);
 }
 
 /* One run of output pixels ox..ox+run-1 of one output row, for kernel tap (ky, kx) of channel ci. */
@@ -135,6 +163,7 @@ void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, vo
     float staging[KC_MAX * MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
     im2col_panel(p, staging, first, cols, k0, kc);
     g->to_pairs(dst, staging, cols, kc);
+    zero_pair_rows(dst, cols, (kc + 1) / 2, mx_gemm_panel_words(g, kc));
 }
 
 /* Outer blocks of columns bound the shared B buffer (≤ OUTER_MAX columns per K block, ~5 MiB),
@@ -158,15 +187,13 @@ typedef struct {
 
 #define PACK_PANELS_PER_TASK 4
 
-/* 32-bit words per k of a packed panel row: 1 for fp32, 1/2 for bf16 pairs (rounded up). */
-static size_t panel_words(const mx_gemm_kernel *g, int kc) { return g->to_pairs ? (size_t)(kc + 1) / 2 : (size_t)kc; }
 
 static void pack_b_task(void *arg, int task, int thread) {
     (void)thread;
     const gemm_job *j = arg;
     int nr = j->g->nr;
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
-        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr, j->k0,
+        j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * mx_gemm_panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr, j->k0,
                      j->kc);
 }
 
@@ -178,7 +205,7 @@ static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
     if (j->ablock_mb[thread] != mb) {
         int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
         for (int mp = mp0; mp < mp1; mp++)
-            j->p->pack_a(j->p, j->g, buf + (size_t)(mp - mp0) * panel_words(j->g, j->kc) * mr, mp * mr, mr, j->k0,
+            j->p->pack_a(j->p, j->g, buf + (size_t)(mp - mp0) * mx_gemm_panel_words(j->g, j->kc) * mr, mp * mr, mr, j->k0,
                          j->kc);
         j->ablock_mb[thread] = mb;
     }
@@ -204,7 +231,7 @@ static void compute_task(void *arg, int task, int thread) {
     int mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
     int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
     const float *a = thread_a_block(j, mb, thread);
-    size_t words = panel_words(j->g, j->kc);
+    size_t words = mx_gemm_panel_words(j->g, j->kc);
     for (int np = np0; np < np1; np++) {
         const float *b = j->bpack + (size_t)np * words * nr;
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
@@ -266,8 +293,9 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
     int nthreads = mx_par_threads(c);
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
-    size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * kc_max;
-    size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * kc_max;
+    size_t words = mx_gemm_panel_words(g, kc_max);
+    size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * words;
+    size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * words;
     size_t floats = (size_t)nthreads * ablock_n + bpack_n + bias_n;
     mx_scratch s;
     float *mem = mx_scratch_take(c, floats * sizeof(float) + (size_t)nthreads * sizeof(int), &s);

@@ -9,7 +9,9 @@
  * bf16 levels: panels of k-pairs (one 32-bit word = bf16 of k and k+1, an odd last k paired
  * with zero), the operand layout of vdpbf16ps, so the micro-kernel does two k per instruction.
  * The row packers convert each row to pairs (adjacent in a row) and transpose words; the im2col
- * packer builds an fp32 panel and turns it into pairs. */
+ * packer builds an fp32 panel and turns it into pairs. The AMX level (gemm_amx.inc) pads each
+ * panel's pair rows to whole tiles (pair_align 16) and keeps A panels row-major (a_rows: the
+ * tile rows of TDPBF16PS's first operand); its B panels are the same k-pair panels. */
 #ifndef MX_OPS_CPU_GEMM_H
 #define MX_OPS_CPU_GEMM_H
 
@@ -33,6 +35,9 @@ typedef struct mx_gemm_kernel {
     void (*to_pairs)(uint32_t *dst, const float *src, int width, int kc);
     /* With to_pairs: dst[0 .. (n+1)/2) = pairs of the row src[0 .. n). */
     void (*row_pairs)(uint32_t *dst, const float *src, int n);
+    /* With to_pairs: pair rows of a panel padded with zeros to a multiple of this (0 or 1: none);
+     * a_rows: A panels are a[mr][words] (each row's pairs together) instead of a[words][mr]. */
+    int pair_align, a_rows;
 } mx_gemm_kernel;
 
 /* Widest panel (MR or NR) of any kernel: bounds the fp32 staging panel of the bf16 levels. */
@@ -73,8 +78,17 @@ void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
 void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
                            int k0, int kc);
 
-/* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 level. */
+/* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 levels. */
 void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);
+/* The AVX512_BF16 to_pairs (gemm_avx512bf16.c), also used by the AMX level. */
+void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc);
+/* 32-bit words per row (A) or column (B) of a packed panel for a K block of kc: kc for fp32
+ * panels, (kc+1)/2 k-pairs rounded up to pair_align for bf16 ones. */
+static inline size_t mx_gemm_panel_words(const mx_gemm_kernel *g, int kc) {
+    if (!g->to_pairs) return (size_t)kc;
+    size_t kp = (size_t)(kc + 1) / 2, align = g->pair_align > 1 ? (size_t)g->pair_align : 1;
+    return (kp + align - 1) / align * align;
+}
 
 /* Returns -1 (and writes nothing) when no memory for the packed panels could be had. */
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);

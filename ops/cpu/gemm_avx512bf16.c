@@ -18,7 +18,7 @@
 #include "gemm_micro_avx512.inc"
 
 /* Word c of pair row kp: bf16(src[2kp][c]) in the low half, bf16(src[2kp+1][c]) in the high. */
-static void to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc) {
+void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc) {
     for (int kp = 0; kp < (kc + 1) / 2; kp++) {
         const float *even = src + (size_t)(2 * kp) * width, *odd = even + width;
         int has_odd = 2 * kp + 1 < kc;
@@ -32,7 +32,7 @@ static void to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int 
 }
 
 static const mx_gemm_kernel kernel_avx512bf16 = {MR, NR, micro_12x32_bf16, mx_gemm_widen_avx512, mx_gemm_transpose,
-                                                 to_pairs_avx512bf16, bf16_pairs_row};
+                                                 mx_gemm_to_pairs_avx512bf16, bf16_pairs_row, 1, 0};
 
 void mx_linear_avx512bf16(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512bf16, y, x, w, bias, M, N, K);

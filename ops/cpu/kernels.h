@@ -1,7 +1,7 @@
 /* Internal to ops/: the kernel functions behind the dispatch table (ops/cpu/dispatch.c),
  * the scratch-memory helper and the parallel-for helper they share.
  * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512,
- * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation).
+ * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation), mx_<op>_amx (the same on AMX tiles).
  *
  * Files: <family>_ref.c are the references (linear, conv, norm, attention, activation, binary,
  * layout, convert). gemm.c is the blocked GEMM engine behind linear and conv2d; gemm_<isa>.c
@@ -70,6 +70,12 @@ void mx_conv2d_avx512bf16(const mx_ctx *, float *y, const float *x, int B, int C
 void mx_attention_avx512bf16(const mx_ctx *, float *out, const float *q, const float *k, const float *v, int B,
                              int H, int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal,
                              float scale);
+
+/* The AMX level: linear and conv2d on AMX-BF16 tiles (gemm_amx.c); everything else is the
+ * AVX512_BF16 level's. */
+void mx_linear_amx(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
+void mx_conv2d_amx(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w, mx_wptr bias,
+                   int Cout, int kh, int kw, int stride, int pad);
 
 /* Layout ops have only a reference: they are memory-bound copies the compiler vectorises. */
 void mx_upsample_nearest2x_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W);

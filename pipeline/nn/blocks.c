@@ -7,12 +7,19 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "precision.h"
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st) {
     memset(r, 0, sizeof *r);
     r->c = mx_run_ctx(c, a);
+    r->fp32 = mx_ctx_fp32(r->c);
     r->a = a;
     r->st = st;
+}
+
+void mx_run_init_net(mx_run *r, const char *net, const mx_ctx *c, mx_arena *a, mx_status *st) {
+    mx_run_init(r, c, a, st);
+    if (mx_prec_net_fp32(net)) r->c = &r->fp32;
 }
 
 float *mx_run_alloc(mx_run *r, size_t n) { return mx_act_alloc(r->a, n, r->st); }
@@ -45,6 +52,7 @@ int mx_conv_load(mx_conv *p, mx_binder *b, const char *path, int cin, int cout, 
     p->k = k;
     p->stride = stride;
     p->pad = pad;
+    p->fp32 = mx_prec_conv_fp32(path);
     p->b = mx_w_none();
     if (bind_param(b, &p->w, path, "weight", 4, shape, st)) return -1;
     return bias ? bind_vec(b, &p->b, path, "bias", cout, st) : 0;
@@ -81,7 +89,7 @@ int mx_conv_out_size(const mx_conv *p, int n) { return (n + 2 * p->pad - p->k) /
 void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
     int Ho = mx_conv_out_size(p, H), Wo = mx_conv_out_size(p, W);
     r->flops += 2.0 * B * p->cout * Ho * Wo * (double)p->cin * p->k * p->k;
-    mx_conv2d(r->c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
+    mx_conv2d(p->fp32 ? &r->fp32 : r->c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
 }
 
 void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M) {

@@ -17,16 +17,19 @@
  * sink, FLOP counter. */
 typedef struct mx_run {
     const mx_ctx *c;
+    mx_ctx fp32; /* c computing in fp32 (mx_ctx_fp32): the layers precision.h keeps in fp32 */
     mx_arena *a;
     mx_status *st;
     double flops;
 } mx_run;
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
+/* The same for a network precision.h runs in fp32 throughout (mx_prec_net_fp32), by name. */
+void mx_run_init_net(mx_run *r, const char *net, const mx_ctx *c, mx_arena *a, mx_status *st);
 /* Activation floats from the run's arena (mx_act_alloc). NULL only on failure (st filled). */
 float *mx_run_alloc(mx_run *r, size_t n);
 
-typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad; } mx_conv;
+typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad, fp32; } mx_conv; /* fp32: precision.h */
 typedef struct { mx_wptr w, b; int in, out; } mx_lin;
 typedef struct { mx_wptr g, b; int c, groups; float eps; } mx_gn;
 typedef struct { mx_wptr g, b; int c; float eps; } mx_ln;

@@ -265,7 +265,7 @@ int mx_vae_encode(const mx_ctx *c, const mx_vae *v, const float *image, int B, i
                   float *logvar, mx_arena *a, mx_status *st) {
     if (check_sizes(v, B, H, W, mx_vae_factor(v), st)) return -1;
     mx_run r;
-    mx_run_init(&r, c, a, st);
+    mx_run_init_net(&r, "vae", c, a, st);
     size_t mark = mx_arena_mark(a);
     int rc = encode_run(&r, v, image, B, H, W, mean, logvar);
     mx_arena_reset(a, mark);
@@ -277,7 +277,7 @@ int mx_vae_decode(const mx_ctx *c, const mx_vae *v, const float *latents, int B,
     int f = mx_vae_factor(v);
     if (check_sizes(v, B, h * f, w * f, f, st)) return -1;
     mx_run r;
-    mx_run_init(&r, c, a, st);
+    mx_run_init_net(&r, "vae", c, a, st);
     size_t mark = mx_arena_mark(a);
     int rc = decode_run(&r, v, latents, B, h, w, image);
     mx_arena_reset(a, mark);

@@ -1,0 +1,30 @@
+/* The bf16 precision policy (precision.h). */
+#include "precision.h"
+
+#include <string.h>
+
+/* The fp32 convolutions of UNet and ControlNet by parameter path: first component... */
+static const char *const fp32_first[] = {"conv_in", "controlnet_cond_embedding", "controlnet_down_blocks",
+                                         "controlnet_mid_block"};
+/* ...or last component ("conv": the down/upsamplers', "down_blocks.0.downsamplers.0.conv"). */
+static const char *const fp32_last[] = {"conv_shortcut", "proj_in", "proj_out", "conv"};
+
+static int first_is(const char *path, const char *name) {
+    size_t n = strlen(name);
+    return !strncmp(path, name, n) && (path[n] == '\0' || path[n] == '.');
+}
+
+static int last_is(const char *path, const char *name) {
+    const char *dot = strrchr(path, '.');
+    return !strcmp(dot ? dot + 1 : path, name);
+}
+
+int mx_prec_conv_fp32(const char *path) {
+    for (size_t i = 0; i < sizeof fp32_first / sizeof *fp32_first; i++)
+        if (first_is(path, fp32_first[i])) return 1;
+    for (size_t i = 0; i < sizeof fp32_last / sizeof *fp32_last; i++)
+        if (last_is(path, fp32_last[i])) return 1;
+    return 0;
+}
+
+int mx_prec_net_fp32(const char *net) { return !strcmp(net, "vae"); }

@@ -1,0 +1,30 @@
+/* The bf16 precision policy: which layers compute in bf16 when a run's context does (--precision
+ * bf16; DESIGN.md §4). Everything not named here follows the context. The one rule:
+ *
+ *   bf16: linear layers, attention, and the 3×3 convolutions fed by a GroupNorm (the resnets'
+ *         conv1 and conv2, the UNet's conv_out): the bulk of the FLOPs;
+ *   fp32: the other convolutions of UNet and ControlNet (conv_in, the ControlNet's conditioning
+ *         embedding and zero convolutions, the resnets' 1×1 shortcuts, the down/upsamplers,
+ *         proj_in and proj_out), and the whole VAE (encoder and decoder);
+ *   GroupNorm, LayerNorm, softmax, activations and residual adds are fp32 at every level.
+ *   CLIP and TAESD follow the context.
+ *
+ * Why (relative L2 against the fp32 goldens): bf16 rounds both operands of a product to 8 bits
+ * (~1.6e-3 per layer) and the errors of the layers add up. With every layer in bf16 the
+ * ControlNet's deepest residual reached 1.29e-2 (mini) / 1.03e-2 (SD1.5), the VAE decode 2.07e-2
+ * and an encode then decode 5.6e-2. In the VAE a single bf16 convolution moves the decode by 1e-3
+ * to 7e-3 (the early ones most, measured one layer at a time), so no useful part of it can be bf16;
+ * it runs in fp32. In UNet and ControlNet the convolutions fed by unnormalised activations (the
+ * residual stream) carry more error per FLOP; in fp32 they cost a few % of the FLOPs. With this
+ * rule: UNet tiny/mini/SD1.5 6.1e-3/6.1e-3/5.6e-3, ControlNet mini/SD1.5 8.9e-3/6.7e-3. */
+#ifndef MX_NN_PRECISION_H
+#define MX_NN_PRECISION_H
+
+/* 1 when the convolution bound at `path` (its parameter path in the network, e.g.
+ * "down_blocks.0.resnets.1.conv_shortcut") runs in fp32 under a bf16 context. */
+int mx_prec_conv_fp32(const char *path);
+
+/* 1 when the network runs in fp32 under a bf16 context ("vae"). */
+int mx_prec_net_fp32(const char *net);
+
+#endif
