@@ -4,7 +4,7 @@
 # fp16 matex weight file: what the end-to-end benchmark times. ~3.6 GB, about a minute.
 # With --fast, the file of `matex texture --fast` instead: the same plus a random LCM-LoRA of the
 # real rank 64 in the public LCM-LoRA SD1.5 keys (gen-weights --lcm-lora), merged at convert time,
-# and a random full-size TAESD (the config of madebyollin/taesd, below).
+# and a random full-size TAESD (tools/taesd_config.json: the config of madebyollin/taesd).
 # usage: sh tools/make_sd15_weights.sh MATEX OUT.mxw [--fast]
 set -eu
 MATEX=$1
@@ -29,13 +29,7 @@ set --
 if [ "$FAST" = --fast ]; then
     "$MATEX" gen-weights "$DIR/unet/config.json" --seed 4 --dtype f16 --lcm-lora 64 -o "$DIR/lcm_lora.safetensors"
     mkdir -p "$DIR/taesd"
-    cat >"$DIR/taesd/config.json" <<'JSON'
-{"_class_name": "AutoencoderTiny", "act_fn": "relu", "block_out_channels": [64, 64, 64, 64],
- "decoder_block_out_channels": [64, 64, 64, 64], "encoder_block_out_channels": [64, 64, 64, 64],
- "force_upcast": false, "in_channels": 3, "latent_channels": 4, "latent_magnitude": 3, "latent_shift": 0.5,
- "num_decoder_blocks": [3, 3, 3, 1], "num_encoder_blocks": [1, 3, 3, 3], "out_channels": 3,
- "scaling_factor": 1.0, "shift_factor": 0.0, "upsample_fn": "nearest", "upsampling_scaling_factor": 2}
-JSON
+    cp tools/taesd_config.json "$DIR/taesd/config.json"
     "$MATEX" gen-weights "$DIR/taesd/config.json" --seed 1 --dtype f16 -o "$DIR/taesd/diffusion_pytorch_model.safetensors"
     set -- --lcm-lora "$DIR/lcm_lora.safetensors" --taesd "$DIR/taesd"
 fi
