@@ -2,7 +2,7 @@
  * config, golden-v1 rule weights in fp16, made in memory) decoding a 64×64 latent to 512² and
  * encoding 512² back, fp32 and (where the CPU has AVX512_BF16) bf16 right after: seconds, GFLOP
  * and GFLOP/s over CPU time against the measured peak of the cores (bench_sd15.h).
- * Usage: bench_taesd [--threads N] [--repeats N] (run from the repository root). */
+ * Best of 3 runs each. Usage: bench_taesd [--threads N] (run from the repository root). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -11,6 +11,8 @@
 #include "../pipeline/nn/taesd.h"
 #include "../runtime/fileio.h"
 #include "bench_sd15.h"
+
+#define REPEATS 3
 
 /* Best of `repeats` runs of decode (enc 0) or encode (enc 1): wall and process CPU seconds. */
 static int time_pass(const mx_ctx *c, const mx_taesd *t, int enc, int repeats, const float *in, float *out,
@@ -87,20 +89,14 @@ done:
 }
 
 int main(int argc, char **argv) {
-    int threads = 0, repeats = 3;
-    for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--threads") && i + 1 < argc)
-            threads = atoi(argv[++i]);
-        else if (!strcmp(argv[i], "--repeats") && i + 1 < argc)
-            repeats = atoi(argv[++i]);
-        else {
-            fprintf(stderr, "usage: bench_taesd [--threads N] [--repeats N]\n");
-            return 2;
-        }
+    int threads = argc == 3 && !strcmp(argv[1], "--threads") ? atoi(argv[2]) : 0;
+    if (argc != 1 && threads < 1) {
+        fprintf(stderr, "usage: bench_taesd [--threads N]\n");
+        return 2;
     }
     mx_status st;
     mx_status_clear(&st);
-    if (run(threads, repeats > 0 ? repeats : 1, &st)) {
+    if (run(threads, REPEATS, &st)) {
         fprintf(stderr, "bench_taesd: %s\n", st.msg);
         return 1;
     }
