@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../pipeline/nn/sd_edit.h"
 #include "../pipeline/nn/sd_pipeline.h"
 #include "../pipeline/nn/taesd.h"
 #include "nn_golden.h"
@@ -33,6 +34,35 @@ static int on_step(void *user, int step, int n_steps, int64_t t, const float *la
     snprintf(name, sizeof name, "LCM latents after step %d/%d (t=%lld)", step + 1, n_steps, (long long)t);
     mx_check_close(name, latents, io->want + (size_t)step * numel, numel, 1e-4);
     return 0;
+}
+
+/* enhance --fast: the inpaint pipeline at strength 0.5 (the last 2 of the 4 LCM steps) encoding its
+ * init image with TAESD; with nothing to paint the final latents are exactly TAESD's encoding of
+ * that image (the known region is put back after the last step). */
+static void test_edit_keep(const tiny_nets *n, const mx_ctx *c, const mx_sched_config *scfg, const float *ctl,
+                           const float *cond, const float *image, const float *noises, size_t nlat) {
+    mx_status st = {0};
+    mx_sched s;
+    size_t npx = (size_t)2 * 64 * 64;
+    float *mask = calloc(npx, sizeof *mask), *lat = malloc(nlat * sizeof *lat), *want = malloc(nlat * sizeof *want);
+    int ok = mask && lat && want && mx_sched_init(&s, c, scfg, 4, nlat, &st) == 0;
+    CHECK(ok);
+    if (ok) {
+        mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
+        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, NULL, NULL, NULL, NULL};
+        step_io io = {noises + nlat, NULL, 0};
+        s.noise_fn = give_noise;
+        s.noise_user = &io;
+        mx_sd_edit e = {NULL, image, mask, noises, 0.5f, n->taesd};
+        CHECK(mx_sd_edit_run(&rq, &e, c, 2, 8, 8, lat, &st) == 0);
+        CHECK(mx_sched_steps(&s) == 2 && mx_sched_timestep(&s, 0) == 499);
+        CHECK(mx_taesd_encode_image(c, n->taesd, image, 2, 64, 64, want, &st) == 0);
+        mx_check_close("TAESD-encoded init kept by the fast inpaint", lat, want, nlat, 1e-6);
+        mx_sched_free(&s);
+    }
+    free(mask);
+    free(lat);
+    free(want);
 }
 
 static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
@@ -80,6 +110,7 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         rq.progress = NULL;
         CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) != 0 && strstr(st.msg, "noise source"));
         mx_sched_free(&s);
+        test_edit_keep(n, c, &scfg, ctl, cond, img_want, noises, nlat);
     }
     free(lat);
     free(ctl);

@@ -1,6 +1,6 @@
 /* What the two autoencoders (AutoencoderKL: vae.c, vae_tiled.c; AutoencoderTiny: taesd.c) share
  * around a pass (an encoder or decoder run): running it on an arena it leaves as it found it, and
- * the SD pipelines' decode of host latents into a host image in [0, 1]. */
+ * the SD pipelines' decode of host latents into a host image in [0, 1] and encode of one. */
 #ifndef MX_AE_PASS_H
 #define MX_AE_PASS_H
 
@@ -18,19 +18,25 @@ int mx_ae_run(const mx_ctx *c, mx_ae_pass_fn pass, const void *net, const float 
 int mx_ae_dry_run(mx_ae_pass_fn pass, const void *net, int B, int H, int W, size_t *bytes, double *flops,
                   mx_status *st);
 
-/* A decoder with what the host decode needs to know of it. */
-typedef struct mx_ae_decoder {
-    int (*decode)(const mx_ctx *c, const void *net, const float *latents, int n, int h, int w, float *image,
-                  mx_arena *a, mx_status *st); /* device latents -> device image, unclamped */
+/* A decoder or encoder with what the host calls need to know of it. */
+typedef struct mx_ae_coder {
+    /* device latents [n, latent, h, w] -> device image [n, image, f h, f w], unclamped (decoder), or
+     * device image in [-1, 1] -> device latents (encoder; h, w are then the image's) */
+    int (*run)(const mx_ctx *c, const void *net, const float *in, int n, int h, int w, float *out, mx_arena *a,
+               mx_status *st);
     const void *net;
-    int latent_channels, out_channels, factor; /* image side = factor * latent side */
+    int latent_channels, image_channels, factor; /* image side = factor * latent side */
     float scaling_factor;
-    size_t arena_bytes; /* for n latents of h x w */
-} mx_ae_decoder;
+    size_t arena_bytes; /* for this call's sizes */
+} mx_ae_coder;
 
 /* On HOST arrays (uploaded and downloaded here): image [n, out, f h, f w] =
  * clamp(decode(latents / scaling_factor) / 2 + 0.5, 0, 1). */
-int mx_ae_decode_host(const mx_ctx *c, const mx_ae_decoder *d, const float *latents, int n, int h, int w,
+int mx_ae_decode_host(const mx_ctx *c, const mx_ae_coder *d, const float *latents, int n, int h, int w,
                       float *image, mx_status *st);
+/* On HOST arrays: latents [n, latent, H/f, W/f] = scaling_factor * encode(2 image - 1), image
+ * [n, image, H, W] in [0, 1]. */
+int mx_ae_encode_host(const mx_ctx *c, const mx_ae_coder *e, const float *image, int n, int H, int W, float *latents,
+                      mx_status *st);
 
 #endif

@@ -225,12 +225,30 @@ static int decode_dev(const mx_ctx *c, const void *net, const float *latents, in
     return mx_taesd_decode(c, net, latents, n, h, w, image, a, st);
 }
 
+static int encode_dev(const mx_ctx *c, const void *net, const float *image, int n, int H, int W, float *latents,
+                      mx_arena *a, mx_status *st) {
+    return mx_taesd_encode(c, net, image, n, H, W, latents, a, st);
+}
+
+static mx_ae_coder coder(const mx_taesd *t, int encode) {
+    const mx_taesd_config *cfg = &t->cfg;
+    mx_ae_coder k = {encode ? encode_dev : decode_dev, t, cfg->latent_channels, encode ? cfg->in_channels : cfg->out_channels,
+                     mx_taesd_factor(t), cfg->scaling_factor, 0};
+    return k;
+}
+
 int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *latents, int n, int h, int w,
                           float *image, mx_status *st) {
-    const mx_taesd_config *cfg = &t->cfg;
-    mx_ae_decoder d = {decode_dev, t, cfg->latent_channels, cfg->out_channels, mx_taesd_factor(t), cfg->scaling_factor, 0};
+    mx_ae_coder d = coder(t, 0);
     if (mx_taesd_decode_arena_bytes(t, n, h, w, &d.arena_bytes, st)) return -1;
     return mx_ae_decode_host(c, &d, latents, n, h, w, image, st);
+}
+
+int mx_taesd_encode_image(const mx_ctx *c, const mx_taesd *t, const float *image, int n, int H, int W, float *latents,
+                          mx_status *st) {
+    mx_ae_coder e = coder(t, 1);
+    if (mx_taesd_encode_arena_bytes(t, n, H, W, &e.arena_bytes, st)) return -1;
+    return mx_ae_encode_host(c, &e, image, n, H, W, latents, st);
 }
 
 double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w) {

@@ -167,8 +167,8 @@ int mx_vae_decode_image_tiled(const mx_ctx *c, const mx_vae *v, const float *lat
                               float *image, mx_status *st) {
     const mx_vae_config *cfg = mx_vae_cfg(v);
     tiled_net t = {v, tile};
-    mx_ae_decoder d = {decode_tiled_dev, &t, cfg->latent_channels, cfg->out_channels, mx_vae_factor(v),
-                       cfg->scaling_factor, 0};
+    mx_ae_coder d = {decode_tiled_dev, &t, cfg->latent_channels, cfg->out_channels, mx_vae_factor(v),
+                     cfg->scaling_factor, 0};
     if (mx_vae_decode_tiled_arena_bytes(v, h, w, tile, &d.arena_bytes, st)) return -1;
     return mx_ae_decode_host(c, &d, latents, n, h, w, image, st);
 }

@@ -316,7 +316,8 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
         return mx_sd_denoise(rq, j->ctx, lat, b->n, h, w, st);
     }
-    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength};
+    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength,
+                    j->o->fast ? j->models->taesd : NULL};
     return mx_sd_edit_run(rq, &e, j->ctx, b->n, h, w, lat, st);
 }
 
