@@ -59,4 +59,11 @@ check "bf16 output written" [ -s "$T/g16.safetensors" ]
 check "gen-weights is deterministic" sh -c ""$M" gen-weights '$T/gen/config.json' --seed 3 -o '$T/again.safetensors' --dtype f16 2>/dev/null && cmp -s '$T/again.safetensors' '$T/gen/diffusion_pytorch_model.safetensors'"
 check "gen-weights bad config exits 1" [ "$(rc_of "$M" gen-weights "$G/README.md" -o "$T/x.safetensors")" = 1 ]
 check "no output for a bad config" [ ! -e "$T/x.safetensors" ]
+# gen-weights --lcm-lora: a random LoRA in the LCM-LoRA SD1.5 keys, which convert --lcm-lora merges
+check "gen-weights --lcm-lora" [ "$(rc_of "$M" gen-weights "$T/gen/config.json" --lcm-lora 4 -o "$T/lcm.safetensors")" = 0 ]
+check "lcm-lora keys in the kohya style with alpha" grep -q "lora_unet_mid_block_attentions_0_transformer_blocks_0_attn1_to_q.alpha" "$T/lcm.safetensors"
+check "convert --lcm-lora merges it" sh -c ""$M" convert '$T/gen' --lcm-lora '$T/lcm.safetensors' -o '$T/lcm.mxw' 2>&1 | grep -q 'weight(s) changed by LoRA'"
+check "run-net on the merged UNet" [ "$(rc_of "$M" run-net unet --weights "$T/lcm.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/l.safetensors")" = 0 ]
+check "gen-weights --lcm-lora refuses a VAE" [ "$(rc_of "$M" gen-weights "$G/vae_tiny/config.json" --lcm-lora 4 -o "$T/x.safetensors")" = 1 ]
+check "gen-weights --lcm-lora 0 exits 2" [ "$(rc_of "$M" gen-weights "$T/gen/config.json" --lcm-lora 0 -o "$T/x.safetensors")" = 2 ]
 exit $fail

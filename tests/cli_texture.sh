@@ -41,7 +41,11 @@ check "no output after --fast is refused" [ ! -e "$T/f" ]
 check "texture --fast runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$WF" -o "$T/fast" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
 check "--fast report: 4 steps, guidance 1" grep -q '"steps":4,"fast":true,"guidance":1,' "$T/fast/report.json"
 check "--fast ran the LCM timesteps" grep -q "step 4/4 (t=259)" "$T/err"
-check "enhance --fast exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" x --weights "$WF" -o "$T/f" --fast)" = 2 ]
+# enhance --fast: LCM at the SDEdit strength (0.5 of 4 steps: the last 2), TAESD encoder and decoder
+check "enhance --fast runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$WF" -o "$T/hatf" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
+check "enhance --fast ran the last 2 LCM timesteps" sh -c "grep -q 'step 1/2 (t=499)' '$T/err' && grep -q 'step 2/2 (t=259)' '$T/err'"
+check "enhance --fast wrote mesh.glb" [ -s "$T/hatf/mesh.glb" ]
+check "enhance --fast without LCM/TAESD exits 1" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]
 check "enhance runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$W" -o "$T/hat2" $SMALL)" = 0 ]
 check "enhance wrote mesh.glb" [ -s "$T/hat2/mesh.glb" ]
 check "bad strength exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" --strength 2 --weights "$W" -o "$T/b")" = 2 ]

@@ -10,75 +10,14 @@
 #include "../pipeline/nn/clip.h"
 #include "../pipeline/nn/sd_pipeline.h"
 #include "nn_golden.h"
+#include "tiny_nets.h"
 #include "util_test.h"
 
 #define PIPE "pipeline_controlnet_tiny"
 
-typedef struct nets {
-    mx_safetensors wf[4];
-    mx_binder b[4];
-    mx_unet_config ucfg, ccfg;
-    mx_vae_config vcfg;
-    mx_clip_config clip_cfg;
-    mx_unet *unet;
-    mx_controlnet *cnet;
-    mx_vae *vae;
-    mx_clip clip;
-    int loaded;
-} nets;
-
-/* Opens net/file and a binder over it (slot i). */
-static int bind_golden(nets *n, int i, const char *net, const char *file, mx_status *st) {
-    if (golden_open(&n->wf[i], net, file)) return mx_fail(st, MX_EINPUT, "%s/%s: cannot open", net, file);
-    return mx_binder_st(&n->b[i], &n->wf[i], "", st);
-}
-
-static int load_nets(nets *n, mx_status *st) {
-    memset(n, 0, sizeof *n);
-    size_t lu, lc, lv, ll;
-    char *tu = golden_text("unet_tiny", "config.json", &lu), *tc = golden_text("controlnet_tiny", "config.json", &lc);
-    char *tv = golden_text("vae_tiny", "config.json", &lv), *tl = golden_text("clip_tiny", "config.json", &ll);
-    int rc = -1;
-    if (!tu || !tc || !tv || !tl) {
-        mx_fail(st, MX_EINPUT, "a tiny network config.json is missing");
-        goto done;
-    }
-    if (mx_unet_config_parse(&n->ucfg, tu, lu, "unet_tiny", st) ||
-        mx_unet_config_parse(&n->ccfg, tc, lc, "controlnet_tiny", st) ||
-        mx_vae_config_parse(&n->vcfg, tv, lv, "vae_tiny", st) ||
-        mx_clip_config_parse(&n->clip_cfg, tl, ll, "clip_tiny", st))
-        goto done;
-    if (bind_golden(n, 0, "unet_tiny", "diffusion_pytorch_model.safetensors", st) ||
-        mx_unet_load(&n->unet, &n->ucfg, &n->b[0], st) ||
-        bind_golden(n, 1, "controlnet_tiny", "diffusion_pytorch_model.safetensors", st) ||
-        mx_controlnet_load(&n->cnet, &n->ccfg, &n->b[1], st) ||
-        bind_golden(n, 2, "vae_tiny", "diffusion_pytorch_model.safetensors", st) ||
-        mx_vae_load(&n->vae, &n->vcfg, &n->b[2], st) || bind_golden(n, 3, "clip_tiny", "model.safetensors", st) ||
-        mx_clip_load(&n->clip, &n->clip_cfg, &n->b[3], st))
-        goto done;
-    n->loaded = 1;
-    rc = 0;
-done:
-    free(tu);
-    free(tc);
-    free(tv);
-    free(tl);
-    return rc;
-}
-
-static void free_nets(nets *n) {
-    mx_unet_free(n->unet);
-    mx_controlnet_free(n->cnet);
-    mx_vae_free(n->vae);
-    if (n->loaded) mx_clip_free(&n->clip);
-    for (int i = 0; i < 4; i++) {
-        mx_binder_free(&n->b[i]);
-        if (n->wf[i].map) mx_st_close(&n->wf[i]);
-    }
-}
-
 /* Prompt embeddings from the golden ids, compared with the pipeline's. */
-static void check_embeddings(const nets *n, const mx_ctx *c, const mx_safetensors *in, const mx_safetensors *out) {
+static void check_embeddings(const tiny_nets *n, const mx_ctx *c, const mx_safetensors *in,
+                             const mx_safetensors *out) {
     const char *ids_name[2] = {"prompt_ids", "negative_prompt_ids"};
     const char *emb_name[2] = {"prompt_embeds", "negative_prompt_embeds"};
     for (int k = 0; k < 2; k++) {
@@ -166,14 +105,14 @@ done:
     free(text2);
 }
 
-static void test_pipeline(const nets *n, const mx_ctx *c) {
+static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
     mx_safetensors in, out;
     if (golden_open(&in, PIPE, "inputs.safetensors") || golden_open(&out, PIPE, "outputs.safetensors")) {
         CHECK(0);
         return;
     }
     check_embeddings(n, c, &in, &out);
-    size_t nlat, nctl, ncond, nunc, nts, nafter, nimg, lsched;
+    size_t nlat = 0, nctl = 0, ncond = 0, nunc = 0, nts = 0, nafter = 0, nimg = 0, lsched = 0;
     float *lat = golden_f32(&in, "latents", &nlat), *ctl = golden_f32(&in, "control_image", &nctl);
     float *cond = golden_f32(&out, "prompt_embeds", &ncond), *unc = golden_f32(&out, "negative_prompt_embeds", &nunc);
     float *ts = golden_f32(&out, "timesteps", &nts), *after = golden_f32(&out, "latents_after_step", &nafter);
@@ -245,15 +184,5 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
 }
 
 int main(void) {
-    mx_ctx c;
-    mx_status st = {0};
-    nets n;
-    if (golden_ctx(&c)) return 1;
-    int ok = load_nets(&n, &st) == 0;
-    if (!ok) fprintf(stderr, "%s\n", st.msg);
-    CHECK(ok);
-    if (ok) test_pipeline(&n, &c);
-    free_nets(&n);
-    mx_ctx_destroy(&c);
-    return mx_test_finish("test_nn_pipeline");
+    return tiny_nets_main("test_nn_pipeline", TINY_UNET | TINY_CONTROLNET | TINY_VAE | TINY_CLIP, test_pipeline);
 }

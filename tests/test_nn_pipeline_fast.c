@@ -7,58 +7,13 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../pipeline/nn/sd_edit.h"
 #include "../pipeline/nn/sd_pipeline.h"
 #include "../pipeline/nn/taesd.h"
 #include "nn_golden.h"
+#include "tiny_nets.h"
 
 #define PIPE "pipeline_controlnet_lcm_taesd_tiny"
-
-typedef struct nets {
-    mx_safetensors wf[3];
-    mx_binder b[3];
-    mx_unet_config ucfg, ccfg;
-    mx_taesd_config tcfg;
-    mx_unet *unet;
-    mx_controlnet *cnet;
-    mx_taesd *taesd;
-} nets;
-
-static int bind_golden(nets *n, int i, const char *net, mx_status *st) {
-    if (golden_open(&n->wf[i], net, "diffusion_pytorch_model.safetensors"))
-        return mx_fail(st, MX_EINPUT, "%s: cannot open its weights", net);
-    return mx_binder_st(&n->b[i], &n->wf[i], "", st);
-}
-
-static int load_nets(nets *n, mx_status *st) {
-    memset(n, 0, sizeof *n);
-    size_t lu, lc, lt;
-    char *tu = golden_text("unet_tiny", "config.json", &lu), *tc = golden_text("controlnet_tiny", "config.json", &lc);
-    char *tt = golden_text("taesd_tiny", "config.json", &lt);
-    int rc = -1;
-    if (!tu || !tc || !tt)
-        mx_fail(st, MX_EINPUT, "a tiny network config.json is missing");
-    else if (!mx_unet_config_parse(&n->ucfg, tu, lu, "unet_tiny", st) &&
-             !mx_unet_config_parse(&n->ccfg, tc, lc, "controlnet_tiny", st) &&
-             !mx_taesd_config_parse(&n->tcfg, tt, lt, "taesd_tiny", st) && !bind_golden(n, 0, "unet_tiny", st) &&
-             !mx_unet_load(&n->unet, &n->ucfg, &n->b[0], st) && !bind_golden(n, 1, "controlnet_tiny", st) &&
-             !mx_controlnet_load(&n->cnet, &n->ccfg, &n->b[1], st) && !bind_golden(n, 2, "taesd_tiny", st) &&
-             !mx_taesd_load(&n->taesd, &n->tcfg, &n->b[2], st))
-        rc = 0;
-    free(tu);
-    free(tc);
-    free(tt);
-    return rc;
-}
-
-static void free_nets(nets *n) {
-    mx_unet_free(n->unet);
-    mx_controlnet_free(n->cnet);
-    mx_taesd_free(n->taesd);
-    for (int i = 0; i < 3; i++) {
-        mx_binder_free(&n->b[i]);
-        if (n->wf[i].map) mx_st_close(&n->wf[i]);
-    }
-}
 
 typedef struct step_io {
     const float *noises; /* [steps - 1, numel] */
@@ -81,13 +36,42 @@ static int on_step(void *user, int step, int n_steps, int64_t t, const float *la
     return 0;
 }
 
-static void test_pipeline(const nets *n, const mx_ctx *c) {
+/* enhance --fast: the inpaint pipeline at strength 0.5 (the last 2 of the 4 LCM steps) encoding its
+ * init image with TAESD; with nothing to paint the final latents are exactly TAESD's encoding of
+ * that image (the known region is put back after the last step). */
+static void test_edit_keep(const tiny_nets *n, const mx_ctx *c, const mx_sched_config *scfg, const float *ctl,
+                           const float *cond, const float *image, const float *noises, size_t nlat) {
+    mx_status st = {0};
+    mx_sched s;
+    size_t npx = (size_t)2 * 64 * 64;
+    float *mask = calloc(npx, sizeof *mask), *lat = malloc(nlat * sizeof *lat), *want = malloc(nlat * sizeof *want);
+    int ok = mask && lat && want && mx_sched_init(&s, c, scfg, 4, nlat, &st) == 0;
+    CHECK(ok);
+    if (ok) {
+        mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
+        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, NULL, NULL, NULL, NULL};
+        step_io io = {noises + nlat, NULL, 0};
+        s.noise_fn = give_noise;
+        s.noise_user = &io;
+        mx_sd_edit e = {NULL, image, mask, noises, 0.5f, n->taesd};
+        CHECK(mx_sd_edit_run(&rq, &e, c, 2, 8, 8, lat, &st) == 0);
+        CHECK(mx_sched_steps(&s) == 2 && mx_sched_timestep(&s, 0) == 499);
+        CHECK(mx_taesd_encode_image(c, n->taesd, image, 2, 64, 64, want, &st) == 0);
+        mx_check_close("TAESD-encoded init kept by the fast inpaint", lat, want, nlat, 1e-6);
+        mx_sched_free(&s);
+    }
+    free(mask);
+    free(lat);
+    free(want);
+}
+
+static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
     mx_safetensors in, out;
     if (golden_open(&in, PIPE, "inputs.safetensors") || golden_open(&out, PIPE, "outputs.safetensors")) {
         CHECK(0);
         return;
     }
-    size_t nlat, nctl, ncond, nnoise, nts, nafter, nimg;
+    size_t nlat = 0, nctl = 0, ncond = 0, nnoise = 0, nts = 0, nafter = 0, nimg = 0;
     float *lat = golden_f32(&in, "latents", &nlat), *ctl = golden_f32(&in, "control_image", &nctl);
     float *cond = golden_f32(&in, "prompt_embeds", &ncond), *noises = golden_f32(&in, "noises", &nnoise);
     float *ts = golden_f32(&out, "timesteps", &nts), *after = golden_f32(&out, "latents_after_step", &nafter);
@@ -126,6 +110,7 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
         rq.progress = NULL;
         CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) != 0 && strstr(st.msg, "noise source"));
         mx_sched_free(&s);
+        test_edit_keep(n, c, &scfg, ctl, cond, img_want, noises, nlat);
     }
     free(lat);
     free(ctl);
@@ -139,15 +124,5 @@ static void test_pipeline(const nets *n, const mx_ctx *c) {
 }
 
 int main(void) {
-    mx_ctx c;
-    mx_status st = {0};
-    nets n;
-    if (golden_ctx(&c)) return 1;
-    int ok = load_nets(&n, &st) == 0;
-    if (!ok) fprintf(stderr, "%s\n", st.msg);
-    CHECK(ok);
-    if (ok) test_pipeline(&n, &c);
-    free_nets(&n);
-    mx_ctx_destroy(&c);
-    return mx_test_finish("test_nn_pipeline_fast");
+    return tiny_nets_main("test_nn_pipeline_fast", TINY_UNET | TINY_CONTROLNET | TINY_TAESD, test_pipeline);
 }

@@ -90,8 +90,34 @@ static void test_config_and_errors(void) {
     CHECK(mx_sched_init(&s, NULL, &cfg, 4, 16, &st) == 0);
     float mo[16] = {0}, x[16] = {0};
     CHECK(mx_sched_step(&s, mo, x, &st) == -1 && strstr(st.msg, "noise source"));
-    CHECK(mx_sched_set_strength(&s, 0.5f, &st) == -1 && strstr(st.msg, "strength"));
     mx_sched_free(&s);
+}
+
+/* img2img strength as diffusers' img2img/inpaint pipelines apply it to LCMScheduler: its 4-step list
+ * [999, 759, 499, 259], then get_timesteps keeps the last int(4 * strength) with set_begin_index;
+ * the step noise is asked from step 0 on, and the last kept step returns the denoised sample. */
+static void test_strength(void) {
+    mx_sched_config cfg;
+    mx_status st;
+    mx_sched s;
+    sd15_lcm(&cfg);
+    static const struct {
+        float strength;
+        int steps;
+        int64_t first;
+    } cases[] = {{0.5f, 2, 499}, {0.55f, 2, 499}, {0.3f, 1, 259}, {1.0f, 4, 999}, {0.75f, 3, 759}};
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        CHECK(mx_sched_init(&s, NULL, &cfg, 4, 4, &st) == 0);
+        CHECK(mx_sched_set_strength(&s, cases[k].strength, &st) == 0);
+        CHECK(mx_sched_steps(&s) == cases[k].steps && mx_sched_timestep(&s, 0) == cases[k].first);
+        CHECK(mx_sched_timestep(&s, mx_sched_steps(&s) - 1) == 259);
+        float noise[3 * 4] = {0}, mo[4] = {0}, x[4] = {1, 1, 1, 1}; /* noise: steps 0..2 */
+        s.noise_fn = give_noise;
+        s.noise_user = noise;
+        for (int i = 0; i < cases[k].steps; i++) CHECK(mx_sched_step(&s, mo, x, &st) == 0);
+        CHECK(mx_sched_step(&s, mo, x, &st) == -1); /* past the last */
+        mx_sched_free(&s);
+    }
 }
 
 int main(void) {
@@ -101,5 +127,6 @@ int main(void) {
     run_case(&f, "steps6", 6);
     mx_st_close(&f);
     test_config_and_errors();
+    test_strength();
     return mx_test_finish("test_nn_scheduler_lcm");
 }

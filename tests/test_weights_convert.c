@@ -360,7 +360,6 @@ static void test_lora(void) {
          "unet.up_blocks.1.attentions.0.transformer_blocks.0.attn2.processor.to_out_lora.down.weight",
          "unet.up_blocks.1.attentions.0.transformer_blocks.0.attn2.processor.to_out_lora.up.weight", NULL, 4, 0, 0},
     };
-    check_lora("unet_tiny", "diffusion_pytorch_model.safetensors", "unet", diffusers_unet, 3, 0.7f);
     const lora_case kohya_unet[] = {
         {"down_blocks.0.attentions.0.transformer_blocks.0.attn2.to_k.weight",
          "lora_unet_down_blocks_0_attentions_0_transformer_blocks_0_attn2_to_k.lora_down.weight",
@@ -370,7 +369,6 @@ static void test_lora(void) {
          "lora_unet_mid_block_attentions_0_proj_out.lora_up.weight", "lora_unet_mid_block_attentions_0_proj_out.alpha",
          2, 1, 1.0f},
     };
-    check_lora("unet_tiny", "diffusion_pytorch_model.safetensors", "unet", kohya_unet, 2, -1.25f);
     const lora_case kohya_te[] = {
         {"text_model.encoder.layers.0.self_attn.q_proj.weight",
          "lora_te_text_model_encoder_layers_0_self_attn_q_proj.lora_down.weight",
@@ -379,13 +377,11 @@ static void test_lora(void) {
         {"text_model.encoder.layers.1.mlp.fc1.weight", "lora_te_text_model_encoder_layers_1_mlp_fc1.lora_down.weight",
          "lora_te_text_model_encoder_layers_1_mlp_fc1.lora_up.weight", NULL, 3, 0, 0},
     };
-    check_lora("clip_tiny", "model.safetensors", "text_encoder", kohya_te, 2, 1.0f);
     const lora_case peft_te[] = {
         {"text_model.encoder.layers.1.self_attn.v_proj.weight",
          "text_encoder.text_model.encoder.layers.1.self_attn.v_proj.lora_A.weight",
          "text_encoder.text_model.encoder.layers.1.self_attn.v_proj.lora_B.weight", NULL, 5, 0, 0},
     };
-    check_lora("clip_tiny", "model.safetensors", "text_encoder", peft_te, 1, 0.5f);
     /* the module kinds of the LCM-LoRA for SD1.5 (its trainer targets to_q/k/v/out.0, proj_in/out,
      * ff.net.0.proj/ff.net.2, conv1/conv2/conv_shortcut, down/upsampler convs, time_emb_proj; 3x3
      * convs get a 3x3 down and a 1x1 up), in the kohya keys with alpha of the published file */
@@ -403,7 +399,6 @@ static void test_lora(void) {
          "lora_unet_up_blocks_0_resnets_1_conv_shortcut.lora_up.weight",
          "lora_unet_up_blocks_0_resnets_1_conv_shortcut.alpha", 3, 1, 8.0f},
     };
-    check_lora("unet_tiny", "diffusion_pytorch_model.safetensors", "unet", lcm_kohya, 4, 1.0f);
     /* the same kinds in diffusers/PEFT keys (lora_A / lora_B, no alpha) */
     const lora_case lcm_peft[] = {
         {"mid_block.resnets.0.conv1.weight", "unet.mid_block.resnets.0.conv1.lora_A.weight",
@@ -414,7 +409,24 @@ static void test_lora(void) {
          "unet.mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.lora_A.weight",
          "unet.mid_block.attentions.0.transformer_blocks.0.ff.net.0.proj.lora_B.weight", NULL, 4, 0, 0},
     };
-    check_lora("unet_tiny", "diffusion_pytorch_model.safetensors", "unet", lcm_peft, 3, 1.0f);
+    /* each set of cases converted with its network at a LoRA scale */
+#define CASES(a) a, (int)(sizeof a / sizeof a[0])
+    const struct {
+        const char *net_dir, *src_file, *prefix;
+        const lora_case *cases;
+        int n;
+        float scale;
+    } sets[] = {
+        {"unet_tiny", "diffusion_pytorch_model.safetensors", "unet", CASES(diffusers_unet), 0.7f},
+        {"unet_tiny", "diffusion_pytorch_model.safetensors", "unet", CASES(kohya_unet), -1.25f},
+        {"clip_tiny", "model.safetensors", "text_encoder", CASES(kohya_te), 1.0f},
+        {"clip_tiny", "model.safetensors", "text_encoder", CASES(peft_te), 0.5f},
+        {"unet_tiny", "diffusion_pytorch_model.safetensors", "unet", CASES(lcm_kohya), 1.0f},
+        {"unet_tiny", "diffusion_pytorch_model.safetensors", "unet", CASES(lcm_peft), 1.0f},
+    };
+    for (size_t k = 0; k < sizeof sets / sizeof sets[0]; k++)
+        check_lora(sets[k].net_dir, sets[k].src_file, sets[k].prefix, sets[k].cases, sets[k].n, sets[k].scale);
+#undef CASES
 }
 
 /* ---- bad input: an error naming the problem and no output file ---- */

@@ -5,10 +5,13 @@
  * - unet_b2_64_*: one UNet call (batch 2, 64×64 latent, 77 tokens), fp32 and bf16 alternated,
  *   median of 3 each (bf16 "na" without AVX512_BF16).
  * - default_s, peak_rss_mb: a default `matex texture` run (10 steps, 6 views, 1024², its default
- *   precision), timed as a child process whose peak RSS wait4 reports. About 10-15 minutes on
- *   2 cores, so only with BENCH_E2E=1; otherwise "na".
- * - fast_s: the same with `--fast` when this matex has it, the weight file has its networks (LCM-LoRA,
- *   TAESD: not yet in the random model set) and BENCH_E2E=1, else "na".
+ *   precision), timed as a child process whose peak RSS wait4 reports (peak_rss_mb: the larger of the
+ *   two runs). About 10-15 minutes on 2 cores, so only with BENCH_E2E=1; otherwise "na".
+ * - fast_s: the same with `--fast`, on the fast model set (the same plus a random LCM-LoRA merged and
+ *   a random TAESD: sd15_random_f16_fast.mxw beside the other, made once), only with BENCH_E2E=1.
+ * - each texture run also prints a line `bench-e2e-run: LABEL wall_s= cpu_s= peak_rss_mb=` with the
+ *   stage times of its report.json (stages_s, work_s); BENCH_E2E_FP32=1 adds a default run with
+ *   `--precision fp32` (the default before bf16) for the before/after.
  * - isa: the kernel level a default `matex texture` uses.
  * Usage: bench_e2e [--threads N] (MATEX: the matex binary, default ./matex). */
 #include <stdio.h>
@@ -19,6 +22,8 @@
 #include <unistd.h>
 
 #include "../pipeline/texture/models.h"
+#include "../runtime/fileio.h"
+#include "../runtime/json.h"
 #include "bench_sd15.h"
 
 #define UNET_REPEATS 3
@@ -76,40 +81,56 @@ done:
     return rc;
 }
 
-/* Does this matex's texture verb have --fast? */
-static int matex_has_fast(const char *matex) {
-    char cmd[1200], line[512];
-    snprintf(cmd, sizeof cmd, "'%s' texture --help 2>/dev/null", matex);
-    FILE *f = popen(cmd, "r");
-    int found = 0;
-    while (f && fgets(line, sizeof line, f)) found |= strstr(line, "--fast") != NULL;
-    if (f) pclose(f);
-    return found;
+/* One `matex texture` run as a child process: wall and CPU seconds (user + sys, wait4), peak RSS. */
+typedef struct e2e_run {
+    const char *label, *precision; /* precision NULL: the default */
+    int fast;
+    double wall_s, cpu_s, rss_mb;
+} e2e_run;
+
+/* Prints the run's stage times (report.json: stages_s, work_s) on one line. */
+static void print_stages(const e2e_run *r, const char *out_dir) {
+    char path[256];
+    size_t len;
+    mx_status st;
+    snprintf(path, sizeof path, "%s/report.json", out_dir);
+    char *text = mx_read_file(path, (size_t)16 << 20, &len, &st);
+    mx_json *rep = text ? mx_json_parse(text, len, path, &st) : NULL;
+    printf("bench-e2e-run: %s wall_s=%.1f cpu_s=%.1f peak_rss_mb=%.0f", r->label, r->wall_s, r->cpu_s, r->rss_mb);
+    const char *objs[2] = {"stages_s", "work_s"};
+    for (int o = 0; rep && o < 2; o++) {
+        const mx_json *s = mx_json_get(rep, objs[o]);
+        for (size_t i = 0; i < mx_json_len(s); i++) printf(" %s=%.1f", mx_json_key(s, i), mx_json_num(mx_json_at(s, i)));
+    }
+    printf("\n");
+    mx_json_free(rep);
+    free(text);
 }
 
-/* Runs `matex texture` on spot with the defaults (plus --fast), as a child: its wall seconds
- * and peak RSS (MB). Returns -1 when it fails. */
-static int run_texture(const char *matex, const char *weights, int threads, int fast, double *secs, double *rss_mb) {
-    char out[] = "/tmp/matex_bench_e2e.XXXXXX", thr[16];
+/* Runs `matex texture` on spot with the defaults (plus --fast / --precision). Returns -1 when it fails. */
+static int run_texture(const char *matex, const char *weights, int threads, e2e_run *r) {
+    char out[] = "/tmp/matex_bench_e2e.XXXXXX", dir[64], thr[16];
     if (!mkdtemp(out)) return -1;
+    snprintf(dir, sizeof dir, "%s/o", out);
     snprintf(thr, sizeof thr, "%d", threads);
+    const char *argv[20] = {matex, "texture", "tests/data/assets/spot/spot_triangulated.obj",
+                            "a black-and-white dairy cow", "--weights", weights, "-o", dir, "--threads", thr, "--quiet"};
+    int n = 11;
+    if (r->fast) argv[n++] = "--fast";
+    if (r->precision) argv[n++] = "--precision", argv[n++] = r->precision;
     double t0 = mx_now();
     pid_t pid = fork();
     if (pid == 0) {
-        const char *mesh = "tests/data/assets/spot/spot_triangulated.obj";
-        if (fast)
-            execl(matex, matex, "texture", mesh, "a black-and-white dairy cow", "--weights", weights, "-o", out,
-                  "--threads", thr, "--quiet", "--fast", (char *)NULL);
-        else
-            execl(matex, matex, "texture", mesh, "a black-and-white dairy cow", "--weights", weights, "-o", out,
-                  "--threads", thr, "--quiet", (char *)NULL);
+        execv(matex, (char *const *)argv);
         _exit(127);
     }
     int status = 0;
     struct rusage ru;
     int ok = pid > 0 && wait4(pid, &status, 0, &ru) == pid && WIFEXITED(status) && !WEXITSTATUS(status);
-    *secs = mx_now() - t0;
-    *rss_mb = ok ? ru.ru_maxrss / 1024.0 : 0;
+    r->wall_s = mx_now() - t0;
+    r->cpu_s = ok ? ru.ru_utime.tv_sec + ru.ru_stime.tv_sec + 1e-6 * (ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) : 0;
+    r->rss_mb = ok ? ru.ru_maxrss / 1024.0 : 0;
+    if (ok) print_stages(r, dir);
     char cmd[128];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", out);
     return system(cmd) == 0 && ok ? 0 : -1;
@@ -133,37 +154,40 @@ int main(int argc, char **argv) {
         }
     }
     const char *matex = getenv("MATEX") ? getenv("MATEX") : "./matex";
-    const char *e2e = getenv("BENCH_E2E");
+    const char *e2e = getenv("BENCH_E2E"), *e2e_fp32 = getenv("BENCH_E2E_FP32");
     int run_e2e = e2e && !strcmp(e2e, "1");
-    char weights[1100];
-    if (bench_sd15_weights(weights, sizeof weights)) {
-        fprintf(stderr, "bench_e2e: cannot make the SD1.5 weight file %s\n", weights);
+    char weights[1100], fast_weights[1100];
+    if (bench_sd15_weights(weights, sizeof weights) ||
+        (run_e2e && bench_sd15_file(fast_weights, sizeof fast_weights, 1))) {
+        fprintf(stderr, "bench_e2e: cannot make the SD1.5 weight files in the cache\n");
         return 1;
     }
     mx_status st;
     mx_status_clear(&st);
-    double unet[2], def_s = 0, fast_s = 0, rss = 0, fast_rss = 0;
+    double unet[2];
     if (time_unet(weights, threads, unet, &st)) {
         fprintf(stderr, "bench_e2e: %s\n", st.msg);
         return 1;
     }
-    if (run_e2e && run_texture(matex, weights, threads, 0, &def_s, &rss)) {
-        fprintf(stderr, "bench_e2e: the default matex texture run failed\n");
+    e2e_run def = {"default", NULL, 0, 0, 0, 0}, fast = {"fast", NULL, 1, 0, 0, 0}, fp32 = {"default-fp32", "fp32", 0, 0, 0, 0};
+    if (run_e2e && (run_texture(matex, weights, threads, &def) || run_texture(matex, fast_weights, threads, &fast))) {
+        fprintf(stderr, "bench_e2e: a matex texture run failed\n");
         return 1;
     }
-    /* --fast needs a file converted with --lcm-lora and --taesd, which the random model set lacks
-     * so far: then fast_s stays na */
-    if (run_e2e && matex_has_fast(matex) && run_texture(matex, weights, threads, 1, &fast_s, &fast_rss)) {
-        fprintf(stderr, "bench_e2e: matex texture --fast did not run on %s (no LCM-LoRA/TAESD in it?)\n", weights);
-        fast_s = fast_rss = 0;
+    /* the fp32 run (the default before bf16): the before/after of the per-stage breakdown */
+    if (run_e2e && e2e_fp32 && !strcmp(e2e_fp32, "1") && run_texture(matex, weights, threads, &fp32)) {
+        fprintf(stderr, "bench_e2e: the --precision fp32 matex texture run failed\n");
+        return 1;
     }
-    if (!run_e2e) printf("bench_e2e: the matex texture runs are opt-in (BENCH_E2E=1, ~10-15 min on 2 cores)\n");
+    if (!run_e2e)
+        printf("bench_e2e: the matex texture runs are opt-in (BENCH_E2E=1, ~10-15 min on 2 cores; BENCH_E2E_FP32=1 adds "
+               "an fp32 run)\n");
     char d[32], f[32], u0[32], u1[32], r[32];
-    fmt(d, sizeof d, def_s, "%.1f");
-    fmt(f, sizeof f, fast_s, "%.1f");
+    fmt(d, sizeof d, def.wall_s, "%.1f");
+    fmt(f, sizeof f, fast.wall_s, "%.1f");
     fmt(u0, sizeof u0, unet[0], "%.2f");
     fmt(u1, sizeof u1, unet[1], "%.2f");
-    fmt(r, sizeof r, rss > fast_rss ? rss : fast_rss, "%.0f");
+    fmt(r, sizeof r, def.rss_mb > fast.rss_mb ? def.rss_mb : fast.rss_mb, "%.0f");
     printf("bench-e2e: default_s=%s fast_s=%s unet_b2_64_fp32_s=%s unet_b2_64_bf16_s=%s peak_rss_mb=%s "
            "weights_mb=%.0f isa=%s\n",
            d, f, u0, u1, r, bench_file_mb(weights), mx_isa_name(mx_cpu_isa_for(MX_PREC_BF16)));

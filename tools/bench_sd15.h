@@ -15,22 +15,25 @@
 #include "../ops/ops.h"
 #include "../runtime/log.h"
 
-/* The weight file's path into buf; makes the file when absent. Returns -1 when it cannot. */
-static inline int bench_sd15_weights(char *buf, size_t cap) {
+/* The weight file's path into buf; makes the file when absent. Returns -1 when it cannot. fast: the
+ * file of `texture --fast` (the same plus a random LCM-LoRA merged and a random TAESD). */
+static inline int bench_sd15_file(char *buf, size_t cap, int fast) {
     const char *dir = getenv("MATEX_CACHE"), *home = getenv("HOME");
     char d[1024];
     if (dir && *dir)
         snprintf(d, sizeof d, "%s", dir);
     else
         snprintf(d, sizeof d, "%s/.cache/matex", home && *home ? home : "/tmp");
-    snprintf(buf, cap, "%s/sd15_random_f16.mxw", d);
+    snprintf(buf, cap, fast ? "%s/sd15_random_f16_fast.mxw" : "%s/sd15_random_f16.mxw", d);
     if (access(buf, R_OK) == 0) return 0;
     char cmd[3072];
-    snprintf(cmd, sizeof cmd, "mkdir -p '%s' && sh tools/make_sd15_weights.sh '%s' '%s'", d,
-             getenv("MATEX") ? getenv("MATEX") : "./matex", buf);
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s' && sh tools/make_sd15_weights.sh '%s' '%s'%s", d,
+             getenv("MATEX") ? getenv("MATEX") : "./matex", buf, fast ? " --fast" : "");
     fprintf(stderr, "bench: making %s (once, ~3.6 GB, about a minute)\n", buf);
     return system(cmd) == 0 ? 0 : -1;
 }
+
+static inline int bench_sd15_weights(char *buf, size_t cap) { return bench_sd15_file(buf, cap, 0); }
 
 static inline double bench_file_mb(const char *path) {
     struct stat sb;

@@ -26,7 +26,7 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --batch N                most views generated in one batch (default 4)\n"
             "  --negative TEXT          negative prompt (default empty)\n"
             "  --guidance G             classifier-free guidance scale (default 7.5; 1 with --fast: none, batch not doubled)\n"
-            "  --fast                   few-step path (texture only): LCM scheduler, TAESD decoder; needs a weight file\n"
+            "  --fast                   few-step path: LCM scheduler, TAESD encoder/decoder; needs a weight file\n"
             "                           made with convert --lcm-lora FILE --taesd DIR\n"
             "  --grid-depth-weight W    depth control weight of the front+back grid (default 1.0)\n"
             "  --depth-weight A[,B]     depth control weight of the first[,last] later view (default 1.0,0.7)\n"

@@ -182,7 +182,8 @@ typedef struct enum_binder {
 
 static int bind_enum(mx_binder *b, const char *name, int ndim, const int64_t *shape, mx_wptr *out, mx_status *st) {
     enum_binder *e = b->impl;
-    if (ndim < 1 || ndim > MX_MAX_DIMS || mx_shape_numel(ndim, shape) < 0)
+    /* ndim 0: a scalar (a LoRA's alpha, `gen-weights --lcm-lora`); no network binds one */
+    if (ndim < 0 || ndim > MX_MAX_DIMS || mx_shape_numel(ndim, shape) < 0)
         return mx_fail(st, MX_EINTERNAL, "parameter %s: bad shape", name);
     if (e->n == e->cap) {
         size_t cap = e->cap ? 2 * e->cap : 256;

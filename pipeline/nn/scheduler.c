@@ -370,8 +370,6 @@ int mx_sched_set_strength(mx_sched *s, float strength, mx_status *st) {
     if (!(strength >= 0.0f && strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "scheduler: strength %g outside [0, 1]", (double)strength);
     if (s->step_index != s->begin) return mx_fail(st, MX_EUSAGE, "scheduler: strength set after stepping");
-    if (s->cfg.kind == MX_SCHED_LCM && strength != 1.0f)
-        return mx_fail(st, MX_EUSAGE, "scheduler: LCM with img2img strength is not supported");
     int init = (int)((float)s->num_inference_steps * strength);
     if (init > s->num_inference_steps) init = s->num_inference_steps;
     int t_start = s->num_inference_steps - init;

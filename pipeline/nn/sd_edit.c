@@ -46,12 +46,13 @@ static int blend_known(void *user, const mx_ctx *c, int step, int n_steps, float
 }
 
 static int check_edit(const mx_sd_request *rq, const mx_sd_edit *e, int n, int h, int w, mx_status *st) {
-    if (!e->vae || !e->image || !e->noise || !rq->sched || n < 1 || h < 1 || w < 1)
+    if ((!e->vae && !e->taesd) || !e->image || !e->noise || !rq->sched || n < 1 || h < 1 || w < 1)
         return mx_fail(st, MX_EUSAGE, "sd edit: missing VAE, image, noise or scheduler, or bad sizes");
     if (rq->after_step) return mx_fail(st, MX_EUSAGE, "sd edit: the request already has an after-step hook");
     if (!(e->strength > 0.0f && e->strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "sd edit: strength must be in (0, 1], not %g", (double)e->strength);
-    if (mx_vae_cfg(e->vae)->latent_channels != 4 || mx_unet_cfg(rq->unet)->in_channels != 4)
+    int latent_channels = e->taesd ? mx_taesd_cfg(e->taesd)->latent_channels : mx_vae_cfg(e->vae)->latent_channels;
+    if (latent_channels != 4 || mx_unet_cfg(rq->unet)->in_channels != 4)
         return mx_fail(st, MX_EUSAGE, "sd edit: needs a 4-channel UNet and VAE latent");
     return 0;
 }
@@ -75,13 +76,14 @@ static int upload_state(const mx_ctx *c, edit_state *es, const float *host, size
 int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
                    float *latents, mx_status *st) {
     if (check_edit(rq, e, n, h, w, st)) return -1;
-    int f = mx_vae_factor(e->vae);
+    int f = e->taesd ? mx_taesd_factor(e->taesd) : mx_vae_factor(e->vae);
     edit_state es = {rq->sched, NULL, NULL, NULL, NULL, NULL, NULL, {n, 4, h, w}, {n, 1, h, w}, (size_t)n * 4 * h * w};
     size_t plane = (size_t)n * h * w;
     float *host = malloc((2 * es.numel + 2 * plane) * sizeof(float)); /* image latents, noise, paint, keep */
     if (!host) return mx_fail(st, MX_ENOMEM, "sd edit: out of memory");
     int rc = -1;
-    if (mx_sd_encode_image(c, e->vae, e->image, n, h * f, w * f, host, st) ||
+    if ((e->taesd ? mx_taesd_encode_image(c, e->taesd, e->image, n, h * f, w * f, host, st)
+                  : mx_sd_encode_image(c, e->vae, e->image, n, h * f, w * f, host, st)) ||
         mx_sched_set_strength(rq->sched, e->strength, st))
         goto done;
     memcpy(host + es.numel, e->noise, es.numel * sizeof(float));

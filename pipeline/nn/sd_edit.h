@@ -11,12 +11,14 @@
  *   the last floor(steps · strength) timesteps and x = add_noise(image_latents, noise, first
  *   kept timestep); no blending.
  *
- * The VAE encoding is the posterior mean (the goldens' manifests state it), all noise is an
- * input. The loop itself is mx_sd_denoise. */
+ * The VAE encoding is the posterior mean (the goldens' manifests state it); with a TAESD it is its
+ * encoder (image_latents = scaling_factor · encode(2·image − 1), scaling_factor 1, as the diffusers
+ * pipelines with vae = AutoencoderTiny). All noise is an input. The loop itself is mx_sd_denoise. */
 #ifndef MX_SD_EDIT_H
 #define MX_SD_EDIT_H
 
 #include "sd_pipeline.h"
+#include "taesd.h"
 
 typedef struct mx_sd_edit {
     const mx_vae *vae;
@@ -24,6 +26,7 @@ typedef struct mx_sd_edit {
     const float *mask;  /* [n, 1, 8h, 8w], 1 = paint (binarised at 0.5); NULL: img2img */
     const float *noise; /* [n, 4, h, w] */
     float strength;     /* (0, 1]; applied to rq->sched here */
+    const mx_taesd *taesd; /* non-NULL: the encoder instead of vae (the few-step path), image [n, 3, f h, f w] */
 } mx_sd_edit;
 
 /* Runs the pipeline up to the final latents [n, 4, h, w] (decode with mx_sd_decode_latents).

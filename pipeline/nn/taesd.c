@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "ae_pass.h"
 #include "blocks.h"
 
 #define TAESD_MAX_BLOCKS 16
@@ -134,7 +135,8 @@ static float *blocks_run(mx_run *r, const tiny_level *lv, float *p[2], float *h,
     return h;
 }
 
-static int encode_run(mx_run *r, const mx_taesd *t, const float *image, int B, int H, int W, float *latents) {
+static int encode_run(mx_run *r, const void *net, const float *image, int B, int H, int W, float *latents) {
+    const mx_taesd *t = net;
     const mx_taesd_config *c = &t->cfg;
     size_t n = (size_t)B * (c->channels > c->in_channels ? c->channels : c->in_channels) * H * W;
     float *p[2] = {mx_run_alloc(r, n), mx_run_alloc(r, n)};
@@ -154,7 +156,8 @@ static int encode_run(mx_run *r, const mx_taesd *t, const float *image, int B, i
     return 0;
 }
 
-static int decode_run(mx_run *r, const mx_taesd *t, const float *latents, int B, int H, int W, float *image) {
+static int decode_run(mx_run *r, const void *net, const float *latents, int B, int H, int W, float *image) {
+    const mx_taesd *t = net;
     const mx_taesd_config *c = &t->cfg;
     int f = mx_taesd_factor(t);
     size_t n = (size_t)B * (c->channels > c->latent_channels ? c->channels : c->latent_channels) * H * W * f * f;
@@ -198,72 +201,60 @@ static int check_sizes(const mx_taesd *t, int B, int H, int W, mx_status *st) {
 int mx_taesd_encode(const mx_ctx *c, const mx_taesd *t, const float *image, int B, int H, int W, float *latents,
                     mx_arena *a, mx_status *st) {
     if (check_sizes(t, B, H, W, st)) return -1;
-    mx_run r;
-    mx_run_init(&r, c, a, st);
-    size_t mark = mx_arena_mark(a);
-    int rc = encode_run(&r, t, image, B, H, W, latents);
-    mx_arena_reset(a, mark);
-    return rc ? mx_fail_prefix(st, "TAESD encode") : 0;
+    return mx_ae_run(c, "taesd", encode_run, t, image, B, H, W, latents, a, st, "TAESD encode");
 }
 
 int mx_taesd_decode(const mx_ctx *c, const mx_taesd *t, const float *latents, int B, int h, int w, float *image,
                     mx_arena *a, mx_status *st) {
     int f = mx_taesd_factor(t);
     if (check_sizes(t, B, h * f, w * f, st)) return -1;
-    mx_run r;
-    mx_run_init(&r, c, a, st);
-    size_t mark = mx_arena_mark(a);
-    int rc = decode_run(&r, t, latents, B, h, w, image);
-    mx_arena_reset(a, mark);
-    return rc ? mx_fail_prefix(st, "TAESD decode") : 0;
+    return mx_ae_run(c, "taesd", decode_run, t, latents, B, h, w, image, a, st, "TAESD decode");
 }
 
 int mx_taesd_encode_arena_bytes(const mx_taesd *t, int B, int H, int W, size_t *bytes, mx_status *st) {
-    mx_arena a;
-    mx_arena_measure(&a);
-    if (mx_taesd_encode(NULL, t, NULL, B, H, W, NULL, &a, st)) return -1;
-    *bytes = a.peak + 4 * MX_ARENA_ALIGN;
-    return 0;
+    return check_sizes(t, B, H, W, st) ? -1 : mx_ae_dry_run(encode_run, t, B, H, W, bytes, NULL, st);
 }
 
 int mx_taesd_decode_arena_bytes(const mx_taesd *t, int B, int h, int w, size_t *bytes, mx_status *st) {
-    mx_arena a;
-    mx_arena_measure(&a);
-    if (mx_taesd_decode(NULL, t, NULL, B, h, w, NULL, &a, st)) return -1;
-    *bytes = a.peak + 4 * MX_ARENA_ALIGN;
-    return 0;
+    int f = mx_taesd_factor(t);
+    return check_sizes(t, B, h * f, w * f, st) ? -1 : mx_ae_dry_run(decode_run, t, B, h, w, bytes, NULL, st);
+}
+
+static int decode_dev(const mx_ctx *c, const void *net, const float *latents, int n, int h, int w, float *image,
+                      mx_arena *a, mx_status *st) {
+    return mx_taesd_decode(c, net, latents, n, h, w, image, a, st);
+}
+
+static int encode_dev(const mx_ctx *c, const void *net, const float *image, int n, int H, int W, float *latents,
+                      mx_arena *a, mx_status *st) {
+    return mx_taesd_encode(c, net, image, n, H, W, latents, a, st);
+}
+
+static mx_ae_coder coder(const mx_taesd *t, int encode) {
+    const mx_taesd_config *cfg = &t->cfg;
+    mx_ae_coder k = {encode ? encode_dev : decode_dev, t, cfg->latent_channels, encode ? cfg->in_channels : cfg->out_channels,
+                     mx_taesd_factor(t), cfg->scaling_factor, 0};
+    return k;
 }
 
 int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *latents, int n, int h, int w,
                           float *image, mx_status *st) {
-    const mx_taesd_config *cfg = &t->cfg;
-    size_t bytes, nl = (size_t)n * cfg->latent_channels * h * w;
-    size_t ni = (size_t)n * cfg->out_channels * h * w * mx_taesd_factor(t) * mx_taesd_factor(t);
-    if (mx_taesd_decode_arena_bytes(t, n, h, w, &bytes, st)) return -1;
-    mx_arena a = {0};
-    float *din = mx_dev_alloc(c, nl, st), *dout = din ? mx_dev_alloc(c, ni, st) : NULL;
-    int rc = -1;
-    if (dout && !mx_upload(c, din, latents, nl, st) && !mx_arena_create_on(&a, c->be, bytes, st)) {
-        mx_scale(c, din, din, 1.0f / cfg->scaling_factor, nl);
-        if (!mx_taesd_decode(c, t, din, n, h, w, dout, &a, st)) {
-            mx_affine(c, dout, dout, 0.5f, 0.5f, ni);
-            mx_clamp(c, dout, dout, 0.0f, 1.0f, ni);
-            rc = mx_download(c, image, dout, ni, st);
-        }
-    }
-    mx_arena_destroy(&a);
-    mx_dev_free(c, din);
-    mx_dev_free(c, dout);
-    return rc;
+    mx_ae_coder d = coder(t, 0);
+    if (mx_taesd_decode_arena_bytes(t, n, h, w, &d.arena_bytes, st)) return -1;
+    return mx_ae_decode_host(c, &d, latents, n, h, w, image, st);
+}
+
+int mx_taesd_encode_image(const mx_ctx *c, const mx_taesd *t, const float *image, int n, int H, int W, float *latents,
+                          mx_status *st) {
+    mx_ae_coder e = coder(t, 1);
+    if (mx_taesd_encode_arena_bytes(t, n, H, W, &e.arena_bytes, st)) return -1;
+    return mx_ae_encode_host(c, &e, image, n, H, W, latents, st);
 }
 
 double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w) {
-    mx_arena a;
     mx_status st;
-    mx_arena_measure(&a);
-    mx_run r;
-    mx_run_init(&r, NULL, &a, &st);
+    double flops = 0.0;
     int f = mx_taesd_factor(t);
-    if (check_sizes(t, B, h * f, w * f, &st) || decode_run(&r, t, NULL, B, h, w, NULL)) return 0.0;
-    return r.flops;
+    if (check_sizes(t, B, h * f, w * f, &st) || mx_ae_dry_run(decode_run, t, B, h, w, NULL, &flops, &st)) return 0.0;
+    return flops;
 }

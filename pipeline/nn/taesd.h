@@ -39,6 +39,10 @@ int mx_taesd_decode(const mx_ctx *c, const mx_taesd *t, const float *latents, in
  * [n, 3, h*f, w*f] in [0, 1] = clamp(decode(latents / scaling_factor) / 2 + 0.5, 0, 1). */
 int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *latents, int n, int h, int w,
                           float *image, mx_status *st);
+/* As the SD img2img/inpaint pipelines encode with it (AutoencoderTiny.encode(...).latents times
+ * scaling_factor), on HOST arrays: image [n, 3, H, W] in [0, 1] -> latents [n, 4, H/f, W/f]. */
+int mx_taesd_encode_image(const mx_ctx *c, const mx_taesd *t, const float *image, int n, int H, int W, float *latents,
+                          mx_status *st);
 double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w);
 
 #endif

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ae_pass.h"
 #include "blocks.h"
 
 #define VAE_EPS 1e-6f
@@ -219,7 +220,8 @@ static int encode_run(mx_run *r, const mx_vae *v, const float *image, int B, int
     return 0;
 }
 
-static int decode_run(mx_run *r, const mx_vae *v, const float *latents, int B, int H, int W, float *image) {
+static int decode_run(mx_run *r, const void *net, const float *latents, int B, int H, int W, float *image) {
+    const mx_vae *v = net;
     const mx_vae_config *c = &v->cfg;
     const vae_half *d = &v->dec;
     size_t n = decoder_max(c, B, H, W);
@@ -276,12 +278,7 @@ int mx_vae_decode(const mx_ctx *c, const mx_vae *v, const float *latents, int B,
                   mx_arena *a, mx_status *st) {
     int f = mx_vae_factor(v);
     if (check_sizes(v, B, h * f, w * f, f, st)) return -1;
-    mx_run r;
-    mx_run_init_net(&r, "vae", c, a, st);
-    size_t mark = mx_arena_mark(a);
-    int rc = decode_run(&r, v, latents, B, h, w, image);
-    mx_arena_reset(a, mark);
-    return rc ? mx_fail_prefix(st, "VAE decode") : 0;
+    return mx_ae_run(c, "vae", decode_run, v, latents, B, h, w, image, a, st, "VAE decode");
 }
 
 int mx_vae_encode_arena_bytes(const mx_vae *v, int B, int H, int W, size_t *bytes, mx_status *st) {
@@ -293,21 +290,14 @@ int mx_vae_encode_arena_bytes(const mx_vae *v, int B, int H, int W, size_t *byte
 }
 
 int mx_vae_decode_arena_bytes(const mx_vae *v, int B, int h, int w, size_t *bytes, mx_status *st) {
-    mx_arena a;
-    mx_arena_measure(&a);
-    if (mx_vae_decode(NULL, v, NULL, B, h, w, NULL, &a, st)) return -1;
-    *bytes = a.peak + 4 * MX_ARENA_ALIGN;
-    return 0;
+    int f = mx_vae_factor(v);
+    return check_sizes(v, B, h * f, w * f, f, st) ? -1 : mx_ae_dry_run(decode_run, v, B, h, w, bytes, NULL, st);
 }
 
 double mx_vae_decode_flops(const mx_vae *v, int B, int h, int w) {
-    mx_arena a;
     mx_status st;
-    mx_arena_measure(&a);
-    mx_run r;
-    mx_run_init(&r, NULL, &a, &st);
-    if (check_sizes(v, B, h * mx_vae_factor(v), w * mx_vae_factor(v), mx_vae_factor(v), &st) ||
-        decode_run(&r, v, NULL, B, h, w, NULL))
-        return 0.0;
-    return r.flops;
+    double flops = 0.0;
+    int f = mx_vae_factor(v);
+    if (check_sizes(v, B, h * f, w * f, f, &st) || mx_ae_dry_run(decode_run, v, B, h, w, NULL, &flops, &st)) return 0.0;
+    return flops;
 }

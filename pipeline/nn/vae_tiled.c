@@ -5,6 +5,8 @@
 
 #include <stdlib.h>
 
+#include "ae_pass.h"
+
 #define OVERLAP_FACTOR 0.25 /* diffusers' tile_overlap_factor */
 
 typedef struct tiling {
@@ -150,26 +152,23 @@ int mx_vae_decode_tiled_arena_bytes(const mx_vae *v, int h, int w, int tile, siz
     return 0;
 }
 
+typedef struct tiled_net {
+    const mx_vae *v;
+    int tile;
+} tiled_net;
+
+static int decode_tiled_dev(const mx_ctx *c, const void *net, const float *latents, int n, int h, int w, float *image,
+                            mx_arena *a, mx_status *st) {
+    const tiled_net *t = net;
+    return mx_vae_decode_tiled(c, t->v, latents, n, h, w, t->tile, image, a, st);
+}
+
 int mx_vae_decode_image_tiled(const mx_ctx *c, const mx_vae *v, const float *latents, int n, int h, int w, int tile,
                               float *image, mx_status *st) {
     const mx_vae_config *cfg = mx_vae_cfg(v);
-    size_t bytes, nl = (size_t)n * cfg->latent_channels * h * w;
-    size_t ni = (size_t)n * cfg->out_channels * h * w * mx_vae_factor(v) * mx_vae_factor(v);
-    if (cfg->scaling_factor == 0.0f) return mx_fail(st, MX_EINPUT, "VAE: scaling_factor is 0");
-    if (mx_vae_decode_tiled_arena_bytes(v, h, w, tile, &bytes, st)) return -1;
-    mx_arena a = {0};
-    float *din = mx_dev_alloc(c, nl, st), *dout = din ? mx_dev_alloc(c, ni, st) : NULL;
-    int rc = -1;
-    if (dout && !mx_upload(c, din, latents, nl, st) && !mx_arena_create_on(&a, c->be, bytes, st)) {
-        mx_scale(c, din, din, 1.0f / cfg->scaling_factor, nl);
-        if (!mx_vae_decode_tiled(c, v, din, n, h, w, tile, dout, &a, st)) {
-            mx_affine(c, dout, dout, 0.5f, 0.5f, ni);
-            mx_clamp(c, dout, dout, 0.0f, 1.0f, ni);
-            rc = mx_download(c, image, dout, ni, st);
-        }
-    }
-    mx_arena_destroy(&a);
-    mx_dev_free(c, din);
-    mx_dev_free(c, dout);
-    return rc;
+    tiled_net t = {v, tile};
+    mx_ae_coder d = {decode_tiled_dev, &t, cfg->latent_channels, cfg->out_channels, mx_vae_factor(v),
+                     cfg->scaling_factor, 0};
+    if (mx_vae_decode_tiled_arena_bytes(v, h, w, tile, &d.arena_bytes, st)) return -1;
+    return mx_ae_decode_host(c, &d, latents, n, h, w, image, st);
 }

@@ -316,7 +316,8 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
         return mx_sd_denoise(rq, j->ctx, lat, b->n, h, w, st);
     }
-    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength};
+    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength,
+                    j->o->fast ? j->models->taesd : NULL};
     return mx_sd_edit_run(rq, &e, j->ctx, b->n, h, w, lat, st);
 }
 
@@ -381,9 +382,11 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
         goto done;
     }
     j->last_denoise_s = mx_now() - t;
+    j->denoise_s += j->last_denoise_s;
     t = mx_now();
     rc = decode_images(j, lat, b->n, h, w, images, st);
     j->last_decode_s = mx_now() - t;
+    j->decode_s += j->last_decode_s;
 done:
     if (sched_ready) mx_sched_free(&s);
     free(lat);
@@ -487,6 +490,7 @@ int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, con
 
 int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st) {
     int R = j->o->render_size, S = j->o->image_size;
+    double t = mx_now();
     mx_image gen, canvas;
     if (mx_planes_to_image(planes, 3, S, plane_w, x0, S, &gen, st)) return -1;
     if (mx_image_alloc(&canvas, R, R, 3, st)) {
@@ -497,6 +501,7 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
     int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, j->write_flags, j->ctx->pool, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
+    j->backproject_s += mx_now() - t;
     j->views_done++;
     if (!rc) emit_progress(j, 0, 0, "view backprojected");
     return rc;
@@ -586,6 +591,11 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *s
     mx_job_stage_done(j, "uv_fill", mx_now() - t);
     mx_jw_begin_obj(w, "stages_s");
     for (int i = 0; i < j->nstages; i++) mx_jw_num(w, j->stage_name[i], j->stage_s[i]);
+    mx_jw_end_obj(w);
+    mx_jw_begin_obj(w, "work_s"); /* inside grid and views: the networks and the backprojection */
+    mx_jw_num(w, "denoise", j->denoise_s);
+    mx_jw_num(w, "decode", j->decode_s);
+    mx_jw_num(w, "backproject", j->backproject_s);
     mx_jw_end_obj(w);
     mx_jw_num(w, "total_s", mx_now() - j->t0);
     mx_jw_end_obj(w);

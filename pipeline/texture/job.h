@@ -59,6 +59,7 @@ typedef struct mx_job {
     int views_done;
     double t0;
     double last_denoise_s, last_decode_s; /* of the latest mx_job_generate, for the report */
+    double denoise_s, decode_s, backproject_s; /* summed over the run: the report's work_s */
     double psnr_db; /* transfer onto its own mesh: PSNR of the painted texels (report), else NAN */
     int nstages; /* seconds per stage, for the report */
     const char *stage_name[8];

@@ -79,7 +79,6 @@ int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_sta
         return mx_fail(st, MX_EUSAGE, "--precision must be fp32 or bf16");
     if ((int)o->device < 0 || (int)o->device >= MX_BACKEND_KINDS)
         return mx_fail(st, MX_EUSAGE, "--device must be cpu, cpu-strict or cuda");
-    if (o->fast && mode != MX_TEXTURE_MODE_TEXTURE)
-        return mx_fail(st, MX_EUSAGE, "--fast is for texture only (the LCM scheduler has no img2img strength yet)");
+    if (o->fast && mode == MX_TEXTURE_MODE_TRANSFER) return mx_fail(st, MX_EUSAGE, "--fast is for texture and enhance");
     return 0;
 }
