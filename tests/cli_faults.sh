@@ -2,8 +2,9 @@
 # Fault injection on a tiny `matex texture` run (tests/faults/fault.c): the k-th allocation
 # fails, or the disk fills up at the k-th write. Each run must end in exit 1 with one clear
 # message on stderr, leave nothing behind (no output folder, no temporary sibling), and, in an
-# ASan build, report no leak. `make test` samples k; MATEX_FAULTS_SWEEP=full (`make faults`)
-# tries every k. A run where the failure is absorbed (exit 0) must still have written the
+# ASan build, report no leak; in any build, leave no block of matex's C allocation functions
+# unfreed at exit (the injector's own count: "live" in its report). `make test` samples k;
+# MATEX_FAULTS_SWEEP=full (`make faults`, on the fast plain build) tries every k. A run where the failure is absorbed (exit 0) must still have written the
 # whole output; such k are counted and listed. MATEX_FAULTS_SWEEP=sites fails the first
 # allocation of every allocation site (and every write).
 NAME=faults
@@ -28,7 +29,9 @@ judge() {
     rc=$?
     left=$(ls -A "$d/work")
     lines=$(wc -l < "$d/stderr")
+    live=$(sed -n 's/^live //p' "$d/report" 2> /dev/null)
     if grep -q "Sanitizer\|runtime error" "$d/stderr"; then why="sanitizer report: $(grep -m1 "ERROR\|runtime error" "$d/stderr")"
+    elif [ "${live:-0}" -gt 0 ]; then why="leak: $live allocated blocks not freed at exit (exit $rc)"
     elif [ $rc -eq 0 ]; then
         why=absorbed
         for f in $OUTPUTS; do [ -s "$d/work/out/$f" ] || why="exit 0 without $f"; done
@@ -75,6 +78,7 @@ writes=$(echo "$write_line" | cut -d' ' -f2)
 write_sites=$(echo "$write_line" | cut -d' ' -f4)
 check "allocations were counted" [ "${allocs:-0}" -gt 100 ]
 check "writes were counted" [ "${writes:-0}" -gt 5 ]
+check "the fault-free run frees every block" [ "$(sed -n 's/^live //p' "$T/base/report")" = 0 ]
 check "every failed allocation ends cleanly" sweep alloc "$allocs" "$alloc_sites"
 check "every failed write ends cleanly" sweep write "$writes" "$write_sites"
 exit $fail

@@ -248,6 +248,37 @@ static void test_normalize(void) {
     free(n);
 }
 
+static uint32_t crc32_of(const unsigned char *p, size_t n) {
+    uint32_t c = 0xFFFFFFFFu;
+    for (size_t i = 0; i < n; i++) {
+        c ^= p[i];
+        for (int k = 0; k < 8; k++) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+    }
+    return c ^ 0xFFFFFFFFu;
+}
+
+/* A PNG whose IHDR (CRC intact) declares 30000 x 30000 pixels for its few bytes of image data
+ * is refused before the reader allocates them. `png`: a valid small PNG (IHDR first). */
+static void check_inflated_png(const unsigned char *png, size_t len) {
+    unsigned char *p = malloc(len);
+    mx_status st;
+    mx_image back;
+    CHECK(p && len > 33 && !memcmp(png + 12, "IHDR", 4));
+    if (!p || len <= 33) {
+        free(p);
+        return;
+    }
+    memcpy(p, png, len);
+    const unsigned char side[4] = {0, 0, 0x75, 0x30}; /* 30000, big-endian */
+    memcpy(p + 16, side, 4);
+    memcpy(p + 20, side, 4);
+    uint32_t crc = crc32_of(p + 12, 17);
+    for (int i = 0; i < 4; i++) p[29 + i] = (unsigned char)(crc >> (24 - 8 * i));
+    CHECK(mx_io_decode_image(p, len, "inflated png", &back, &st) == -1 &&
+          strstr(st.msg, "inflated png: PNG declares 30000x30000 pixels") && back.data == NULL);
+    free(p);
+}
+
 /* An EXR header is checked before OpenEXR sees it: an attribute declaring more bytes than the
  * file holds (OpenEXR would allocate them: 2 GB for this 40-byte file, found by fuzz_image), a
  * value shorter than its type, an offset table longer than the file. `good`: a valid EXR (written by mx_io_write_exr). */
@@ -304,6 +335,7 @@ static void test_images(void) {
     CHECK(mx_io_decode_image(bytes, len, "memory", &back, &st) == 0 && back.w == 7 && back.h == 5);
     mx_image_free(&back);
     CHECK(mx_io_decode_image(bytes, len / 2, "half png", &back, &st) == -1 && strstr(st.msg, "half png: truncated"));
+    check_inflated_png(bytes, len);
     free(bytes);
     CHECK(mx_io_decode_image("GIF89a", 6, "gif bytes", &back, &st) == -1 && strstr(st.msg, "not a PNG"));
     tmp_path(p, sizeof p, "img.exr");

@@ -80,9 +80,23 @@ const char *sniff_name(const unsigned char *p, size_t n) {
 
 uint32_t be32(const unsigned char *p) { return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3]; }
 
+// Deflate expands at most 1032:1, so the image data of the IDAT chunks bounds the pixels an
+// honest IHDR can declare; a header claiming more (a few hundred bytes "holding" 16k x 16k)
+// would have the reader allocate gigabytes before the data runs out.
+int check_png_size(const unsigned char *ihdr, unsigned long long idat, const char *what, mx_status *st) {
+    static const int channels[7] = {1, 0, 3, 1, 2, 0, 4}; // by colour type
+    unsigned long long w = be32(ihdr), h = be32(ihdr + 4), depth = ihdr[8];
+    int ch = ihdr[9] < 7 ? channels[ihdr[9]] : 0;
+    unsigned long long raw = h * (1 + (w * (unsigned)ch * depth + 7) / 8);
+    if (w > 1u << 24 || h > 1u << 24 || raw / 1032 > idat + 64)
+        return mx_fail(st, MX_EINPUT, "%s: PNG declares %llux%llu pixels but holds %llu bytes of image data", what, w, h,
+                       idat);
+    return 0;
+}
+
 // Walks the chunks of a PNG (lengths and CRCs) up to IEND. libpng would catch the same damage,
 // but OIIO 2.4's PNG reader leaks its error string whenever libpng bails out; this keeps
-// damaged data away from it and names the broken chunk.
+// damaged data away from it and names the broken chunk. Then checks the declared size.
 int check_png_chunks(const unsigned char *p, size_t n, const char *what, mx_status *st) {
     uint32_t table[256];
     for (uint32_t i = 0; i < 256; i++) {
@@ -90,6 +104,8 @@ int check_png_chunks(const unsigned char *p, size_t n, const char *what, mx_stat
         for (int k = 0; k < 8; k++) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
         table[i] = c;
     }
+    const unsigned char *ihdr = nullptr;
+    unsigned long long idat = 0;
     for (size_t pos = 8;;) {
         if (n - pos < 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk)", what);
         size_t len = be32(p + pos);
@@ -99,7 +115,10 @@ int check_png_chunks(const unsigned char *p, size_t n, const char *what, mx_stat
         if ((crc ^ 0xFFFFFFFFu) != be32(p + pos + 8 + len))
             return mx_fail(st, MX_EINPUT, "%s: corrupt PNG chunk '%.4s' at byte %zu (CRC mismatch)", what,
                            (const char *)p + pos + 4, pos);
-        if (!memcmp(p + pos + 4, "IEND", 4)) return 0;
+        if (!memcmp(p + pos + 4, "IHDR", 4) && len == 13) ihdr = p + pos + 8;
+        if (!memcmp(p + pos + 4, "IDAT", 4)) idat += len;
+        if (!memcmp(p + pos + 4, "IEND", 4))
+            return ihdr ? check_png_size(ihdr, idat, what, st) : mx_fail(st, MX_EINPUT, "%s: PNG without IHDR", what);
         pos += 12 + len;
     }
 }

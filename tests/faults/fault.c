@@ -7,8 +7,11 @@
  *   MATEX_FAIL_WRITE=k   the k-th write is short (half the bytes, ENOSPC) and every later write
  *                        fails with ENOSPC: a disk that fills up
  *   MATEX_FAULT_REPORT=F at exit, F gets "allocs N sites S" and "writes N sites S": calls made
- *                        and distinct call sites (return addresses) seen, then "first K" for
- *                        each allocation site: the number of the first allocation made there
+ *                        and distinct call sites (return addresses) seen, "live L": blocks of
+ *                        matex's C allocation functions not freed by exit (a leak check that
+ *                        needs no sanitizer, so that a plain fast build can try every k), then
+ *                        "first K" for each allocation site: the number of the first allocation
+ *                        made there
  * Calls are counted across threads (run with --threads 1 for a reproducible k), from the start
  * of main's constructors on: the shared libraries' own start-up is not matex's to handle. */
 #include <dlfcn.h>
@@ -31,9 +34,51 @@ typedef struct counter {
     long first[MAX_SITES];              /* number of the first call from that site */
 } counter;
 
+/* The blocks returned by the wrapped C allocation functions and not yet freed: an
+ * open-addressed set of addresses (TOMB marks a removed entry) behind a spin lock. */
+#define LIVE_SLOTS (1u << 20)
+#define TOMB ((uintptr_t)1)
+typedef struct live_set {
+    atomic_flag lock;
+    long count;
+    uintptr_t slot[LIVE_SLOTS];
+} live_set;
+
 /* Test-harness state: the wrapped functions have no context argument to carry it. */
 static counter allocs, writes;
 static atomic_int armed;
+static live_set live = {ATOMIC_FLAG_INIT, 0, {0}};
+
+static size_t live_hash(uintptr_t p) { return (size_t)((p >> 4) * 0x9E3779B97F4A7C15ull >> 44) % LIVE_SLOTS; }
+
+static void live_add(void *ptr) {
+    if (!ptr || !atomic_load(&armed)) return;
+    uintptr_t p = (uintptr_t)ptr;
+    while (atomic_flag_test_and_set(&live.lock)) {
+    }
+    for (size_t i = live_hash(p), n = 0; n < LIVE_SLOTS; i = (i + 1) % LIVE_SLOTS, n++)
+        if (live.slot[i] == 0 || live.slot[i] == TOMB) {
+            live.slot[i] = p;
+            live.count++;
+            break;
+        }
+    atomic_flag_clear(&live.lock);
+}
+
+/* A block that is not in the set (allocated by a library, e.g. realpath's) is ignored. */
+static void live_remove(void *ptr) {
+    if (!ptr) return;
+    uintptr_t p = (uintptr_t)ptr;
+    while (atomic_flag_test_and_set(&live.lock)) {
+    }
+    for (size_t i = live_hash(p), n = 0; n < LIVE_SLOTS && live.slot[i]; i = (i + 1) % LIVE_SLOTS, n++)
+        if (live.slot[i] == p) {
+            live.slot[i] = TOMB;
+            live.count--;
+            break;
+        }
+    atomic_flag_clear(&live.lock);
+}
 
 static long env_long(const char *name) {
     const char *s = getenv(name);
@@ -90,8 +135,9 @@ static void write_report(void) {
     static ssize_t (*real_write)(int, const void *, size_t);
     real_write = (ssize_t (*)(int, const void *, size_t))dlsym(RTLD_NEXT, "write");
     char line[256];
-    int n = snprintf(line, sizeof line, "allocs %ld sites %zu\nwrites %ld sites %zu\n", atomic_load(&allocs.calls),
-                     count_sites(&allocs), atomic_load(&writes.calls), count_sites(&writes));
+    int n = snprintf(line, sizeof line, "allocs %ld sites %zu\nwrites %ld sites %zu\nlive %ld\n",
+                     atomic_load(&allocs.calls), count_sites(&allocs), atomic_load(&writes.calls), count_sites(&writes),
+                     live.count);
     FILE *f = fopen(getenv("MATEX_FAULT_REPORT"), "w");
     if (!f || !real_write) return;
     real_write(fileno(f), line, (size_t)n);
@@ -112,22 +158,41 @@ int __real_posix_memalign(void **p, size_t align, size_t n);
 char *__real_strdup(const char *s);
 char *__real_strndup(const char *s, size_t n);
 
-void *__wrap_malloc(size_t n) { return fault_alloc_fails(__builtin_return_address(0)) ? NULL : __real_malloc(n); }
+void __real_free(void *p);
+
+static void *track(void *p) {
+    live_add(p);
+    return p;
+}
+
+void *__wrap_malloc(size_t n) { return fault_alloc_fails(__builtin_return_address(0)) ? NULL : track(__real_malloc(n)); }
 void *__wrap_calloc(size_t n, size_t size) {
-    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : __real_calloc(n, size);
+    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : track(__real_calloc(n, size));
 }
 void *__wrap_realloc(void *p, size_t n) {
-    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : __real_realloc(p, n);
+    if (fault_alloc_fails(__builtin_return_address(0))) return NULL;
+    void *q = __real_realloc(p, n);
+    if (q || !n) live_remove(p);
+    return track(q);
 }
 void *__wrap_aligned_alloc(size_t align, size_t n) {
-    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : __real_aligned_alloc(align, n);
+    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : track(__real_aligned_alloc(align, n));
 }
 int __wrap_posix_memalign(void **p, size_t align, size_t n) {
-    return fault_alloc_fails(__builtin_return_address(0)) ? ENOMEM : __real_posix_memalign(p, align, n);
+    if (fault_alloc_fails(__builtin_return_address(0))) return ENOMEM;
+    int rc = __real_posix_memalign(p, align, n);
+    if (!rc) live_add(*p);
+    return rc;
 }
-char *__wrap_strdup(const char *s) { return fault_alloc_fails(__builtin_return_address(0)) ? NULL : __real_strdup(s); }
+char *__wrap_strdup(const char *s) {
+    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : track(__real_strdup(s));
+}
 char *__wrap_strndup(const char *s, size_t n) {
-    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : __real_strndup(s, n);
+    return fault_alloc_fails(__builtin_return_address(0)) ? NULL : track(__real_strndup(s, n));
+}
+void __wrap_free(void *p) {
+    live_remove(p);
+    __real_free(p);
 }
 
 /* ---- writes (interposed: the image libraries' calls land here too) ---- */

@@ -1,7 +1,8 @@
 #!/bin/sh
 # `make fuzz`: runs each harness SECONDS seconds under libFuzzer, starting from its seeds and
-# regression inputs; the growing corpus stays in BUILD/fuzz-corpus/<H>. Prints one line per
-# harness (executions, coverage) and exits non-zero if any crashed, naming the input to copy
+# regression inputs; the growing corpus stays in BUILD/fuzz-corpus/<H>. JOBS harnesses run at
+# a time (FUZZ_JOBS, default 2: the whole set in about 5 x SECONDS on 2 cores). Prints one line
+# per harness (executions, coverage) and exits non-zero if any crashed, naming the input to copy
 # into tests/fuzz/regress/<H>/ once the bug is fixed. The harnesses' own stdout/stderr are closed
 # (error messages of rejected inputs); libFuzzer and sanitizer reports still reach the log.
 # usage: sh tests/fuzz/run.sh BUILD SECONDS HARNESS...
@@ -11,12 +12,18 @@ export OPENIMAGEIO_OPTIONS="${OPENIMAGEIO_OPTIONS:-threads=1}"
 build=$1
 secs=$2
 shift 2
-failed=""
-for h in "$@"; do
+jobs=${FUZZ_JOBS:-2}
+
+# fuzz_one H: runs harness H, writes its summary line(s) to BUILD/fuzz-logs/H.summary and
+# creates BUILD/fuzz-logs/H.failed if it crashed
+fuzz_one() {
+    h=$1
     corpus=$build/fuzz-corpus/$h
     crashes=$build/fuzz-crashes/$h
     log=$build/fuzz-logs/$h.log
-    mkdir -p "$corpus" "$crashes" "$(dirname "$log")"
+    summary=$build/fuzz-logs/$h.summary
+    rm -f "$build/fuzz-logs/$h.failed"
+    mkdir -p "$corpus" "$crashes"
     regress=tests/fuzz/regress/$h
     [ -d "$regress" ] || regress=
     "$build/tests/fuzz/fuzz_$h" -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=2048 \
@@ -26,12 +33,29 @@ for h in "$@"; do
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
     cov=$(grep -o 'cov: [0-9]* ft: [0-9]*' "$log" | tail -n 1)
     if [ $rc -eq 0 ]; then
-        echo "fuzz $h: ok, ${execs:-?} executions in ${secs}s, $cov"
+        echo "fuzz $h: ok, ${execs:-?} executions in ${secs}s, $cov" > "$summary"
     else
-        failed="$failed $h"
-        echo "fuzz $h: CRASH after ${execs:-?} executions (exit $rc); input: $(ls -t "$crashes" | head -n 1)"
-        grep -m 1 -A 12 'ERROR:\|runtime error\|deadly signal' "$log" | sed 's/^/    /'
-        echo "    full log: $log; once fixed, copy the input into tests/fuzz/regress/$h/"
+        touch "$build/fuzz-logs/$h.failed"
+        {
+            echo "fuzz $h: CRASH after ${execs:-?} executions (exit $rc); input: $(ls -t "$crashes" | head -n 1)"
+            grep -m 1 -A 12 'ERROR:\|runtime error\|deadly signal' "$log" | sed 's/^/    /'
+            echo "    full log: $log; once fixed, copy the input into tests/fuzz/regress/$h/"
+        } > "$summary"
     fi
+}
+
+mkdir -p "$build/fuzz-logs"
+i=0
+for h in "$@"; do
+    fuzz_one "$h" &
+    i=$((i + 1))
+    [ $((i % jobs)) -eq 0 ] && wait
+done
+wait
+failed=""
+for h in "$@"; do
+    cat "$build/fuzz-logs/$h.summary"
+    [ -e "$build/fuzz-logs/$h.failed" ] && failed="$failed $h"
 done
 [ -z "$failed" ] || { echo "fuzz: crashes in:$failed"; exit 1; }
+exit 0
