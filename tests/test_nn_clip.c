@@ -98,7 +98,7 @@ static void run_and_compare(const mx_clip *m, const mx_ctx *c, const char *net, 
             float *want = t ? mx_st_to_f32(&sf, t, &st) : NULL;
             CHECK(want != NULL && t->nbytes / 4 == n);
             snprintf(msg, sizeof msg, "%s %s", label, name);
-            if (want && t->nbytes / 4 == n) mx_check_close(msg, got, want, n, 1e-4);
+            if (want && t->nbytes / 4 == n) mx_check_close(msg, got, want, n, golden_bound(c, GOLDEN_BF16));
             free(want);
         }
         mx_st_close(&sf);
@@ -241,7 +241,7 @@ static void check_prompt_path(const mx_clip *m, const mx_ctx *c, const char *net
         const mx_st_tensor *t = mx_st_find(&sf, "last_hidden_state");
         want = t && t->nbytes / 4 == n ? mx_st_to_f32(&sf, t, &st) : NULL;
         CHECK(want != NULL && dropped[0] == 0 && dropped[1] == 0);
-        if (want) mx_check_close("sd15 prompts -> embeddings", got, want, n, 1e-4);
+        if (want) mx_check_close("sd15 prompts -> embeddings", got, want, n, golden_bound(c, GOLDEN_BF16));
         mx_st_close(&sf);
     }
     mx_tok_free(tok);
@@ -263,7 +263,9 @@ static void test_sd15(const mx_ctx *c) {
     int ok = mx_clip_load(&m, &cfg, &b, &st) == 0;
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
-    if (ok) run_and_compare(&m, c, net, "outputs.safetensors", "sd15");
+    char label[32];
+    golden_label(label, sizeof label, c, "sd15");
+    if (ok) run_and_compare(&m, c, net, "outputs.safetensors", label);
     if (ok) check_prompt_path(&m, c, net);
     mx_clip_free(&m);
     for (size_t i = 0; i < g.n; i++) free(g.bufs[i]);
@@ -287,5 +289,10 @@ int main(void) {
     if (full && !strcmp(full, "1")) test_sd15(&best);
     mx_ctx_destroy(&scalar);
     mx_ctx_destroy(&best);
+    if (golden_bf16_ctx(&best, "test_nn_clip") == 0) { /* bf16 arithmetic against the fp32 goldens */
+        test_tiny("model.safetensors", "outputs.safetensors", &best, "bf16");
+        if (full && !strcmp(full, "1")) test_sd15(&best);
+        mx_ctx_destroy(&best);
+    }
     return mx_test_finish("test_nn_clip");
 }

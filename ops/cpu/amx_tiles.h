@@ -116,9 +116,10 @@ static inline void mx_amx_emu_dpbf16ps(mx_amx_emu *s, int d, int a, int b) {
     for (int m = 0; m < M; m++) {
         float acc[MX_AMX_COLSB / 4];
         memcpy(acc, s->t[d][m], sizeof acc);
-        const uint16_t *arow = (const uint16_t *)(const void *)s->t[a][m];
+        uint16_t arow[MX_AMX_COLSB / 2], brow[MX_AMX_COLSB / 2]; /* the bytes as bf16 (no aliasing) */
+        memcpy(arow, s->t[a][m], sizeof arow);
         for (int k = 0; k < K; k++) {
-            const uint16_t *brow = (const uint16_t *)(const void *)s->t[b][k];
+            memcpy(brow, s->t[b][k], sizeof brow);
             for (int n = 0; n < N; n++) {
                 acc[n] += mx_amx_emu_bf16(arow[2 * k]) * mx_amx_emu_bf16(brow[2 * n]);
                 acc[n] += mx_amx_emu_bf16(arow[2 * k + 1]) * mx_amx_emu_bf16(brow[2 * n + 1]);

@@ -16,7 +16,8 @@
  * to 7e-3 (the early ones most, measured one layer at a time), so no useful part of it can be bf16;
  * it runs in fp32. In UNet and ControlNet the convolutions fed by unnormalised activations (the
  * residual stream) carry more error per FLOP; in fp32 they cost a few % of the FLOPs. With this
- * rule: UNet tiny/mini/SD1.5 6.1e-3/6.1e-3/5.6e-3, ControlNet mini/SD1.5 8.9e-3/6.7e-3. */
+ * rule: UNet tiny/mini/SD1.5 6.1e-3/6.1e-3/5.6e-3, ControlNet mini/SD1.5 8.9e-3/6.7e-3; CLIP,
+ * all bf16, SD1.5 6.7e-3. */
 #ifndef MX_NN_PRECISION_H
 #define MX_NN_PRECISION_H
 
