@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ae_pass.h"
+
 /* Sizes of one loop. The networks run on one latent at a time, B = its batch (2 with CFG, its
  * uncond and cond halves, else 1): they are batch-independent, so this changes no result and
  * keeps a step's arena and residuals at those of one latent (SD1.5 at 64x64: ~0.25 GB + 54 MB,
@@ -245,56 +247,28 @@ done:
     return rc;
 }
 
-/* One VAE call on the device: the host input goes in, the host output comes out; pre and post
- * are the affine maps (y = a·x + b) the SD pipelines apply around it, post clamped to [lo, hi]
- * when lo < hi. */
-typedef struct vae_call {
-    const mx_vae *vae;
-    int decode, n, h, w; /* h, w: the input's spatial size */
-    size_t in_numel, out_numel;
-    float pre_a, pre_b, post_a, post_b, lo, hi;
-} vae_call;
+static int vae_decode_dev(const mx_ctx *c, const void *net, const float *latents, int n, int h, int w, float *image,
+                          mx_arena *a, mx_status *st) {
+    return mx_vae_decode(c, net, latents, n, h, w, image, a, st);
+}
 
-static int run_vae_call(const mx_ctx *c, const vae_call *v, const float *in, float *out, mx_status *st) {
-    float *din = mx_dev_alloc(c, v->in_numel, st), *dout = din ? mx_dev_alloc(c, v->out_numel, st) : NULL;
-    size_t bytes = 0;
-    mx_arena a = {0};
-    int rc = -1;
-    if (!dout || mx_upload(c, din, in, v->in_numel, st)) goto done;
-    mx_affine(c, din, din, v->pre_a, v->pre_b, v->in_numel);
-    if (v->decode ? mx_vae_decode_arena_bytes(v->vae, v->n, v->h, v->w, &bytes, st)
-                  : mx_vae_encode_arena_bytes(v->vae, v->n, v->h, v->w, &bytes, st))
-        goto done;
-    if (mx_arena_create_on(&a, c->be, bytes, st)) goto done;
-    if (v->decode ? mx_vae_decode(c, v->vae, din, v->n, v->h, v->w, dout, &a, st)
-                  : mx_vae_encode(c, v->vae, din, v->n, v->h, v->w, dout, NULL, &a, st))
-        goto done;
-    mx_affine(c, dout, dout, v->post_a, v->post_b, v->out_numel);
-    if (v->lo < v->hi) mx_clamp(c, dout, dout, v->lo, v->hi, v->out_numel);
-    rc = mx_download(c, out, dout, v->out_numel, st);
-done:
-    mx_arena_destroy(&a);
-    mx_dev_free(c, din);
-    mx_dev_free(c, dout);
-    return rc;
+static int vae_encode_dev(const mx_ctx *c, const void *net, const float *image, int n, int H, int W, float *latents,
+                          mx_arena *a, mx_status *st) {
+    return mx_vae_encode(c, net, image, n, H, W, latents, NULL, a, st); /* the posterior mean */
 }
 
 int mx_sd_decode_latents(const mx_ctx *c, const mx_vae *vae, const float *latents, int n, int h, int w,
                          float *image, mx_status *st) {
     const mx_vae_config *vc = mx_vae_cfg(vae);
-    size_t f = (size_t)mx_vae_factor(vae);
-    vae_call v = {vae, 1, n, h, w, (size_t)n * (size_t)vc->latent_channels * (size_t)h * (size_t)w,
-                  (size_t)n * (size_t)vc->out_channels * (h * f) * (w * f), 1.0f / MX_SD_VAE_SCALE, 0.0f, 0.5f,
-                  0.5f, 0.0f, 1.0f};
-    return run_vae_call(c, &v, latents, image, st);
+    mx_ae_coder d = {vae_decode_dev, vae, vc->latent_channels, vc->out_channels, mx_vae_factor(vae), MX_SD_VAE_SCALE, 0};
+    if (mx_vae_decode_arena_bytes(vae, n, h, w, &d.arena_bytes, st)) return -1;
+    return mx_ae_decode_host(c, &d, latents, n, h, w, image, st);
 }
 
 int mx_sd_encode_image(const mx_ctx *c, const mx_vae *vae, const float *image, int n, int H, int W,
                        float *latents, mx_status *st) {
     const mx_vae_config *vc = mx_vae_cfg(vae);
-    int f = mx_vae_factor(vae);
-    vae_call v = {vae, 0, n, H, W, (size_t)n * (size_t)vc->in_channels * (size_t)H * (size_t)W,
-                  (size_t)n * (size_t)vc->latent_channels * (size_t)(H / f) * (size_t)(W / f), 2.0f, -1.0f,
-                  MX_SD_VAE_SCALE, 0.0f, 0.0f, 0.0f};
-    return run_vae_call(c, &v, image, latents, st);
+    mx_ae_coder e = {vae_encode_dev, vae, vc->latent_channels, vc->in_channels, mx_vae_factor(vae), MX_SD_VAE_SCALE, 0};
+    if (mx_vae_encode_arena_bytes(vae, n, H, W, &e.arena_bytes, st)) return -1;
+    return mx_ae_encode_host(c, &e, image, n, H, W, latents, st);
 }
