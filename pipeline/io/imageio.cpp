@@ -24,7 +24,7 @@
 namespace {
 
 // Larger images than this are refused: 16k x 16k covers every texture we produce or read.
-const long long kMaxPixels = 16384LL * 16384LL;
+const long long kMaxSide = 16384;
 
 // Reads all pixels of an opened input as floats (w*h*nchannels). Reading in the file's own
 // format and converting here matters: OIIO's read_image with a type conversion goes through a
@@ -46,7 +46,7 @@ int read_pixels(OIIO::ImageInput &in, std::vector<float> &buf) {
 int read_opened(OIIO::ImageInput &in, const char *what, mx_image *out, mx_status *st) {
     const OIIO::ImageSpec &spec = in.spec();
     int w = spec.width, h = spec.height, nch = spec.nchannels;
-    if (w <= 0 || h <= 0 || nch <= 0 || (long long)w * h > kMaxPixels)
+    if (w <= 0 || h <= 0 || nch <= 0 || w > kMaxSide || h > kMaxSide)
         return mx_fail(st, MX_EINPUT, "%s: unsupported image size %dx%d with %d channels", what, w, h, nch);
     std::vector<float> buf;
     if (read_pixels(in, buf)) return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, in.geterror().c_str());
@@ -88,7 +88,9 @@ int check_png_size(const unsigned char *ihdr, unsigned long long idat, const cha
     unsigned long long w = be32(ihdr), h = be32(ihdr + 4), depth = ihdr[8];
     int ch = ihdr[9] < 7 ? channels[ihdr[9]] : 0;
     unsigned long long raw = h * (1 + (w * (unsigned)ch * depth + 7) / 8);
-    if (w > 1u << 24 || h > 1u << 24 || raw / 1032 > idat + 64)
+    if (w > (unsigned long long)kMaxSide || h > (unsigned long long)kMaxSide)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %llux%llu (at most %lld a side)", what, w, h, kMaxSide);
+    if (raw / 1032 > idat + 64)
         return mx_fail(st, MX_EINPUT, "%s: PNG declares %llux%llu pixels but holds %llu bytes of image data", what, w, h,
                        idat);
     return 0;
@@ -178,7 +180,7 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
     uint32_t flags = le32(p + 4);
     int multipart = (flags & 0x1000) != 0, tiled = (flags & 0x200) != 0;
     size_t max_name = flags & 0x400 ? 256 : 32; // names and types of at most 31 (long names: 255) chars
-    long long ymin = 0, ymax = -1;
+    long long xmin = 0, xmax = -1, ymin = 0, ymax = -1;
     int compression = -1;
     size_t pos = 8;
     for (;;) {
@@ -209,12 +211,16 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
             return mx_fail(st, MX_EINPUT, "%s: corrupt EXR attribute '%s' (%zu bytes do not hold a %s)", what, name,
                            size, name + name_len + 1);
         if (!strcmp(name, "dataWindow") && size == 16) {
-            ymin = (int32_t)le32(p + pos + 4);
-            ymax = (int32_t)le32(p + pos + 12);
+            xmin = (int32_t)le32(p + pos), ymin = (int32_t)le32(p + pos + 4);
+            xmax = (int32_t)le32(p + pos + 8), ymax = (int32_t)le32(p + pos + 12);
         }
         if (!strcmp(name, "compression") && size == 1) compression = p[pos];
         pos += size;
     }
+    // before OpenEXR sizes its line buffers by the width (a 4M x 1 image: 512 MB for 234 bytes)
+    if (xmax - xmin >= kMaxSide || ymax - ymin >= kMaxSide)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %lldx%lld (at most %lld a side)", what,
+                       xmax - xmin + 1, ymax - ymin + 1, kMaxSide);
     int lines = exr_lines_per_chunk(compression);
     if (multipart || tiled || !lines || ymax < ymin) return 0; // OpenEXR checks the rest
     long long chunks = (ymax - ymin + lines) / lines;
