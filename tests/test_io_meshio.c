@@ -312,6 +312,15 @@ static void check_hostile_exr(const char *good) {
     CHECK(f && fwrite(tall, 1, sizeof tall - 1, f) == sizeof tall - 1 && !fclose(f));
     CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tall.exr: unsupported image size 1x4210305") &&
           back.data == NULL);
+    /* 16000 x 16000 in 1 x 1 tiles: a 2 GB tile offset table */
+    static const unsigned char tiny_tiles[] = "v/1\x01\x02\x02\0\0tiles\0tiledesc\0\x09\0\0\0\x01\0\0\0\x01\0\0\0\0"
+                                              "dataWindow\0box2i\0\x10\0\0\0\0\0\0\0\0\0\0\0\x7f\x3e\0\0\x7f\x3e\0\0\0"
+                                              "0123456789";
+    tmp_path(p, sizeof p, "tiles.exr");
+    f = fopen(p, "wb");
+    CHECK(f && fwrite(tiny_tiles, 1, sizeof tiny_tiles - 1, f) == sizeof tiny_tiles - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tiles.exr: truncated EXR (256000000 tile blocks") &&
+          back.data == NULL);
     CHECK(mx_io_read_image(good, &back, &st) == 0); /* the checks pass a valid file */
     mx_image_free(&back);
 }
