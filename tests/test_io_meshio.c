@@ -257,7 +257,7 @@ static uint32_t crc32_of(const unsigned char *p, size_t n) {
     return c ^ 0xFFFFFFFFu;
 }
 
-/* A PNG whose IHDR (CRC intact) declares 30000 x 30000 pixels for its few bytes of image data
+/* A PNG whose IHDR (CRC intact) declares 16000 x 16000 pixels for its few bytes of image data
  * is refused before the reader allocates them. `png`: a valid small PNG (IHDR first). */
 static void check_inflated_png(const unsigned char *png, size_t len) {
     unsigned char *p = malloc(len);
@@ -269,13 +269,13 @@ static void check_inflated_png(const unsigned char *png, size_t len) {
         return;
     }
     memcpy(p, png, len);
-    const unsigned char side[4] = {0, 0, 0x75, 0x30}; /* 30000, big-endian */
+    const unsigned char side[4] = {0, 0, 0x3E, 0x80}; /* 16000, big-endian */
     memcpy(p + 16, side, 4);
     memcpy(p + 20, side, 4);
     uint32_t crc = crc32_of(p + 12, 17);
     for (int i = 0; i < 4; i++) p[29 + i] = (unsigned char)(crc >> (24 - 8 * i));
     CHECK(mx_io_decode_image(p, len, "inflated png", &back, &st) == -1 &&
-          strstr(st.msg, "inflated png: PNG declares 30000x30000 pixels") && back.data == NULL);
+          strstr(st.msg, "inflated png: PNG declares 16000x16000 pixels") && back.data == NULL);
     free(p);
 }
 
@@ -299,13 +299,27 @@ static void check_hostile_exr(const char *good) {
     CHECK(f && fwrite(short_float, 1, sizeof short_float - 1, f) == sizeof short_float - 1 && !fclose(f));
     CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "corrupt EXR attribute 'pixelAspectRatio'") &&
           back.data == NULL);
-    /* ZIP (16 lines a block), lines 0..1000000, no offset table */
-    static const unsigned char tall[] = "v/1\x01\x02\0\0\0compression\0compression\0\x01\0\0\0\x03"
-                                        "dataWindow\0box2i\0\x10\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x40\x42\x0f\0\0" "0123456789";
+    /* ZIP (16 lines a block), lines 0..16000, no offset table */
+    unsigned char tall[] = "v/1\x01\x02\0\0\0compression\0compression\0\x01\0\0\0\x03"
+                                        "dataWindow\0box2i\0\x10\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\x80\x3e\0\0\0" "0123456789";
     tmp_path(p, sizeof p, "tall.exr");
     f = fopen(p, "wb");
     CHECK(f && fwrite(tall, 1, sizeof tall - 1, f) == sizeof tall - 1 && !fclose(f));
-    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tall.exr: truncated EXR (62501 scan-line blocks") &&
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tall.exr: truncated EXR (1001 scan-line blocks") &&
+          back.data == NULL);
+    tall[sizeof tall - 14] = 0x40; /* lines 0..0x403e80: too many for any texture */
+    f = fopen(p, "wb");
+    CHECK(f && fwrite(tall, 1, sizeof tall - 1, f) == sizeof tall - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tall.exr: unsupported image size 1x4210305") &&
+          back.data == NULL);
+    /* 16000 x 16000 in 1 x 1 tiles: a 2 GB tile offset table */
+    static const unsigned char tiny_tiles[] = "v/1\x01\x02\x02\0\0tiles\0tiledesc\0\x09\0\0\0\x01\0\0\0\x01\0\0\0\0"
+                                              "dataWindow\0box2i\0\x10\0\0\0\0\0\0\0\0\0\0\0\x7f\x3e\0\0\x7f\x3e\0\0\0"
+                                              "0123456789";
+    tmp_path(p, sizeof p, "tiles.exr");
+    f = fopen(p, "wb");
+    CHECK(f && fwrite(tiny_tiles, 1, sizeof tiny_tiles - 1, f) == sizeof tiny_tiles - 1 && !fclose(f));
+    CHECK(mx_io_read_image(p, &back, &st) == -1 && strstr(st.msg, "tiles.exr: truncated EXR (256000000 tile blocks") &&
           back.data == NULL);
     CHECK(mx_io_read_image(good, &back, &st) == 0); /* the checks pass a valid file */
     mx_image_free(&back);

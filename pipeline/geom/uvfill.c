@@ -347,10 +347,13 @@ typedef struct fill_graph {
     size_t nu;
 } fill_graph;
 
+/* Frees and empties g, so that a second call (build_graph's failure, then the caller's
+ * cleanup) frees nothing twice: found by the allocation fault sweep. */
 static void fill_graph_free(fill_graph *g) {
     free(g->unknown);
     free(g->start);
     free(g->nbr);
+    memset(g, 0, sizeof *g);
 }
 
 /* Neighbours of texel t (x, y): written to out (NULL: only counted). */

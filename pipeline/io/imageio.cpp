@@ -24,7 +24,7 @@
 namespace {
 
 // Larger images than this are refused: 16k x 16k covers every texture we produce or read.
-const long long kMaxPixels = 16384LL * 16384LL;
+const long long kMaxSide = 16384;
 
 // Reads all pixels of an opened input as floats (w*h*nchannels). Reading in the file's own
 // format and converting here matters: OIIO's read_image with a type conversion goes through a
@@ -46,7 +46,7 @@ int read_pixels(OIIO::ImageInput &in, std::vector<float> &buf) {
 int read_opened(OIIO::ImageInput &in, const char *what, mx_image *out, mx_status *st) {
     const OIIO::ImageSpec &spec = in.spec();
     int w = spec.width, h = spec.height, nch = spec.nchannels;
-    if (w <= 0 || h <= 0 || nch <= 0 || (long long)w * h > kMaxPixels)
+    if (w <= 0 || h <= 0 || nch <= 0 || w > kMaxSide || h > kMaxSide)
         return mx_fail(st, MX_EINPUT, "%s: unsupported image size %dx%d with %d channels", what, w, h, nch);
     std::vector<float> buf;
     if (read_pixels(in, buf)) return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, in.geterror().c_str());
@@ -88,7 +88,9 @@ int check_png_size(const unsigned char *ihdr, unsigned long long idat, const cha
     unsigned long long w = be32(ihdr), h = be32(ihdr + 4), depth = ihdr[8];
     int ch = ihdr[9] < 7 ? channels[ihdr[9]] : 0;
     unsigned long long raw = h * (1 + (w * (unsigned)ch * depth + 7) / 8);
-    if (w > 1u << 24 || h > 1u << 24 || raw / 1032 > idat + 64)
+    if (w > (unsigned long long)kMaxSide || h > (unsigned long long)kMaxSide)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %llux%llu (at most %lld a side)", what, w, h, kMaxSide);
+    if (raw / 1032 > idat + 64)
         return mx_fail(st, MX_EINPUT, "%s: PNG declares %llux%llu pixels but holds %llu bytes of image data", what, w, h,
                        idat);
     return 0;
@@ -169,8 +171,38 @@ bool exr_value_ok(const char *type, const unsigned char *v, size_t size) {
     return true;
 }
 
+// Bytes of one pixel over all channels of a (checked) channel list: UINT 4, HALF 2, FLOAT 4.
+unsigned long long exr_pixel_bytes(const unsigned char *v, size_t size) {
+    unsigned long long bytes = 0;
+    for (size_t at = 0; at < size && v[at];) {
+        at += strlen((const char *)v + at) + 1;
+        bytes += le32(v + at) == 1 ? 2 : 4;
+        at += 16;
+    }
+    return bytes;
+}
+
+// The buffers OpenEXR sizes from the header before reading any pixel: the line or tile
+// offset table (8 bytes an entry, read from the file: it must fit in what follows the header)
+// and the decompression buffer of one chunk (a few hundred channels 16k wide at most).
+int check_exr_layout(long long w, long long h, unsigned long long pixel_bytes, int compression, long long tile_w,
+                     long long tile_h, size_t after_header, const char *what, mx_status *st) {
+    long long lines = tile_w ? tile_h : exr_lines_per_chunk(compression);
+    if (!lines) return 0; // a compression this check does not know: OpenEXR decides
+    long long chunks = tile_w ? ((w + tile_w - 1) / tile_w) * ((h + tile_h - 1) / tile_h) : (h + lines - 1) / lines;
+    if (tile_w > kMaxSide || tile_h > kMaxSide)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported EXR tile size %lldx%lld", what, tile_w, tile_h);
+    if ((unsigned long long)(tile_w ? tile_w : w) * pixel_bytes * lines > (1ull << 28))
+        return mx_fail(st, MX_EINPUT, "%s: unsupported EXR layout (%llu bytes a pixel, %lld lines a block)", what,
+                       pixel_bytes, lines);
+    if ((unsigned long long)chunks * 8 > after_header)
+        return mx_fail(st, MX_EINPUT, "%s: truncated EXR (%lld %s blocks declared, the file is too short for them)", what,
+                       chunks, tile_w ? "tile" : "scan-line");
+    return 0;
+}
+
 // Walks the header(s) of an EXR held in memory: every attribute must fit in the file, and a
-// single-part scan-line image's offset table too. OpenEXR sizes a string attribute by its
+// single-part image's offset table and buffers be plausible (check_exr_layout). OpenEXR sizes a string attribute by its
 // declared length before reading it (a 200-byte file declaring a 2 GB "capDate" allocates
 // 2 GB), and its offset table by the data window's height.
 int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_status *st) {
@@ -178,8 +210,10 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
     uint32_t flags = le32(p + 4);
     int multipart = (flags & 0x1000) != 0, tiled = (flags & 0x200) != 0;
     size_t max_name = flags & 0x400 ? 256 : 32; // names and types of at most 31 (long names: 255) chars
-    long long ymin = 0, ymax = -1;
+    long long xmin = 0, xmax = -1, ymin = 0, ymax = -1;
     int compression = -1;
+    long long tile_w = 0, tile_h = 0;
+    unsigned long long pixel_bytes = 0;
     size_t pos = 8;
     for (;;) {
         if (pos >= n) return mx_fail(st, MX_EINPUT, "%s: truncated EXR header", what);
@@ -209,19 +243,21 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
             return mx_fail(st, MX_EINPUT, "%s: corrupt EXR attribute '%s' (%zu bytes do not hold a %s)", what, name,
                            size, name + name_len + 1);
         if (!strcmp(name, "dataWindow") && size == 16) {
-            ymin = (int32_t)le32(p + pos + 4);
-            ymax = (int32_t)le32(p + pos + 12);
+            xmin = (int32_t)le32(p + pos), ymin = (int32_t)le32(p + pos + 4);
+            xmax = (int32_t)le32(p + pos + 8), ymax = (int32_t)le32(p + pos + 12);
         }
         if (!strcmp(name, "compression") && size == 1) compression = p[pos];
+        if (!strcmp(name, "tiles") && size == 9) tile_w = le32(p + pos), tile_h = le32(p + pos + 4);
+        if (!strcmp(name, "channels") && !strcmp(name + name_len + 1, "chlist")) pixel_bytes = exr_pixel_bytes(p + pos, size);
         pos += size;
     }
-    int lines = exr_lines_per_chunk(compression);
-    if (multipart || tiled || !lines || ymax < ymin) return 0; // OpenEXR checks the rest
-    long long chunks = (ymax - ymin + lines) / lines;
-    if ((unsigned long long)chunks * 8 > n - pos)
-        return mx_fail(st, MX_EINPUT, "%s: truncated EXR (%lld scan-line blocks declared, the file is too short for them)",
-                       what, chunks);
-    return 0;
+    // before OpenEXR sizes its line buffers by the width (a 4M x 1 image: 512 MB for 234 bytes)
+    if (xmax - xmin >= kMaxSide || ymax - ymin >= kMaxSide)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %lldx%lld (at most %lld a side)", what,
+                       xmax - xmin + 1, ymax - ymin + 1, kMaxSide);
+    if (multipart || xmax < xmin || ymax < ymin || (tiled && (tile_w <= 0 || tile_h <= 0))) return 0; // OpenEXR checks
+    return check_exr_layout(xmax - xmin + 1, ymax - ymin + 1, pixel_bytes, compression, tiled ? tile_w : 0, tile_h,
+                            n - pos, what, st);
 }
 
 // Opens `name` (a file, or a name for the data of `proxy`) with the reader of `format` only:
