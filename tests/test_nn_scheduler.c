@@ -189,6 +189,12 @@ static void test_config(void) {
     /* diffusers writes -Infinity (Python json); "Infinity" inside a string is left alone */
     const char *py = "{\"lambda_min_clipped\": -Infinity, \"_note\": \"Infinity\", \"solver_order\": 3}";
     CHECK(mx_sched_config_parse(&cfg, py, strlen(py), "py.json", &st) == 0 && cfg.solver_order == 3);
+    /* integers beyond int's range or with a fraction are refused, not cast (found by fuzz_json) */
+    const char *huge = "{\"num_train_timesteps\": 1e120}", *frac = "{\"solver_order\": 2.5}";
+    CHECK(mx_sched_config_parse(&cfg, huge, strlen(huge), "huge.json", &st) != 0);
+    CHECK(strstr(st.msg, "num_train_timesteps") != NULL);
+    CHECK(mx_sched_config_parse(&cfg, frac, strlen(frac), "frac.json", &st) != 0);
+    printf("scheduler config refusals: %s\n", st.msg);
 }
 
 int main(void) {

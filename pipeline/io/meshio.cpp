@@ -401,6 +401,18 @@ int check_ply_header(const char *path, mx_status *st) {
 // OpenMesh's OFF reader trusts each face's corner count and reads (and stores) that many
 // indices even past the end of the data: a count of 10^9 costs gigabytes. Checked here first
 // for ASCII OFF (one vertex and one face per line, as OFF writers do); binary OFF is refused.
+// A count word: decimal digits only (no sign, no embedded NUL), at most 18 of them.
+bool parse_count(const std::string &w, unsigned long long *out) {
+    if (w.empty() || w.size() > 18) return false;
+    unsigned long long n = 0;
+    for (char ch : w) {
+        if (ch < '0' || ch > '9') return false;
+        n = n * 10 + (unsigned long long)(ch - '0');
+    }
+    *out = n;
+    return true;
+}
+
 int check_off_counts(const char *path, mx_status *st) {
     std::string text;
     if (read_text_file(path, text, st)) return -1;
@@ -427,17 +439,19 @@ int check_off_counts(const char *path, mx_status *st) {
     std::vector<std::string> counts(lines[0].begin() + 1, lines[0].end()); // "OFF nv nf ne" or next line
     size_t first = 1;
     if (counts.empty() && lines.size() > 1) counts = lines[first++];
-    char *end;
-    unsigned long long nv = counts.size() >= 2 ? strtoull(counts[0].c_str(), &end, 10) : 0, nf = 0;
-    if (counts.size() < 2 || *end || (nf = strtoull(counts[1].c_str(), &end, 10), *end) || nv > kMaxElements ||
+    unsigned long long nv = 0, nf = 0;
+    if (counts.size() < 2 || !parse_count(counts[0], &nv) || !parse_count(counts[1], &nf) || nv > kMaxElements ||
         nf > kMaxElements)
         return mx_fail(st, MX_EINPUT, "%s: OFF vertex and face counts missing or too large", path);
+    if (first + nv + nf > lines.size()) // before OpenMesh reserves room for the declared counts
+        return mx_fail(st, MX_EINPUT, "%s: OFF header declares %llu vertices and %llu faces, the file has %zu lines",
+                       path, nv, nf, lines.size() - first);
     for (size_t f = 0; f < nf; f++) {
         size_t li = first + (size_t)nv + f;
         if (li >= lines.size()) return mx_fail(st, MX_EINPUT, "%s: OFF file ends before face %zu", path, f);
         const std::vector<std::string> &w = lines[li];
-        unsigned long long n = strtoull(w[0].c_str(), &end, 10);
-        if (*end || w[0][0] == '-' || n + 1 > w.size())
+        unsigned long long n = 0;
+        if (!parse_count(w[0], &n) || n + 1 > w.size())
             return mx_fail(st, MX_EINPUT, "%s: OFF face %zu: corner count '%s' does not match its line", path, f,
                            w[0].c_str());
     }

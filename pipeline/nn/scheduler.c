@@ -4,6 +4,7 @@
  * integer timesteps come out identical; the latent updates are the reference's formulas. */
 #include "scheduler.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -64,6 +65,16 @@ static int reject_true(const mx_json *root, const char *key, const char *what, m
     return 0;
 }
 
+/* *v = the integer member key (kept when absent); a value that is not an integer within int's range
+ * is refused (a cast would be undefined for it). */
+static int get_int(const mx_json *root, const char *key, int *v, const char *what, mx_status *st) {
+    double d = mx_json_get_num(root, key, *v);
+    if (!(d >= INT_MIN && d <= INT_MAX) || d != floor(d))
+        return mx_fail(st, MX_EINPUT, "%s: \"%s\" must be an integer", what, key);
+    *v = (int)d;
+    return 0;
+}
+
 static int parse_fields(mx_sched_config *c, const mx_json *root, const char *what, mx_status *st) {
     static const char *const betas[] = {"scaled_linear", "linear"};
     static const char *const preds[] = {"epsilon", "v_prediction", "sample"};
@@ -75,18 +86,19 @@ static int parse_fields(mx_sched_config *c, const mx_json *root, const char *wha
                                               "use_lu_lambdas", "use_flow_sigmas", "rescale_betas_zero_snr",
                                               "use_dynamic_shifting"};
     int e, algo = 0;
-    c->num_train_timesteps = (int)mx_json_get_num(root, "num_train_timesteps", c->num_train_timesteps);
+    if (get_int(root, "num_train_timesteps", &c->num_train_timesteps, what, st) ||
+        get_int(root, "steps_offset", &c->steps_offset, what, st) ||
+        get_int(root, "solver_order", &c->solver_order, what, st) ||
+        get_int(root, "original_inference_steps", &c->original_inference_steps, what, st))
+        return -1;
     c->beta_start = mx_json_get_num(root, "beta_start", c->beta_start);
     c->beta_end = mx_json_get_num(root, "beta_end", c->beta_end);
-    c->steps_offset = (int)mx_json_get_num(root, "steps_offset", c->steps_offset);
-    c->solver_order = (int)mx_json_get_num(root, "solver_order", c->solver_order);
     c->lower_order_final = mx_json_get_bool(root, "lower_order_final", c->lower_order_final);
     c->euler_at_final = mx_json_get_bool(root, "euler_at_final", c->euler_at_final);
     c->use_karras_sigmas = mx_json_get_bool(root, "use_karras_sigmas", c->use_karras_sigmas);
     c->set_alpha_to_one = mx_json_get_bool(root, "set_alpha_to_one", c->set_alpha_to_one);
     c->clip_sample = mx_json_get_bool(root, "clip_sample", c->clip_sample);
     c->clip_sample_range = mx_json_get_num(root, "clip_sample_range", c->clip_sample_range);
-    c->original_inference_steps = (int)mx_json_get_num(root, "original_inference_steps", c->original_inference_steps);
     c->timestep_scaling = mx_json_get_num(root, "timestep_scaling", c->timestep_scaling);
     e = (int)c->beta_schedule;
     if (parse_enum(root, "beta_schedule", betas, 2, &e, what, st)) return -1;
