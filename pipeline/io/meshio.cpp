@@ -398,9 +398,6 @@ int check_ply_header(const char *path, mx_status *st) {
     }
 }
 
-// OpenMesh's OFF reader trusts each face's corner count and reads (and stores) that many
-// indices even past the end of the data: a count of 10^9 costs gigabytes. Checked here first
-// for ASCII OFF (one vertex and one face per line, as OFF writers do); binary OFF is refused.
 // A count word: decimal digits only (no sign, no embedded NUL), at most 18 of them.
 bool parse_count(const std::string &w, unsigned long long *out) {
     if (w.empty() || w.size() > 18) return false;
@@ -413,6 +410,20 @@ bool parse_count(const std::string &w, unsigned long long *out) {
     return true;
 }
 
+// A number word as OpenMesh's stream reads one: the whole word, finite.
+bool is_number(const std::string &w) {
+    char *end;
+    double v = strtod(w.c_str(), &end);
+    return end == w.c_str() + w.size() && std::isfinite(v);
+}
+
+// OpenMesh's OFF reader reads words, not lines, and trusts each face's corner count: one word
+// too many or too few (or a word that is not a number) shifts every later word, and a corner count
+// of 10^20 then costs gigabytes. So ASCII OFF is checked here first, line by line, as OFF writers
+// write it: "nv nf ne", then one vertex per line (3 numbers for OFF; the same count, at least 3,
+// on every line for the COFF/NOFF/STOFF variants), then one face per line (its corner count, that
+// many vertex indices below nv: OpenMesh reads a face colour as the next face). Binary OFF is
+// refused.
 int check_off_counts(const char *path, mx_status *st) {
     std::string text;
     if (read_text_file(path, text, st)) return -1;
@@ -439,21 +450,28 @@ int check_off_counts(const char *path, mx_status *st) {
     std::vector<std::string> counts(lines[0].begin() + 1, lines[0].end()); // "OFF nv nf ne" or next line
     size_t first = 1;
     if (counts.empty() && lines.size() > 1) counts = lines[first++];
-    unsigned long long nv = 0, nf = 0;
-    if (counts.size() < 2 || !parse_count(counts[0], &nv) || !parse_count(counts[1], &nf) || nv > kMaxElements ||
-        nf > kMaxElements)
+    unsigned long long nv = 0, nf = 0, ne = 0;
+    if (counts.size() != 3 || !parse_count(counts[0], &nv) || !parse_count(counts[1], &nf) ||
+        !parse_count(counts[2], &ne) || nv > kMaxElements || nf > kMaxElements)
         return mx_fail(st, MX_EINPUT, "%s: OFF vertex and face counts missing or too large", path);
     if (first + nv + nf > lines.size()) // before OpenMesh reserves room for the declared counts
         return mx_fail(st, MX_EINPUT, "%s: OFF header declares %llu vertices and %llu faces, the file has %zu lines",
                        path, nv, nf, lines.size() - first);
+    size_t vwords = lines[0][0] == "OFF" ? 3 : lines[first].size();
+    for (size_t v = 0; v < nv; v++) {
+        const std::vector<std::string> &w = lines[first + v];
+        bool ok = w.size() == vwords && vwords >= 3;
+        for (size_t k = 0; ok && k < w.size(); k++) ok = is_number(w[k]);
+        if (!ok) return mx_fail(st, MX_EINPUT, "%s: OFF vertex %zu: expected %zu numbers on its line", path, v, vwords);
+    }
     for (size_t f = 0; f < nf; f++) {
-        size_t li = first + (size_t)nv + f;
-        if (li >= lines.size()) return mx_fail(st, MX_EINPUT, "%s: OFF file ends before face %zu", path, f);
-        const std::vector<std::string> &w = lines[li];
-        unsigned long long n = 0;
-        if (!parse_count(w[0], &n) || n + 1 > w.size())
-            return mx_fail(st, MX_EINPUT, "%s: OFF face %zu: corner count '%s' does not match its line", path, f,
-                           w[0].c_str());
+        const std::vector<std::string> &w = lines[first + (size_t)nv + f];
+        unsigned long long n = 0, idx = 0;
+        bool ok = parse_count(w[0], &n) && n + 1 == w.size();
+        for (size_t k = 1; ok && k < w.size(); k++) ok = parse_count(w[k], &idx) && idx < nv;
+        if (!ok)
+            return mx_fail(st, MX_EINPUT, "%s: OFF face %zu: corner count '%s' or its indices do not match its line",
+                           path, f, w[0].c_str());
     }
     return 0;
 }
