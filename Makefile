@@ -174,11 +174,14 @@ $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/r
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)
 	$(CXX) $(LDFLAGS) -fsanitize=fuzzer -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
-.PHONY: fuzz fuzz-run
+.PHONY: fuzz fuzz-ci fuzz-run
 fuzz:
 	$(MAKE) BUILD=build-fuzz CC=clang CXX=clang++ SAN=fuzz OPT=-O1 fuzz-run
+# CI's reproducible run: fixed seed and executions per harness, fresh corpus (tests/fuzz/run.sh)
+fuzz-ci:
+	$(MAKE) BUILD=build-fuzz CC=clang CXX=clang++ SAN=fuzz OPT=-O1 FUZZ_CI=1 fuzz-run
 fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
-	sh tests/fuzz/run.sh $(BUILD) $(FUZZ_SECONDS) $(FUZZ_NAMES)
+	FUZZ_CI=$(FUZZ_CI) sh tests/fuzz/run.sh $(BUILD) $(FUZZ_SECONDS) $(FUZZ_NAMES)
 
 # ---- fault injection: a test-only matex failing the k-th allocation or write (tests/faults/fault.c);
 # `make test` samples k (tests/cli_faults.sh); `make faults` tries every k on the plain build
