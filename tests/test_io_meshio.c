@@ -159,6 +159,8 @@ static void test_hostile(void) {
     expect_fail("shifted.off", "OFF\n3 1 0 7\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "counts missing");
     expect_fail("short_vertex.off", "OFF\n3 1 0\n0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "vertex 0");
     expect_fail("face_colour.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 255 0 0\n", "face 0");
+    expect_fail("one_line.off", "COFF 0 0 0\n", "line of their own");
+    expect_fail("empty.off", "OFF\n0 0 0\n", "no faces");
     expect_fail("signed.off", "OFF\n+3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "counts missing");
     /* A missing MTL is a warning; degenerate faces load and are counted. */
     write_text("degen.obj", "mtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\nf 1 2 4\n");

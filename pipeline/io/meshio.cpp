@@ -447,9 +447,12 @@ int check_off_counts(const char *path, mx_status *st) {
         return mx_fail(st, MX_EINPUT, "%s: not an OFF file (no OFF header)", path);
     for (const std::string &w : lines[0])
         if (w == "BINARY") return mx_fail(st, MX_EINPUT, "%s: binary OFF is not supported", path);
-    std::vector<std::string> counts(lines[0].begin() + 1, lines[0].end()); // "OFF nv nf ne" or next line
-    size_t first = 1;
-    if (counts.empty() && lines.size() > 1) counts = lines[first++];
+    // OpenMesh takes the whole first line as the header and reads the counts after it, so counts
+    // on the header line would leave them unread (uninitialised: a reserve of gigabytes).
+    if (lines[0].size() != 1 || lines.size() < 2)
+        return mx_fail(st, MX_EINPUT, "%s: OFF counts must follow the header keyword on a line of their own", path);
+    const std::vector<std::string> &counts = lines[1];
+    size_t first = 2;
     unsigned long long nv = 0, nf = 0, ne = 0;
     if (counts.size() != 3 || !parse_count(counts[0], &nv) || !parse_count(counts[1], &nf) ||
         !parse_count(counts[2], &ne) || nv > kMaxElements || nf > kMaxElements)
@@ -457,7 +460,7 @@ int check_off_counts(const char *path, mx_status *st) {
     if (first + nv + nf > lines.size()) // before OpenMesh reserves room for the declared counts
         return mx_fail(st, MX_EINPUT, "%s: OFF header declares %llu vertices and %llu faces, the file has %zu lines",
                        path, nv, nf, lines.size() - first);
-    size_t vwords = lines[0][0] == "OFF" ? 3 : lines[first].size();
+    size_t vwords = lines[0][0] == "OFF" || nv == 0 ? 3 : lines[first].size(); // lines[first] exists if nv > 0
     for (size_t v = 0; v < nv; v++) {
         const std::vector<std::string> &w = lines[first + v];
         bool ok = w.size() == vwords && vwords >= 3;
