@@ -116,7 +116,8 @@ typedef struct matex_options {
     const char *negative_prompt;  /* "" */
     const char *out_dir;          /* write the output folder (texture.png/.exr, mesh.obj/.mtl/.glb,
                                      report.json); NULL: results in memory only */
-    int force;                    /* replace an existing non-empty out_dir (atomically); 0: refuse */
+    int force;                    /* replace an earlier output of matex in out_dir (atomically; a folder
+                                     without its marker .matex-output, or holding other files, is refused); 0: refuse */
     uint64_t seed;                /* 0; the same seed gives the same texture */
     int steps;                    /* denoising steps: 10 */
     int views;                    /* view budget, front and back included: 6 */
@@ -166,7 +167,7 @@ typedef struct matex_result {
 int matex_texture(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
 /* Enhances the texture of a textured mesh (SDEdit over views). */
 int matex_enhance(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
-/* Writes a result's output folder as out_dir does (force: replace a non-empty folder). */
+/* Writes a result's output folder as out_dir does (force: replace an earlier output of matex). */
 int matex_result_write(const matex_result *r, const char *out_dir, int force, matex_error *err);
 void matex_result_free(matex_result *r);
 

@@ -131,9 +131,32 @@ mkdir "$T/full" && echo old > "$T/full/old_texture.png"
 check "a non-empty folder is refused" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL)" = 1 ]
 check "a non-empty folder: message says --force" grep -q "not empty (--force replaces it)" "$T/err"
 check "a non-empty folder: left alone" [ "$(ls "$T/full")" = old_texture.png ]
+# --force replaces only what matex wrote (issue 24: `-o . --force` deleted a user's folder)
+check "--force over a user's files: refused" \
+    [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL --force)" = 1 ]
+check "... says matex did not write it" grep -q "not written by matex" "$T/err"
+check "... and leaves it alone" [ "$(ls "$T/full")" = old_texture.png ] && check "... no staging" no_staging "$T/full"
+mkdir "$T/userdir" && cp "$T/quad.obj" "$T/userdir/chair.obj" && echo mine > "$T/userdir/notes.txt"
+check "-o . --force in the mesh's folder: refused" \
+    [ "$(M_ABS=$(realpath "$M") W_ABS=$(realpath "$W") && cd "$T/userdir" &&
+        rc_of "$M_ABS" texture chair.obj "a tile" --weights "$W_ABS" -o . $SMALL --force)" = 1 ]
+check "... says why" grep -q "current folder" "$T/err"
+check "... the user's files stay" [ -s "$T/userdir/chair.obj" ] && check "... all of them" [ -s "$T/userdir/notes.txt" ]
+mkdir "$T/wdir" && cp "$W" "$T/wdir/w.mxw"
+check "-o the weights' folder --force: refused" \
+    [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$T/wdir/w.mxw" -o "$T/wdir" $SMALL --force)" = 1 ]
+check "... says it holds the input" grep -q "holds the input" "$T/err" && check "... the weights stay" [ -s "$T/wdir/w.mxw" ]
+rm -rf "$T/full" && mkdir "$T/full"
+check "an output of matex's" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL)" = 0 ]
+check "... carries the marker listing its files" grep -q "^report.json$" "$T/full/.matex-output"
 check "--force replaces it" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL --force)" = 0 ]
 check "--force: only the new files" complete "$T/full"
 check "--force: no staging or old folder left" no_staging "$T/full"
+echo mine > "$T/full/notes.txt"
+check "--force over matex's output with a user's file added: refused" \
+    [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/full" $SMALL --force)" = 1 ]
+check "... names the file" grep -q "holds notes.txt, which matex did not write" "$T/err"
+rm "$T/full/notes.txt"
 mkdir -p "$T/home/docs" && echo keep > "$T/home/docs/letter.txt"
 check "--force refuses a folder with sub-folders" \
     [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/home" $SMALL --force)" = 1 ]
@@ -172,6 +195,9 @@ check "... complete" [ -s "$T/rend/contact_sheet.png" ] && check "... two views"
 check "render over it without --force: refused" [ "$(rc_of "$M" render "$T/quad.obj" --views 1 --size 32 -o "$T/rend")" = 1 ]
 check "... says why" grep -q "not empty" "$T/err" && check "... and leaves it" [ -s "$T/rend/view_01.png" ]
 check "render --force replaces it" [ "$(rc_of "$M" render "$T/quad.obj" --views 1 --size 32 --force -o "$T/rend")" = 0 ]
+check "render --force over the mesh's folder: refused" \
+    [ "$(rc_of "$M" render "$T/userdir/chair.obj" --views 1 --size 32 --force -o "$T/userdir")" = 1 ]
+check "... the user's files stay" [ -s "$T/userdir/chair.obj" ] && check "... all of them" [ -s "$T/userdir/notes.txt" ]
 check "... with only the new views" [ ! -e "$T/rend/view_01.png" ] && check "... complete" [ -s "$T/rend/contact_sheet.png" ]
 check "render of a missing mesh: exit 1" [ "$(rc_of "$M" render "$T/none.obj" -o "$T/rendbad")" = 1 ]
 check "... no folder, no staging" [ ! -e "$T/rendbad" ] && check "... no staging" no_staging "$T/rendbad"

@@ -129,43 +129,90 @@ static int count_entries(const char *dir) {
     return n;
 }
 
+static void touch(const char *path) {
+    FILE *f = fopen(path, "w");
+    if (f) fclose(f);
+}
+
+/* One triangle with UVs and a 16x16 texture: what mx_outdir_commit writes. */
+typedef struct {
+    float pos[9], uv[6];
+    int32_t face[3];
+    mx_mesh m;
+    mx_image tex;
+} tiny_output;
+
+static void tiny_output_init(tiny_output *t, mx_status *st) {
+    *t = (tiny_output){.pos = {0, 0, 0, 1, 0, 0, 0, 1, 0}, .uv = {0, 0, 1, 0, 0, 1}, .face = {0, 1, 2}};
+    t->m = (mx_mesh){.nverts = 3, .nfaces = 1, .pos = t->pos, .faces = t->face, .nuv = 3, .uv = t->uv, .face_uv = t->face};
+    CHECK(mx_image_alloc(&t->tex, 16, 16, 3, st) == 0);
+}
+
+/* --force replaces only matex's own output: never a folder of user files, the current folder, or
+ * one holding an input (issue 24: `-o . --force` deleted a user's folder). */
+static void test_outdir_force_refusals(const char *tmp, const char *done) {
+    char user[600], note[700], cwd[4096], input[700];
+    mx_outdir od;
+    mx_status st;
+    snprintf(user, sizeof user, "%s/user", tmp);
+    snprintf(note, sizeof note, "%s/notes.txt", user);
+    mkdir(user, 0777);
+    touch(note);
+    CHECK(mx_outdir_open(&od, user, 1, NULL, 0, &st) == -1 && strstr(st.msg, "not written by matex"));
+    CHECK(exists(note) && no_staging(user));
+    /* a user's file added to matex's output is not replaced either */
+    snprintf(input, sizeof input, "%s/mine.obj", done);
+    touch(input);
+    CHECK(mx_outdir_open(&od, done, 1, NULL, 0, &st) == -1 && strstr(st.msg, "mine.obj, which matex did not write"));
+    CHECK(exists(input) && no_staging(done));
+    /* nor a folder holding an input, even one matex wrote */
+    const char *inputs[] = {NULL, input};
+    CHECK(mx_outdir_open(&od, done, 1, inputs, 2, &st) == -1 && strstr(st.msg, "holds the input"));
+    remove(input);
+    snprintf(input, sizeof input, "%s/mesh.obj", done);
+    CHECK(mx_outdir_open(&od, done, 1, (const char *[]){input}, 1, &st) == -1 && strstr(st.msg, "holds the input"));
+    /* nor the current folder */
+    CHECK(getcwd(cwd, sizeof cwd) != NULL && chdir(done) == 0);
+    CHECK(mx_outdir_open(&od, ".", 1, NULL, 0, &st) == -1 && strstr(st.msg, "current folder"));
+    CHECK(chdir(cwd) == 0 && exists(input) && no_staging(done));
+}
+
 static void test_outdir(const char *tmp) {
-    char file[600], full[600], old[700], staged[4400];
+    char file[600], full[600], old[700], staged[4400], marker[700];
     mx_outdir od;
     mx_status st;
     snprintf(file, sizeof file, "%s/a_file", tmp);
-    FILE *f = fopen(file, "w");
-    if (f) fclose(f);
-    CHECK(mx_outdir_open(&od, file, 1, &st) == -1 && strstr(st.msg, "not a folder"));
+    touch(file);
+    CHECK(mx_outdir_open(&od, file, 1, NULL, 0, &st) == -1 && strstr(st.msg, "not a folder"));
     snprintf(full, sizeof full, "%s/full", tmp);
     snprintf(old, sizeof old, "%s/old.png", full);
-    mkdir(full, 0777);
-    f = fopen(old, "w");
-    if (f) fclose(f);
-    CHECK(mx_outdir_open(&od, full, 0, &st) == -1 && strstr(st.msg, "--force"));
+    snprintf(marker, sizeof marker, "%s/" MX_OUTDIR_MARKER, full);
+    tiny_output t;
+    tiny_output_init(&t, &st);
+    /* matex's own output: the marker lists its files */
+    CHECK(mx_outdir_open(&od, full, 0, NULL, 0, &st) == 0);
+    snprintf(staged, sizeof staged, "%s/old.png", od.stage);
+    touch(staged);
+    CHECK(mx_outdir_commit(&od, &t.m, &t.tex, 1, "{}", NULL, &st) == 0);
+    CHECK(exists(old) && exists(marker) && count_entries(full) == 8); /* six outputs, old.png, the marker */
+    CHECK(mx_outdir_open(&od, full, 0, NULL, 0, &st) == -1 && strstr(st.msg, "--force"));
     CHECK(exists(old) && no_staging(full));
     /* with force: staged at once, discarded on failure, swapped in on commit */
-    CHECK(mx_outdir_open(&od, full, 1, &st) == 0 && exists(od.stage));
+    CHECK(mx_outdir_open(&od, full, 1, NULL, 0, &st) == 0 && exists(od.stage));
     mx_outdir_discard(&od);
     CHECK(!exists(od.stage) && exists(old));
-    CHECK(mx_outdir_open(&od, full, 1, &st) == 0);
+    CHECK(mx_outdir_open(&od, full, 1, NULL, 0, &st) == 0);
     snprintf(staged, sizeof staged, "%s/new.txt", od.stage);
-    f = fopen(staged, "w");
-    if (f) fclose(f);
-    mx_image tex;
-    mx_mesh m = {0};
-    float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0}, uv[6] = {0, 0, 1, 0, 0, 1};
-    int32_t face[3] = {0, 1, 2};
-    m.nverts = 3, m.nfaces = 1, m.pos = pos, m.faces = face, m.nuv = 3, m.uv = uv, m.face_uv = face;
-    CHECK(mx_image_alloc(&tex, 16, 16, 3, &st) == 0);
+    touch(staged);
     volatile sig_atomic_t stop = 1;
-    CHECK(mx_outdir_commit(&od, &m, &tex, 1, "{}", &stop, &st) == -1 && st.code == MX_ECANCEL);
+    CHECK(mx_outdir_commit(&od, &t.m, &t.tex, 1, "{}", &stop, &st) == -1 && st.code == MX_ECANCEL);
     CHECK(exists(old) && no_staging(full)); /* interrupted before the swap: the old folder stays */
-    CHECK(mx_outdir_open(&od, full, 1, &st) == 0);
+    CHECK(mx_outdir_open(&od, full, 1, NULL, 0, &st) == 0);
     stop = 0;
-    CHECK(mx_outdir_commit(&od, &m, &tex, 1, "{}", &stop, &st) == 0);
-    CHECK(!exists(old) && count_entries(full) == 6 && no_staging(full));
-    mx_image_free(&tex);
+    CHECK(mx_outdir_commit(&od, &t.m, &t.tex, 1, "{}", &stop, &st) == 0);
+    CHECK(!exists(old) && count_entries(full) == 7 && no_staging(full));
+    test_outdir_force_refusals(tmp, full);
+    mx_image_free(&t.tex);
 }
 
 typedef struct {
@@ -209,7 +256,7 @@ static void test_cancel(const char *weights, const char *tmp) {
             CHECK(st.code == MX_ECANCEL && !strcmp(st.msg, "interrupted"));
             CHECK(!exists(out));
         } else {
-            CHECK(count_entries(out) == 6);
+            CHECK(count_entries(out) == 7); /* six outputs and the marker */
         }
         CHECK(no_staging(out));
     }

@@ -41,7 +41,7 @@ void mx_cli_texture_options_help(FILE *f) {
             "                           else fp32): bf16 products with fp32 sums, about 2x faster\n"
             "  --device D               cpu (default), cpu-strict (activations guarded, for tests) or cuda\n"
             "                           (in binaries built by `make cuda`)\n"
-            "  --force                  replace an existing non-empty output folder (atomically)\n"
+            "  --force                  replace an earlier output of matex (atomically; never other files)\n"
             "  --quiet                  no progress on stderr\n"
             "  --json                   print a JSON summary on stdout\n"
             "  -h, --help               this help\n");

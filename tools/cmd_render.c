@@ -25,7 +25,7 @@ static void usage(FILE *f) {
                "and a contact sheet DIR/contact_sheet.png. Textured when the mesh has UVs and a texture\n"
                "(its materials' own, or IMG for all), else shaded normals.\n"
                "  --up z   the mesh is z-up (CAD, scans); default y-up (glTF, OBJ)\n"
-               "  --force  replace DIR when it exists and is not empty (else refused)\n"
+               "  --force  replace DIR when it holds an earlier output of matex (never other files)\n"
                "exit: 0 done, 1 bad input, 2 usage, 130 interrupted (nothing written)\n");
 }
 
@@ -155,7 +155,7 @@ int cmd_render(int argc, char **argv) {
     mx_outdir od = {0};
     volatile sig_atomic_t *stop = mx_cli_signals_catch();
     int rc = mx_mesh_load(a.mesh, &m, &st) || mx_mesh_normalized(&m, a.up, &pos, NULL, NULL, &st) ||
-             load_textures(&a, &m, &tex, &ntex, &st) || mx_outdir_open(&od, a.out, a.force, &st);
+             load_textures(&a, &m, &tex, &ntex, &st) || mx_outdir_open(&od, a.out, a.force, (const char *[]){a.mesh, a.texture}, 2, &st);
     rc = rc || !(pool = mx_pool_create(0, &st)) || mx_image_alloc(&sheet, cols * tile, rows * tile, 3, &st);
     if (!rc) {
         for (size_t i = 0; i < (size_t)sheet.w * sheet.h * 3; i++) sheet.data[i] = 1;

@@ -29,7 +29,7 @@ static void usage(FILE *f) {
                "  --background R,G,B       colour behind the source in its renders (default 0,0,0)\n"
                "  --up y|z                 up axis of the meshes (default y)\n"
                "  --threads N              CPU threads (default: all)\n"
-               "  --force                  replace an existing non-empty output folder (atomically)\n"
+               "  --force                  replace an earlier output of matex (atomically; never other files)\n"
                "  --quiet                  no progress on stderr\n"
                "  --json                   print a JSON summary on stdout\n"
                "  -h, --help               this help\n");

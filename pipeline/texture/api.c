@@ -274,7 +274,7 @@ int matex_result_write(const matex_result *r, const char *out_dir, int force, ma
     mx_status_clear(&st);
     mx_outdir od;
     memset(&od, 0, sizeof od);
-    int rc = mx_outdir_open(&od, out_dir, force, &st) ||
+    int rc = mx_outdir_open(&od, out_dir, force, NULL, 0, &st) ||
              mx_outdir_commit(&od, &a->in.mesh, a->in.textures, a->in.ntex, a->in.report_json, NULL, &st);
     mx_outdir_discard(&od);
     if (rc) set_error(err, st.code, st.msg);

@@ -196,7 +196,8 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     mx_job_set_phase(j, "load");
     j->psnr_db = NAN;
     j->write_flags = o->first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
-    if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, st)) return -1;
+    const char *inputs[] = {o->mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->source_path};
+    if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, inputs, 3, st)) return -1;
     if (o->models) { /* an opened model set computes on its own context */
         j->models = o->models;
         j->ctx = o->models->c;

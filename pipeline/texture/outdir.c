@@ -10,7 +10,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "../../runtime/atomic_file.h"
+#include "../../runtime/buf.h"
+#include "../../runtime/fileio.h"
 #include "../geom/export.h"
+
+#define MARKER_HEADER "matex output folder: `--force` may replace it. The files matex wrote here:\n"
+#define MARKER_MAX_BYTES (1 << 20)
 
 static int remove_entry(const char *path, const struct stat *sb, int type, struct FTW *ftw) {
     (void)sb, (void)type, (void)ftw;
@@ -92,10 +98,95 @@ static int check_same_device(const mx_outdir *od, const char *given, mx_status *
     return 0;
 }
 
-int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st) {
+/* Is the resolved path `path` the folder `dir` or inside it? */
+static int path_within(const char *path, const char *dir) {
+    size_t n = strlen(dir);
+    return !strncmp(path, dir, n) && (path[n] == 0 || path[n] == '/');
+}
+
+/* Is `file` (or, for a link, the link itself: its folder resolved) inside `dir`? */
+static int file_within(const char *file, const char *dir) {
+    char *real = realpath(file, NULL);
+    int inside = real && path_within(real, dir);
+    free(real);
+    char folder[4096];
+    snprintf(folder, sizeof folder, "%s", file);
+    char *slash = strrchr(folder, '/');
+    if (slash == folder) folder[1] = 0;
+    else if (slash) *slash = 0;
+    else snprintf(folder, sizeof folder, ".");
+    real = realpath(folder, NULL);
+    inside = inside || (real && path_within(real, dir));
+    free(real);
+    return inside;
+}
+
+/* An existing output folder is replaced by a new one, so it must not be (or hold) the current
+ * folder, nor hold a file the run reads. */
+static int check_holds_nothing_needed(const mx_outdir *od, const char *given, const char *const *inputs, int ninputs,
+                                      mx_status *st) {
+    char *cwd = realpath(".", NULL);
+    int holds_cwd = cwd && path_within(cwd, od->dir);
+    free(cwd);
+    if (holds_cwd)
+        return mx_fail(st, MX_EINPUT, "%s: is the current folder (or holds it), which an output folder cannot be; give another",
+                       given);
+    for (int i = 0; i < ninputs; i++)
+        if (inputs[i] && file_within(inputs[i], od->dir))
+            return mx_fail(st, MX_EINPUT, "%s: holds the input %s, which an output folder cannot; give another", given,
+                           inputs[i]);
+    return 0;
+}
+
+/* Is `name` one of the lines of the marker text? */
+static int marker_lists(const char *marker, const char *name) {
+    size_t n = strlen(name);
+    for (const char *p = strstr(marker, name); p; p = strstr(p + 1, name))
+        if (p > marker && p[-1] == '\n' && p[n] == '\n') return 1;
+    return 0;
+}
+
+/* --force replaces only what matex wrote: a folder with the marker, every entry of which is a plain
+ * file the marker lists. Anything else (an older matex's output included) is refused, with why. */
+static int check_written_by_matex(const char *dir, const char *given, mx_status *st) {
+    char path[4200];
+    snprintf(path, sizeof path, "%s/%s", dir, MX_OUTDIR_MARKER);
+    mx_status ignored;
+    char *marker = mx_read_file(path, MARKER_MAX_BYTES, NULL, &ignored);
+    if (!marker || strncmp(marker, MARKER_HEADER, strlen(MARKER_HEADER))) {
+        free(marker);
+        return mx_fail(st, MX_EINPUT,
+                       "%s: was not written by matex (no %s in it): --force replaces only a folder of matex's own output; "
+                       "empty it yourself or give another folder",
+                       given, MX_OUTDIR_MARKER);
+    }
+    DIR *d = opendir(dir);
+    if (!d) {
+        free(marker);
+        return mx_fail(st, MX_EIO, "%s: cannot read folder: %s", given, strerror(errno));
+    }
+    int rc = 0;
+    struct dirent *e;
+    while (!rc && (e = readdir(d)) != NULL) {
+        if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..") || !strcmp(e->d_name, MX_OUTDIR_MARKER)) continue;
+        struct stat sb;
+        int is_file = fstatat(dirfd(d), e->d_name, &sb, AT_SYMLINK_NOFOLLOW) == 0 && S_ISREG(sb.st_mode);
+        if (!is_file || !marker_lists(marker, e->d_name))
+            rc = mx_fail(st, MX_EINPUT,
+                         "%s: holds %s, which matex did not write there: --force replaces only a folder of matex's own "
+                         "output; move it away or give another folder",
+                         given, e->d_name);
+    }
+    closedir(d);
+    free(marker);
+    return rc;
+}
+
+int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const *inputs, int ninputs, mx_status *st) {
     memset(od, 0, sizeof *od);
     if (!dir || !*dir) return mx_fail(st, MX_EUSAGE, "no output folder given");
     if (resolve_dir(od, dir, st)) return -1;
+    if (od->exists && check_holds_nothing_needed(od, dir, inputs, ninputs, st)) return -1;
     int content = od->exists ? folder_content(od->dir, st) : 0;
     if (content < 0) return -1;
     if (content && !force)
@@ -104,6 +195,7 @@ int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st) {
     if (content == 2)
         return mx_fail(st, MX_EINPUT, "%s: holds sub-folders; --force replaces only a folder of files (an earlier output)",
                        dir);
+    if (content && check_written_by_matex(od->dir, dir, st)) return -1;
     int n = snprintf(od->stage, sizeof od->stage, "%s.partial-%ld", od->dir, (long)getpid());
     if (n < 0 || (size_t)n >= sizeof od->stage) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
     if (make_parents(od->dir, st)) return -1;
@@ -116,6 +208,25 @@ int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st) {
         return -1;
     }
     return 0;
+}
+
+/* The marker, listing every file of the staging folder: written last, so a folder holding it is complete. */
+static int write_marker(const mx_outdir *od, mx_status *st) {
+    DIR *d = opendir(od->stage);
+    if (!d) return mx_fail(st, MX_EIO, "%s: cannot read folder: %s", od->stage, strerror(errno));
+    mx_buf b = {0};
+    mx_buf_printf(&b, "%s", MARKER_HEADER);
+    struct dirent *e;
+    while ((e = readdir(d)) != NULL)
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..") && strcmp(e->d_name, MX_OUTDIR_MARKER))
+            mx_buf_printf(&b, "%s\n", e->d_name);
+    closedir(d);
+    char path[4300];
+    int rc = b.oom ? mx_fail(st, MX_ENOMEM, "%s: out of memory", od->stage)
+                   : mx_path_join(path, sizeof path, od->stage, MX_OUTDIR_MARKER, st) ||
+                         mx_atomic_write(path, b.p, b.len, st);
+    mx_buf_free(&b);
+    return rc ? -1 : 0;
 }
 
 void mx_outdir_discard(mx_outdir *od) {
@@ -165,6 +276,10 @@ int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_sta
     if (cancel && *cancel) {
         mx_outdir_discard(od);
         return mx_fail(st, MX_ECANCEL, "interrupted");
+    }
+    if (write_marker(od, st)) {
+        mx_outdir_discard(od);
+        return -1;
     }
     if (od->exists) return replace_existing(od, st);
     if (rename(od->stage, od->dir)) {

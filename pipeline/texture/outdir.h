@@ -1,15 +1,18 @@
 /* The output folder of a run, checked and staged before any expensive work, so that a failure
  * or an interrupt at any moment leaves either what was there before or the complete new folder:
  *   mx_outdir_open: resolves DIR (a link to a folder is followed), refuses a path that is not a
- *     folder, a non-empty folder unless force, and (even with force) a folder holding sub-folders,
- *     which no earlier output does; creates missing parents and the staging
+ *     folder, the current folder (or one holding it), a folder holding one of the run's inputs,
+ *     and a non-empty folder unless force; even with force it replaces only a folder that matex
+ *     wrote: one with the marker file MX_OUTDIR_MARKER, every entry of which is a file the marker
+ *     lists (so never a sub-folder, a user's file, the input mesh or the weights). Creates missing
+ *     parents and the staging
  *     folder "DIR.partial-PID" beside DIR (same file system, so the final move cannot be
  *     cross-device): an unwritable location fails at once, not after the generation;
  *   mx_outdir_commit: writes the files into the staging folder, then puts it in place with one
  *     rename (DIR missing or empty) or one atomic exchange (--force over a non-empty DIR; its old
  *     content is then removed);
  *   mx_outdir_publish: the same move for a staging folder filled by the caller (files written
- *     into od->stage, e.g. by matex render);
+ *     into od->stage, e.g. by matex render); both write the marker, listing the staged files, last;
  *   mx_outdir_discard: removes the staging folder (after a failure or an interrupt). */
 #ifndef MX_OUTDIR_H
 #define MX_OUTDIR_H
@@ -27,7 +30,13 @@ typedef struct mx_outdir {
     int staged;       /* the staging folder exists */
 } mx_outdir;
 
-int mx_outdir_open(mx_outdir *od, const char *dir, int force, mx_status *st);
+/* The file that marks a folder as matex's output: a first line saying so, then the names of the
+ * files matex wrote there, one a line. */
+#define MX_OUTDIR_MARKER ".matex-output"
+
+/* inputs[0..ninputs-1]: the files the run reads (mesh, weights, textures; NULL entries skipped):
+ * a folder holding one of them is never an output folder. */
+int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const *inputs, int ninputs, mx_status *st);
 /* cancel (may be NULL) is checked once more after the files are written, before the move. */
 int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
                      const volatile sig_atomic_t *cancel, mx_status *st);
