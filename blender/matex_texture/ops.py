@@ -18,10 +18,12 @@ def _show(context, j):
     wm.progress_update(int(100 * j.fraction))
     if context.workspace is not None:
         context.workspace.status_text_set(j.status)
-    for window in wm.windows:
+    for window in wm.windows:  # the sidebars only: redrawing the viewports each poll would be costly
         for area in window.screen.areas:
             if area.type == "VIEW_3D":
-                area.tag_redraw()
+                for region in area.regions:
+                    if region.type == "UI":
+                        region.tag_redraw()
 
 
 def _end(context, op, j):
