@@ -54,6 +54,11 @@ def smart_uv_project(context, obj):
             bpy.ops.mesh.select_all(action="SELECT")
             bpy.ops.uv.smart_project(island_margin=0.02)
             bpy.ops.object.mode_set(mode="OBJECT")
+    except RuntimeError:
+        if obj.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        mesh.uv_layers.remove(mesh.uv_layers[name])
+        raise
     finally:
         view_layer.objects.active = previous
     _restore_select_state(mesh, selection)
@@ -82,7 +87,7 @@ class Job:
     """mode: "texture", "enhance" or "transfer". Call start(), then poll() until it returns
     True; cancel() may come at any time."""
 
-    def __init__(self, context, obj, mode, settings, matex):
+    def __init__(self, obj, mode, settings, matex):
         self.obj, self.mode, self.s, self.matex = obj, mode, settings, matex
         # saved beside the .blend only once there is one; packed until then
         self.storage = settings.storage if bpy.data.filepath else "PACK"

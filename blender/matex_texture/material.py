@@ -123,17 +123,21 @@ def apply_textures(obj, uv_name, slot_pngs, storage):
     "PACK" (into the .blend) or "SAVE" (textures/ beside the saved .blend). Returns the
     materials."""
     per_slot = len(set(slot_pngs.values())) > 1
+    names = {slot: "matex %s %d" % (obj.name, slot) if per_slot else "matex %s" % obj.name for slot in slot_pngs}
+    images = {}  # every image first: a file that fails to load leaves the materials as they were
+    for slot, png in sorted(slot_pngs.items()):
+        if png not in images:
+            mat = bpy.data.materials.get(names[slot])
+            tex = mat.node_tree.nodes.get(TEX_NODE) if mat and mat.node_tree else None
+            images[png] = _load_image(png, names[slot], storage, tex.image if tex else None)
     if not obj.material_slots:
         obj.data.materials.append(None)
-    made, loaded = [], {}
+    made = []
     for slot, png in sorted(slot_pngs.items()):
-        name = "matex %s %d" % (obj.name, slot) if per_slot else "matex %s" % obj.name
-        mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+        mat = bpy.data.materials.get(names[slot]) or bpy.data.materials.new(names[slot])
         mat.use_nodes = True
-        if png not in loaded:
-            tex = mat.node_tree.nodes.get(TEX_NODE)
-            loaded[png] = _load_image(png, name, storage, tex.image if tex else None)
-        _link_nodes(mat, uv_name, loaded[png])
+        _link_nodes(mat, uv_name, images[png])
+        images[png].name = names[slot]  # the replaced image is gone now: take its name, not "<name>.001"
         obj.material_slots[slot].material = mat
         if mat not in made:
             made.append(mat)

@@ -55,7 +55,7 @@ class _MatexRunOperator:
         if matex is None:
             self.report({"ERROR"}, "matex not found: put it on PATH or set its path in the add-on's preferences")
             return None
-        j = job.Job(context, context.active_object, self.mode, context.scene.matex, matex)
+        j = job.Job(context.active_object, self.mode, context.scene.matex, matex)
         try:
             j.start(context)
         except (ValueError, OSError, RuntimeError) as e:
@@ -92,6 +92,15 @@ class _MatexRunOperator:
             return {"RUNNING_MODAL"}
         context.window_manager.event_timer_remove(self._timer)
         return _end(context, self, self._job)
+
+    def cancel(self, context):
+        """Blender ends the modal operator itself (a file is loaded, the window closes): stop
+        matex and put the object back before its data may go away."""
+        context.window_manager.event_timer_remove(self._timer)
+        self._job.cancel()
+        self._job.run.wait(timeout=60)
+        self._job.poll()
+        context.window_manager.progress_end()
 
 
 class MATEX_OT_texture(_MatexRunOperator, bpy.types.Operator):

@@ -268,7 +268,8 @@ def test_enhance_and_transfer(s, obj):
     check("enhance finished: %s" % err, res == {"FINISHED"})
     image = tex_image(obj.material_slots[0].material)
     check("enhance replaced the image", image is not None and pixels(image) != old)
-    check("enhance kept one image in the file", sum(1 for i in bpy.data.images if i.name.startswith("matex Suzanne")) == 1)
+    check("enhance: the material's one image, same name",
+          [i.name for i in bpy.data.images if i.name.startswith("matex Suzanne")] == ["matex Suzanne"])
     copy = add_monkey("Copy", (0, 0, 0), uv=False)
     s.transfer_source = obj
     extra, s.extra_args = s.extra_args, "--candidates 8"  # transfer has no networks: no --image-size
@@ -291,7 +292,7 @@ def test_cancel(s):
     steps, extra = s.steps, s.extra_args
     s.steps, s.extra_args = 50, "--image-size 128 --render-size 512 --candidates 12"
     select_only(obj)
-    j = job.Job(bpy.context, obj, "texture", s, MATEX)
+    j = job.Job(obj, "texture", s, MATEX)
     j.start(bpy.context)
     tmp = j.tmp
     t0 = time.time()
