@@ -167,7 +167,7 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 # each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz, FUZZ_JOBS (2) at a time ----
 FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
 FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
-FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_progress.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
