@@ -105,7 +105,7 @@
 /* The contents of a parenthesised list: MX_SPLICE params is the parameter list of one op. */
 #define MX_SPLICE(...) __VA_ARGS__
 
-/* The number of ops, and the name of each (op names in error messages come from here). */
+/* The number of ops (what tests and messages count). Op names are the list's names (#name). */
 #define MX_OP_ONE_(name, guard, params, args) +1
 enum { MX_OP_COUNT = 0 MX_OPS(MX_OP_ONE_) };
 
