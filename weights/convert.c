@@ -107,15 +107,6 @@ static const mx_net_kind *network_kind(const mx_json *cfg) {
                                                                               : NULL;
 }
 
-/* "A, B or C": the classes convert knows, for the message about an unknown one. */
-static void known_classes(char *buf, size_t cap) {
-    size_t len = 0;
-    buf[0] = 0;
-    for (size_t i = 0; i < mx_net_kind_count && len < cap; i++)
-        len += (size_t)snprintf(buf + len, cap - len, "%s%s", i == 0 ? "" : i + 1 < mx_net_kind_count ? ", " : " or ",
-                                mx_net_kinds[i].class_name);
-}
-
 /* ---- locating weight files ---- */
 
 typedef struct {
@@ -280,7 +271,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
     const mx_net_kind *known = cfg ? network_kind(cfg) : NULL;
     const char *kind = known ? known->name : NULL;
     char classes[256];
-    known_classes(classes, sizeof classes);
+    mx_net_kind_classes(classes, sizeof classes);
     int rc = 0;
     if (!cfg) rc = -1;
     else if (!kind)

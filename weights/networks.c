@@ -1,6 +1,7 @@
 /* The networks a weight file can hold (networks.h). */
 #include "networks.h"
 
+#include <stdio.h>
 #include <string.h>
 
 const mx_net_kind mx_net_kinds[] = {
@@ -22,4 +23,12 @@ const mx_net_kind *mx_net_kind_of_class(const char *class_name) {
     for (size_t i = 0; class_name && i < mx_net_kind_count; i++)
         if (!strcmp(mx_net_kinds[i].class_name, class_name)) return &mx_net_kinds[i];
     return NULL;
+}
+
+void mx_net_kind_classes(char *buf, size_t cap) {
+    size_t len = 0;
+    buf[0] = 0;
+    for (size_t i = 0; i < mx_net_kind_count && len < cap; i++)
+        len += (size_t)snprintf(buf + len, cap - len, "%s%s", i == 0 ? "" : i + 1 < mx_net_kind_count ? ", " : " or ",
+                                mx_net_kinds[i].class_name);
 }

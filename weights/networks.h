@@ -23,5 +23,7 @@ extern const size_t mx_net_kind_count;
 /* The entry of that name / class, or NULL. */
 const mx_net_kind *mx_net_kind_named(const char *name);
 const mx_net_kind *mx_net_kind_of_class(const char *class_name);
+/* "A, B, ... or E": the known classes, for a message about an unknown one (cut at cap). */
+void mx_net_kind_classes(char *buf, size_t cap);
 
 #endif

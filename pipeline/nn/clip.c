@@ -166,3 +166,60 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
     mx_arena_reset(arena, mark);
     return 0;
 }
+
+/* ---- the registry's entry points (registry.h) ---- */
+
+int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st) {
+    mx_clip_config cfg;
+    if (mx_clip_config_parse(&cfg, text, len, what, st)) return -1;
+    mx_clip *m = calloc(1, sizeof *m);
+    if (!m) return mx_fail(st, MX_ENOMEM, "clip: out of memory");
+    *net = m;
+    return mx_clip_load(m, &cfg, b, st);
+}
+
+void mx_clip_destroy(void *net) {
+    if (!net) return;
+    mx_clip_free(net);
+    free(net);
+}
+
+/* run-net clip: input_ids [B,T] -> last_hidden_state, pooler_output, hidden_states.{i}. */
+int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    const mx_clip *m = net;
+    int L = m->cfg.num_hidden_layers, C = m->cfg.hidden_size, rc = -1;
+    int64_t is[2] = {-1, -1};
+    const float *idf = io->host(io, "input_ids", 2, is, st);
+    if (!idf) return -1;
+    int B = (int)is[0], T = (int)is[1];
+    if (T > m->cfg.max_position_embeddings)
+        return mx_fail(st, MX_EINPUT, "%s: input_ids has %d tokens, the model takes at most %d", io->source, T,
+                       m->cfg.max_position_embeddings);
+    float **hs = calloc((size_t)L + 1, sizeof *hs), *last, *pooled;
+    int32_t *ids = malloc((size_t)B * T * sizeof *ids);
+    if (!hs || !ids) {
+        mx_fail(st, MX_ENOMEM, "clip: out of memory");
+        goto done;
+    }
+    for (size_t i = 0; i < (size_t)B * T; i++) ids[i] = (int32_t)idf[i];
+    int64_t hshape[3] = {B, T, C}, pshape[2] = {B, C};
+    if (!(last = io->output(io, "last_hidden_state", 3, hshape, st)) ||
+        !(pooled = io->output(io, "pooler_output", 2, pshape, st)))
+        goto done;
+    for (int i = 0; i <= L; i++) {
+        char name[48];
+        snprintf(name, sizeof name, "hidden_states.%d", i);
+        if (!(hs[i] = io->output(io, name, 3, hshape, st))) goto done;
+    }
+    mx_arena dry, *a;
+    mx_arena_measure(&dry);
+    if (mx_clip_forward(m, c, &dry, ids, B, T, last, pooled, hs, st) ||
+        !(a = io->arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st)) ||
+        mx_clip_forward(m, c, a, ids, B, T, last, pooled, hs, st))
+        goto done;
+    rc = 0;
+done:
+    free(ids);
+    free(hs);
+    return rc;
+}

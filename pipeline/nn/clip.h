@@ -13,6 +13,7 @@
 
 #include "../../ops/ops.h"
 #include "../../runtime/status.h"
+#include "net_io.h"
 #include "params.h"
 #include "transformer.h"
 
@@ -59,5 +60,11 @@ void mx_clip_free(mx_clip *m);
  * sizes the arena). */
 int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const int32_t *ids, int B, int T,
                     float *last_hidden, float *pooled, float **hidden_states, mx_status *st);
+
+/* The registry's entry points (registry.h): config parse + load into a malloc'ed mx_clip, its
+ * free, the run-net adapter. */
+int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
+void mx_clip_destroy(void *net);
+int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
 
 #endif
