@@ -15,15 +15,16 @@ static void controlnet_free(void *n) { mx_controlnet_free(n); }
 static void vae_free(void *n) { mx_vae_free(n); }
 static void taesd_free(void *n) { mx_taesd_free(n); }
 
-#define CONDITIONING "sample [B,C,H,W], timestep [B] or [1] (I64, I32 or F32), encoder_hidden_states [B,T,D]"
+#define CONDITIONING "sample [B,C,H,W], timestep [B] or [1] (I64, I32 or F32),\n               encoder_hidden_states [B,T,D]"
 
 const mx_net_def mx_nets[] = {
     {.kind = "unet", .load = mx_unet_load_config, .free = unet_free,
-     .verbs = {{"unet", CONDITIONING ",\n    optional down_block_res_sample.{i} and mid_block_res_sample -> out",
+     .verbs = {{"unet", CONDITIONING ",\n               optional down_block_res_sample.{i} and mid_block_res_sample -> out",
                 mx_unet_run_io}}},
     {.kind = "controlnet", .load = mx_controlnet_load_config, .free = controlnet_free,
-     .verbs = {{"controlnet", CONDITIONING ", controlnet_cond [B,3,8H,8W],\n    conditioning_scale (one float, "
-                              "default 1) -> down_block_res_sample.{i}, mid_block_res_sample",
+     .verbs = {{"controlnet", "sample, timestep, encoder_hidden_states (as unet), controlnet_cond [B,3,8H,8W],\n"
+                              "               conditioning_scale (one float, default 1)\n"
+                              "               -> down_block_res_sample.{i}, mid_block_res_sample",
                 mx_controlnet_run_io}}},
     {.kind = "vae", .fp32_under_bf16 = 1, .load = mx_vae_load_config, .free = vae_free,
      .verbs = {{"vae-encode", "image [B,3,H,W] in [-1,1] -> mean, logvar", mx_vae_run_encode_io},

@@ -27,7 +27,8 @@ typedef int (*mx_net_run_fn)(const mx_ctx *c, const void *net, mx_net_io *io, mx
 
 typedef struct mx_net_verb {
     const char *name; /* "vae-decode": the run-net NET */
-    const char *help; /* its tensors, "latents [B,4,h,w] (unscaled) -> image" */
+    const char *help; /* its tensors, "latents [B,4,h,w] (unscaled) -> image" (lines after the first
+                         indented by 15 spaces, under the usage's column) */
     mx_net_run_fn run;
 } mx_net_verb;
 
