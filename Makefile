@@ -211,6 +211,12 @@ TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
+# Every repository path named in the docs and the code exists (tools/check_paths.sh; under a
+# second; `make test` runs it as tests/cli_check_paths.sh).
+.PHONY: check
+check:
+	sh tools/check_paths.sh .
+
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: $(TEST_DEPS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
