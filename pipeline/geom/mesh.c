@@ -9,6 +9,7 @@
 
 #include "../../runtime/log.h"
 #include "../io/io.h"
+#include "filekind.h"
 #include "gltf.h"
 #include "image.h"
 
@@ -47,6 +48,8 @@ static int has_ext(const char *path, const char *ext) {
 }
 
 int mx_mesh_load(const char *path, mx_mesh *m, mx_status *st) {
+    memset(m, 0, sizeof *m);
+    if (mx_mesh_check_file(path, st)) return -1;
     int rc = has_ext(path, "gltf") || has_ext(path, "glb") ? mx_gltf_load(path, m, st) : mx_io_read_mesh(path, m, st);
     if (rc) return -1;
     if (mx_mesh_validate(m, st)) {
@@ -103,9 +106,13 @@ int mx_mesh_validate(const mx_mesh *m, mx_status *st) {
     const char *src = m->source_path[0] ? m->source_path : "mesh";
     if (m->nverts <= 0 || m->nfaces <= 0 || !m->pos || !m->faces)
         return mx_fail(st, MX_EINPUT, "%s: empty mesh (%d vertices, %d faces)", src, m->nverts, m->nfaces);
-    for (size_t i = 0; i < (size_t)m->nverts * 3; i++)
+    for (size_t i = 0; i < (size_t)m->nverts * 3; i++) {
         if (!isfinite(m->pos[i]))
-            return mx_fail(st, MX_EINPUT, "%s: vertex %zu has a NaN or infinite coordinate", src, i / 3);
+            return mx_fail(st, MX_EINPUT, "%s: vertex %zu has a non-finite coordinate", src, i / 3);
+        if (fabsf(m->pos[i]) > MX_MESH_MAX_COORD)
+            return mx_fail(st, MX_EINPUT, "%s: vertex %zu: coordinate out of range (%g; at most %g in magnitude)", src,
+                           i / 3, (double)m->pos[i], MX_MESH_MAX_COORD);
+    }
     if (check_index_list(m, m->faces, m->nverts, 0, "vertex", st)) return -1;
     if (m->face_uv && (!m->uv || check_index_list(m, m->face_uv, m->nuv, 1, "uv", st))) {
         if (!m->uv) return mx_fail(st, MX_EINPUT, "%s: face UV indices without UVs", src);

@@ -24,8 +24,13 @@ int mx_mesh_load(const char *path, mx_mesh *m, mx_status *st);
  * glTF (buffer view or data: URI). Free each with mx_image_free. */
 int mx_mesh_load_textures(const mx_mesh *m, struct mx_image *tex, mx_status *st);
 
-/* Empty mesh, NaN/Inf positions, vertex/UV/normal/material indices out of range -> error
- * naming m->source_path. UV index -1 (a face without vt in an OBJ) is allowed. */
+/* Positions beyond this magnitude are refused: the bounding box, normals and areas of the
+ * geometry stages square and sum coordinates in float (3e38 overflowed into an atlas of
+ * infinite size). 1e15 is far beyond any real unit (a light-day is 2.6e13 m). */
+#define MX_MESH_MAX_COORD 1e15
+
+/* Empty mesh, NaN/Inf or out-of-range positions, vertex/UV/normal/material indices out of
+ * range -> error naming m->source_path. UV index -1 (a face without vt in an OBJ) is allowed. */
 int mx_mesh_validate(const mx_mesh *m, mx_status *st);
 
 /* Up axis of the input: y (glTF/OBJ default) or z (CAD, scans). Rendering works y-up. */
