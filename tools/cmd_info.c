@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "../pipeline/geom/mesh.h"
+#include "../runtime/buf.h"
 #include "../runtime/log.h"
 #include "../weights/wfinfo.h"
 #include "cli.h"
@@ -34,14 +35,10 @@ static int count_faces_with(const mx_mesh *m, const int32_t *idx) {
 static const char *presence(int with, int total) { return with == 0 ? "no" : with == total ? "yes" : "partial"; }
 
 static void json_str(FILE *out, const char *s) {
-    fputc('"', out);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\') fprintf(out, "\\%c", c);
-        else if (c < 0x20) fprintf(out, "\\u%04x", c);
-        else fputc(c, out);
-    }
-    fputc('"', out);
+    mx_buf b = {0};
+    mx_buf_json_str(&b, s);
+    fputs(b.oom ? "\"\"" : b.p, out);
+    mx_buf_free(&b);
 }
 
 static void print_text(const char *path, const mx_mesh *m, const mesh_stats *s) {
