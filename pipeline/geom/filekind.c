@@ -98,10 +98,10 @@ static int content_fits(const mesh_format *f, const char *kind, int definite) {
     return 0;
 }
 
-int mx_mesh_check_file(const char *path, mx_status *st) {
+int mx_file_kind_of(const char *path, const char *what, const char **kind, int *definite, mx_status *st) {
     struct stat sb;
     if (stat(path, &sb) != 0) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
-    if (S_ISDIR(sb.st_mode)) return mx_fail(st, MX_EINPUT, "%s: is a directory, not a mesh file", path);
+    if (S_ISDIR(sb.st_mode)) return mx_fail(st, MX_EINPUT, "%s: is a directory, not %s", path, what);
     FILE *fp = fopen(path, "rb");
     if (!fp) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
     unsigned char head[512];
@@ -109,8 +109,14 @@ int mx_mesh_check_file(const char *path, mx_status *st) {
     int bad = ferror(fp);
     fclose(fp);
     if (bad) return mx_fail(st, MX_EINPUT, "%s: read error: %s", path, strerror(errno));
+    *kind = mx_file_kind(head, n, (uint64_t)sb.st_size, definite);
+    return 0;
+}
+
+int mx_mesh_check_file(const char *path, mx_status *st) {
+    const char *kind;
     int definite;
-    const char *kind = mx_file_kind(head, n, (uint64_t)sb.st_size, &definite);
+    if (mx_file_kind_of(path, "a mesh file", &kind, &definite, st)) return -1;
     const char *dot = strrchr(path, '.'), *slash = strrchr(path, '/');
     const char *ext_want = ext_of_kind(kind);
     if (!dot || (slash && dot < slash) || !dot[1]) {

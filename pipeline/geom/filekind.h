@@ -14,6 +14,10 @@
  * guesses "text", "JSON text" and "binary data"). */
 const char *mx_file_kind(const unsigned char *head, size_t n, uint64_t file_size, int *definite);
 
+/* What the file at path is (mx_file_kind of its first 512 bytes); a folder ("is a directory,
+ * not <what>") or an unreadable file is an error naming it. */
+int mx_file_kind_of(const char *path, const char *what, const char **kind, int *definite, mx_status *st);
+
 /* The mesh path is a readable file whose extension is a mesh format matex reads
  * (.obj .ply .off .stl .gltf .glb) and whose content is not clearly something else.
  * Otherwise one message naming the file, what it is and what was expected. */
