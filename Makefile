@@ -234,7 +234,7 @@ demo: all $(DEMO_WEIGHTS)
 	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
 	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
 	$(BUILD)/matex render $(DEMO_OUT)/mesh.glb --views 8 --size 256 -o $(DEMO_OUT)/views
-	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, report.json)"
+	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, texture.exr, report.json)"
 	@echo "demo: contact sheet of 8 views in $(CURDIR)/$(DEMO_OUT)/views/contact_sheet.png"
 
 asan:
