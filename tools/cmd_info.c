@@ -5,12 +5,14 @@
 
 #include "../pipeline/geom/mesh.h"
 #include "../runtime/log.h"
+#include "../weights/single_file.h"
 #include "../weights/wfinfo.h"
 #include "cli.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex info [--json] FILE\n\n"
-               "FILE is a mesh (.obj .ply .off .stl .gltf .glb) or a matex weight file.\n"
+               "FILE is a mesh (.obj .ply .off .stl .gltf .glb), a matex weight file, or an SD1.x checkpoint\n"
+               "(.safetensors .ckpt .pt .pth: architecture, networks, dtypes, skipped keys).\n"
                "For a mesh: vertices and triangles as stored (polygons fan-triangulated), UV and normal\n"
                "presence, materials and their textures, and the topology after welding vertices with\n"
                "identical positions: watertightness, boundary and non-manifold edges, components,\n"
@@ -85,6 +87,27 @@ static void print_json(const char *path, const mx_mesh *m, const mesh_stats *s) 
     printf("]}\n");
 }
 
+/* .safetensors, .ckpt, .pt, .pth: a single-file checkpoint (weights/single_file.h). */
+static int is_checkpoint_name(const char *path) {
+    static const char *const ext[] = {".safetensors", ".ckpt", ".pt", ".pth"};
+    size_t n = strlen(path);
+    for (size_t i = 0; i < sizeof ext / sizeof ext[0]; i++)
+        if (n > strlen(ext[i]) && !strcmp(path + n - strlen(ext[i]), ext[i])) return 1;
+    return 0;
+}
+
+static int checkpoint_info(const char *path) {
+    mx_single_file sf;
+    mx_status st;
+    if (mx_sf_open(&sf, path, 0, &st)) {
+        fprintf(stderr, "matex info: %s\n", st.msg);
+        return 1;
+    }
+    mx_sf_print_info(&sf, stdout);
+    mx_sf_close(&sf);
+    return 0;
+}
+
 static int mesh_info(const char *path, int json) {
     mx_mesh m;
     mx_status st;
@@ -142,6 +165,13 @@ int cmd_info(int argc, char **argv) {
             return 1;
         }
         return 0;
+    }
+    if (is_checkpoint_name(file)) {
+        if (json) {
+            fprintf(stderr, "matex info: --json is for meshes; %s is a checkpoint\n", file);
+            return 2;
+        }
+        return checkpoint_info(file);
     }
     return mesh_info(file, json);
 }
