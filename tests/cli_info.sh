@@ -47,4 +47,12 @@ check "weight file dispatch exits 1" [ "$(rc_of "$M" info "$T/w.mxw")" = 1 ]
 check "weight file error names it" grep -q "w.mxw" "$T/err"
 check "weight file --json exits 2" [ "$(rc_of "$M" info --json "$T/w.mxw")" = 2 ]
 
+# Single-file checkpoints: what they hold; a hostile one is refused.
+check "checkpoint info" [ "$(rc_of "$M" info tests/fuzz/seeds/ckpt/model.ckpt)" = 0 ]
+check "checkpoint container" grep -q "^container: *PyTorch zip" "$T/out"
+check "checkpoint networks" grep -q "^network: *text_encoder" "$T/out"
+check "checkpoint schedule" grep -q "alphas_cumprod matches" "$T/out"
+check "hostile checkpoint exits 1" [ "$(rc_of "$M" info tests/fuzz/seeds/ckpt/eval.ckpt)" = 1 ]
+check "hostile checkpoint message" grep -q "builtins.eval" "$T/err"
+
 exit $fail

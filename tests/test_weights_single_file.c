@@ -566,6 +566,48 @@ static void test_hostile(void) {
     expect_refused(p, 0, "legacy format");
 }
 
+/* Fuzz seeds (tests/fuzz/seeds/ckpt): the tiny model and ControlNet with every dimension shrunk to 1
+ * (conv_in keeps its 4 channels, the hint its 3), as torch.save zips, plus the hostile files. */
+static void shrink(ckpt *c) {
+    static const uint16_t zeros[64];
+    for (size_t i = 0; i < c->n; i++) {
+        mx_st_tensor *t = &c->t[i];
+        if (t->dtype == MX_ST_I64 || !strcmp(t->name, "alphas_cumprod")) continue;
+        int keep = strstr(t->name, "input_blocks.0.0.weight") || strstr(t->name, "input_hint_block.0.weight");
+        for (int d = 0; d < t->ndim; d++)
+            if (!(keep && d == 1)) t->shape[d] = 1;
+        t->dtype = MX_ST_F16;
+        t->nbytes = keep ? (size_t)t->shape[1] * 2 : 2;
+        t->data = zeros;
+    }
+}
+
+static void write_seeds(const char *dir) {
+    static const char *const hostile[] = {"os_system.ckpt", "eval.ckpt", "extent.ckpt", "huge.ckpt", "bomb.ckpt", "cycle.ckpt", "good.ckpt"};
+    ckpt *m = calloc(1, sizeof *m), *cn = calloc(1, sizeof *cn);
+    add_golden(m, "unet_tiny/diffusion_pytorch_model.safetensors", MX_LDM_UNET, &unet_tiny, "model.diffusion_model.");
+    add_golden(m, "vae_tiny/diffusion_pytorch_model.safetensors", MX_LDM_VAE, &vae_tiny, "first_stage_model.");
+    add_golden(m, "clip_tiny/model.safetensors", MX_LDM_CLIP, &clip_tiny, "cond_stage_model.transformer.");
+    add_extras(m, 0.012);
+    add_golden(cn, "controlnet_tiny/diffusion_pytorch_model.safetensors", MX_LDM_CONTROLNET, &cn_tiny, "control_model.");
+    shrink(m);
+    shrink(cn);
+    char p[700];
+    snprintf(p, sizeof p, "%s/model.ckpt", dir);
+    CHECK(mx_test_write_torchzip(p, m->t, m->n, 1) == 0);
+    snprintf(p, sizeof p, "%s/control.pth", dir);
+    CHECK(mx_test_write_torchzip(p, cn->t, cn->n, 0) == 0);
+    for (size_t i = 0; i < sizeof hostile / sizeof hostile[0]; i++) {
+        char cmd[1600];
+        snprintf(cmd, sizeof cmd, "cp %s/%s %s/", tmp, hostile[i], dir);
+        CHECK(system(cmd) == 0);
+    }
+    ckpt_free(m);
+    ckpt_free(cn);
+    free(m);
+    free(cn);
+}
+
 int main(void) {
     snprintf(tmp, sizeof tmp, "/tmp/mx_test_single_file_XXXXXX");
     if (!mkdtemp(tmp)) return 1;
@@ -577,6 +619,7 @@ int main(void) {
     test_ema();
     test_other_architectures();
     test_hostile();
+    if (getenv("MX_WRITE_CKPT_SEEDS")) write_seeds(getenv("MX_WRITE_CKPT_SEEDS"));
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);

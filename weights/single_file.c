@@ -64,7 +64,8 @@ static int max_index(const mx_single_file *sf, const char *prefix, const char *h
 }
 
 static void note_skipped(mx_single_file *sf, const char *name) {
-    if (!sf->skipped++) snprintf(sf->skipped_example, sizeof sf->skipped_example, "%s", name);
+    sf->skipped++;
+    if (!sf->skipped_example[0]) snprintf(sf->skipped_example, sizeof sf->skipped_example, "%s", name);
 }
 
 /* ---- architecture ---- */
@@ -141,6 +142,7 @@ static int unet_config(mx_single_file *sf, const char *pre, mx_ldm_net net, cons
         size_t n = strlen(s);
         if (starts(s, pre) && n > 17 && !strcmp(s + n - 17, "attn2.to_k.weight")) ctx = dim(&sf->src.tensors[i], 1);
     }
+    if (net == MX_LDM_UNET) sf->sd15_sizes = ch[0] == 320 && ctx == 768;
     mx_buf_printf(b, "{\"_class_name\": \"%s\", \"matex_source\": \"single file\"",
                   net == MX_LDM_UNET ? "UNet2DConditionModel" : "ControlNetModel");
     put_int_list(b, "block_out_channels", ch, l->levels);
@@ -406,8 +408,8 @@ static const char *dtype_name(mx_st_dtype d) {
 }
 
 void mx_sf_print_info(const mx_single_file *sf, FILE *out) {
-    fprintf(out, "file:         %s\ncontainer:    %s\narchitecture: Stable Diffusion 1.x layout\n", sf->src.path,
-            sf->container);
+    fprintf(out, "file:         %s\ncontainer:    %s\narchitecture: Stable Diffusion 1.x%s\n", sf->src.path,
+            sf->container, sf->sd15_sizes ? " (SD1.5 sizes)" : " layout");
     fprintf(out, "tensors:      %zu\n", sf->src.count);
     for (size_t k = 0; k < sf->n_nets; k++) {
         const mx_sf_net *n = &sf->nets[k];

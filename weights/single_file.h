@@ -35,6 +35,7 @@ typedef struct mx_single_file {
     int has_ema;          /* the file carries an EMA copy of the UNet */
     int used_ema;
     int schedule_checked; /* alphas_cumprod was present and matched */
+    int sd15_sizes;       /* the UNet has SD1.5's sizes (320 channels first, 768-wide cross-attention) */
 } mx_single_file;
 
 /* Whether path is a regular file (not a diffusers folder). */
