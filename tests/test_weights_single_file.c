@@ -620,6 +620,11 @@ int main(void) {
     test_other_architectures();
     test_hostile();
     if (getenv("MX_WRITE_CKPT_SEEDS")) write_seeds(getenv("MX_WRITE_CKPT_SEEDS"));
+    if (getenv("MX_WRITE_CKPT_TINY")) { /* the tiny fp32 checkpoints, for tests/cli_run_net.sh */
+        char cmd[1200];
+        snprintf(cmd, sizeof cmd, "cp %s/model.ckpt %s/control.pth %s/", tmp, tmp, getenv("MX_WRITE_CKPT_TINY"));
+        CHECK(system(cmd) == 0);
+    }
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmp);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", tmp);
