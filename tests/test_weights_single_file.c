@@ -413,6 +413,52 @@ static void test_ema(void) {
     free(c);
 }
 
+static int convert_vae(const char *input, const char *vae, const char *out, mx_status *st) {
+    mx_convert_opts o;
+    memset(&o, 0, sizeof o);
+    o.input = input;
+    o.vae = vae;
+    o.output = out;
+    o.dtype = MX_F32;
+    unlink(out);
+    int rc = mx_convert(&o, NULL, st);
+    if (rc) fprintf(stderr, "convert --vae %s: %s\n", vae, st->msg);
+    return rc;
+}
+
+/* --vae: a VAE file of its own (LDM names with a training-loss tensor beside them, values negated
+ * so that the replacement shows) replaces the model file's VAE; a diffusers-named file too. */
+static void test_vae(void) {
+    ckpt *c = calloc(1, sizeof *c);
+    add_golden(c, "vae_tiny/diffusion_pytorch_model.safetensors", MX_LDM_VAE, &vae_tiny, "");
+    for (size_t i = 0; i < c->n; i++) {
+        float *d = ckpt_own(c, c->t[i].nbytes);
+        const float *s = c->t[i].data;
+        for (size_t j = 0; j < c->t[i].nbytes / 4; j++) d[j] = -s[j];
+        c->t[i].data = d;
+    }
+    int64_t one = 1;
+    ckpt_add(c, "loss.logvar", MX_ST_F32, 1, &one, c->t[0].data, 4);
+    char vae[600], model[600], out[600], ref_vae[600], ref_unet[600], golden_vae[700];
+    in_tmp(vae, sizeof vae, "vae-ft.safetensors");
+    in_tmp(model, sizeof model, "model.safetensors");
+    in_tmp(out, sizeof out, "vae.mxw");
+    in_tmp(ref_vae, sizeof ref_vae, "ref_vae_tiny_f32.mxw");
+    in_tmp(ref_unet, sizeof ref_unet, "ref_unet_tiny_f32.mxw");
+    snprintf(golden_vae, sizeof golden_vae, "%s/vae_tiny/diffusion_pytorch_model.safetensors", golden);
+    CHECK(mx_test_write_safetensors(vae, c->t, c->n) == 0);
+    mx_status st;
+    CHECK(convert_vae(model, vae, out, &st) == 0);
+    compare_net(out, ref_vae, "vae", 1);
+    compare_net(out, ref_unet, "unet", 0);
+    CHECK(convert_vae(NULL, golden_vae, out, &st) == 0);
+    compare_net(out, ref_vae, "vae", 0);
+    in_tmp(vae, sizeof vae, "control.pth"); /* a file without a VAE */
+    CHECK(convert_vae(NULL, vae, out, &st) != 0 && strstr(st.msg, "no VAE found"));
+    ckpt_free(c);
+    free(c);
+}
+
 /* ---- refusals ---- */
 
 static void expect_refused(const char *file, int controlnet, const char *fragment) {
@@ -617,6 +663,7 @@ int main(void) {
     test_model_files(0);
     test_model_files(1);
     test_ema();
+    test_vae();
     test_other_architectures();
     test_hostile();
     if (getenv("MX_WRITE_CKPT_SEEDS")) write_seeds(getenv("MX_WRITE_CKPT_SEEDS"));

@@ -29,6 +29,8 @@ static void convert_usage(FILE *f) {
             "  --variant fp16           read the *.fp16.safetensors files (used anyway when only they exist)\n"
             "  --controlnet NAME=PATH   add a ControlNet as controlnet_NAME.* (repeatable; NAME in [a-z0-9_]);\n"
             "                           PATH: a folder or a ControlNet v1.0/v1.1 file (.pth or .safetensors)\n"
+            "  --vae PATH               replace the model's VAE: a VAE file (LDM or diffusers names, e.g.\n"
+            "                           vae-ft-mse-840000-ema-pruned.safetensors) or an AutoencoderKL folder\n"
             "  --ema                    single file: take the EMA copy of the UNet (default: the non-EMA weights)\n"
             "  --tokenizer DIR          CLIP vocabulary (vocab.json, merges.txt) for a single file (default:\n"
             "                           the copy installed with matex, share/matex/tokenizer)\n"
@@ -73,7 +75,7 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         int takes = !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--dtype") ||
                     !strcmp(arg, "--variant") || !strcmp(arg, "--controlnet") || !strcmp(arg, "--lora") ||
                     !strcmp(arg, "--lora-scale") || !strcmp(arg, "--lcm-lora") || !strcmp(arg, "--taesd") ||
-                    !strcmp(arg, "--tokenizer");
+                    !strcmp(arg, "--tokenizer") || !strcmp(arg, "--vae");
         if (takes && !val) return usage_error("missing value after", arg);
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
             convert_usage(stdout);
@@ -100,6 +102,8 @@ static int parse_args(int argc, char **argv, convert_args *a) {
             a->o.loras[a->o.n_loras++].scale = 1.0f;
         } else if (!strcmp(arg, "--taesd")) {
             a->o.taesd = val;
+        } else if (!strcmp(arg, "--vae")) {
+            a->o.vae = val;
         } else if (!strcmp(arg, "--tokenizer")) {
             a->o.tokenizer = val;
         } else if (!strcmp(arg, "--ema")) {
@@ -122,7 +126,7 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         if (takes) i++;
     }
     if (!a->o.output) return usage_error("no output file (-o OUT.mxw)", NULL);
-    if (!a->o.input && a->o.n_controlnets == 0 && !a->o.taesd) return usage_error("no INPUT folder or checkpoint file", NULL);
+    if (!a->o.input && a->o.n_controlnets == 0 && !a->o.taesd && !a->o.vae) return usage_error("no INPUT folder or checkpoint file", NULL);
     return -1;
 }
 

@@ -99,7 +99,9 @@ static int is_checkpoint_name(const char *path) {
 static int checkpoint_info(const char *path) {
     mx_single_file sf;
     mx_status st;
-    if (mx_sf_open(&sf, path, 0, &st)) {
+    mx_status st_vae;
+    /* a VAE file of its own (vae-ft-mse-...) holds none of a model's networks */
+    if (mx_sf_open(&sf, path, 0, &st) && mx_sf_open(&sf, path, MX_SF_VAE_ONLY, &st_vae)) {
         fprintf(stderr, "matex info: %s\n", st.msg);
         return 1;
     }

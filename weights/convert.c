@@ -355,6 +355,7 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
     for (int i = 0; i < 4; i++) {
         if (mx_path_join(dir, sizeof dir, root, subs[i], st)) return -1;
         if (!is_dir(dir)) continue;
+        if (cv->o->vae && !strcmp(subs[i], "vae")) continue; /* replaced by --vae */
         if (add_network(cv, dir, subs[i], subs[i], st)) return -1;
         found++;
     }
@@ -394,23 +395,25 @@ static int add_single_net(converter *cv, const mx_single_file *sf, const mx_sf_n
     return 0;
 }
 
-/* A single-file checkpoint: its networks under their kinds, or only its ControlNet under
- * controlnet_prefix. The CLIP vocabulary comes from o->tokenizer. */
-static int add_single_file(converter *cv, const char *path, const char *controlnet_prefix, mx_status *st) {
+/* A single-file checkpoint: its networks under their kinds (the VAE left out when --vae replaces
+ * it), or with only = MX_SF_CONTROLNET_ONLY or MX_SF_VAE_ONLY that one network under `prefix`. The
+ * CLIP vocabulary comes from o->tokenizer. */
+static int add_single_file(converter *cv, const char *path, int only, const char *prefix, mx_status *st) {
     mx_single_file *sf = calloc(1, sizeof *sf);
     if (!sf) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
-    int flags = (cv->o->ema ? MX_SF_EMA : 0) | (controlnet_prefix ? MX_SF_CONTROLNET_ONLY : 0);
+    int flags = (cv->o->ema && !only ? MX_SF_EMA : 0) | only;
     if (mx_sf_open(sf, path, flags, st)) {
         free(sf);
         return -1;
     }
     cv->singles[cv->n_singles++] = sf;
-    if (cv->o->ema && !sf->has_ema) return mx_fail(st, MX_EUSAGE, "%s: --ema: the file has no EMA copy", path);
+    if ((flags & MX_SF_EMA) && !sf->has_ema) return mx_fail(st, MX_EUSAGE, "%s: --ema: the file has no EMA copy", path);
     int has_clip = 0;
     for (size_t k = 0; k < sf->n_nets; k++) {
         const mx_sf_net *n = &sf->nets[k];
         has_clip |= !strcmp(n->kind, "text_encoder");
-        if (add_single_net(cv, sf, n, controlnet_prefix ? controlnet_prefix : n->kind, st)) return -1;
+        if (!only && cv->o->vae && !strcmp(n->kind, "vae")) continue;
+        if (add_single_net(cv, sf, n, only ? prefix : n->kind, st)) return -1;
     }
     if (sf->skipped) mx_info("convert: %s: %zu entries skipped (e.g. %s)", path, sf->skipped, sf->skipped_example);
     if (has_clip && cv->o->tokenizer) return add_tokenizer(cv, cv->o->tokenizer, st);
@@ -428,7 +431,7 @@ static int valid_controlnet_name(const char *s) {
 static int convert_inputs(converter *cv, mx_status *st) {
     const mx_convert_opts *o = cv->o;
     if (o->input && mx_sf_is_file(o->input)) {
-        if (add_single_file(cv, o->input, NULL, st)) return -1;
+        if (add_single_file(cv, o->input, 0, NULL, st)) return -1;
     } else if (o->input) {
         char cfg[PATH_MAX];
         if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder or a checkpoint file", o->input);
@@ -440,10 +443,13 @@ static int convert_inputs(converter *cv, mx_status *st) {
         if (!valid_controlnet_name(o->controlnets[i].name))
             return mx_fail(st, MX_EUSAGE, "--controlnet %s: the name must be 1-32 of [a-z0-9_]", o->controlnets[i].name);
         snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
-        if (mx_sf_is_file(o->controlnets[i].dir) ? add_single_file(cv, o->controlnets[i].dir, prefix, st)
+        if (mx_sf_is_file(o->controlnets[i].dir) ? add_single_file(cv, o->controlnets[i].dir, MX_SF_CONTROLNET_ONLY, prefix, st)
                                                  : add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st))
             return -1;
     }
+    if (o->vae && (mx_sf_is_file(o->vae) ? add_single_file(cv, o->vae, MX_SF_VAE_ONLY, "vae", st)
+                                         : add_network(cv, o->vae, "vae", "vae", st)))
+        return -1;
     if (o->taesd && add_network(cv, o->taesd, "taesd", "taesd", st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;

@@ -26,6 +26,7 @@ typedef struct mx_convert_opts {
     } controlnets[MX_CONVERT_MAX_EXTRA];
     const char *taesd;  /* AutoencoderTiny folder -> taesd.*, or NULL */
     int ema;            /* single-file checkpoints: take the EMA copy of the UNet */
+    const char *vae;    /* a VAE replacing the model's: a single file (single_file.h) or an AutoencoderKL folder */
     const char *tokenizer; /* folder with vocab.json + merges.txt for single files (no tokenizer/), or NULL */
     size_t n_loras;
     struct {

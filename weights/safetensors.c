@@ -247,6 +247,8 @@ void mx_st_close(mx_safetensors *f) {
     memset(f, 0, sizeof *f);
 }
 
+void mx_st_sort(mx_safetensors *f) { qsort(f->tensors, f->count, sizeof *f->tensors, cmp_tensor_name); }
+
 const mx_st_tensor *mx_st_find(const mx_safetensors *f, const char *name) {
     size_t lo = 0, hi = f->count;
     while (lo < hi) {

@@ -224,6 +224,12 @@ static int skipped_in_part(mx_ldm_net net, const char *name) {
     return net == MX_LDM_CLIP && strstr(name, "position_ids") != NULL;
 }
 
+/* The tensors of a VAE file of its own: the autoencoder's, not its training loss (loss.*). */
+static int in_bare_vae(const char *name) {
+    return starts(name, "encoder.") || starts(name, "decoder.") || starts(name, "quant_conv.") ||
+           starts(name, "post_quant_conv.");
+}
+
 static int add_net_tensor(mx_single_file *sf, mx_sf_net *out, const part *p, const char *pre, const mx_ldm_layout *l,
                           const mx_st_tensor *t, int flags, mx_status *st) {
     char dname[NAME_MAX_LEN];
@@ -266,6 +272,7 @@ static int add_part(mx_single_file *sf, const part *p, const char *pre, int flag
     for (size_t i = 0; i < sf->src.count; i++) {
         const mx_st_tensor *t = &sf->src.tensors[i];
         if (strncmp(t->name, pre, pl)) continue;
+        if (!pl && p->net == MX_LDM_VAE && !in_bare_vae(t->name)) continue;
         if (skipped_in_part(p->net, t->name)) {
             note_skipped(sf, t->name);
             continue;
@@ -349,16 +356,45 @@ static int open_container(mx_single_file *sf, const char *path, mx_status *st) {
     return mx_st_open(&sf->src, path, st);
 }
 
+/* A VAE file in diffusers names: renamed to the LDM layout in place (attention projections back
+ * to 1x1 convolutions), so that one path reads both. */
+static int rename_diffusers_vae(mx_single_file *sf, mx_status *st) {
+    mx_ldm_layout l = {.levels = max_index(sf, "", "encoder.down_blocks.") + 1};
+    for (size_t i = 0; i < sf->src.count; i++) {
+        mx_st_tensor *t = &sf->src.tensors[i];
+        char ldm[NAME_MAX_LEN];
+        if (!in_bare_vae(t->name)) continue;
+        if (mx_diffusers_to_ldm(MX_LDM_VAE, &l, t->name, ldm, sizeof ldm))
+            return mx_fail(st, MX_EINPUT, "%s: tensor '%s' is not part of an SD1.x VAE", sf->src.path, t->name);
+        if (mx_ldm_vae_attn_linear(t->name) && t->ndim == 2) {
+            t->ndim = 4;
+            t->shape[2] = t->shape[3] = 1;
+        }
+        char *name = strdup(ldm);
+        if (!name) return mx_fail(st, MX_ENOMEM, "%s: out of memory", sf->src.path);
+        free(t->name);
+        t->name = name;
+    }
+    mx_st_sort(&sf->src);
+    return 0;
+}
+
 static int convert_parts(mx_single_file *sf, int flags, mx_status *st) {
     int any_prefixed = 0;
     for (size_t i = 0; i < sizeof parts / sizeof parts[0]; i++) {
         if (!has_prefix(sf, parts[i].prefix)) continue;
         any_prefixed = 1;
         if ((flags & MX_SF_CONTROLNET_ONLY) && parts[i].net != MX_LDM_CONTROLNET) continue;
+        if ((flags & MX_SF_VAE_ONLY) && parts[i].net != MX_LDM_VAE) continue;
         if (add_part(sf, &parts[i], parts[i].prefix, flags, st)) return -1;
     }
     if (!any_prefixed && mx_st_find(&sf->src, "input_hint_block.0.weight")) /* a bare ControlNet */
         return add_part(sf, &parts[1], "", flags, st);
+    if (!any_prefixed && (flags & MX_SF_VAE_ONLY) && mx_st_find(&sf->src, "encoder.down_blocks.0.resnets.0.conv1.weight") &&
+        rename_diffusers_vae(sf, st))
+        return -1;
+    if (!any_prefixed && (flags & MX_SF_VAE_ONLY) && mx_st_find(&sf->src, "encoder.conv_in.weight")) /* a bare VAE */
+        return add_part(sf, &parts[2], "", flags, st);
     return 0;
 }
 
@@ -381,8 +417,9 @@ int mx_sf_open(mx_single_file *sf, const char *path, int flags, mx_status *st) {
     if (!rc) rc = convert_parts(sf, flags, st);
     if (!rc && sf->n_nets == 0)
         rc = mx_fail(st, MX_EINPUT, "%s: no %s found (keys %s)", path,
-                     flags & MX_SF_CONTROLNET_ONLY ? "ControlNet" : "SD1.x networks",
+                     flags & MX_SF_CONTROLNET_ONLY ? "ControlNet" : flags & MX_SF_VAE_ONLY ? "VAE" : "SD1.x networks",
                      flags & MX_SF_CONTROLNET_ONLY ? "control_model.* or input_hint_block.*"
+                     : flags & MX_SF_VAE_ONLY     ? "first_stage_model.*, encoder.*/decoder.* or encoder.down_blocks.*"
                                                    : "model.diffusion_model.*, first_stage_model.*, cond_stage_model.transformer.*");
     if (!rc) {
         count_skipped(sf);

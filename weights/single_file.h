@@ -16,7 +16,10 @@
 #include "../runtime/status.h"
 #include "safetensors.h"
 
-enum { MX_SF_EMA = 1, MX_SF_CONTROLNET_ONLY = 2 };
+/* MX_SF_CONTROLNET_ONLY: only the ControlNet (control_model.* or bare keys). MX_SF_VAE_ONLY: only the
+ * VAE (first_stage_model.*, or a VAE file of its own with LDM names encoder.*, decoder.* or diffusers
+ * names, e.g. vae-ft-mse-840000-ema-pruned). */
+enum { MX_SF_EMA = 1, MX_SF_CONTROLNET_ONLY = 2, MX_SF_VAE_ONLY = 4 };
 
 typedef struct mx_sf_net {
     const char *kind; /* "unet", "controlnet", "vae", "text_encoder" */
