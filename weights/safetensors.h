@@ -32,6 +32,10 @@ typedef struct mx_safetensors {
 } mx_safetensors;
 
 int mx_st_open(mx_safetensors *f, const char *path, mx_status *st);
+/* Maps the whole of PATH read-only into f->map / f->map_len (closed by mx_st_close); a file shorter
+ * than min_len is "not a KIND (N bytes, TOO_SHORT)". */
+int mx_st_map_file(mx_safetensors *f, const char *path, long long min_len, const char *kind, const char *too_short,
+                   mx_status *st);
 void mx_st_close(mx_safetensors *f);
 const mx_st_tensor *mx_st_find(const mx_safetensors *f, const char *name);
 /* Sorts the tensors by name again (after a caller renamed them), as mx_st_find needs. */

@@ -3,15 +3,10 @@
  * extra field), local headers. */
 #include "torchzip.h"
 
-#include <errno.h>
-#include <fcntl.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "pickle.h"
 
@@ -41,22 +36,6 @@ static uint64_t le(const uint8_t *p, int n) {
     uint64_t v = 0;
     for (int i = n - 1; i >= 0; i--) v = (v << 8) | p[i];
     return v;
-}
-
-static int map_file(mx_safetensors *f, const char *path, mx_status *st) {
-    int fd = open(path, O_RDONLY);
-    if (fd < 0) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
-    struct stat sb;
-    if (fstat(fd, &sb) != 0 || !S_ISREG(sb.st_mode) || sb.st_size < 22) {
-        close(fd);
-        return mx_fail(st, MX_EINPUT, "%s: not a zip checkpoint (not a regular file of at least 22 bytes)", path);
-    }
-    void *m = mmap(NULL, (size_t)sb.st_size, PROT_READ, MAP_PRIVATE, fd, 0);
-    close(fd);
-    if (m == MAP_FAILED) return mx_fail(st, MX_EIO, "%s: mmap failed: %s", path, strerror(errno));
-    f->map = m;
-    f->map_len = (size_t)sb.st_size;
-    return 0;
 }
 
 /* Finds the central directory: *cd_off, *cd_size, *count from the (zip64) end record. */
@@ -205,7 +184,7 @@ int mx_torchzip_open(mx_safetensors *f, const char *path, size_t *skipped, mx_st
     memset(f, 0, sizeof *f);
     if (!(f->path = strdup(path))) return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
     zip_archive z = {.path = path};
-    int rc = map_file(f, path, st);
+    int rc = mx_st_map_file(f, path, 22, "zip checkpoint", "a zip needs at least 22", st);
     if (!rc) {
         z.map = f->map;
         z.len = f->map_len;
