@@ -266,7 +266,9 @@ static void compare_config(const char *mxw, const char *key, const char *golden_
                                          "attention_head_dim", "down_block_types", "up_block_types",
                                          "in_channels", "out_channels", "latent_channels",
                                          "conditioning_embedding_out_channels", "hidden_size", "intermediate_size",
-                                         "num_hidden_layers", "vocab_size", "max_position_embeddings"};
+                                         "num_hidden_layers", "vocab_size", "max_position_embeddings",
+                                         "num_encoder_blocks", "num_decoder_blocks", "encoder_block_out_channels",
+                                         "decoder_block_out_channels"};
     mx_weightfile *wf;
     mx_status st;
     char path[700];
@@ -457,6 +459,66 @@ static void test_vae(void) {
     CHECK(convert_vae(NULL, vae, out, &st) != 0 && strstr(st.msg, "no VAE found"));
     ckpt_free(c);
     free(c);
+}
+
+static int convert_taesd(const char *taesd, const char *out, mx_status *st) {
+    mx_convert_opts o;
+    memset(&o, 0, sizeof o);
+    o.taesd = taesd;
+    o.output = out;
+    o.dtype = MX_F32;
+    unlink(out);
+    int rc = mx_convert(&o, NULL, st);
+    if (rc) fprintf(stderr, "convert --taesd %s: %s\n", taesd, st->msg);
+    return rc;
+}
+
+/* --taesd with the original files (taesd.py's Sequential indices), made from the taesd_tiny golden
+ * by the inverse of the renaming: the same tensors and config as the AutoencoderTiny folder. */
+static void test_taesd_files(void) {
+    char path[700], dir[600], enc[700], dec[700], out[600], ref[600];
+    snprintf(path, sizeof path, "%s/taesd_tiny/diffusion_pytorch_model.safetensors", golden);
+    mx_safetensors f;
+    mx_status st;
+    if (mx_st_open(&f, path, &st)) {
+        fprintf(stderr, "%s\n", st.msg);
+        mx_test_failures++;
+        return;
+    }
+    ckpt *e = calloc(1, sizeof *e), *d = calloc(1, sizeof *d);
+    for (size_t i = 0; i < f.count; i++) {
+        const mx_st_tensor *t = &f.tensors[i];
+        int enc_half = !strncmp(t->name, "encoder.layers.", 15);
+        const char *s = t->name + 15; /* "encoder.layers." and "decoder.layers." */
+        char *end, name[256];
+        long k = strtol(s, &end, 10);
+        CHECK(enc_half || !strncmp(t->name, "decoder.layers.", 15));
+        snprintf(name, sizeof name, "%ld%s", enc_half ? k : k + 1, end);
+        ckpt_add(enc_half ? e : d, name, t->dtype, t->ndim, t->shape, t->data, t->nbytes);
+    }
+    in_tmp(dir, sizeof dir, "taesd_orig");
+    mkdir(dir, 0755);
+    snprintf(enc, sizeof enc, "%s/taesd_encoder.safetensors", dir);
+    snprintf(dec, sizeof dec, "%s/taesd_decoder.pth", dir);
+    CHECK(mx_test_write_safetensors(enc, e->t, e->n) == 0);
+    CHECK(mx_test_write_torchzip(dec, d->t, d->n, 0) == 0);
+    in_tmp(out, sizeof out, "taesd.mxw");
+    in_tmp(ref, sizeof ref, "ref_taesd.mxw");
+    snprintf(path, sizeof path, "%s/taesd_tiny", golden);
+    CHECK(convert_taesd(path, ref, &st) == 0);
+    const char *given[2] = {dec, dir};
+    for (int g = 0; g < 2; g++) {
+        CHECK(convert_taesd(given[g], out, &st) == 0);
+        compare_net(out, ref, "taesd", 0);
+        compare_config(out, "taesd.config", "taesd_tiny/config.json");
+    }
+    unlink(enc); /* the decoder alone is not enough: the encoder is named */
+    CHECK(convert_taesd(dec, out, &st) != 0 && strstr(st.msg, "taesd_encoder.* and taesd_decoder.*"));
+    ckpt_free(e);
+    ckpt_free(d);
+    free(e);
+    free(d);
+    mx_st_close(&f);
 }
 
 /* ---- refusals ---- */
@@ -664,6 +726,7 @@ int main(void) {
     test_model_files(1);
     test_ema();
     test_vae();
+    test_taesd_files();
     test_other_architectures();
     test_hostile();
     if (getenv("MX_WRITE_CKPT_SEEDS")) write_seeds(getenv("MX_WRITE_CKPT_SEEDS"));

@@ -17,6 +17,7 @@
 #include "lora.h"
 #include "safetensors.h"
 #include "single_file.h"
+#include "taesd_file.h"
 #include "weights.h"
 
 #define CONVERTER_VERSION "matex-convert 1"
@@ -402,7 +403,7 @@ static int add_single_file(converter *cv, const char *path, int only, const char
     mx_single_file *sf = calloc(1, sizeof *sf);
     if (!sf) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
     int flags = (cv->o->ema && !only ? MX_SF_EMA : 0) | only;
-    if (mx_sf_open(sf, path, flags, st)) {
+    if (only == MX_SF_TAESD ? mx_taesd_files_open(sf, path, st) : mx_sf_open(sf, path, flags, st)) {
         free(sf);
         return -1;
     }
@@ -450,7 +451,10 @@ static int convert_inputs(converter *cv, mx_status *st) {
     if (o->vae && (mx_sf_is_file(o->vae) ? add_single_file(cv, o->vae, MX_SF_VAE_ONLY, "vae", st)
                                          : add_network(cv, o->vae, "vae", "vae", st)))
         return -1;
-    if (o->taesd && add_network(cv, o->taesd, "taesd", "taesd", st)) return -1;
+    int taesd_files = o->taesd && (mx_sf_is_file(o->taesd) || mx_taesd_files_given(o->taesd));
+    if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
+                                 : add_network(cv, o->taesd, "taesd", "taesd", st)))
+        return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }

@@ -339,21 +339,22 @@ static int has_prefix(const mx_single_file *sf, const char *pre) {
     return 0;
 }
 
-static int open_container(mx_single_file *sf, const char *path, mx_status *st) {
+int mx_sf_open_tensors(mx_safetensors *src, const char *path, const char **container, size_t *skipped,
+                       mx_status *st) {
     FILE *f = fopen(path, "rb");
     unsigned char head[8] = {0};
     size_t n = f ? fread(head, 1, sizeof head, f) : 0;
     if (f) fclose(f);
     if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open", path);
     if (mx_torchzip_is_zip(head, n)) {
-        sf->container = "PyTorch zip";
-        return mx_torchzip_open(&sf->src, path, &sf->skipped, st);
+        *container = "PyTorch zip";
+        return mx_torchzip_open(src, path, skipped, st);
     }
     if (n >= 2 && head[0] == 0x80 && head[1] <= 5)
         return mx_fail(st, MX_EINPUT, "%s: a PyTorch checkpoint in the legacy format (before PyTorch 1.6), which "
                        "matex does not read; use its .safetensors copy", path);
-    sf->container = "safetensors";
-    return mx_st_open(&sf->src, path, st);
+    *container = "safetensors";
+    return mx_st_open(src, path, st);
 }
 
 /* A VAE file in diffusers names: renamed to the LDM layout in place (attention projections back
@@ -411,7 +412,7 @@ static void count_skipped(mx_single_file *sf) {
 
 int mx_sf_open(mx_single_file *sf, const char *path, int flags, mx_status *st) {
     memset(sf, 0, sizeof *sf);
-    int rc = open_container(sf, path, st);
+    int rc = mx_sf_open_tensors(&sf->src, path, &sf->container, &sf->skipped, st);
     if (!rc) rc = refuse_other_models(sf, st);
     if (!rc) rc = check_schedule(sf, st);
     if (!rc) rc = convert_parts(sf, flags, st);
@@ -435,6 +436,7 @@ void mx_sf_close(mx_single_file *sf) {
         free(sf->nets[k].tensors);
         free(sf->nets[k].config);
     }
+    mx_st_close(&sf->aux);
     mx_st_close(&sf->src);
     memset(sf, 0, sizeof *sf);
 }

@@ -19,7 +19,7 @@
 /* MX_SF_CONTROLNET_ONLY: only the ControlNet (control_model.* or bare keys). MX_SF_VAE_ONLY: only the
  * VAE (first_stage_model.*, or a VAE file of its own with LDM names encoder.*, decoder.* or diffusers
  * names, e.g. vae-ft-mse-840000-ema-pruned). */
-enum { MX_SF_EMA = 1, MX_SF_CONTROLNET_ONLY = 2, MX_SF_VAE_ONLY = 4 };
+enum { MX_SF_EMA = 1, MX_SF_CONTROLNET_ONLY = 2, MX_SF_VAE_ONLY = 4, MX_SF_TAESD = 8 /* taesd_file.h */ };
 
 typedef struct mx_sf_net {
     const char *kind; /* "unet", "controlnet", "vae", "text_encoder" */
@@ -30,6 +30,7 @@ typedef struct mx_sf_net {
 
 typedef struct mx_single_file {
     mx_safetensors src; /* the file's own tensors (LDM names), mapped */
+    mx_safetensors aux; /* the TAESD encoder file beside the decoder (taesd_file.h), else empty */
     const char *container; /* "safetensors" or "PyTorch zip" */
     mx_sf_net nets[4];
     size_t n_nets;
@@ -41,6 +42,10 @@ typedef struct mx_single_file {
     int sd15_sizes;       /* the UNet has SD1.5's sizes (320 channels first, 768-wide cross-attention) */
 } mx_single_file;
 
+/* The tensors of a .safetensors file or a PyTorch zip checkpoint (by its first bytes), as they are
+ * named; *container gets "safetensors" or "PyTorch zip", *skipped the non-tensor entries. */
+int mx_sf_open_tensors(mx_safetensors *src, const char *path, const char **container, size_t *skipped,
+                       mx_status *st);
 /* Whether path is a regular file (not a diffusers folder). */
 int mx_sf_is_file(const char *path);
 int mx_sf_open(mx_single_file *sf, const char *path, int flags, mx_status *st);
