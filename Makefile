@@ -272,6 +272,9 @@ install: all
 	install -D -m 644 $(LIBMATEX) $(DESTDIR)$(PREFIX)/lib/libmatex.a
 	install -D -m 644 $(LIB_IO) $(DESTDIR)$(PREFIX)/lib/libmatex_io.a
 	install -D -m 644 include/matex.h $(DESTDIR)$(PREFIX)/include/matex.h
+	# the CLIP vocabulary (MIT, OpenAI) for single-file checkpoints, which carry none (matex convert)
+	for f in vocab.json merges.txt LICENSE; do \
+	    install -D -m 644 tests/data/golden/tokenizer/$$f $(DESTDIR)$(PREFIX)/share/matex/tokenizer/$$f; done
 	@mkdir -p $(DESTDIR)$(PREFIX)/lib/pkgconfig
 	printf 'prefix=%s\nlibdir=$${prefix}/lib\nincludedir=$${prefix}/include\n\nName: matex\nDescription: %s\nVersion: %s\nCflags: -I$${includedir}\nLibs: %s\n' \
 	    '$(PREFIX)' 'text-to-texture for 3D meshes (Make-A-Texture)' \

@@ -56,4 +56,12 @@ check "its JSON has the size" grep -q '"width":64,"height":64,"channels":3,"min"
 check "info of a folder exits 1" [ "$(rc_of "$M" info "$T/img")" = 1 ]
 check "and says it is a directory" grep -q "img: is a directory" "$T/err"
 
+# Single-file checkpoints: what they hold; a hostile one is refused.
+check "checkpoint info" [ "$(rc_of "$M" info tests/fuzz/seeds/ckpt/model.ckpt)" = 0 ]
+check "checkpoint container" grep -q "^container: *PyTorch zip" "$T/out"
+check "checkpoint networks" grep -q "^network: *text_encoder" "$T/out"
+check "checkpoint schedule" grep -q "alphas_cumprod matches" "$T/out"
+check "hostile checkpoint exits 1" [ "$(rc_of "$M" info tests/fuzz/seeds/ckpt/eval.ckpt)" = 1 ]
+check "hostile checkpoint message" grep -q "builtins.eval" "$T/err"
+
 exit $fail

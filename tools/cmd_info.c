@@ -8,14 +8,16 @@
 #include "../pipeline/io/io.h"
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
+#include "../weights/single_file.h"
 #include "../weights/wfinfo.h"
 #include "cli.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex info [--json] FILE\n\n"
-               "FILE is a mesh (.obj .ply .off .stl .gltf .glb), an image (PNG, JPEG, EXR, ...) or a matex\n"
-               "weight file. For an image: its size, channels and each channel's min, mean and max (0..1\n"
-               "for 8-bit files).\n"
+               "FILE is a mesh (.obj .ply .off .stl .gltf .glb), an image (PNG, JPEG, EXR, ...), a matex\n"
+               "weight file, or an SD1.x checkpoint (.safetensors .ckpt .pt .pth: architecture, networks,\n"
+               "dtypes, skipped keys). For an image: its size, channels and each channel's min, mean and max\n"
+               "(0..1 for 8-bit files).\n"
                "For a mesh: vertices and triangles as stored (polygons fan-triangulated), UV and normal\n"
                "presence, materials and their textures, and the topology after welding vertices with\n"
                "identical positions: watertightness, boundary and non-manifold edges, components,\n"
@@ -127,6 +129,29 @@ static int image_info(const char *path, int json) {
     return 0;
 }
 
+/* .safetensors, .ckpt, .pt, .pth: a single-file checkpoint (weights/single_file.h). */
+static int is_checkpoint_name(const char *path) {
+    static const char *const ext[] = {".safetensors", ".ckpt", ".pt", ".pth"};
+    size_t n = strlen(path);
+    for (size_t i = 0; i < sizeof ext / sizeof ext[0]; i++)
+        if (n > strlen(ext[i]) && !strcmp(path + n - strlen(ext[i]), ext[i])) return 1;
+    return 0;
+}
+
+static int checkpoint_info(const char *path) {
+    mx_single_file sf;
+    mx_status st;
+    mx_status st_vae;
+    /* a VAE file of its own (vae-ft-mse-...) holds none of a model's networks */
+    if (mx_sf_open(&sf, path, 0, &st) && mx_sf_open(&sf, path, MX_SF_VAE_ONLY, &st_vae)) {
+        fprintf(stderr, "matex info: %s\n", st.msg);
+        return 1;
+    }
+    mx_sf_print_info(&sf, stdout);
+    mx_sf_close(&sf);
+    return 0;
+}
+
 static int mesh_info(const char *path, int json) {
     mx_mesh m;
     mx_status st;
@@ -185,10 +210,17 @@ int cmd_info(int argc, char **argv) {
         }
         return 0;
     }
+    if (is_checkpoint_name(file)) {
+        if (json) {
+            fprintf(stderr, "matex info: --json is for meshes and images; %s is a checkpoint\n", file);
+            return 2;
+        }
+        return checkpoint_info(file);
+    }
     const char *kind;
     int definite;
     mx_status st;
-    if (mx_file_kind_of(file, "a mesh, an image or a weight file", &kind, &definite, &st)) {
+    if (mx_file_kind_of(file, "a mesh, an image, a weight file or a checkpoint", &kind, &definite, &st)) {
         fprintf(stderr, "matex info: %s\n", st.msg);
         return 1;
     }
