@@ -19,7 +19,11 @@ typedef struct bp_scratch {
     int32_t *counts;          /* [nchunks][nbins] then write offsets */
     int32_t *bin_start;       /* [nbins + 1] */
     struct splat_rec *recs;   /* records grouped by bin, in pixel order */
-    float *view_q;            /* [nlayers][h][w] this view's best |n.v| per texel */
+    float *view_w;            /* [nlayers][h][w] this view's splat weight per texel */
+    float *view_wc;           /* [nlayers][h][w][3] this view's sum(w colour) */
+    float *view_q;            /* [nlayers][h][w] this view's best |n.v| */
+    uint8_t *hole;            /* [nlayers][h][w] 1: an aliasing hole of this view, filled from its neighbours */
+    uint8_t *claim;           /* [nlayers][h][w] this view's raw claim on known texels, 0..255 */
     struct splat_rec *staged; /* [image pixels]: chunk c's records from its first pixel on */
     int32_t *nstaged;         /* [nchunks] */
 } bp_scratch;
@@ -52,7 +56,11 @@ void mx_bake_free(mx_bake *b) {
         free(s->counts);
         free(s->bin_start);
         free(s->recs);
+        free(s->view_w);
+        free(s->view_wc);
         free(s->view_q);
+        free(s->hole);
+        free(s->claim);
         free(s->staged);
         free(s->nstaged);
         free(s);
@@ -209,70 +217,227 @@ static int splat_texels(const splat_rec *sp, int w, int h, int r0, int r1, size_
     return n;
 }
 
-/* Better-angle overwrite: texels this view sees clearly better than their writers are
- * restarted (sums cleared, out of T^B) before the splat. */
-static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32_t k0, int32_t k1) {
-    mx_bake *b = j->b;
-    float *vq = j->s->view_q;
-    for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++) vq[t] = 0;
-    for (int32_t k = k0; k < k1; k++) {
-        const splat_rec *r = &j->s->recs[k];
-        size_t tex[4];
-        float wt[4];
-        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
-        for (int e = 0; e < n; e++)
-            if (r->q > vq[plane + tex[e]]) vq[plane + tex[e]] = r->q;
-    }
-    for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++)
-        if (b->known[t] && vq[t] > b->quality[t] + b->overwrite_margin) {
-            b->known[t] = 0;
-            b->sum_w[t] = 0;
-            b->sum_wc[3 * t] = b->sum_wc[3 * t + 1] = b->sum_wc[3 * t + 2] = 0;
-            b->quality[t] = 0;
-        }
-}
+/* Each view is first splatted into its own accumulators (view_w, view_wc, view_q), then merged
+ * into the bake texel by texel (issue 24 item 2: no screen-door stipple where views overlap):
+ * - aliasing holes: where the view's pixels are coarser than the texels (a surface seen at a
+ *   slant, or a texture finer than the render), bilinear splats leave single texels with no or
+ *   little weight inside the view's footprint (runs of up to 2-3 texels at the slant the frontal
+ *   filter allows); they would be painted by a later view, its texels in a grid over this
+ *   one. A texel without a full share (weight <= eps) surrounded by texels that have one
+ *   (within HOLE_TEXELS on its left, right, above and below) takes their mean (weights and
+ *   colours), as if splatted by them;
+ * - texels not in T^B take the view's splat (added to what they had);
+ * - texels in T^B (angle-aware, MX_BACKPROJECT_OVERWRITE) blend towards the view by its claim:
+ *   the claim rises from 0 to 1 as the view's |n.v| exceeds the texel's quality by
+ *   overwrite_margin -/+ CLAIM_RAMP / 2, and is then averaged over the texels the view reaches
+ *   within FEATHER_TEXELS, so the source of a texel changes over a feathered border instead of
+ *   texel by texel (an isolated claim is averaged away, as is an isolated refusal); a texel
+ *   between the view's pixels takes their mean colour. The texel keeps its weight: only its
+ *   colour and quality move. */
+#define CLAIM_RAMP 0.1f
+#define FEATHER_TEXELS 2
+#define HOLE_TEXELS 3
 
-/* Adds one texel's share of a splat (skipping texels in T^B before this view, which were
- * written by an earlier view). */
-static inline void splat_texel(mx_bake *b, size_t plane, size_t t, float wt, const splat_rec *r) {
-    t += plane;
-    if (wt <= 0 || b->known[t]) return;
-    b->sum_w[t] += wt;
-    b->sum_wc[3 * t] += wt * r->col[0];
-    b->sum_wc[3 * t + 1] += wt * r->col[1];
-    b->sum_wc[3 * t + 2] += wt * r->col[2];
-    if (r->q > b->quality[t]) b->quality[t] = r->q;
-}
-
-static void splat_band_task(void *ctx, int task, int thread) {
+/* Pass 1, one bin: the view's splats of its rows, in pixel order. */
+static void splat_view_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
     mx_bake *b = j->b;
+    bp_scratch *s = j->s;
     int layer = task / j->nbands, band = task % j->nbands;
     int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
-    size_t plane = (size_t)layer * b->w * b->h;
-    int32_t k0 = j->s->bin_start[task], k1 = j->s->bin_start[task + 1];
-    if (k0 == k1) return;
-    if (j->flags & MX_BACKPROJECT_OVERWRITE) restart_better_texels(j, plane, r0, r1, k0, k1);
-    /* the texels in the order of splat_texels: row y0 (x0, x1), then row y1 (x0, x1) */
+    size_t plane = (size_t)layer * b->w * b->h, t0 = plane + (size_t)r0 * b->w, t1 = plane + (size_t)r1 * b->w;
+    int32_t k0 = s->bin_start[task], k1 = s->bin_start[task + 1];
+    if (k0 == k1) return; /* an empty bin is never read (bin_empty) */
+    memset(s->view_w + t0, 0, (t1 - t0) * sizeof *s->view_w);
+    memset(s->view_wc + 3 * t0, 0, 3 * (t1 - t0) * sizeof *s->view_wc);
+    memset(s->view_q + t0, 0, (t1 - t0) * sizeof *s->view_q);
     for (int32_t k = k0; k < k1; k++) {
-        const splat_rec *r = &j->s->recs[k];
-        int x0 = r->x0, x1 = x0 + 1 == b->w ? 0 : x0 + 1;
-        int y0 = r->y0, y1 = y0 + 1 == b->h ? 0 : y0 + 1;
-        float wy0 = 1 - r->fy, wx0 = 1 - r->fx;
-        if (y0 >= r0 && y0 < r1) {
-            splat_texel(b, plane, (size_t)y0 * b->w + x0, wy0 * wx0, r);
-            splat_texel(b, plane, (size_t)y0 * b->w + x1, wy0 * r->fx, r);
-        }
-        if (y1 >= r0 && y1 < r1) {
-            splat_texel(b, plane, (size_t)y1 * b->w + x0, r->fy * wx0, r);
-            splat_texel(b, plane, (size_t)y1 * b->w + x1, r->fy * r->fx, r);
+        const splat_rec *r = &s->recs[k];
+        size_t tex[4];
+        float wt[4];
+        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
+        for (int e = 0; e < n; e++) {
+            size_t t = plane + tex[e];
+            s->view_w[t] += wt[e];
+            s->view_wc[3 * t] += wt[e] * r->col[0];
+            s->view_wc[3 * t + 1] += wt[e] * r->col[1];
+            s->view_wc[3 * t + 2] += wt[e] * r->col[2];
+            if (r->q > s->view_q[t]) s->view_q[t] = r->q;
         }
     }
-    uint8_t *known = b->known + plane;
-    const float *sw = b->sum_w + plane;
-    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++)
-        known[t] = (uint8_t)(known[t] | (sw[t] > b->eps));
+}
+
+static int bin_empty(const bp_job *j, int layer, int y) {
+    int bin = layer * j->nbands + y / BAND_ROWS;
+    return j->s->bin_start[bin] == j->s->bin_start[bin + 1];
+}
+
+/* The view's weight at texel (x, y) of a layer; 0 outside the texture or in an empty bin. */
+static float view_weight(const bp_job *j, int layer, int x, int y) {
+    const mx_bake *b = j->b;
+    if (x < 0 || y < 0 || x >= b->w || y >= b->h || bin_empty(j, layer, y)) return 0.0f;
+    return j->s->view_w[(size_t)layer * b->w * b->h + (size_t)y * b->w + x];
+}
+
+/* A texel that the view reaches with a full share. */
+static int reached(const bp_job *j, int layer, int x, int y) { return view_weight(j, layer, x, y) > j->b->eps; }
+
+/* Pass 2, one bin: marks the aliasing holes (reads only the view's weights): texels without a
+ * full share that have reached texels within HOLE_TEXELS on their left and on their right, above
+ * and below (surrounded; a texel beside a straight border of the footprint is not). */
+static void mark_holes_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    const mx_bake *b = j->b;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    if (bin_empty(j, layer, r0)) return;
+    uint8_t *hole = j->s->hole + (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            int left = 0, right = 0, up = 0, down = 0;
+            if (!reached(j, layer, x, y))
+                for (int v = y - HOLE_TEXELS; v <= y + HOLE_TEXELS; v++)
+                    for (int u = x - HOLE_TEXELS; u <= x + HOLE_TEXELS; u++) {
+                        if (!reached(j, layer, u, v)) continue;
+                        left |= u < x;
+                        right |= u > x;
+                        up |= v < y;
+                        down |= v > y;
+                    }
+            hole[(size_t)y * b->w + x] = (uint8_t)(left && right && up && down);
+        }
+}
+
+/* The raw claim (0..255) of the view on a texel from its best |n.v| there. */
+static uint8_t texel_claim(const bp_job *j, size_t t) {
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    if (!(j->flags & MX_BACKPROJECT_OVERWRITE) || !b->known[t] || !(s->view_w[t] > b->eps)) return 0;
+    float gain = s->view_q[t] - b->quality[t];
+    float c = (gain - (b->overwrite_margin - 0.5f * CLAIM_RAMP)) / CLAIM_RAMP;
+    c = c < 0 ? 0 : c > 1 ? 1 : c;
+    return (uint8_t)lroundf(255.0f * c);
+}
+
+/* Reached, and not a hole (holes are written by pass 3 while it reads this). */
+static int reached_solid(const bp_job *j, int layer, int x, int y) {
+    const mx_bake *b = j->b;
+    if (x < 0 || y < 0 || x >= b->w || y >= b->h || bin_empty(j, layer, y)) return 0;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    return !j->s->hole[t] && j->s->view_w[t] > b->eps;
+}
+
+/* A hole takes the mean of the reached texels within HOLE_TEXELS (weights, colours; the best
+ * |n.v| among them): as if their pixels had splatted into it. Other holes, filled in the same
+ * pass, are not read. */
+static void fill_hole(const bp_job *j, int layer, int x, int y) {
+    const mx_bake *b = j->b;
+    bp_scratch *s = j->s;
+    size_t plane = (size_t)layer * b->w * b->h, t = plane + (size_t)y * b->w + x;
+    float w = 0, wc[3] = {0, 0, 0}, q = 0;
+    int n = 0;
+    for (int v = y - HOLE_TEXELS; v <= y + HOLE_TEXELS; v++)
+        for (int u = x - HOLE_TEXELS; u <= x + HOLE_TEXELS; u++) {
+            if (!reached_solid(j, layer, u, v)) continue;
+            size_t o = plane + (size_t)v * b->w + u;
+            w += s->view_w[o];
+            for (int c = 0; c < 3; c++) wc[c] += s->view_wc[3 * o + c];
+            if (s->view_q[o] > q) q = s->view_q[o];
+            n++;
+        }
+    s->view_w[t] = w / (float)n;
+    for (int c = 0; c < 3; c++) s->view_wc[3 * t + c] = wc[c] / (float)n;
+    s->view_q[t] = q;
+}
+
+/* Pass 3, one bin: fills the holes from the reached texels around (not holes, so not written
+ * in this pass), then the raw claims. */
+static void fill_holes_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    const mx_bake *b = j->b;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    if (bin_empty(j, layer, r0)) return;
+    size_t plane = (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            size_t t = plane + (size_t)y * b->w + x;
+            if (j->s->hole[t]) fill_hole(j, layer, x, y);
+            j->s->claim[t] = texel_claim(j, t);
+        }
+}
+
+/* What the view offers a texel in T^B, from the reached texels within FEATHER_TEXELS: the mean
+ * of their claims (the feathered claim), and the colour and |n.v| of the texel's own splat, or
+ * of their mean where the view does not reach the texel itself (its pixels sparser than the
+ * texels). Returns the claim, 0 when there is nothing to take. */
+static float texel_offer(const bp_job *j, int layer, int x, int y, float col[3], float *q) {
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    size_t plane = (size_t)layer * b->w * b->h, t = plane + (size_t)y * b->w + x;
+    float w = 0, wc[3] = {0, 0, 0}, best_q = 0;
+    int n = 0, claim = 0;
+    for (int v = y - FEATHER_TEXELS; v <= y + FEATHER_TEXELS; v++)
+        for (int u = x - FEATHER_TEXELS; u <= x + FEATHER_TEXELS; u++) {
+            if (!reached(j, layer, u, v)) continue;
+            size_t o = plane + (size_t)v * b->w + u;
+            claim += s->claim[o];
+            w += s->view_w[o];
+            for (int c = 0; c < 3; c++) wc[c] += s->view_wc[3 * o + c];
+            if (s->view_q[o] > best_q) best_q = s->view_q[o];
+            n++;
+        }
+    if (n == 0 || claim == 0) return 0.0f;
+    if (reached(j, layer, x, y)) {
+        w = s->view_w[t];
+        for (int c = 0; c < 3; c++) wc[c] = s->view_wc[3 * t + c];
+        best_q = s->view_q[t];
+    }
+    for (int c = 0; c < 3; c++) col[c] = wc[c] / w;
+    *q = best_q;
+    return (float)claim / (255.0f * (float)n);
+}
+
+/* A texel in T^B moves towards the view's colour and |n.v| by `a`. */
+static void blend_texel(mx_bake *b, size_t t, float a, const float col[3], float q) {
+    for (int c = 0; c < 3; c++)
+        b->sum_wc[3 * t + c] += a * (col[c] * b->sum_w[t] - b->sum_wc[3 * t + c]);
+    b->quality[t] += a * (q - b->quality[t]);
+}
+
+/* A texel not in T^B takes the view's splat. */
+static void add_texel(mx_bake *b, const bp_scratch *s, size_t t) {
+    float w = s->view_w[t];
+    b->sum_w[t] += w;
+    for (int c = 0; c < 3; c++) b->sum_wc[3 * t + c] += s->view_wc[3 * t + c];
+    if (s->view_q[t] > b->quality[t]) b->quality[t] = s->view_q[t];
+    b->known[t] = b->sum_w[t] > b->eps;
+}
+
+/* Pass 4, one bin: the merge. */
+static void merge_view_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    if (bin_empty(j, layer, r0)) return;
+    size_t plane = (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            size_t t = plane + (size_t)y * b->w + x;
+            if (!b->known[t]) {
+                if (s->view_w[t] > 0) add_texel(b, s, t);
+                continue;
+            }
+            if (!(j->flags & MX_BACKPROJECT_OVERWRITE)) continue;
+            float col[3], q, a = texel_offer(j, layer, x, y, col, &q);
+            if (a > 0) blend_texel(b, t, a, col, q);
+        }
 }
 
 static int reserve(bp_job *j, mx_status *st) {
@@ -290,10 +455,18 @@ static int reserve(bp_job *j, mx_status *st) {
         s->bin_start = malloc(((size_t)j->nbins + 1) * sizeof *s->bin_start);
         s->bin_cap = s->bin_start ? (size_t)j->nbins + 1 : 0;
     }
-    if ((j->flags & MX_BACKPROJECT_OVERWRITE) && need_q > s->q_cap) {
+    if (need_q > s->q_cap) {
+        free(s->view_w);
+        free(s->view_wc);
         free(s->view_q);
+        free(s->hole);
+        free(s->claim);
+        s->view_w = malloc(need_q * sizeof *s->view_w);
+        s->view_wc = malloc(3 * need_q * sizeof *s->view_wc);
         s->view_q = malloc(need_q * sizeof *s->view_q);
-        s->q_cap = s->view_q ? need_q : 0;
+        s->hole = malloc(need_q);
+        s->claim = malloc(need_q);
+        s->q_cap = s->view_w && s->view_wc && s->view_q && s->hole && s->claim ? need_q : 0;
     }
     if (npix > s->staged_cap) {
         free(s->staged);
@@ -305,8 +478,7 @@ static int reserve(bp_job *j, mx_status *st) {
         s->nstaged = malloc((size_t)j->nchunks * sizeof *s->nstaged);
         s->nstaged_cap = s->nstaged ? (size_t)j->nchunks : 0;
     }
-    if (!s->counts || !s->bin_start || !s->staged || !s->nstaged ||
-        ((j->flags & MX_BACKPROJECT_OVERWRITE) && !s->view_q))
+    if (!s->counts || !s->bin_start || !s->staged || !s->nstaged || !s->q_cap)
         return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     return 0;
 }
@@ -342,7 +514,10 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
         if (!j.s->recs) return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     }
     mx_pool_for(pool, j.nchunks, fill_task, &j);
-    mx_pool_for(pool, j.nbins, splat_band_task, &j);
+    mx_pool_for(pool, j.nbins, splat_view_task, &j);
+    mx_pool_for(pool, j.nbins, mark_holes_task, &j);
+    mx_pool_for(pool, j.nbins, fill_holes_task, &j);
+    mx_pool_for(pool, j.nbins, merge_view_task, &j);
     return 0;
 }
 

@@ -448,7 +448,7 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
     uint8_t *mask = malloc((size_t)R * R), *open = NULL;
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
     const uint8_t *known = j->bake.known;
-    if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will restart are repainted */
+    if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will take over are repainted */
         if (!(open = malloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size))) {
             free(mask);
             return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");

@@ -83,7 +83,7 @@ typedef struct mx_texture_opts {
     const char *source_path; /* transfer: the textured mesh whose texture moves onto mesh_path */
     int fast;                /* few-step path: LCM scheduler + TAESD encoder/decoder; the weight file must
                                 hold a merged LCM-LoRA (unet.lcm_lora) and taesd.* (texture, enhance) */
-    int first_wins;          /* texture, transfer: 0 = angle-aware writes (default; a later view restarts
+    int first_wins;          /* texture, transfer: 0 = angle-aware writes (default; a later view repaints
                                 texels it sees with |n.v| higher by 0.15), 1 = the first writer keeps them */
     float background[3];     /* transfer: colour behind the source in its renders (0, 0, 0) */
     int through_model_image; /* transfer: each render goes through the model image (crop, image_size, back) */
