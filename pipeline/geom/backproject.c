@@ -329,27 +329,43 @@ static int reached_solid(const bp_job *j, int layer, int x, int y) {
     return !j->s->hole[t] && j->s->view_w[t] > b->eps;
 }
 
+/* The view's splats summed over the texels within `radius` of (x, y) that it reaches (holes
+ * excluded with `solid`, in pass 3): weights, colours, the best |n.v|, their count and (not
+ * `solid`, pass 4) their raw claims. */
+typedef struct window_sum {
+    float w, wc[3], q;
+    int claim, n;
+} window_sum;
+
+static window_sum sum_window(const bp_job *j, int layer, int x, int y, int radius, int solid) {
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    size_t plane = (size_t)layer * b->w * b->h;
+    window_sum a = {.w = 0};
+    for (int v = y - radius; v <= y + radius; v++)
+        for (int u = x - radius; u <= x + radius; u++) {
+            if (solid ? !reached_solid(j, layer, u, v) : !reached(j, layer, u, v)) continue;
+            size_t o = plane + (size_t)v * b->w + u;
+            a.w += s->view_w[o];
+            for (int c = 0; c < 3; c++) a.wc[c] += s->view_wc[3 * o + c];
+            if (s->view_q[o] > a.q) a.q = s->view_q[o];
+            if (!solid) a.claim += s->claim[o]; /* pass 3 writes the claims while filling holes */
+            a.n++;
+        }
+    return a;
+}
+
 /* A hole takes the mean of the reached texels within HOLE_TEXELS (weights, colours; the best
  * |n.v| among them): as if their pixels had splatted into it. Other holes, filled in the same
  * pass, are not read. */
 static void fill_hole(const bp_job *j, int layer, int x, int y) {
     const mx_bake *b = j->b;
     bp_scratch *s = j->s;
-    size_t plane = (size_t)layer * b->w * b->h, t = plane + (size_t)y * b->w + x;
-    float w = 0, wc[3] = {0, 0, 0}, q = 0;
-    int n = 0;
-    for (int v = y - HOLE_TEXELS; v <= y + HOLE_TEXELS; v++)
-        for (int u = x - HOLE_TEXELS; u <= x + HOLE_TEXELS; u++) {
-            if (!reached_solid(j, layer, u, v)) continue;
-            size_t o = plane + (size_t)v * b->w + u;
-            w += s->view_w[o];
-            for (int c = 0; c < 3; c++) wc[c] += s->view_wc[3 * o + c];
-            if (s->view_q[o] > q) q = s->view_q[o];
-            n++;
-        }
-    s->view_w[t] = w / (float)n;
-    for (int c = 0; c < 3; c++) s->view_wc[3 * t + c] = wc[c] / (float)n;
-    s->view_q[t] = q;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    window_sum a = sum_window(j, layer, x, y, HOLE_TEXELS, 1);
+    s->view_w[t] = a.w / (float)a.n;
+    for (int c = 0; c < 3; c++) s->view_wc[3 * t + c] = a.wc[c] / (float)a.n;
+    s->view_q[t] = a.q;
 }
 
 /* Pass 3, one bin: fills the holes from the reached texels around (not holes, so not written
@@ -377,28 +393,17 @@ static void fill_holes_task(void *ctx, int task, int thread) {
 static float texel_offer(const bp_job *j, int layer, int x, int y, float col[3], float *q) {
     const mx_bake *b = j->b;
     const bp_scratch *s = j->s;
-    size_t plane = (size_t)layer * b->w * b->h, t = plane + (size_t)y * b->w + x;
-    float w = 0, wc[3] = {0, 0, 0}, best_q = 0;
-    int n = 0, claim = 0;
-    for (int v = y - FEATHER_TEXELS; v <= y + FEATHER_TEXELS; v++)
-        for (int u = x - FEATHER_TEXELS; u <= x + FEATHER_TEXELS; u++) {
-            if (!reached(j, layer, u, v)) continue;
-            size_t o = plane + (size_t)v * b->w + u;
-            claim += s->claim[o];
-            w += s->view_w[o];
-            for (int c = 0; c < 3; c++) wc[c] += s->view_wc[3 * o + c];
-            if (s->view_q[o] > best_q) best_q = s->view_q[o];
-            n++;
-        }
-    if (n == 0 || claim == 0) return 0.0f;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    window_sum a = sum_window(j, layer, x, y, FEATHER_TEXELS, 0);
+    if (a.n == 0 || a.claim == 0) return 0.0f;
     if (reached(j, layer, x, y)) {
-        w = s->view_w[t];
-        for (int c = 0; c < 3; c++) wc[c] = s->view_wc[3 * t + c];
-        best_q = s->view_q[t];
+        a.w = s->view_w[t];
+        for (int c = 0; c < 3; c++) a.wc[c] = s->view_wc[3 * t + c];
+        a.q = s->view_q[t];
     }
-    for (int c = 0; c < 3; c++) col[c] = wc[c] / w;
-    *q = best_q;
-    return (float)claim / (255.0f * (float)n);
+    for (int c = 0; c < 3; c++) col[c] = a.wc[c] / a.w;
+    *q = a.q;
+    return (float)a.claim / (255.0f * (float)a.n);
 }
 
 /* A texel in T^B moves towards the view's colour and |n.v| by `a`. */
