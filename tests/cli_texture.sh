@@ -53,4 +53,11 @@ check "render runs" [ "$(rc_of "$M" render "$T/hat/mesh.glb" --views 4 --size 12
 check "render wrote a contact sheet" [ -s "$T/render/contact_sheet.png" ]
 check "transfer runs" [ "$(rc_of "$M" transfer "$T/hat/mesh.obj" "$A/fedora_hat/fedora.obj" --size 256 -o "$T/tr")" = 0 ]
 check "transfer wrote mesh.glb" [ -s "$T/tr/mesh.glb" ]
+# transfer times its backprojection like texture does (issue 24 item 12: work_s.backproject was 0)
+check "transfer reports its backprojection time" grep -q '"backproject":[0-9.e-]*[1-9]' "$T/tr/report.json"
+check "transfer reports both coverages" grep -q '"candidate_coverage":' "$T/tr/report.json"
+# a render coarser than the texture leaves texels unseen: a warning says so (issue 24 item 13)
+check "coarse render runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/coarse" --views 2 --image-size 64 --steps 1 --texture-size 256 --render-size 128 --candidates 12)" = 0 ]
+check "coarse render warns" grep -q "render size 128 is below the texture size 256" "$T/err"
+check "the uv fill prints progress" grep -q "uv fill: texture 1/1" "$T/err"
 exit $fail
