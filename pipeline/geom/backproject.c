@@ -22,6 +22,8 @@ typedef struct bp_scratch {
     float *view_w;            /* [nlayers][h][w] this view's splat weight per texel */
     float *view_wc;           /* [nlayers][h][w][3] this view's sum(w colour) */
     float *view_q;            /* [nlayers][h][w] this view's best |n.v| */
+    uint8_t *reach;           /* [nlayers][h][w] 1: the view reaches the texel with a full share */
+    uint8_t *near_row, *near_col; /* [nlayers][h][w] reach within HOLE_TEXELS along the row / column */
     uint8_t *hole;            /* [nlayers][h][w] 1: an aliasing hole of this view, filled from its neighbours */
     uint8_t *claim;           /* [nlayers][h][w] this view's raw claim on known texels, 0..255 */
     struct splat_rec *staged; /* [image pixels]: chunk c's records from its first pixel on */
@@ -59,6 +61,9 @@ void mx_bake_free(mx_bake *b) {
         free(s->view_w);
         free(s->view_wc);
         free(s->view_q);
+        free(s->reach);
+        free(s->near_row);
+        free(s->near_col);
         free(s->hole);
         free(s->claim);
         free(s->staged);
@@ -238,7 +243,8 @@ static int splat_texels(const splat_rec *sp, int w, int h, int r0, int r1, size_
 #define FEATHER_TEXELS 2
 #define HOLE_TEXELS 3
 
-/* Pass 1, one bin: the view's splats of its rows, in pixel order. */
+/* Pass 1, one bin: the view's splats of its rows, in pixel order; reach[t] = the view reaches
+ * texel t with a full share (weight > eps). */
 static void splat_view_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
@@ -248,7 +254,10 @@ static void splat_view_task(void *ctx, int task, int thread) {
     int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
     size_t plane = (size_t)layer * b->w * b->h, t0 = plane + (size_t)r0 * b->w, t1 = plane + (size_t)r1 * b->w;
     int32_t k0 = s->bin_start[task], k1 = s->bin_start[task + 1];
-    if (k0 == k1) return; /* an empty bin is never read (bin_empty) */
+    if (k0 == k1) { /* the accumulators of an empty bin are never read (reach is 0, bin_empty) */
+        memset(s->reach + t0, 0, t1 - t0);
+        return;
+    }
     memset(s->view_w + t0, 0, (t1 - t0) * sizeof *s->view_w);
     memset(s->view_wc + 3 * t0, 0, 3 * (t1 - t0) * sizeof *s->view_wc);
     memset(s->view_q + t0, 0, (t1 - t0) * sizeof *s->view_q);
@@ -266,6 +275,7 @@ static void splat_view_task(void *ctx, int task, int thread) {
             if (r->q > s->view_q[t]) s->view_q[t] = r->q;
         }
     }
+    for (size_t t = t0; t < t1; t++) s->reach[t] = s->view_w[t] > b->eps;
 }
 
 static int bin_empty(const bp_job *j, int layer, int y) {
@@ -273,41 +283,68 @@ static int bin_empty(const bp_job *j, int layer, int y) {
     return j->s->bin_start[bin] == j->s->bin_start[bin + 1];
 }
 
-/* The view's weight at texel (x, y) of a layer; 0 outside the texture or in an empty bin. */
-static float view_weight(const bp_job *j, int layer, int x, int y) {
+/* Pass 2, one bin: near_row[t] / near_col[t] = some texel within HOLE_TEXELS along the row /
+ * the column of t is reached (separable, so the hole test reads 12 bytes, not a window). */
+static void mark_near_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
     const mx_bake *b = j->b;
-    if (x < 0 || y < 0 || x >= b->w || y >= b->h || bin_empty(j, layer, y)) return 0.0f;
-    return j->s->view_w[(size_t)layer * b->w * b->h + (size_t)y * b->w + x];
+    bp_scratch *s = j->s;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    const uint8_t *reach = s->reach + (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            uint8_t row = 0, col = 0;
+            for (int d = -HOLE_TEXELS; d <= HOLE_TEXELS; d++) {
+                if (x + d >= 0 && x + d < b->w) row |= reach[(size_t)y * b->w + x + d];
+                if (y + d >= 0 && y + d < b->h) col |= reach[(size_t)(y + d) * b->w + x];
+            }
+            s->near_row[(size_t)layer * b->w * b->h + (size_t)y * b->w + x] = row;
+            s->near_col[(size_t)layer * b->w * b->h + (size_t)y * b->w + x] = col;
+        }
 }
 
-/* A texel that the view reaches with a full share. */
-static int reached(const bp_job *j, int layer, int x, int y) { return view_weight(j, layer, x, y) > j->b->eps; }
+/* Some texel of `near` (near_col or near_row of a layer) at 1..HOLE_TEXELS steps (dx, dy) from
+ * (x, y) is set. */
+static int near_towards(const mx_bake *b, const uint8_t *near, int x, int y, int dx, int dy) {
+    for (int k = 1; k <= HOLE_TEXELS; k++) {
+        int u = x + k * dx, v = y + k * dy;
+        if (u >= 0 && v >= 0 && u < b->w && v < b->h && near[(size_t)v * b->w + u]) return 1;
+    }
+    return 0;
+}
 
-/* Pass 2, one bin: marks the aliasing holes (reads only the view's weights): texels without a
- * full share that have reached texels within HOLE_TEXELS on their left and on their right, above
- * and below (surrounded; a texel beside a straight border of the footprint is not). */
+/* Pass 3, one bin: marks the aliasing holes: texels not reached that have reached texels within
+ * HOLE_TEXELS on their left and on their right, above and below (surrounded; a texel beside a
+ * straight border of the footprint is not). 0 in an empty bin. */
 static void mark_holes_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
     const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
     int layer = task / j->nbands, band = task % j->nbands;
     int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
-    if (bin_empty(j, layer, r0)) return;
-    uint8_t *hole = j->s->hole + (size_t)layer * b->w * b->h;
+    size_t plane = (size_t)layer * b->w * b->h;
+    const uint8_t *reach = s->reach + plane, *row = s->near_row + plane, *col = s->near_col + plane;
+    uint8_t *hole = s->hole + plane;
+    int empty = bin_empty(j, layer, r0);
     for (int y = r0; y < r1; y++)
         for (int x = 0; x < b->w; x++) {
-            int left = 0, right = 0, up = 0, down = 0;
-            if (!reached(j, layer, x, y))
-                for (int v = y - HOLE_TEXELS; v <= y + HOLE_TEXELS; v++)
-                    for (int u = x - HOLE_TEXELS; u <= x + HOLE_TEXELS; u++) {
-                        if (!reached(j, layer, u, v)) continue;
-                        left |= u < x;
-                        right |= u > x;
-                        up |= v < y;
-                        down |= v > y;
-                    }
-            hole[(size_t)y * b->w + x] = (uint8_t)(left && right && up && down);
+            size_t t = (size_t)y * b->w + x;
+            hole[t] = (uint8_t)(!empty && !reach[t] && near_towards(b, col, x, y, -1, 0) &&
+                                near_towards(b, col, x, y, 1, 0) && near_towards(b, row, x, y, 0, -1) &&
+                                near_towards(b, row, x, y, 0, 1));
         }
+}
+
+/* The view has a splat at (x, y): it reaches the texel (reach, pass 1) or, after pass 4, fills
+ * it as a hole. */
+static int reached(const bp_job *j, int layer, int x, int y, int with_holes) {
+    const mx_bake *b = j->b;
+    if (x < 0 || y < 0 || x >= b->w || y >= b->h) return 0;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    return j->s->reach[t] || (with_holes && j->s->hole[t]);
 }
 
 /* The raw claim (0..255) of the view on a texel from its best |n.v| there. */
@@ -321,17 +358,9 @@ static uint8_t texel_claim(const bp_job *j, size_t t) {
     return (uint8_t)lroundf(255.0f * c);
 }
 
-/* Reached, and not a hole (holes are written by pass 3 while it reads this). */
-static int reached_solid(const bp_job *j, int layer, int x, int y) {
-    const mx_bake *b = j->b;
-    if (x < 0 || y < 0 || x >= b->w || y >= b->h || bin_empty(j, layer, y)) return 0;
-    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
-    return !j->s->hole[t] && j->s->view_w[t] > b->eps;
-}
-
 /* The view's splats summed over the texels within `radius` of (x, y) that it reaches (holes
- * excluded with `solid`, in pass 3): weights, colours, the best |n.v|, their count and (not
- * `solid`, pass 4) their raw claims. */
+ * excluded with `solid`, in pass 4): weights, colours, the best |n.v|, their count and (not
+ * `solid`, pass 5) their raw claims. */
 typedef struct window_sum {
     float w, wc[3], q;
     int claim, n;
@@ -344,12 +373,12 @@ static window_sum sum_window(const bp_job *j, int layer, int x, int y, int radiu
     window_sum a = {.w = 0};
     for (int v = y - radius; v <= y + radius; v++)
         for (int u = x - radius; u <= x + radius; u++) {
-            if (solid ? !reached_solid(j, layer, u, v) : !reached(j, layer, u, v)) continue;
+            if (!reached(j, layer, u, v, !solid)) continue;
             size_t o = plane + (size_t)v * b->w + u;
             a.w += s->view_w[o];
             for (int c = 0; c < 3; c++) a.wc[c] += s->view_wc[3 * o + c];
             if (s->view_q[o] > a.q) a.q = s->view_q[o];
-            if (!solid) a.claim += s->claim[o]; /* pass 3 writes the claims while filling holes */
+            if (!solid) a.claim += s->claim[o]; /* pass 4 writes the claims while filling holes */
             a.n++;
         }
     return a;
@@ -368,7 +397,7 @@ static void fill_hole(const bp_job *j, int layer, int x, int y) {
     s->view_q[t] = a.q;
 }
 
-/* Pass 3, one bin: fills the holes from the reached texels around (not holes, so not written
+/* Pass 4, one bin: fills the holes from the reached texels around (not holes, so not written
  * in this pass), then the raw claims. */
 static void fill_holes_task(void *ctx, int task, int thread) {
     (void)thread;
@@ -396,7 +425,7 @@ static float texel_offer(const bp_job *j, int layer, int x, int y, float col[3],
     size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
     window_sum a = sum_window(j, layer, x, y, FEATHER_TEXELS, 0);
     if (a.n == 0 || a.claim == 0) return 0.0f;
-    if (reached(j, layer, x, y)) {
+    if (reached(j, layer, x, y, 1)) {
         a.w = s->view_w[t];
         for (int c = 0; c < 3; c++) a.wc[c] = s->view_wc[3 * t + c];
         a.q = s->view_q[t];
@@ -422,7 +451,7 @@ static void add_texel(mx_bake *b, const bp_scratch *s, size_t t) {
     b->known[t] = b->sum_w[t] > b->eps;
 }
 
-/* Pass 4, one bin: the merge. */
+/* Pass 5, one bin: the merge. */
 static void merge_view_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
@@ -464,14 +493,22 @@ static int reserve(bp_job *j, mx_status *st) {
         free(s->view_w);
         free(s->view_wc);
         free(s->view_q);
+        free(s->reach);
+        free(s->near_row);
+        free(s->near_col);
         free(s->hole);
         free(s->claim);
         s->view_w = malloc(need_q * sizeof *s->view_w);
         s->view_wc = malloc(3 * need_q * sizeof *s->view_wc);
         s->view_q = malloc(need_q * sizeof *s->view_q);
+        s->reach = malloc(need_q);
+        s->near_row = malloc(need_q);
+        s->near_col = malloc(need_q);
         s->hole = malloc(need_q);
         s->claim = malloc(need_q);
-        s->q_cap = s->view_w && s->view_wc && s->view_q && s->hole && s->claim ? need_q : 0;
+        s->q_cap = s->view_w && s->view_wc && s->view_q && s->reach && s->near_row && s->near_col && s->hole && s->claim
+                       ? need_q
+                       : 0;
     }
     if (npix > s->staged_cap) {
         free(s->staged);
@@ -520,6 +557,7 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
     }
     mx_pool_for(pool, j.nchunks, fill_task, &j);
     mx_pool_for(pool, j.nbins, splat_view_task, &j);
+    mx_pool_for(pool, j.nbins, mark_near_task, &j);
     mx_pool_for(pool, j.nbins, mark_holes_task, &j);
     mx_pool_for(pool, j.nbins, fill_holes_task, &j);
     mx_pool_for(pool, j.nbins, merge_view_task, &j);
