@@ -101,4 +101,11 @@ tok_dropped=$(sed -n 's/.*"dropped": \([0-9]*\).*/\1/p' "$T/tok")
 check "a long prompt runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "$long" --weights "$W" -o "$T/long" ${SMALL% --quiet} --views 2)" = 0 ]
 check "its warning counts $tok_dropped dropped tokens, as tokenize" grep -q "prompt longer than the 75 tokens CLIP reads: $tok_dropped tokens dropped" "$T/err"
 check "the warning is one short line" sh -c "[ \$(grep -c 'tokens dropped' '$T/err') = 1 ] && [ \$(grep 'tokens dropped' '$T/err' | wc -c) -lt 200 ]"
+# transfer times its backprojection like texture does (issue 24 item 12: work_s.backproject was 0)
+check "transfer reports its backprojection time" grep -q '"backproject":[0-9.e-]*[1-9]' "$T/tr/report.json"
+check "transfer reports both coverages" grep -q '"candidate_coverage":' "$T/tr/report.json"
+# a render coarser than the texture leaves texels unseen: a warning says so (issue 24 item 13)
+check "coarse render runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/coarse" --views 2 --image-size 64 --steps 1 --texture-size 256 --render-size 128 --candidates 12)" = 0 ]
+check "coarse render warns" grep -q "render size 128 is below the texture size 256" "$T/err"
+check "the uv fill prints progress" grep -q "uv fill: texture 1/1" "$T/err"
 exit $fail

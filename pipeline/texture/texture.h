@@ -34,7 +34,7 @@ typedef struct mx_texture_progress {
     int step, steps;     /* denoising step (1-based) of the stage's diffusion call; 0, 0 outside one */
     int views_done;      /* views backprojected so far (front and back count as two) */
     int views_total;     /* the view budget */
-    double coverage;     /* fraction of candidate-visible texels painted so far */
+    double coverage;     /* fraction of the mesh's texels (inside a face in UV space) painted so far */
     double seconds;      /* since the run started */
     const char *message; /* the progress line (the CLI prints it unless quiet) */
 } mx_texture_progress;
@@ -67,7 +67,8 @@ typedef struct mx_texture_opts {
     float inpaint_weight[2]; /* first, last later view: 0.8, 1.0 */
     float frontal_threshold; /* |n.v| needed to backproject a pixel: 0.3 */
     int normal_source;       /* MX_NORMAL_FROM_DEPTH (paper) or MX_NORMAL_GEOMETRIC */
-    float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted: 0.995 */
+    float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted (the
+                                candidate coverage): 0.995 */
     mx_up_axis up;
     int threads;             /* 0: all CPUs */
     mx_backend_kind device;  /* where the networks run: cpu (default), cpu-strict, cuda */
@@ -83,7 +84,7 @@ typedef struct mx_texture_opts {
     const char *source_path; /* transfer: the textured mesh whose texture moves onto mesh_path */
     int fast;                /* few-step path: LCM scheduler + TAESD encoder/decoder; the weight file must
                                 hold a merged LCM-LoRA (unet.lcm_lora) and taesd.* (texture, enhance) */
-    int first_wins;          /* texture, transfer: 0 = angle-aware writes (default; a later view restarts
+    int first_wins;          /* texture, transfer: 0 = angle-aware writes (default; a later view repaints
                                 texels it sees with |n.v| higher by 0.15), 1 = the first writer keeps them */
     float background[3];     /* transfer: colour behind the source in its renders (0, 0, 0) */
     int through_model_image; /* transfer: each render goes through the model image (crop, image_size, back) */
@@ -99,7 +100,8 @@ typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE, MX_TEXTURE_MODE
 int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st);
 
 typedef struct mx_texture_result {
-    double coverage;   /* fraction of candidate-visible texels painted by views */
+    double coverage;   /* fraction of the mesh's texels (inside a face in UV space) painted by views */
+    double candidate_coverage; /* fraction of the texels some candidate view sees painted (coverage_stop's measure) */
     int views;         /* views generated (front and back count as two) */
     double seconds;
     /* with keep_outputs: the mesh as exported (its UVs are the atlas when the input had none) */
