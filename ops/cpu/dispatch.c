@@ -97,12 +97,52 @@ static const mx_kernels amx_table = {
 
 #endif
 
+#ifdef MX_WITH_NEON /* aarch64 builds (Makefile) */
+/* The NEON entries without a bf16 kernel: shared by the neon and neonbf16 tables. */
+#define MX_NEON_FP32_ONLY                                                                                    \
+    .group_norm = mx_group_norm_neon,                                                                        \
+    .layer_norm = mx_layer_norm_neon,                                                                        \
+    .softmax = mx_softmax_neon,                                                                              \
+    .gelu = mx_gelu_neon,                                                                                    \
+    .quick_gelu = mx_quick_gelu_neon,                                                                        \
+    .silu = mx_silu_neon,                                                                                    \
+    .geglu = mx_geglu_neon,                                                                                  \
+    .binary = mx_binary_neon,                                                                                \
+    .scale = mx_scale_neon,                                                                                  \
+    MX_LAYOUT_REF,                                                                                           \
+    .f16_to_f32 = mx_f16_to_f32_neon,                                                                        \
+    .f32_to_f16 = mx_f32_to_f16_neon,                                                                        \
+    .bf16_to_f32 = mx_bf16_to_f32_neon,                                                                      \
+    .f32_to_bf16 = mx_f32_to_bf16_neon
+
+static const mx_kernels neon_table = {
+    .isa = MX_ISA_NEON,
+    .linear = mx_linear_neon,
+    .conv2d = mx_conv2d_neon,
+    .attention = mx_attention_neon,
+    MX_NEON_FP32_ONLY,
+};
+
+static const mx_kernels neonbf16_table = {
+    .isa = MX_ISA_NEON_BF16,
+    .linear = mx_linear_neonbf16,
+    .conv2d = mx_conv2d_neonbf16,
+    .attention = mx_attention_neonbf16,
+    MX_NEON_FP32_ONLY,
+};
+#endif
+
 const mx_kernels *mx_kernels_scalar(void) { return &scalar_table; }
 
 const mx_kernels *mx_kernels_for(mx_isa isa) {
-    mx_isa best = mx_cpu_best_isa();
-    if (isa > best) isa = best;
-#ifndef MX_NO_X86_SIMD
+    isa = mx_isa_min(isa, mx_cpu_best_isa());
+#if defined(MX_WITH_NEON)
+    switch (isa) {
+    case MX_ISA_NEON_BF16: return &neonbf16_table;
+    case MX_ISA_NEON: return &neon_table;
+    default: return &scalar_table;
+    }
+#elif !defined(MX_NO_X86_SIMD)
     switch (isa) {
     case MX_ISA_AMX: return &amx_table;
     case MX_ISA_AVX512_BF16: return &avx512bf16_table;

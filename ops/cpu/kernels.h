@@ -1,13 +1,14 @@
 /* Internal to ops/: the kernel functions behind the dispatch table (ops/cpu/dispatch.c),
  * the scratch-memory helper and the parallel-for helper they share.
  * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512,
- * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation), mx_<op>_amx (the same on AMX tiles).
+ * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation), mx_<op>_amx (the same on AMX tiles),
+ * mx_<op>_neon and mx_<op>_neonbf16 (aarch64: Advanced SIMD, FEAT_BF16).
  *
  * Files: <family>_ref.c are the references (linear, conv, norm, attention, activation, binary,
  * layout, convert). gemm.c is the blocked GEMM engine behind linear and conv2d; gemm_<isa>.c
  * holds its micro-kernels (the AVX-512 one written once in gemm_micro_avx512.inc for fp32 and bf16). The other SIMD kernels are written once as templates
  * (attention_simd.inc, norm_simd.inc, activation_simd.inc, vmath_simd.inc for exp/erfc) over a
- * small vector vocabulary (simd_avx2.h, simd_avx512.h) and instantiated by attention_<isa>.c
+ * small vector vocabulary (simd_avx2.h, simd_avx512.h, simd_neon.h) and instantiated by attention_<isa>.c
  * and elementwise_<isa>.c; convert_<isa>.c are the fp16/bf16 conversions. */
 #ifndef MX_OPS_CPU_KERNELS_H
 #define MX_OPS_CPU_KERNELS_H
@@ -61,6 +62,7 @@ void mx_scratch_release(const mx_ctx *c, mx_scratch *s);
 MX_KERNEL_DECLS(ref)
 MX_KERNEL_DECLS(avx2)
 MX_KERNEL_DECLS(avx512)
+MX_KERNEL_DECLS(neon)
 
 /* The AVX512_BF16 level: bf16 products with fp32 sums for the matrix products; everything else
  * is the AVX-512 fp32 kernels. */
@@ -76,6 +78,15 @@ void mx_attention_avx512bf16(const mx_ctx *, float *out, const float *q, const f
 void mx_linear_amx(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
 void mx_conv2d_amx(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w, mx_wptr bias,
                    int Cout, int kh, int kw, int stride, int pad);
+
+/* The aarch64 FEAT_BF16 level: linear, conv2d and attention with BFDOT (bf16 products, fp32
+ * sums); everything else is the NEON fp32 kernels. */
+void mx_linear_neonbf16(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
+void mx_conv2d_neonbf16(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                        mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+void mx_attention_neonbf16(const mx_ctx *, float *out, const float *q, const float *k, const float *v, int B, int H,
+                           int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal,
+                           float scale);
 
 /* Layout ops have only a reference: they are memory-bound copies the compiler vectorises. */
 void mx_upsample_nearest2x_ref(const mx_ctx *, float *y, const float *x, int BC, int H, int W);
