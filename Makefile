@@ -255,13 +255,16 @@ asan:
 ARM64_CC    ?= aarch64-linux-gnu-gcc
 ARM64_BUILD ?= build-arm64
 ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip \
-               test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline
+               test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline test_texture_threads_core
 .PHONY: test-arm64 arm64-build
 test-arm64: $(DEMO_WEIGHTS)
 	$(MAKE) ARCH=aarch64 CC=$(ARM64_CC) BUILD=$(ARM64_BUILD) arm64-build
 	ARM64_BUILD=$(ARM64_BUILD) ARM64_CC=$(ARM64_CC) MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
 	    sh tests/arm64.sh $(ARM64_TESTS)
 arm64-build: core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
+# A test of the public API linked with the core library (no I/O adapter, no C++).
+$(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 # The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
 deps:
