@@ -261,7 +261,12 @@ test-arm64: $(DEMO_WEIGHTS)
 	$(MAKE) ARCH=aarch64 CC=$(ARM64_CC) BUILD=$(ARM64_BUILD) arm64-build
 	ARM64_BUILD=$(ARM64_BUILD) ARM64_CC=$(ARM64_CC) MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
 	    sh tests/arm64.sh $(ARM64_TESTS)
-arm64-build: core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
+arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
+# matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
+# memory and weight files, for a cross-built core.
+$(BUILD)/matex-core: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+                     $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
 $(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)

@@ -3,7 +3,8 @@
 # Each test program given runs on two CPU models: cortex-a72 (Advanced SIMD, no FEAT_BF16: the
 # neon level) and max (FEAT_BF16: neonbf16, and neon below it); the level each model gets is read
 # from getauxval by matex itself, so a level a model lacks shows as NOT TESTED, never as passed.
-# Then the core library's dependencies (readelf -d: libc, libm, pthreads only) and the tiny
+# matex --version (matex-core: matex without the file I/O adapter) must name the level each model
+# gets. Then the core library's dependencies (readelf -d: libc, libm, pthreads only) and the tiny
 # pipeline through the C API with an in-memory mesh (examples/embed.c on libmatex_core.a).
 # Only the repository's tiny goldens run (MATEX_TESTDATA points nowhere: the mini cases take
 # minutes each under emulation), on the cpu-strict backend as in `make test`.
@@ -46,6 +47,21 @@ run() {
 for cpu in $CPUS; do
     for t in "$@"; do run "$cpu" "$t" "$B/tests/$t"; done
 done
+
+# What matex itself picks on each model (getauxval), and MATEX_ISA lowering it.
+version_is() {
+    cpu=$1 want=$2
+    shift 2
+    got=$(env "$@" qemu-aarch64 -L "$SYSROOT" -cpu "$cpu" "$B/matex-core" --version 2>&1 | sed -n 's/^cpu kernels used on this CPU: //p')
+    case "$got" in
+    "$want"*) pass=$((pass + 1)); echo "PASS matex --version on $cpu${1:+ ($*)}: $got" ;;
+    *) fail=$((fail + 1)); failed="$failed version/$cpu"; echo "FAIL matex --version on $cpu${1:+ ($*)}: '$got', want '$want'" ;;
+    esac
+}
+version_is cortex-a72 "fp32 neon, bf16 neon"
+version_is max "fp32 neon, bf16 neonbf16"
+version_is max "fp32 neon, bf16 neon" MATEX_ISA=neon
+version_is max "fp32 scalar, bf16 scalar" MATEX_ISA=scalar
 
 # The levels each CPU model exercised, from test_ops_kernels' lines ("LEVEL: NOT TESTED (...)").
 for cpu in $CPUS; do
