@@ -256,11 +256,13 @@ ARM64_CC    ?= aarch64-linux-gnu-gcc
 ARM64_BUILD ?= build-arm64
 ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip \
                test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline test_texture_threads_core
+# also run on the CPU model without FEAT_BF16 (tests/arm64.sh)
+ARM64_NOBF16_TESTS = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision
 .PHONY: test-arm64 arm64-build
 test-arm64: $(DEMO_WEIGHTS)
 	$(MAKE) ARCH=aarch64 CC=$(ARM64_CC) BUILD=$(ARM64_BUILD) arm64-build
 	ARM64_BUILD=$(ARM64_BUILD) ARM64_CC=$(ARM64_CC) MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
-	    sh tests/arm64.sh $(ARM64_TESTS)
+	    ARM64_NOBF16_TESTS="$(ARM64_NOBF16_TESTS)" sh tests/arm64.sh $(ARM64_TESTS)
 arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
 # matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
 # memory and weight files, for a cross-built core.
