@@ -36,12 +36,23 @@ AVX512_FLAGS = -mavx512f -mavx512bw -mavx512vl -mavx512dq -mfma -mf16c
 AVX512BF16_FLAGS = $(AVX512_FLAGS) -mavx512bf16
 AMX_FLAGS    = $(AVX512BF16_FLAGS) -mamx-tile -mamx-bf16
 
-# x86-64 gets the AVX2/AVX-512 kernels (chosen at run time); other CPUs only the scalar ones
-# (`make ARCH=aarch64 BUILD=build-noarch` builds that way here, to check it).
+# aarch64: NEON is in every aarch64 core, so the NEON files take the baseline (armv8-a: Cortex-A53/A72
+# too); the bf16 files run only where getauxval reports FEAT_BF16 (runtime/cpuid.c).
+NEONBF16_FLAGS = -march=armv8.2-a+bf16
+
+# x86-64 gets the AVX2/AVX-512 kernels, aarch64 the NEON and FEAT_BF16 ones (chosen at run time);
+# other CPUs only the scalar ones (`make ARCH=none BUILD=build-noarch` builds that way here, to
+# check it; `make test-arm64` cross-builds aarch64).
 ARCH ?= $(shell uname -m)
+X86_SIMD_SRC  = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c ops/cpu/*_amx.c)
+NEON_SIMD_SRC = $(wildcard ops/cpu/*_neon.c ops/cpu/*_neonbf16.c)
 ifneq ($(filter x86_64 i686 i386,$(ARCH)),)
-SIMD_SRC    = $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c ops/cpu/*_amx.c)
+SIMD_SRC    = $(X86_SIMD_SRC)
 GEOM_SIMD_SRC = $(wildcard pipeline/geom/*_avx2.c)
+else ifneq ($(filter aarch64 arm64,$(ARCH)),)
+SIMD_SRC    = $(NEON_SIMD_SRC)
+GEOM_SIMD_SRC =
+CFLAGS     += -DMX_NO_X86_SIMD -DMX_WITH_NEON
 else
 SIMD_SRC    =
 GEOM_SIMD_SRC =
@@ -49,7 +60,7 @@ CFLAGS     += -DMX_NO_X86_SIMD
 endif
 
 # Modules: a test links only the modules it needs, so one module's breakage stays local.
-CORE_SRC    = $(filter-out $(wildcard ops/cpu/*_avx2.c ops/cpu/*_avx512.c ops/cpu/*_avx512bf16.c ops/cpu/*_amx.c),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
+CORE_SRC    = $(filter-out $(X86_SIMD_SRC) $(NEON_SIMD_SRC),$(wildcard runtime/*.c ops/*.c ops/cpu/*.c)) $(SIMD_SRC)
 WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
@@ -116,6 +127,9 @@ $(BUILD)/%_avx512bf16.o: %_avx512bf16.c
 $(BUILD)/%_amx.o: %_amx.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AMX_FLAGS) -c -o $@ $<
+$(BUILD)/%_neonbf16.o: %_neonbf16.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(NEONBF16_FLAGS) -c -o $@ $<
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c -o $@ $<
@@ -136,7 +150,7 @@ $(BUILD)/tests/test_ops_%: $(BUILD)/tests/test_ops_%.o $(TEST_UTIL) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 # The AMX GEMM on the software emulation of its tile operations (ops/cpu/amx_tiles.h), linked
 # into test_ops_kernels: its packing, tiling and edges are tested on any AVX512_BF16 CPU.
-ifneq ($(SIMD_SRC),)
+ifeq ($(SIMD_SRC),$(X86_SIMD_SRC))
 $(BUILD)/tests/gemm_amx_emu.o: tests/gemm_amx_emu.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
@@ -249,6 +263,32 @@ demo: all $(DEMO_WEIGHTS)
 
 asan:
 	$(MAKE) BUILD=build-asan SAN=1 OPT=-O1 test
+
+# ---- aarch64 under emulation: the core library (no C++ adapter) and the tests that need no file
+# I/O adapter, cross-built in build-arm64 and run by qemu-user on CPU models with and without
+# FEAT_BF16 (tests/arm64.sh; Debian: gcc-aarch64-linux-gnu qemu-user). The tiny pipeline uses the
+# demo weights made by the native matex. ----
+ARM64_CC    ?= aarch64-linux-gnu-gcc
+ARM64_BUILD ?= build-arm64
+ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip \
+               test_nn_transformer test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline \
+               test_texture_threads_core
+# also run on the CPU model without FEAT_BF16 (tests/arm64.sh)
+ARM64_NOBF16_TESTS = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision
+.PHONY: test-arm64 arm64-build
+test-arm64: $(DEMO_WEIGHTS)
+	$(MAKE) ARCH=aarch64 CC=$(ARM64_CC) BUILD=$(ARM64_BUILD) arm64-build
+	ARM64_BUILD=$(ARM64_BUILD) ARM64_CC=$(ARM64_CC) MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) \
+	    ARM64_NOBF16_TESTS="$(ARM64_NOBF16_TESTS)" sh tests/arm64.sh $(ARM64_TESTS)
+arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
+# matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
+# memory and weight files, for a cross-built core.
+$(BUILD)/matex-core: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+                     $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+# A test of the public API linked with the core library (no I/O adapter, no C++).
+$(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 # The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
 deps:

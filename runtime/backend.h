@@ -22,25 +22,38 @@
 typedef enum { MX_BACKEND_CPU = 0, MX_BACKEND_CPU_STRICT = 1, MX_BACKEND_CUDA = 2 } mx_backend_kind;
 #define MX_BACKEND_KINDS 3
 
-/* Instruction-set levels of the CPU kernels, in increasing order. MX_ISA_AVX512_BF16 is the
+/* Instruction-set levels of the CPU kernels. Each architecture has its own ladder, in
+ * increasing order: x86-64 scalar < avx2 < avx512 < avx512bf16 < amx, aarch64 scalar < neon <
+ * neonbf16 (compare levels with mx_isa_min, never across ladders). MX_ISA_AVX512_BF16 is the
  * AVX-512 level with linear, conv2d and attention in bf16 arithmetic (fp32 accumulation), and
- * MX_ISA_AMX the same with linear and conv2d on AMX-BF16 tiles: precision choices as much as
- * ISAs, so fp32 work asks for mx_cpu_isa_for(MX_PREC_FP32). */
+ * MX_ISA_AMX the same with linear and conv2d on AMX-BF16 tiles; MX_ISA_NEON_BF16 is the NEON
+ * level with those three on FEAT_BF16 (BFDOT): precision choices as much as ISAs, so fp32 work
+ * asks for mx_cpu_isa_for(MX_PREC_FP32). */
 typedef enum {
     MX_ISA_SCALAR = 0,
     MX_ISA_AVX2 = 1,
     MX_ISA_AVX512 = 2,
     MX_ISA_AVX512_BF16 = 3,
-    MX_ISA_AMX = 4
+    MX_ISA_AMX = 4,
+    MX_ISA_NEON = 5,
+    MX_ISA_NEON_BF16 = 6,
+    MX_ISA_COUNT
 } mx_isa;
 
 /* Arithmetic of the matrix products: fp32, or bf16 inputs with fp32 accumulation. */
 typedef enum { MX_PREC_FP32 = 0, MX_PREC_BF16 = 1 } mx_precision;
 
-/* Best level this CPU and OS support (cpuid + xgetbv; for amx also Linux's permission for the
- * tile data, asked at each call: the grant is per process and asking again is harmless, so no
- * process-wide flag remembers it). MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx lowers it. */
+/* Best level this CPU and OS support (x86: cpuid + xgetbv, for amx also Linux's permission for
+ * the tile data, asked at each call: the grant is per process and asking again is harmless, so no
+ * process-wide flag remembers it; aarch64: getauxval's HWCAP_ASIMD and HWCAP2_BF16).
+ * MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx|neon|neonbf16 lowers it. */
 mx_isa mx_cpu_best_isa(void);
+/* want, lowered to best when it is above it on the same ladder; scalar when the two are of
+ * different architectures. */
+mx_isa mx_isa_min(mx_isa want, mx_isa best);
+/* The fp32 level a bf16 level is built on (avx512 for avx512bf16 and amx, neon for neonbf16);
+ * an fp32 level itself. */
+mx_isa mx_isa_fp32_level(mx_isa isa);
 /* Best level for a precision: fp32 never gets a bf16 level; bf16 gets the best level, which is
  * an fp32 one when the CPU has no bf16 arithmetic (check with mx_isa_precision). */
 mx_isa mx_cpu_isa_for(mx_precision p);

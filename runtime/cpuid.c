@@ -1,8 +1,9 @@
-/* mx_cpu_best_isa: cpuid for the instruction sets, xgetbv for the OS saving their registers,
- * and for AMX Linux's permission to use the tile data (Documentation/arch/x86/xstate.rst: the
- * first tile instruction of a process without it gets SIGILL; the permission is per process and
- * asking again is harmless). MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx can only lower the
- * level (asking for more than the CPU has would crash with an illegal instruction). */
+/* mx_cpu_best_isa. x86: cpuid for the instruction sets, xgetbv for the OS saving their
+ * registers, and for AMX Linux's permission to use the tile data (Documentation/arch/x86/xstate.rst:
+ * the first tile instruction of a process without it gets SIGILL; the permission is per process
+ * and asking again is harmless). aarch64: the kernel's hardware capabilities (getauxval).
+ * MATEX_ISA can only lower the level (asking for more than the CPU has would crash with an
+ * illegal instruction). */
 #include <stdlib.h>
 #include <string.h>
 
@@ -61,39 +62,61 @@ static mx_isa detect_isa(void) {
     if (!__get_cpuid_count(7, 1, &a, &b, &c, &d) || !((a >> 5) & 1)) return MX_ISA_AVX512;
     return amx_usable(leaf7_edx, xcr0) ? MX_ISA_AMX : MX_ISA_AVX512_BF16;
 }
+#elif defined(__aarch64__) && defined(__linux__) && defined(MX_WITH_NEON)
+#include <sys/auxv.h>
+
+/* HWCAP_ASIMD (AT_HWCAP bit 1) and HWCAP2_BF16 (AT_HWCAP2 bit 14: BFDOT, BFMMLA, BFCVT), the
+ * values of Linux's arch/arm64/include/uapi/asm/hwcap.h, spelt out for older libc headers. */
+#define MX_HWCAP_ASIMD (1UL << 1)
+#define MX_HWCAP2_BF16 (1UL << 14)
+
+static mx_isa detect_isa(void) {
+    if (!(getauxval(AT_HWCAP) & MX_HWCAP_ASIMD)) return MX_ISA_SCALAR;
+    return getauxval(AT_HWCAP2) & MX_HWCAP2_BF16 ? MX_ISA_NEON_BF16 : MX_ISA_NEON;
+}
 #else
 static mx_isa detect_isa(void) { return MX_ISA_SCALAR; }
 #endif
 
+/* 0: scalar (on every ladder), 1: x86-64, 2: aarch64. */
+static int isa_ladder(mx_isa isa) { return isa == MX_ISA_SCALAR ? 0 : isa <= MX_ISA_AMX ? 1 : 2; }
+
+mx_isa mx_isa_min(mx_isa want, mx_isa best) {
+    if (want == MX_ISA_SCALAR || best == MX_ISA_SCALAR || isa_ladder(want) != isa_ladder(best)) return MX_ISA_SCALAR;
+    return want < best ? want : best;
+}
+
+mx_isa mx_isa_fp32_level(mx_isa isa) {
+    switch (isa) {
+    case MX_ISA_AVX512_BF16:
+    case MX_ISA_AMX: return MX_ISA_AVX512;
+    case MX_ISA_NEON_BF16: return MX_ISA_NEON;
+    default: return isa;
+    }
+}
+
 static mx_isa isa_from_env(mx_isa best) {
     const char *e = getenv("MATEX_ISA");
     if (!e || !*e) return best;
-    mx_isa want;
-    if (!strcmp(e, "scalar"))
-        want = MX_ISA_SCALAR;
-    else if (!strcmp(e, "avx2"))
-        want = MX_ISA_AVX2;
-    else if (!strcmp(e, "avx512"))
-        want = MX_ISA_AVX512;
-    else if (!strcmp(e, "avx512bf16"))
-        want = MX_ISA_AVX512_BF16;
-    else if (!strcmp(e, "amx"))
-        want = MX_ISA_AMX;
-    else {
-        mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2, avx512, avx512bf16 or amx); using %s", e, mx_isa_name(best));
-        return best;
+    for (int i = 0; i < MX_ISA_COUNT; i++) {
+        if (strcmp(e, mx_isa_name((mx_isa)i)) != 0) continue;
+        if (isa_ladder((mx_isa)i) != isa_ladder(best) && i != MX_ISA_SCALAR && best != MX_ISA_SCALAR)
+            mx_warn("MATEX_ISA=%s: not a level of this CPU's architecture; using scalar", e);
+        return mx_isa_min((mx_isa)i, best);
     }
-    return want < best ? want : best;
+    mx_warn("MATEX_ISA=%s: unknown (use scalar, avx2, avx512, avx512bf16, amx, neon or neonbf16); using %s", e,
+            mx_isa_name(best));
+    return best;
 }
 
 mx_isa mx_cpu_best_isa(void) { return isa_from_env(detect_isa()); }
 
 mx_isa mx_cpu_isa_for(mx_precision p) {
     mx_isa best = mx_cpu_best_isa();
-    return p == MX_PREC_FP32 && best > MX_ISA_AVX512 ? MX_ISA_AVX512 : best;
+    return p == MX_PREC_FP32 ? mx_isa_fp32_level(best) : best;
 }
 
-mx_precision mx_isa_precision(mx_isa isa) { return isa >= MX_ISA_AVX512_BF16 ? MX_PREC_BF16 : MX_PREC_FP32; }
+mx_precision mx_isa_precision(mx_isa isa) { return mx_isa_fp32_level(isa) != isa ? MX_PREC_BF16 : MX_PREC_FP32; }
 
 const char *mx_precision_name(mx_precision p) { return p == MX_PREC_BF16 ? "bf16" : "fp32"; }
 
@@ -114,6 +137,9 @@ const char *mx_isa_name(mx_isa isa) {
     case MX_ISA_AVX512: return "avx512";
     case MX_ISA_AVX512_BF16: return "avx512bf16";
     case MX_ISA_AMX: return "amx";
+    case MX_ISA_NEON: return "neon";
+    case MX_ISA_NEON_BF16: return "neonbf16";
+    case MX_ISA_COUNT: break;
     }
     return "?";
 }

@@ -31,10 +31,12 @@ const char *mx_build_flags(void) { return MX_BUILD_FLAGS; }
 const char *mx_build_sanitizers(void) { return MX_BUILD_SAN; }
 
 int mx_build_has_isa(mx_isa isa) {
-#ifdef MX_NO_X86_SIMD
+#if defined(MX_WITH_NEON)
+    return isa == MX_ISA_SCALAR || isa == MX_ISA_NEON || isa == MX_ISA_NEON_BF16;
+#elif defined(MX_NO_X86_SIMD)
     return isa == MX_ISA_SCALAR;
 #else
-    return strcmp(mx_isa_name(isa), "?") != 0;
+    return isa <= MX_ISA_AMX;
 #endif
 }
 

@@ -92,7 +92,7 @@ static inline int golden_ctx(mx_ctx *c) { return golden_ctx_precision(c, MX_PREC
  * not tested and returns 1 (-1 on error). */
 static inline int golden_bf16_ctx(mx_ctx *c, const char *test) {
     if (mx_isa_precision(mx_cpu_isa_for(MX_PREC_BF16)) != MX_PREC_BF16) {
-        printf("%s: bf16 arithmetic NOT TESTED (no AVX512_BF16 on this CPU, or lowered by MATEX_ISA)\n", test);
+        printf("%s: bf16 arithmetic NOT TESTED (no AVX512_BF16 or FEAT_BF16 on this CPU, or lowered by MATEX_ISA)\n", test);
         return 1;
     }
     return golden_ctx_precision(c, MX_PREC_BF16);

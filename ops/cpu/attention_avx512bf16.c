@@ -2,6 +2,7 @@
  * and fp32 sums; 4 queries × 64 keys of scores in 16 zmm accumulators. */
 #include "kernels.h"
 #include "simd_avx512.h"
+#include "bf16_avx512.h"
 #include "vmath_simd.inc"
 #undef KFN
 #define KFN(name) name##_avx512bf16

@@ -1,6 +1,8 @@
 /* bf16 pair packing for the AVX512_BF16 kernels (gemm_avx512bf16.c, attention_avx512bf16.c): one
  * 32-bit word holds two bf16 (the lower index in the low half), the operand layout of vdpbf16ps.
- * Rounding to nearest even by vcvtne2ps2bf16 (which, like vdpbf16ps, reads denormals as zero). */
+ * Rounding to nearest even by vcvtne2ps2bf16 (which, like vdpbf16ps, reads denormals as zero).
+ * The bf16 vocabulary of attention_simd.inc (vbw, vbw_load, vbw_set1, v_dot_bf16,
+ * bf16_pairs_row, bf16_store_pairs_of_rows) is the same in bf16_neon.h. */
 #ifndef MX_BF16_AVX512_H
 #define MX_BF16_AVX512_H
 
@@ -28,6 +30,16 @@ static inline __m512i bf16_pairs_of_rows(__m512 even, __m512 odd) {
     const __m512i interleave = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7,
                                                 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
     return _mm512_permutexvar_epi16(interleave, (__m512i)_mm512_cvtne2ps_pbh(odd, even));
+}
+
+/* 16 words of pairs (vdpbf16ps operands) and the dot product acc[i] += a[2i]·b[2i] + a[2i+1]·b[2i+1]. */
+typedef __m512bh vbw;
+static inline vbw vbw_load(const uint32_t *p) { return (__m512bh)_mm512_loadu_si512(p); }
+static inline vbw vbw_set1(uint32_t w) { return (__m512bh)_mm512_set1_epi32((int)w); }
+static inline __m512 v_dot_bf16(__m512 acc, vbw a, vbw b) { return _mm512_dpbf16_ps(acc, a, b); }
+/* dst[c] = bf16(even[c]) | bf16(odd[c]) << 16 for the 16 lanes. */
+static inline void bf16_store_pairs_of_rows(uint32_t *dst, __m512 even, __m512 odd) {
+    _mm512_storeu_si512(dst, bf16_pairs_of_rows(even, odd));
 }
 
 #endif

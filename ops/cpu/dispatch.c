@@ -42,9 +42,25 @@
 /* amx: the GEMMs on AMX-BF16 tiles; attention is not a GEMM and stays avx512bf16. */
 #define MX_AMX_KERNELS MX_AVX512BF16_KERNELS .linear = mx_linear_amx, .conv2d = mx_conv2d_amx,
 
+/* neon (aarch64 Advanced SIMD): the avx2 set of kernels on 4-float vectors. */
+#define MX_NEON_KERNELS                                                                                      \
+    MX_SCALAR_KERNELS .linear = mx_linear_neon, .conv2d = mx_conv2d_neon, .group_norm = mx_group_norm_neon,   \
+    .layer_norm = mx_layer_norm_neon, .attention = mx_attention_neon, .gelu = mx_gelu_neon,                   \
+    .quick_gelu = mx_quick_gelu_neon, .silu = mx_silu_neon, .geglu = mx_geglu_neon,                         \
+    .binary = mx_binary_neon, .scale = mx_scale_neon,
+
+/* neonbf16 (FEAT_BF16): the matrix products in bf16 arithmetic with fp32 sums (BFDOT). */
+#define MX_NEONBF16_KERNELS                                                                                  \
+    MX_NEON_KERNELS .linear = mx_linear_neonbf16, .conv2d = mx_conv2d_neonbf16, .attention = mx_attention_neonbf16,
+
 static const mx_kernels scalar_table = {.isa = MX_ISA_SCALAR, MX_SCALAR_KERNELS};
 
-#ifndef MX_NO_X86_SIMD /* non-x86 builds (Makefile) have only the scalar table */
+#ifdef MX_WITH_NEON /* aarch64 builds (Makefile) */
+static const mx_kernels neon_table = {.isa = MX_ISA_NEON, MX_NEON_KERNELS};
+static const mx_kernels neonbf16_table = {.isa = MX_ISA_NEON_BF16, MX_NEONBF16_KERNELS};
+#endif
+
+#ifndef MX_NO_X86_SIMD /* x86-64 builds (Makefile); other architectures have only the scalar table */
 static const mx_kernels avx2_table = {.isa = MX_ISA_AVX2, MX_AVX2_KERNELS};
 static const mx_kernels avx512_table = {.isa = MX_ISA_AVX512, MX_AVX512_KERNELS};
 static const mx_kernels avx512bf16_table = {.isa = MX_ISA_AVX512_BF16, MX_AVX512BF16_KERNELS};
@@ -62,14 +78,16 @@ const mx_kernels *mx_kernels_compiled(mx_isa isa) {
     case MX_ISA_AVX512_BF16: return &avx512bf16_table;
     case MX_ISA_AMX: return &amx_table;
 #endif
+#ifdef MX_WITH_NEON
+    case MX_ISA_NEON: return &neon_table;
+    case MX_ISA_NEON_BF16: return &neonbf16_table;
+#endif
     default: return NULL;
     }
 }
 
 const mx_kernels *mx_kernels_for(mx_isa isa) {
-    mx_isa best = mx_cpu_best_isa();
-    if (isa > best) isa = best;
-    const mx_kernels *k = mx_kernels_compiled(isa);
+    const mx_kernels *k = mx_kernels_compiled(mx_isa_min(isa, mx_cpu_best_isa()));
     return k ? k : &scalar_table;
 }
 

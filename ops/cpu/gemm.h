@@ -80,6 +80,8 @@ void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, vo
 
 /* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 levels. */
 void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);
+/* The NEON weight widening (gemm_neon.c), also used by the neonbf16 level. */
+void mx_gemm_widen_neon(float *y, mx_wptr w, size_t off, size_t n);
 /* The AVX512_BF16 to_pairs (gemm_avx512bf16.c), also used by the AMX level. */
 void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc);
 /* 32-bit words per row (A) or column (B) of a packed panel for a K block of kc: kc for fp32

@@ -1,14 +1,15 @@
 /* Internal to ops/: the kernel functions behind the dispatch tables (ops/cpu/dispatch.c), the
  * scratch-memory helper and the parallel-for helper they share.
  * Naming: mx_<op>_ref (scalar reference, the test oracle), mx_<op>_avx2, mx_<op>_avx512,
- * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation), mx_<op>_amx (the same on AMX tiles).
+ * mx_<op>_avx512bf16 (bf16 arithmetic, fp32 accumulation), mx_<op>_amx (the same on AMX tiles),
+ * mx_<op>_neon and mx_<op>_neonbf16 (aarch64: Advanced SIMD, FEAT_BF16).
  *
  * Files, by op family: <family>_ref.c are the references (linear, conv, norm, attention,
  * activation, binary, layout, vector, embed). gemm.c is the blocked GEMM engine behind linear
  * and conv2d; gemm_<isa>.c holds its micro-kernels (the AVX-512 one written once in
  * gemm_micro_avx512.inc for fp32 and bf16). The other SIMD kernels are written once as templates
  * (attention_simd.inc, norm_simd.inc, activation_simd.inc, vmath_simd.inc for exp/erfc) over a
- * small vector vocabulary (simd_avx2.h, simd_avx512.h) and instantiated per level by
+ * small vector vocabulary (simd_avx2.h, simd_avx512.h, simd_neon.h) and instantiated per level by
  * attention_<isa>.c and elementwise_<isa>.c (docs/DESIGN.md §4 has the recipe for a new level). */
 #ifndef MX_OPS_CPU_KERNELS_H
 #define MX_OPS_CPU_KERNELS_H
@@ -42,7 +43,9 @@ void mx_scratch_release(const mx_ctx *c, mx_scratch *s);
     void mx_##name##_avx2(const mx_ctx *c, MX_SPLICE params);                                                \
     void mx_##name##_avx512(const mx_ctx *c, MX_SPLICE params);                                              \
     void mx_##name##_avx512bf16(const mx_ctx *c, MX_SPLICE params);                                          \
-    void mx_##name##_amx(const mx_ctx *c, MX_SPLICE params);
+    void mx_##name##_amx(const mx_ctx *c, MX_SPLICE params);                                                 \
+    void mx_##name##_neon(const mx_ctx *c, MX_SPLICE params);                                                \
+    void mx_##name##_neonbf16(const mx_ctx *c, MX_SPLICE params);
 MX_OPS(MX_KERNEL_DECL_)
 
 /* Elements per task of the element-wise kernels: fixed, so the split never depends on threads. */

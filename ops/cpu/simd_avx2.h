@@ -5,6 +5,8 @@
 
 #include <immintrin.h>
 
+#include "transpose_avx.h"
+
 #define VL 8
 #define KFN(name) name##_avx2
 typedef __m256 vf;
@@ -56,6 +58,10 @@ static inline vf v_round(vf x) { return _mm256_round_ps(x, _MM_FROUND_TO_NEAREST
 static inline vf v_pow2i(vf n) {
     __m256i e = _mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127));
     return _mm256_castsi256_ps(_mm256_slli_epi32(e, 23));
+}
+/* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
+static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
+    transpose_avx(dst, dst_ld, src, src_ld, rows, cols);
 }
 
 #endif

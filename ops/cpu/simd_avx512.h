@@ -5,6 +5,8 @@
 
 #include <immintrin.h>
 
+#include "transpose_avx.h"
+
 #define VL 16
 #define KFN(name) name##_avx512
 typedef __m512 vf;
@@ -49,6 +51,10 @@ static inline vf v_round(vf x) { return _mm512_roundscale_ps(x, _MM_FROUND_TO_NE
 static inline vf v_pow2i(vf n) {
     __m512i e = _mm512_add_epi32(_mm512_cvtps_epi32(n), _mm512_set1_epi32(127));
     return _mm512_castsi512_ps(_mm512_slli_epi32(e, 23));
+}
+/* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
+static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
+    transpose_avx(dst, dst_ld, src, src_ld, rows, cols);
 }
 
 #endif

@@ -30,7 +30,7 @@ static inline void transpose_8x8(float *dst, size_t dst_ld, const float *src, si
 }
 
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
-static void transpose_avx(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
+static inline void transpose_avx(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     int r = 0;
     for (; r + 8 <= rows; r += 8) {
         int c = 0;

@@ -1,0 +1,6 @@
+/* Element-wise ops, norms and softmax, aarch64 NEON (templates *_simd.inc). */
+#include "kernels.h"
+#include "simd_neon.h"
+#include "vmath_simd.inc"
+#include "activation_simd.inc"
+#include "norm_simd.inc"
