@@ -293,10 +293,10 @@ $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB
 	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
 ifeq ($(CUDA),1)
-$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): | $(LIB_CUDA)
+$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): $(LIB_CUDA) # relinked when the kernels change
 endif
 
-.PHONY: test-cuda cuda-all cuda-run-tests
+.PHONY: test-cuda cuda-all cuda-run-tests gpu-check gpu-check-pack
 cuda:
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
 cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
@@ -305,3 +305,19 @@ test-cuda: cuda
 cuda-run-tests:
 	$(TEST_ENV) MX_TEST_DEVICE=cuda MATEX_FULL=1 sh tests/cuda/run.sh $(CUDA_TEST) \
 	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
+
+# `make gpu-check` on a machine with a GPU: the evidence of tools/gpu_check.sh (docs/cuda-notes.md).
+# `make gpu-check-pack` here first: stripped binaries and the small SD1.5 goldens into
+# $(CUDA_BUILD)/gpu (~35 MB), the one folder a device run carries; gpu-check then builds nothing.
+GPU_PACK = $(CUDA_BUILD)/gpu
+MATEX_TESTDATA ?= ../shared
+GPU_PACK_DATA = golden/sd15_controlnet/inputs.safetensors golden/sd15_controlnet/config.json golden/sd15_vae golden/sd15_clip
+gpu-check:
+	sh tools/gpu_check.sh
+gpu-check-pack: cuda
+	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/data/golden/sd15_controlnet
+	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex
+	strip -o $(GPU_PACK)/tests/cuda/test_cuda_ops $(CUDA_BUILD)/tests/cuda/test_cuda_ops
+	for t in $(CUDA_NN_TESTS); do strip -o $(GPU_PACK)/tests/$$t $(CUDA_BUILD)/tests/$$t || exit 1; done
+	for d in $(GPU_PACK_DATA); do cp -r $(MATEX_TESTDATA)/$$d $(GPU_PACK)/data/$$d || exit 1; done
+	du -sh $(GPU_PACK)

@@ -10,16 +10,8 @@
  * (~10 us) is small against its transfer (8 MiB at ~25 GB/s: ~0.3 ms), small enough to pin. */
 #define MX_CUDA_STAGING_BYTES ((size_t)8 << 20)
 
-/* "driver D.d, runtime R.r" (CUDA versions are 1000*major + 10*minor; 0: none installed). */
-static void cuda_versions(char *buf, size_t cap) {
-    int drv = 0, rt = 0;
-    (void)cudaDriverGetVersion(&drv);
-    (void)cudaRuntimeGetVersion(&rt);
-    snprintf(buf, cap, "driver %d.%d, runtime %d.%d", drv / 1000, drv % 1000 / 10, rt / 1000, rt % 1000 / 10);
-}
-
 int mx_cuda_device_count(int *count, mx_status *st) {
-    int n = 0;
+    int n = 0, drv = 0, rt = 0;
     cudaError_t e = cudaGetDeviceCount(&n);
     (void)cudaGetLastError(); /* clear it, so that it is not reported by a later launch check */
     *count = 0;
@@ -27,17 +19,18 @@ int mx_cuda_device_count(int *count, mx_status *st) {
         *count = n;
         return 0;
     }
-    char versions[96];
-    cuda_versions(versions, sizeof versions);
-    /* No device at all is not an error (a machine without a GPU); every other failure is one. */
-    if (e == cudaErrorNoDevice) return 0;
+    (void)cudaDriverGetVersion(&drv); /* 0: no driver (libcuda) installed */
+    (void)cudaRuntimeGetVersion(&rt);
+    /* No driver or no device at all is not an error (a machine without a GPU); a driver that is
+     * there but cannot serve this runtime, or any other failure, is one. */
+    if (e == cudaErrorNoDevice || (e == cudaErrorInsufficientDriver && drv == 0)) return 0;
     if (e == cudaErrorInsufficientDriver)
         return mx_fail(st, MX_EUSAGE,
-                       "CUDA driver too old for this runtime (%s): this matex was built with CUDA %d.%d and needs a "
-                       "newer NVIDIA driver",
-                       versions, CUDART_VERSION / 1000, CUDART_VERSION % 1000 / 10);
-    return mx_fail(st, MX_EINTERNAL, "CUDA cannot list the devices (%s): %s: %s", versions, cudaGetErrorName(e),
-                   cudaGetErrorString(e));
+                       "CUDA driver too old for this runtime (driver %d.%d, runtime %d.%d): install an NVIDIA driver "
+                       "that supports CUDA %d.%d (for 13.0: 580 or later)",
+                       drv / 1000, drv % 1000 / 10, rt / 1000, rt % 1000 / 10, rt / 1000, rt % 1000 / 10);
+    return mx_fail(st, MX_EINTERNAL, "CUDA cannot list the devices (driver %d.%d, runtime %d.%d): %s: %s", drv / 1000,
+                   drv % 1000 / 10, rt / 1000, rt % 1000 / 10, cudaGetErrorName(e), cudaGetErrorString(e));
 }
 
 /* Two pinned halves of MX_CUDA_STAGING_BYTES each and their events. */
