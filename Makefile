@@ -70,7 +70,7 @@ LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm
+.PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm blender-addon test-blender
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -167,7 +167,7 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 # each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz, FUZZ_JOBS (2) at a time ----
 FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
 FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
-FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_progress.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
@@ -219,6 +219,16 @@ test-full: $(TEST_DEPS)
 # missing) runs tools/slurm/matex-array.sbatch over tiny-weight jobs: submit, cancel, resume.
 test-slurm: all $(DEMO_WEIGHTS)
 	$(TEST_ENV) timeout 300 sh tests/slurm_cluster.sh
+
+# The Blender add-on (blender/matex_texture) as the zip Blender installs; `make test-blender` installs
+# it in a headless Blender (Debian's `blender`) and textures, renders, cancels (tests/blender/).
+ADDON_ZIP = $(BUILD)/matex_blender.zip
+$(ADDON_ZIP): $(wildcard blender/matex_texture/*.py)
+	@mkdir -p $(dir $@)
+	rm -f $@ && cd blender && zip -q -r -X $(abspath $@) matex_texture -x '*__pycache__*'
+blender-addon: $(ADDON_ZIP)
+test-blender: all $(DEMO_WEIGHTS) $(ADDON_ZIP)
+	$(TEST_ENV) MATEX_ADDON_ZIP=$(ADDON_ZIP) timeout 600 sh tests/blender/run.sh
 
 # End to end in seconds with tiny random weights (they paint noise: see README): the shipped
 # Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.

@@ -10,6 +10,7 @@
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
 #include "cli_args.h"
+#include "cli_progress.h"
 #include "cli_signals.h"
 
 void mx_cli_texture_options_help(FILE *f) {
@@ -44,6 +45,8 @@ void mx_cli_texture_options_help(FILE *f) {
             "  --force                  replace an earlier output of matex (atomically; never other files)\n"
             "  --quiet                  no progress on stderr\n"
             "  --json                   print a JSON summary on stdout\n"
+            "  --progress text|json     text: progress lines on stderr (default); json: one JSON object per\n"
+            "                           line on stdout per stage and step, then a result line (README)\n"
             "  -h, --help               this help\n");
 }
 
@@ -63,7 +66,8 @@ int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
     fprintf(stderr, "matex %s: %s\n(matex %s --help for usage)\n", verb, msg, verb);
-    if (json) print_json_error(msg);
+    if (json == MX_CLI_JSON_STREAM) mx_cli_progress_result(stdout, 2, msg, NULL, NULL);
+    else if (json) print_json_error(msg);
     return 2;
 }
 
@@ -120,6 +124,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
         if (!strcmp(val, "z")) return o->up = MX_UP_Z, 1;
         return -1;
     }
+    if (!strcmp(arg, "--progress")) return mx_cli_progress_parse(val, &(int){0}) ? -1 : 1; /* mode: the pre-scan */
     if (!strcmp(arg, "--device")) return mx_backend_parse(val, &o->device, NULL) ? -1 : mx_backend_compiled(o->device) ? 1 : -2;
     return 0;
 }
@@ -128,7 +133,7 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
     const char *verb = argv[0];
     memset(c, 0, sizeof *c);
     mx_texture_opts_default(&c->o);
-    for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
+    c->json = mx_cli_progress_scan(argc, argv); /* usage errors in JSON too */
     int npos = 0, steps_given = 0, guidance_given = 0;
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
@@ -140,10 +145,7 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
             c->o.quiet = 1;
             continue;
         }
-        if (!strcmp(arg, "--json")) {
-            c->json = 1;
-            continue;
-        }
+        if (!strcmp(arg, "--json")) continue; /* read by mx_cli_progress_scan */
         if (!strcmp(arg, "--fast")) {
             c->o.fast = 1;
             continue;
@@ -187,6 +189,11 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_op
 
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
                        int (*run)(const mx_texture_opts *, mx_texture_result *, mx_status *)) {
+    if (c->json == MX_CLI_JSON_STREAM) { /* the events replace the human lines */
+        c->o.quiet = 1;
+        c->o.progress = mx_cli_progress_event;
+        c->o.progress_user = stdout;
+    }
     if (c->o.quiet) mx_log_set_level(MX_LOG_ERROR);
     mx_status st;
     mx_status_clear(&st);
@@ -203,10 +210,13 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb,
     if (rc) {
         if (st.code == MX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", st.msg);
         fprintf(stderr, "matex %s: %s\n", verb, st.msg);
-        if (c->json) print_json_error(st.msg);
-        return st.code == MX_ECANCEL ? 130 : 1;
+        int code = st.code == MX_ECANCEL ? 130 : 1;
+        if (c->json == MX_CLI_JSON_STREAM) mx_cli_progress_result(stdout, code, st.msg, NULL, NULL);
+        else if (c->json) print_json_error(st.msg);
+        return code;
     }
-    if (c->json) {
+    if (c->json == MX_CLI_JSON_STREAM) mx_cli_progress_result(stdout, 0, NULL, c->o.out_dir, &res);
+    else if (c->json) {
         mx_buf b = {0};
         mx_buf_printf(&b, "{\"ok\":true,\"out\":");
         mx_buf_json_str(&b, c->o.out_dir);

@@ -8,7 +8,8 @@
 
 typedef struct mx_cli_texture {
     mx_texture_opts o;
-    int json;
+    int json; /* what goes to stdout: MX_CLI_JSON_NONE, _SUMMARY (--json) or _STREAM (--progress json;
+                 tools/cli_progress.h) */
 } mx_cli_texture;
 
 /* Parses argv (argv[0] = verb). Positional: MESH then PROMPT (optional when
@@ -16,8 +17,9 @@ typedef struct mx_cli_texture {
  * error, message printed). */
 int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, int prompt_optional,
                          void (*usage)(FILE *));
-/* A usage error: "matex VERB: MESSAGE" and the --help hint on stderr, and with json
- * {"ok":false,"error":MESSAGE} on stdout. Returns 2 (the usage-error exit code). */
+/* A usage error: "matex VERB: MESSAGE" and the --help hint on stderr, and on stdout with json
+ * {"ok":false,"error":MESSAGE} (the stream's result line when json is MX_CLI_JSON_STREAM).
+ * Returns 2 (the usage-error exit code). */
 int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 /* The option list (printed by both verbs' --help). */
 void mx_cli_texture_options_help(FILE *f);

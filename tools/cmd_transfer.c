@@ -6,6 +6,7 @@
 #include "../pipeline/geom/masks.h"
 #include "cli.h"
 #include "cli_args.h"
+#include "cli_progress.h"
 #include "cli_texture_opts.h"
 
 static void usage(FILE *f) {
@@ -32,6 +33,7 @@ static void usage(FILE *f) {
                "  --force                  replace an earlier output of matex (atomically; never other files)\n"
                "  --quiet                  no progress on stderr\n"
                "  --json                   print a JSON summary on stdout\n"
+               "  --progress text|json     progress lines on stderr (default), or JSON lines on stdout (README)\n"
                "  -h, --help               this help\n");
 }
 
@@ -68,6 +70,7 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
         if (!strcmp(val, "first-wins")) return o->first_wins = 1, 1;
         return -1;
     }
+    if (!strcmp(arg, "--progress")) return mx_cli_progress_parse(val, &(int){0}) ? -1 : 1; /* mode: the pre-scan */
     if (!strcmp(arg, "--up")) {
         if (!strcmp(val, "y")) return o->up = MX_UP_Y, 1;
         if (!strcmp(val, "z")) return o->up = MX_UP_Z, 1;
@@ -80,12 +83,12 @@ static int parse_valued(mx_texture_opts *o, const char *arg, const char *val) {
 static int parse(mx_cli_texture *c, int argc, char **argv) {
     memset(c, 0, sizeof *c);
     mx_texture_opts_default(&c->o);
-    for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
+    c->json = mx_cli_progress_scan(argc, argv); /* usage errors in JSON too */
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) return usage(stdout), 0;
         if (!strcmp(arg, "--quiet")) c->o.quiet = 1;
-        else if (!strcmp(arg, "--json")) c->json = 1;
+        else if (!strcmp(arg, "--json")) continue; /* read by mx_cli_progress_scan */
         else if (!strcmp(arg, "--force")) c->o.force = 1;
         else if (arg[0] == '-' && arg[1]) {
             if (i + 1 >= argc) return mx_cli_usage_error("transfer", c->json, "missing value after %s", arg);

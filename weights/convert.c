@@ -15,6 +15,7 @@
 #include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "lora.h"
+#include "networks.h"
 #include "safetensors.h"
 #include "weights.h"
 
@@ -92,25 +93,18 @@ static int own_buffer(converter *cv, void *p, mx_status *st) {
 
 /* ---- network type from config.json ---- */
 
-static const char *json_array_has(const mx_json *arr, const char *s) {
-    for (size_t i = 0; i < mx_json_len(arr); i++) {
-        const char *v = mx_json_str(mx_json_at(arr, i));
-        if (v && !strcmp(v, s)) return v;
+/* The network a config names: diffusers' "_class_name", else a known class among transformers'
+ * "architectures" or, for CLIP, its "model_type". NULL when none is known. */
+static const mx_net_kind *network_kind(const mx_json *cfg) {
+    const char *cls = mx_json_get_str(cfg, "_class_name", NULL);
+    if (cls) return mx_net_kind_of_class(cls);
+    const mx_json *arch = mx_json_get(cfg, "architectures");
+    for (size_t i = 0; i < mx_json_len(arch); i++) {
+        const mx_net_kind *k = mx_net_kind_of_class(mx_json_str(mx_json_at(arch, i)));
+        if (k) return k;
     }
-    return NULL;
-}
-
-/* "unet", "controlnet", "vae", "text_encoder", or NULL. */
-static const char *network_kind(const mx_json *cfg) {
-    const char *cls = mx_json_get_str(cfg, "_class_name", "");
-    if (!strcmp(cls, "UNet2DConditionModel")) return "unet";
-    if (!strcmp(cls, "ControlNetModel")) return "controlnet";
-    if (!strcmp(cls, "AutoencoderKL")) return "vae";
-    if (!strcmp(cls, "AutoencoderTiny")) return "taesd";
-    if (json_array_has(mx_json_get(cfg, "architectures"), "CLIPTextModel") ||
-        !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model"))
-        return "text_encoder";
-    return NULL;
+    return !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model") ? mx_net_kind_of_class("CLIPTextModel")
+                                                                              : NULL;
 }
 
 /* ---- locating weight files ---- */
@@ -180,7 +174,8 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
 /* ---- adding tensors ---- */
 
 static int lora_targets(const converter *cv, const char *kind) {
-    return cv->o->n_loras > 0 && (!strcmp(kind, "unet") || !strcmp(kind, "text_encoder"));
+    const mx_net_kind *k = mx_net_kind_named(kind);
+    return cv->o->n_loras > 0 && k && k->lora_prefix;
 }
 
 static int add_integer_tensor(converter *cv, const char *name, const mx_safetensors *f, const mx_st_tensor *t,
@@ -273,14 +268,15 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
     char *cfg_text = read_text(cfg_path, st);
     if (!cfg_text) return -1;
     mx_json *cfg = mx_json_parse(cfg_text, strlen(cfg_text), cfg_path, st);
-    const char *kind = cfg ? network_kind(cfg) : NULL;
+    const mx_net_kind *known = cfg ? network_kind(cfg) : NULL;
+    const char *kind = known ? known->name : NULL;
+    char classes[256];
+    mx_net_kind_classes(classes, sizeof classes);
     int rc = 0;
     if (!cfg) rc = -1;
     else if (!kind)
-        rc = mx_fail(st, MX_EINPUT,
-                     "%s: unknown network type (need _class_name UNet2DConditionModel, ControlNetModel, "
-                     "AutoencoderKL, AutoencoderTiny or architectures CLIPTextModel)",
-                     cfg_path);
+        rc = mx_fail(st, MX_EINPUT, "%s: unknown network type (need _class_name or architectures %s)", cfg_path,
+                     classes);
     else if (want_kind && strcmp(kind, want_kind))
         rc = mx_fail(st, MX_EINPUT, "%s: holds a %s, expected a %s", cfg_path, kind, want_kind);
     char resolved_prefix[96];
@@ -346,13 +342,14 @@ static int add_tokenizer(converter *cv, const char *dir, mx_status *st) {
 /* ---- the whole conversion ---- */
 
 static int convert_model_set(converter *cv, const char *root, mx_status *st) {
-    static const char *subs[4] = {"unet", "controlnet", "vae", "text_encoder"};
     char dir[PATH_MAX];
     size_t found = 0;
-    for (int i = 0; i < 4; i++) {
-        if (mx_path_join(dir, sizeof dir, root, subs[i], st)) return -1;
+    for (size_t i = 0; i < mx_net_kind_count; i++) {
+        const char *sub = mx_net_kinds[i].name;
+        if (!mx_net_kinds[i].in_model_set) continue;
+        if (mx_path_join(dir, sizeof dir, root, sub, st)) return -1;
         if (!is_dir(dir)) continue;
-        if (add_network(cv, dir, subs[i], subs[i], st)) return -1;
+        if (add_network(cv, dir, sub, sub, st)) return -1;
         found++;
     }
     if (mx_path_join(dir, sizeof dir, root, "tokenizer", NULL) == 0 && is_dir(dir)) {
