@@ -73,8 +73,8 @@ else
     echo "NOT RUN: the UNet and ControlNet calls need golden/sd15_controlnet/inputs.safetensors (carry it)" | tee -a "$LOG"
     failed=$((failed + 1))
 fi
-run "memcheck one guided step, two ControlNets (texture 1 view, 1 step)" "$SAN" --tool memcheck --error-exitcode 99 \
-    "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --views 1 --steps 1 --texture-size 512 \
+run "memcheck guided steps, two ControlNets (texture 2 views, 1 step)" "$SAN" --tool memcheck --error-exitcode 99 \
+    "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --views 2 --steps 1 --texture-size 512 \
     --render-size 512 -o "$O/memcheck_step" --force
 
 say "timed: default texture on the GPU (6 views, 10 steps, 1024^2)"
