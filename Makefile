@@ -211,6 +211,12 @@ TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
+# Every repository path named in the docs and the code exists (tools/check_paths.sh; under a
+# second; `make test` runs it as tests/cli_check_paths.sh).
+.PHONY: check
+check:
+	sh tools/check_paths.sh .
+
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: $(TEST_DEPS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
@@ -238,7 +244,7 @@ demo: all $(DEMO_WEIGHTS)
 	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
 	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
 	$(BUILD)/matex render $(DEMO_OUT)/mesh.glb --views 8 --size 256 -o $(DEMO_OUT)/views
-	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, report.json)"
+	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, texture.exr, report.json)"
 	@echo "demo: contact sheet of 8 views in $(CURDIR)/$(DEMO_OUT)/views/contact_sheet.png"
 
 asan:
@@ -266,6 +272,9 @@ install: all
 	install -D -m 644 $(LIBMATEX) $(DESTDIR)$(PREFIX)/lib/libmatex.a
 	install -D -m 644 $(LIB_IO) $(DESTDIR)$(PREFIX)/lib/libmatex_io.a
 	install -D -m 644 include/matex.h $(DESTDIR)$(PREFIX)/include/matex.h
+	# the CLIP vocabulary (MIT, OpenAI) for single-file checkpoints, which carry none (matex convert)
+	for f in vocab.json merges.txt LICENSE; do \
+	    install -D -m 644 tests/data/golden/tokenizer/$$f $(DESTDIR)$(PREFIX)/share/matex/tokenizer/$$f; done
 	@mkdir -p $(DESTDIR)$(PREFIX)/lib/pkgconfig
 	printf 'prefix=%s\nlibdir=$${prefix}/lib\nincludedir=$${prefix}/include\n\nName: matex\nDescription: %s\nVersion: %s\nCflags: -I$${includedir}\nLibs: %s\n' \
 	    '$(PREFIX)' 'text-to-texture for 3D meshes (Make-A-Texture)' \

@@ -17,6 +17,8 @@
 #include "lora.h"
 #include "networks.h"
 #include "safetensors.h"
+#include "single_file.h"
+#include "taesd_file.h"
 #include "weights.h"
 
 #define CONVERTER_VERSION "matex-convert 1"
@@ -33,6 +35,8 @@ typedef struct {
     void **bufs; /* converted tensor data owned by the converter */
     size_t n_bufs, cap_bufs;
     mx_lora *loras[MX_CONVERT_MAX_EXTRA];
+    mx_single_file *singles[MX_CONVERT_MAX_EXTRA + 1]; /* single-file inputs, mapped until the end */
+    size_t n_singles;
     text_buf sources; /* provenance: JSON array items */
     mx_convert_result res;
 } converter;
@@ -349,6 +353,7 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
         if (!mx_net_kinds[i].in_model_set) continue;
         if (mx_path_join(dir, sizeof dir, root, sub, st)) return -1;
         if (!is_dir(dir)) continue;
+        if (cv->o->vae && !strcmp(sub, "vae")) continue; /* replaced by --vae */
         if (add_network(cv, dir, sub, sub, st)) return -1;
         found++;
     }
@@ -367,6 +372,53 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
     return 0;
 }
 
+/* ---- single-file checkpoints (single_file.h) ---- */
+
+static int add_single_net(converter *cv, const mx_single_file *sf, const mx_sf_net *n, const char *prefix,
+                          mx_status *st) {
+    char key[128];
+    snprintf(key, sizeof key, "%s.config", prefix);
+    if (mx_wf_writer_meta(cv->w, key, n->config, st)) return -1;
+    for (size_t i = 0; i < n->count; i++) {
+        if (add_tensor(cv, prefix, n->kind, &sf->src, &n->tensors[i], st)) return -1;
+        cv->res.tensors++;
+    }
+    mx_buf_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
+    mx_buf_json_str(&cv->sources, prefix);
+    mx_buf_put(&cv->sources, ", \"files\": [", 12);
+    mx_buf_json_str(&cv->sources, sf->src.path);
+    mx_buf_put(&cv->sources, "]}", 2);
+    cv->res.networks++;
+    mx_info("convert: %s <- %s (%zu tensors, %s)", prefix, sf->src.path, n->count, sf->container);
+    return 0;
+}
+
+/* A single-file checkpoint: its networks under their kinds (the VAE left out when --vae replaces
+ * it), or with only = MX_SF_CONTROLNET_ONLY or MX_SF_VAE_ONLY that one network under `prefix`. The
+ * CLIP vocabulary comes from o->tokenizer. */
+static int add_single_file(converter *cv, const char *path, int only, const char *prefix, mx_status *st) {
+    mx_single_file *sf = calloc(1, sizeof *sf);
+    if (!sf) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    int flags = (cv->o->ema && !only ? MX_SF_EMA : 0) | only;
+    if (only == MX_SF_TAESD ? mx_taesd_files_open(sf, path, st) : mx_sf_open(sf, path, flags, st)) {
+        free(sf);
+        return -1;
+    }
+    cv->singles[cv->n_singles++] = sf;
+    if ((flags & MX_SF_EMA) && !sf->has_ema) return mx_fail(st, MX_EUSAGE, "%s: --ema: the file has no EMA copy", path);
+    int has_clip = 0;
+    for (size_t k = 0; k < sf->n_nets; k++) {
+        const mx_sf_net *n = &sf->nets[k];
+        has_clip |= !strcmp(n->kind, "text_encoder");
+        if (!only && cv->o->vae && !strcmp(n->kind, "vae")) continue;
+        if (add_single_net(cv, sf, n, only ? prefix : n->kind, st)) return -1;
+    }
+    if (sf->skipped) mx_info("convert: %s: %zu entries skipped (e.g. %s)", path, sf->skipped, sf->skipped_example);
+    if (has_clip && cv->o->tokenizer) return add_tokenizer(cv, cv->o->tokenizer, st);
+    if (has_clip) mx_warn("convert: no CLIP vocabulary found: prompts cannot be tokenized with this file");
+    return 0;
+}
+
 static int valid_controlnet_name(const char *s) {
     if (!*s || strlen(s) > 32) return 0;
     for (; *s; s++)
@@ -376,9 +428,11 @@ static int valid_controlnet_name(const char *s) {
 
 static int convert_inputs(converter *cv, mx_status *st) {
     const mx_convert_opts *o = cv->o;
-    if (o->input) {
+    if (o->input && mx_sf_is_file(o->input)) {
+        if (add_single_file(cv, o->input, 0, NULL, st)) return -1;
+    } else if (o->input) {
         char cfg[PATH_MAX];
-        if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder", o->input);
+        if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder or a checkpoint file", o->input);
         if (mx_path_join(cfg, sizeof cfg, o->input, "config.json", st)) return -1;
         if (is_file(cfg) ? add_network(cv, o->input, NULL, NULL, st) : convert_model_set(cv, o->input, st)) return -1;
     }
@@ -387,9 +441,17 @@ static int convert_inputs(converter *cv, mx_status *st) {
         if (!valid_controlnet_name(o->controlnets[i].name))
             return mx_fail(st, MX_EUSAGE, "--controlnet %s: the name must be 1-32 of [a-z0-9_]", o->controlnets[i].name);
         snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
-        if (add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st)) return -1;
+        if (mx_sf_is_file(o->controlnets[i].dir) ? add_single_file(cv, o->controlnets[i].dir, MX_SF_CONTROLNET_ONLY, prefix, st)
+                                                 : add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st))
+            return -1;
     }
-    if (o->taesd && add_network(cv, o->taesd, "taesd", "taesd", st)) return -1;
+    if (o->vae && (mx_sf_is_file(o->vae) ? add_single_file(cv, o->vae, MX_SF_VAE_ONLY, "vae", st)
+                                         : add_network(cv, o->vae, "vae", "vae", st)))
+        return -1;
+    int taesd_files = o->taesd && (mx_sf_is_file(o->taesd) || mx_taesd_files_given(o->taesd));
+    if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
+                                 : add_network(cv, o->taesd, "taesd", "taesd", st)))
+        return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -449,6 +511,10 @@ static void converter_free(converter *cv) {
     for (size_t i = 0; i < cv->n_bufs; i++) free(cv->bufs[i]);
     free(cv->bufs);
     for (size_t k = 0; k < MX_CONVERT_MAX_EXTRA; k++) mx_lora_close(cv->loras[k]);
+    for (size_t k = 0; k < cv->n_singles; k++) {
+        mx_sf_close(cv->singles[k]);
+        free(cv->singles[k]);
+    }
     free(cv->sources.p);
 }
 

@@ -98,7 +98,7 @@ void mx_view_masks(mx_view_buffers *vb, int normal_source, float frontal_thresho
  * rejects anyway, or a jump between surfaces). The radius is MX_VIEW_ERODE_MODEL_PX pixels of
  * the model image in render pixels, ceil(1.5 · render_size / image_size): 3 pixels at the
  * default 1024 render / 512 model size (image_size 0: no resampling, 2 pixels). Measured by
- * tests/test_geom_bleed.c: 2 render pixels at a 2:1 ratio still let background through. */
+ * tests/test_texture_bleed.c: 2 render pixels at a 2:1 ratio still let background through. */
 #define MX_VIEW_ERODE_MODEL_PX 1.5f
 #define MX_VIEW_DEPTH_JUMP 4.0f
 int mx_view_erode_radius(int render_size, int image_size);

@@ -123,6 +123,19 @@ static int build_candidates(mx_job *j, mx_status *st) {
     return 0;
 }
 
+/* Warns, once per job, when `text` is longer than the 75 tokens CLIP reads: how many tokens are
+ * dropped (the count `matex tokenize` gives) and where the dropped part begins. */
+static int warn_if_truncated(mx_job *j, const char *what, const char *text, mx_status *st) {
+    if (j->truncation_warned || !j->models->tok) return 0;
+    mx_tok_result r;
+    if (mx_tok_encode(j->models->tok, text, &r, st)) return -1;
+    if (r.n_dropped == 0) return 0;
+    mx_warn("%s longer than the %d tokens CLIP reads: %d%s tokens dropped, from \"%s\"", what, MX_CLIP_CONTEXT - 2,
+            r.n_dropped, r.n_dropped + MX_CLIP_CONTEXT - 2 >= MX_TOK_MAX_COUNTED ? " or more" : "", r.dropped_from);
+    j->truncation_warned = 1;
+    return 0;
+}
+
 static int encode_negative(mx_job *j, mx_status *st) {
     int C = mx_models_text_dim(j->models);
     j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
@@ -236,7 +249,9 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models && encode_negative(j, st))) return -1;
+    if (build_candidates(j, st) || mx_job_check_cancel(j, st) ||
+        (j->models && (encode_negative(j, st) || (j->o->prompt && warn_if_truncated(j, "prompt", j->o->prompt, st)))))
+        return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
                     j->nlayers, o->candidates);
     report_header(j);
@@ -284,9 +299,10 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
         if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
         return NULL;
     }
-    if (dropped && !j->truncation_warned) {
-        mx_warn("prompt longer than 77 tokens: truncated (%d tokens dropped): \"%s\"", dropped, text);
-        j->truncation_warned = 1;
+    if (dropped && warn_if_truncated(j, "view prompt", text, st)) {
+        free(emb);
+        free(copy);
+        return NULL;
     }
     pc->text[pc->n] = copy;
     pc->emb[pc->n] = emb;
