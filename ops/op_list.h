@@ -19,8 +19,9 @@
     X(linear, M > 0 && N > 0, (float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K),       \
       (y, x, w, bias, M, N, K))                                                                              \
     /* 2-D convolution, NCHW, kernel kh x kw (1x1 or 3x3 in SD; any size is correct), zero padding `pad` */   \
-    /* on each side; Ho = (H + 2 pad - kh)/stride + 1, same for Wo. */                                        \
-    X(conv2d, B > 0 && Cout > 0,                                                                             \
+    /* on each side; Ho = (H + 2 pad - kh)/stride + 1, same for Wo; a kernel larger than the padded */       \
+    /* input has no output (no work). */                                                                     \
+    X(conv2d, B > 0 && Cout > 0 && H + 2 * pad >= kh && W + 2 * pad >= kw,                                   \
       (float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w, mx_wptr bias, int Cout, int kh,     \
        int kw, int stride, int pad),                                                                         \
       (y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad))                                              \
@@ -50,21 +51,25 @@
     /* GEGLU (diffusers): x[M, 2N] = [h | g]; y[M, N] = h * gelu(g). */                                      \
     X(geglu, M > 0 && N > 0, (float *y, const float *x, int M, int N), (y, x, M, N))                          \
     /* y = a op b with numpy broadcasting over ndim (1..5) dims; y has the broadcast shape. y may equal */   \
-    /* a when a has the output shape. */                                                                     \
-    X(binary, 1,                                                                                             \
+    /* a when a has the output shape. A size-0 dim in either shape: no work. */                              \
+    X(binary, mx_shapes_nonempty(ashape, bshape, ndim),                                                      \
       (mx_binop op, float *y, const float *a, const int64_t *ashape, const float *b, const int64_t *bshape,   \
        int ndim),                                                                                            \
       (op, y, a, ashape, b, bshape, ndim))                                                                   \
     /* y = s * x (y may equal x). */                                                                         \
     X(scale, 1, (float *y, const float *x, float s, size_t n), (y, x, s, n))                                 \
     /* Nearest-neighbour 2× upsample of BC planes of H×W into 2H×2W. */                                      \
-    X(upsample_nearest2x, 1, (float *y, const float *x, int BC, int H, int W), (y, x, BC, H, W))             \
+    X(upsample_nearest2x, BC > 0 && H > 0 && W > 0, (float *y, const float *x, int BC, int H, int W),        \
+      (y, x, BC, H, W))                                                                                      \
     /* Channel concat of a[B, Ca, HW] and b[B, Cb, HW] into y[B, Ca+Cb, HW]. */                              \
-    X(concat_channels, 1, (float *y, const float *a, int Ca, const float *b, int Cb, int B, int HW),          \
+    X(concat_channels, B > 0 && HW > 0 && Ca + Cb > 0,                                                       \
+      (float *y, const float *a, int Ca, const float *b, int Cb, int B, int HW),                             \
       (y, a, Ca, b, Cb, B, HW))                                                                              \
     /* [B, C, HW] <-> [B, HW, C]. */                                                                         \
-    X(transpose_chw_hwc, 1, (float *y, const float *x, int B, int C, int HW), (y, x, B, C, HW))              \
-    X(transpose_hwc_chw, 1, (float *y, const float *x, int B, int C, int HW), (y, x, B, C, HW))              \
+    X(transpose_chw_hwc, B > 0 && C > 0 && HW > 0, (float *y, const float *x, int B, int C, int HW),         \
+      (y, x, B, C, HW))                                                                                      \
+    X(transpose_hwc_chw, B > 0 && C > 0 && HW > 0, (float *y, const float *x, int B, int C, int HW),         \
+      (y, x, B, C, HW))                                                                                      \
     /* Rectangle copy over BC planes: y[p, y0 + r, x0 + q] = x[p, sy0 + r, sx0 + q] for r < h, q < w, */    \
     /* with y planes Hy×Wy and x planes Hx×Wx (the rectangle must lie inside both). Crops, pastes, tiles. */ \
     X(copy_rect, BC > 0 && h > 0 && w > 0,                                                                   \

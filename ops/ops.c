@@ -58,6 +58,12 @@ static void op_end(const mx_ctx *c) {
         }                                                                                                    \
     } while (0)
 
+int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim) {
+    for (int d = 0; d < ndim; d++)
+        if (ashape[d] <= 0 || bshape[d] <= 0) return 0;
+    return 1;
+}
+
 /* Every wrapper has the same shape (op_list.h): no work unless the guard holds, else the table
  * entry. None needs more checking: the kernels take any sizes the guards let through. */
 #define MX_WRAPPER_DEF_(name, guard, params, args)                                                          \

@@ -85,6 +85,9 @@ const mx_kernels *mx_kernels_best(void);
 
 /* ---- wrappers: the op semantics (op_list.h) ---- */
 
+/* 1 when every dim of both shapes (ndim of each) is positive: the guard of mx_binary. */
+int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim);
+
 #define MX_WRAPPER_DECL_(name, guard, params, args) void mx_##name(const mx_ctx *c, MX_SPLICE params);
 MX_OPS(MX_WRAPPER_DECL_)
 /* Same-shape shortcut of mx_binary: y = a + b over n floats. */

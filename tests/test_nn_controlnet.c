@@ -169,7 +169,7 @@ static void check_unet_fp16w_chain(const mx_ctx *c, const char *cn_net, const ch
         float *want = golden_f32(&uout, name, &nw);
         CHECK(want != NULL);
         snprintf(label, sizeof label, "%s fp16w %s (fp16 ControlNet chain)", unet_net, name);
-        if (want) mx_check_close(label, got, want, nw, 1e-4);
+        if (want) mx_check_close(label, got, want, nw, golden_bound(c, GOLDEN_BF16));
         free(want);
     }
     free(got);

@@ -1,7 +1,12 @@
 /* The CUDA backend (runtime/backend.h): device memory, host copies, and the kernel table that
  * runs every op of ops.h with the kernels of this folder. Kernel table entries return nothing,
  * so the first error of any op is kept and reported by the next copy to the host (ops queue
- * work on one stream; a download waits for it). One device (0) per process. */
+ * work on one stream; a download waits for it), with the name of the op that raised it, or,
+ * for a fault found only when the stream is waited for, the name of the last op queued.
+ * MATEX_CUDA_SYNC=1 waits after every op, so such a fault names its own op. One device (0) per
+ * process. */
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "cuda_common.cuh"
@@ -14,21 +19,29 @@ typedef struct cuda_backend {
     mx_cuda_ctx *cc;
     mx_status err; /* the first failure of a queued op */
     int failed;
+    int sync_each_op;    /* MATEX_CUDA_SYNC=1: wait after every op (slow; names the op that faults) */
+    const char *last_op; /* the op queued last (an op_list.h name) */
 } cuda_backend;
 
 static cuda_backend *of(const mx_ctx *c) { return (cuda_backend *)c->be->impl; }
 
-/* Runs one mx_cuda_* call (which sees b_ and st_) unless an earlier op failed; keeps its error. */
-#define CUDA_OP(c, call)                                                                                   \
-    do {                                                                                                   \
-        cuda_backend *b_ = of(c);                                                                          \
-        mx_status *st_ = &b_->err;                                                                         \
-        if (!b_->failed && (call) != 0) b_->failed = 1;                                                    \
-    } while (0)
+/* Runs one op unless an earlier op failed; keeps its error, prefixed with the op's name. */
+static void run_op(cuda_backend *b, const char *op, int rc) {
+    b->last_op = op;
+    if (rc == 0 && b->sync_each_op) rc = mx_cuda_sync(b->cc, &b->err);
+    if (rc != 0) {
+        b->failed = 1;
+        mx_fail_prefix(&b->err, "op %s", op);
+    }
+}
 
-/* The table entry of each op of ops/op_list.h: its mx_cuda_<op> on the backend's context. */
+/* The table entry of each op of ops/op_list.h: its mx_cuda_<op> on the backend's context (be_: the
+ * ops' parameters use the short names). */
 #define CUDA_ENTRY_(name, guard, params, args)                                                             \
-    static void k_##name(const mx_ctx *c, MX_SPLICE params) { CUDA_OP(c, mx_cuda_##name(b_->cc, MX_SPLICE args, st_)); }
+    static void k_##name(const mx_ctx *c, MX_SPLICE params) {                                              \
+        cuda_backend *be_ = of(c);                                                                         \
+        if (!be_->failed) run_op(be_, #name, mx_cuda_##name(be_->cc, MX_SPLICE args, &be_->err));          \
+    }
 MX_OPS(CUDA_ENTRY_)
 
 void mx_cuda_fill_kernels(mx_kernels *k) {
@@ -60,16 +73,34 @@ static int report_failure(cuda_backend *b, mx_status *st) {
     return -1;
 }
 
+/* Uploads (weights, network inputs) are queued through the pinned staging buffer: the next
+ * upload's host copy overlaps this one's transfer. */
 static int cuda_to_device(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st) {
     cuda_backend *b = (cuda_backend *)be->impl;
     if (report_failure(b, st)) return -1;
-    return mx_cuda_upload(b->cc, dst, src, bytes, "cuda upload", st);
+    return mx_cuda_upload_staged(b->cc, dst, src, bytes, "cuda upload", st);
+}
+
+/* A fault found while waiting belongs to some queued op: name the last one, and how to find the
+ * one that raised it. */
+static int wait_queued(cuda_backend *b, mx_status *st) {
+    if (!mx_cuda_sync(b->cc, st)) return 0;
+    if (b->last_op)
+        mx_fail_prefix(st, "after op %s (the last queued; MATEX_CUDA_SYNC=1 names the op that failed)", b->last_op);
+    return -1;
 }
 
 static int cuda_to_host(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st) {
     cuda_backend *b = (cuda_backend *)be->impl;
-    if (mx_cuda_sync(b->cc, st) || report_failure(b, st)) return -1;
+    if (report_failure(b, st) || wait_queued(b, st)) return -1;
     return mx_cuda_download(b->cc, dst, src, bytes, "cuda download", st);
+}
+
+unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
+    mx_cuda_ctx *c = ((cuda_backend *)be->impl)->cc;
+    unsigned long long n = c->half_products;
+    if (reset) c->half_products = 0;
+    return n;
 }
 
 static void cuda_destroy(mx_backend *be) {
@@ -81,8 +112,8 @@ static void cuda_destroy(mx_backend *be) {
 int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
     *out = NULL;
     int n = 0;
-    mx_cuda_device_count(&n, st);
-    if (n < 1) return mx_fail(st, MX_EUSAGE, "--device cuda: no CUDA device found (no NVIDIA GPU or driver)");
+    if (mx_cuda_device_count(&n, st)) return mx_fail_prefix(st, "--device cuda");
+    if (n < 1) return mx_fail(st, MX_EUSAGE, "--device cuda: no CUDA device found (no NVIDIA GPU)");
     cuda_backend *b = (cuda_backend *)calloc(1, sizeof *b);
     if (!b) return mx_fail(st, MX_ENOMEM, "cuda backend: out of memory");
     if (mx_cuda_ctx_create(&b->cc, 0, CUDA_SCRATCH_BYTES, st)) {
@@ -90,6 +121,8 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
         return mx_fail_prefix(st, "cuda backend");
     }
     mx_cuda_fill_kernels(&b->k);
+    const char *sync = getenv("MATEX_CUDA_SYNC");
+    b->sync_each_op = sync && strcmp(sync, "1") == 0;
     b->be.kind = MX_BACKEND_CUDA;
     b->be.k = &b->k;
     b->be.host_visible = 0;

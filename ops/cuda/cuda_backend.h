@@ -31,7 +31,10 @@ typedef struct mx_cuda_ctx mx_cuda_ctx;
 
 /* ---- devices and contexts ---- */
 
-/* Number of usable CUDA devices; 0 (and success) when there is no driver or no device. */
+/* Number of usable CUDA devices: 0 (and success) when the system has no CUDA device; -1 with a
+ * message naming the cause for anything else (a driver too old for this runtime, with both
+ * versions; a driver that cannot be loaded or initialised): a GPU that CUDA cannot use is an
+ * error, never "no device". */
 int mx_cuda_device_count(int *count, mx_status *st);
 /* A context on `device`: a stream, a cuBLASLt handle and workspace, and a device scratch
  * buffer of scratch_bytes (temporary memory of the ops: converted activations, im2col tiles). */
@@ -49,6 +52,12 @@ int mx_cuda_upload(mx_cuda_ctx *ctx, void *dst, const void *src, size_t bytes, c
                    mx_status *st);
 int mx_cuda_download(mx_cuda_ctx *ctx, void *dst, const void *src, size_t bytes, const char *what,
                      mx_status *st);
+/* Asynchronous host-to-device copy through the context's two pinned staging halves (double
+ * buffered): src may be reused when it returns; the copy completes in stream order. Errors of the
+ * copy itself surface at the next sync. Weights are uploaded this way (one pass, no pageable
+ * synchronous copy per tensor). */
+int mx_cuda_upload_staged(mx_cuda_ctx *ctx, void *dst, const void *src, size_t bytes, const char *what,
+                          mx_status *st);
 int mx_cuda_memset_zero(mx_cuda_ctx *ctx, void *dptr, size_t bytes, const char *what, mx_status *st);
 
 /* ---- ops: one per op of ops/op_list.h, with the same arguments and semantics as its mx_* wrapper
@@ -66,6 +75,10 @@ MX_OPS(MX_CUDA_OP_DECL_)
  * the functions above (errors are kept and reported by the next copy to the host), device
  * memory, host copies. Fails with one line when there is no usable device. */
 int mx_cuda_backend_create(mx_backend **out, mx_status *st);
+/* The number of matrix products that backend be (a CUDA backend) computed in half precision
+ * (fp16/bf16 weights on tensor cores) since the last call with reset=1. The network parity tests
+ * apply the half-precision bound exactly where this is non-zero (tests/nn_golden.h). */
+unsigned long long mx_cuda_half_products(mx_backend *be, int reset);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

@@ -50,6 +50,7 @@ int mx_cuda_binary(mx_cuda_ctx *c, mx_binop op, float *y, const float *a, const 
     size_t n = 0;
     if (op != MX_BIN_ADD && op != MX_BIN_SUB && op != MX_BIN_MUL)
         return mx_fail(st, MX_EINPUT, "cuda binary: unknown op %d", (int)op);
+    if (ndim >= 1 && ndim <= MX_MAX_DIMS && !mx_shapes_nonempty(ashape, bshape, ndim)) return 0; /* empty: no work */
     if (bcast_make(&bc, ashape, bshape, ndim, &n, st)) return -1;
     binary_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>((int)op, y, a, b, bc, n);
     return mx_cuda_launched("cuda binary", st);

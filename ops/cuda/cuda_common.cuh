@@ -22,6 +22,13 @@ struct mx_cuda_ctx {
     unsigned char *scratch; /* device bump buffer for temporaries of one op */
     size_t scratch_cap;
     size_t scratch_used;
+    /* Host-to-device copies go through two pinned staging halves, used in turn: the host fills
+     * one while the copy engine reads the other (mx_cuda_upload_staged). */
+    unsigned char *staging[2];
+    cudaEvent_t staging_done[2]; /* recorded after the copy out of each half */
+    size_t staging_bytes;        /* of each half; 0: no staging, plain copies */
+    int staging_next;
+    unsigned long long half_products; /* GEMMs run on fp16/bf16 inputs (mx_cuda_half_products) */
 };
 
 /* 0 when e is cudaSuccess, else -1 with "what: CUDA error name: text". */
@@ -100,6 +107,13 @@ __device__ __forceinline__ float mx_cuda_block_max(float v, float *shm) {
 static inline int mx_cuda_check_wdtype(mx_wptr w, const char *what, mx_status *st) {
     if (w.dtype == MX_F32 || w.dtype == MX_F16 || w.dtype == MX_BF16) return 0;
     return mx_fail(st, MX_EINPUT, "%s: weight dtype %d is not fp32, fp16 or bf16", what, (int)w.dtype);
+}
+
+/* 1 when some size is 0: an empty shape, no work (the ops' guards in op_list.h). */
+static inline int mx_cuda_empty(int ndim, const long long *dims) {
+    for (int i = 0; i < ndim; i++)
+        if (dims[i] == 0) return 1;
+    return 0;
 }
 
 /* Sizes must be positive and their product (the element count) must fit an index. */

@@ -87,6 +87,7 @@ int mx_cuda_gemm(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int
                              c->workspace_bytes, c->stream),
               what, "matmul", st))
         goto done;
+    if (ab != MX_F32) c->half_products++;
     rc = 0;
 done:
     gemm_plan_free(&p);

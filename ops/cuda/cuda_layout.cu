@@ -13,6 +13,7 @@ __global__ void upsample_nearest2x_kernel(float *y, const float *x, int H, int W
 
 int mx_cuda_upsample_nearest2x(mx_cuda_ctx *c, float *y, const float *x, int BC, int H, int W, mx_status *st) {
     const long long dims[3] = {BC, H, W};
+    if (mx_cuda_empty(3, dims)) return 0;
     if (mx_cuda_check_dims("cuda upsample_nearest2x", st, 3, dims)) return -1;
     size_t n = (size_t)BC * 4 * H * W;
     upsample_nearest2x_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(y, x, H, W, n);
@@ -32,8 +33,10 @@ __global__ void concat_channels_kernel(float *y, const float *a, int Ca, const f
 
 int mx_cuda_concat_channels(mx_cuda_ctx *c, float *y, const float *a, int Ca, const float *b, int Cb, int B, int HW,
                             mx_status *st) {
-    const long long dims[4] = {Ca, Cb, B, HW};
-    if (mx_cuda_check_dims("cuda concat_channels", st, 4, dims)) return -1;
+    const long long dims[3] = {Ca + Cb, B, HW}, parts[2] = {Ca + 1, Cb + 1}; /* a side may have 0 channels */
+    if (mx_cuda_empty(3, dims)) return 0;
+    if (mx_cuda_check_dims("cuda concat_channels", st, 3, dims) || mx_cuda_check_dims("cuda concat_channels", st, 2, parts))
+        return -1;
     size_t n = (size_t)B * (Ca + Cb) * HW;
     concat_channels_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(y, a, Ca, b, Cb, HW, n);
     return mx_cuda_launched("cuda concat_channels", st);
@@ -60,6 +63,7 @@ __global__ void transpose_kernel(float *y, const float *x, int rows, int cols) {
 static int transpose(mx_cuda_ctx *c, float *y, const float *x, int B, int rows, int cols, const char *what,
                      mx_status *st) {
     const long long dims[3] = {B, rows, cols};
+    if (mx_cuda_empty(3, dims)) return 0;
     if (mx_cuda_check_dims(what, st, 3, dims)) return -1;
     if (B > 65535 || (rows + TILE - 1) / TILE > 65535)
         return mx_fail(st, MX_EINPUT, "%s: %d x %d x %d is beyond the launch grid", what, B, rows, cols);

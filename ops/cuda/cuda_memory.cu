@@ -1,19 +1,54 @@
 /* Devices, contexts and device memory of the CUDA backend. */
+#include <stdio.h>
+#include <string.h>
+
 #include "cuda_common.cuh"
 
 /* cuBLASLt workspace: 32 MiB is what NVIDIA recommends for Hopper (4 MiB is enough before it). */
 #define MX_CUDA_WORKSPACE_BYTES ((size_t)32 << 20)
+/* Each of the two pinned staging halves of the uploads: large enough that a copy's fixed cost
+ * (~10 us) is small against its transfer (8 MiB at ~25 GB/s: ~0.3 ms), small enough to pin. */
+#define MX_CUDA_STAGING_BYTES ((size_t)8 << 20)
 
 int mx_cuda_device_count(int *count, mx_status *st) {
-    (void)st;
-    int n = 0;
-    /* No driver, no device or a driver too old all mean "no usable device", not an error. */
-    if (cudaGetDeviceCount(&n) != cudaSuccess) {
-        (void)cudaGetLastError(); /* clear it, so that it is not reported by a later launch check */
-        n = 0;
+    int n = 0, drv = 0, rt = 0;
+    cudaError_t e = cudaGetDeviceCount(&n);
+    (void)cudaGetLastError(); /* clear it, so that it is not reported by a later launch check */
+    *count = 0;
+    if (e == cudaSuccess) {
+        *count = n;
+        return 0;
     }
-    *count = n;
+    (void)cudaDriverGetVersion(&drv); /* 0: no driver (libcuda) installed */
+    (void)cudaRuntimeGetVersion(&rt);
+    /* No driver or no device at all is not an error (a machine without a GPU); a driver that is
+     * there but cannot serve this runtime, or any other failure, is one. */
+    if (e == cudaErrorNoDevice || (e == cudaErrorInsufficientDriver && drv == 0)) return 0;
+    if (e == cudaErrorInsufficientDriver)
+        return mx_fail(st, MX_EUSAGE,
+                       "CUDA driver too old for this runtime (driver %d.%d, runtime %d.%d): install an NVIDIA driver "
+                       "that supports CUDA %d.%d (for 13.0: 580 or later)",
+                       drv / 1000, drv % 1000 / 10, rt / 1000, rt % 1000 / 10, rt / 1000, rt % 1000 / 10);
+    return mx_fail(st, MX_EINTERNAL, "CUDA cannot list the devices (driver %d.%d, runtime %d.%d): %s: %s", drv / 1000,
+                   drv % 1000 / 10, rt / 1000, rt % 1000 / 10, cudaGetErrorName(e), cudaGetErrorString(e));
+}
+
+/* Two pinned halves of MX_CUDA_STAGING_BYTES each and their events. */
+static int staging_create(mx_cuda_ctx *c, mx_status *st) {
+    for (int i = 0; i < 2; i++) {
+        if (mx_cuda_ok(cudaMallocHost((void **)&c->staging[i], MX_CUDA_STAGING_BYTES), "cuda pinned staging buffer", st) ||
+            mx_cuda_ok(cudaEventCreateWithFlags(&c->staging_done[i], cudaEventDisableTiming), "cuda staging event", st))
+            return -1;
+    }
+    c->staging_bytes = MX_CUDA_STAGING_BYTES;
     return 0;
+}
+
+static void staging_destroy(mx_cuda_ctx *c) {
+    for (int i = 0; i < 2; i++) {
+        if (c->staging_done[i]) cudaEventDestroy(c->staging_done[i]);
+        if (c->staging[i]) cudaFreeHost(c->staging[i]);
+    }
 }
 
 int mx_cuda_ctx_create(mx_cuda_ctx **out, int device, size_t scratch_bytes, mx_status *st) {
@@ -32,6 +67,7 @@ int mx_cuda_ctx_create(mx_cuda_ctx **out, int device, size_t scratch_bytes, mx_s
     if (mx_cuda_alloc(&c->workspace, c->workspace_bytes, "cuBLASLt workspace", st)) goto fail;
     c->scratch_cap = scratch_bytes;
     if (scratch_bytes && mx_cuda_alloc((void **)&c->scratch, scratch_bytes, "cuda scratch", st)) goto fail;
+    if (staging_create(c, st)) goto fail;
     *out = c;
     return 0;
 fail:
@@ -42,6 +78,7 @@ fail:
 void mx_cuda_ctx_destroy(mx_cuda_ctx *c) {
     if (!c) return;
     if (c->stream) cudaStreamSynchronize(c->stream);
+    staging_destroy(c);
     mx_cuda_free(c->scratch);
     mx_cuda_free(c->workspace);
     if (c->lt) cublasLtDestroy(c->lt);
@@ -50,7 +87,7 @@ void mx_cuda_ctx_destroy(mx_cuda_ctx *c) {
 }
 
 int mx_cuda_sync(mx_cuda_ctx *c, mx_status *st) {
-    return mx_cuda_ok(cudaStreamSynchronize(c->stream), "cuda sync (an earlier queued op failed)", st);
+    return mx_cuda_ok(cudaStreamSynchronize(c->stream), "cuda sync: a queued kernel or copy failed", st);
 }
 
 int mx_cuda_alloc(void **dptr, size_t bytes, const char *what, mx_status *st) {
@@ -76,6 +113,27 @@ static int copy_sync(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, c
 
 int mx_cuda_upload(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, const char *what, mx_status *st) {
     return copy_sync(c, dst, src, bytes, cudaMemcpyHostToDevice, what, st);
+}
+
+/* Pieces of at most one staging half: wait until the copy that last read the half is done, fill it
+ * on the host, queue its copy and record its event. The host memory is read before this returns;
+ * the device copy completes in stream order, before any op queued after it. */
+int mx_cuda_upload_staged(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, const char *what,
+                          mx_status *st) {
+    if (!c->staging_bytes) return mx_cuda_upload(c, dst, src, bytes, what, st);
+    for (size_t off = 0; off < bytes;) {
+        int h = c->staging_next;
+        size_t n = bytes - off < c->staging_bytes ? bytes - off : c->staging_bytes;
+        if (mx_cuda_ok(cudaEventSynchronize(c->staging_done[h]), what, st)) return -1;
+        memcpy(c->staging[h], (const unsigned char *)src + off, n);
+        if (mx_cuda_ok(cudaMemcpyAsync((unsigned char *)dst + off, c->staging[h], n, cudaMemcpyHostToDevice, c->stream),
+                       what, st) ||
+            mx_cuda_ok(cudaEventRecord(c->staging_done[h], c->stream), what, st))
+            return -1;
+        c->staging_next = 1 - h;
+        off += n;
+    }
+    return 0;
 }
 
 int mx_cuda_download(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, const char *what,

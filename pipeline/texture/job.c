@@ -173,6 +173,15 @@ static int encode_negative(mx_job *j, mx_status *st) {
     return 0;
 }
 
+/* The kernels and arithmetic of a context, for the log and report.json: a CPU level and its
+ * precision, or CUDA, "mixed": it computes each product in its weights' type (fp16/bf16 weights on
+ * tensor cores with fp32 sums, fp32 weights in fp32; ops/cuda/cuda_backend.h). */
+static int on_cuda(const mx_ctx *c) { return c->be && c->be->kind == MX_BACKEND_CUDA; }
+static const char *ctx_kernels_name(const mx_ctx *c) { return on_cuda(c) ? "cuda" : mx_isa_name(c->k->isa); }
+static const char *ctx_precision_name(const mx_ctx *c) {
+    return on_cuda(c) ? "mixed" : mx_precision_name(mx_isa_precision(c->k->isa));
+}
+
 static void report_header(mx_job *j) {
     const mx_texture_opts *o = j->o;
     mx_jw *w = &j->rep.json;
@@ -194,8 +203,8 @@ static void report_header(mx_job *j) {
     mx_jw_int(w, "render_size", o->render_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->gen.ctx->pool));
     if (j->gen.models) {
-        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->gen.ctx->k->isa)));
-        mx_jw_str(w, "kernels", mx_isa_name(j->gen.ctx->k->isa));
+        mx_jw_str(w, "precision", ctx_precision_name(j->gen.ctx));
+        mx_jw_str(w, "kernels", ctx_kernels_name(j->gen.ctx));
         mx_jw_str(w, "weights", mx_models_path(j->gen.models));
         mx_jw_str(w, "weights_digest", j->gen.models->digest);
     }
@@ -249,8 +258,10 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     }
     if (model_needs != MX_JOB_NO_MODELS && !j->gen.models) {
         mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_backend_name(o->device),
-                        mx_precision_name(mx_isa_precision(j->gen.ctx->k->isa)), mx_isa_name(j->gen.ctx->k->isa),
-                        mx_isa_precision(j->gen.ctx->k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+                        ctx_precision_name(j->gen.ctx), ctx_kernels_name(j->gen.ctx),
+                        !on_cuda(j->gen.ctx) && mx_isa_precision(j->gen.ctx->k->isa) != o->precision
+                            ? ": bf16 is not available on this CPU"
+                            : "");
         if (mx_models_load(&j->gen.own_models, j->gen.ctx, o->weights_path, model_needs, st)) return -1;
         j->gen.own_models_ready = 1;
         j->gen.models = &j->gen.own_models;

@@ -429,7 +429,42 @@ static void test_small_ops(env *e) {
     free(want2);
 }
 
+/* Empty shapes are no work, as on the CPU (op_list.h): each call returns 0 and queues nothing that
+ * faults (NULL data). */
+static void test_empty_shapes(env *e) {
+    const int64_t s0[2] = {2, 0}, s1[2] = {2, 1};
+    mx_cuda_ctx *g = e->gpu;
+    mx_status *st = &e->st;
+    int bad = 0;
+    bad += gpu_ok(e, mx_cuda_binary(g, MX_BIN_ADD, NULL, NULL, s0, NULL, s1, 2, st), "empty binary") != 0;
+    bad += gpu_ok(e, mx_cuda_upsample_nearest2x(g, NULL, NULL, 3, 0, 4, st), "empty upsample") != 0;
+    bad += gpu_ok(e, mx_cuda_concat_channels(g, NULL, NULL, 2, NULL, 3, 2, 0, st), "empty concat") != 0;
+    bad += gpu_ok(e, mx_cuda_transpose_chw_hwc(g, NULL, NULL, 0, 4, 5, st), "empty transpose_chw_hwc") != 0;
+    bad += gpu_ok(e, mx_cuda_transpose_hwc_chw(g, NULL, NULL, 2, 4, 0, st), "empty transpose_hwc_chw") != 0;
+    bad += gpu_ok(e, mx_cuda_conv2d(g, NULL, NULL, 1, 2, 2, 2, mx_w_none(), mx_w_none(), 3, 5, 5, 1, 1, st),
+                  "conv2d kernel larger than the padded input") != 0;
+    bad += gpu_ok(e, mx_cuda_sync(g, st), "sync after the empty ops") != 0;
+    printf("%-48s %d failed %s\n", "empty shapes: no work", bad, bad ? "FAIL" : "ok");
+}
+
+/* concat with one side of 0 channels is a copy of the other. */
+static void test_concat_one_side(env *e) {
+    const int B = 2, Cb = 3, HW = 5;
+    size_t n = (size_t)B * Cb * HW;
+    float *b = rnd(n, 123, -1, 1), *want = malloc(n * sizeof *want);
+    e->cpu.k->concat_channels(&e->cpu, want, b, 0, b, Cb, B, HW); /* a: not read */
+    float *db = dev_copy(e, b, n * sizeof *b), *dy = dev_zero(e, n * sizeof *dy);
+    if (db && dy && !gpu_ok(e, mx_cuda_concat_channels(e->gpu, dy, db, 0, db, Cb, B, HW, &e->st), "concat 0+3"))
+        compare_dev(e, "concat_channels 0+3 x5", dy, want, n, 0.0);
+    mx_cuda_free(db);
+    mx_cuda_free(dy);
+    free(b);
+    free(want);
+}
+
 static void test_other_ops(env *e) {
+    test_empty_shapes(e);
+    test_concat_one_side(e);
     test_activations(e);
     test_geglu(e);
     test_binary(e, MX_BIN_ADD);
@@ -453,16 +488,45 @@ static void test_table_full(void) {
     CHECK(missing == NULL);
 }
 
+/* 1 when nvidia-smi is installed and lists a GPU ("GPU 0: ..."): then "no CUDA device" is a
+ * broken setup (driver/runtime mismatch, hidden devices), to fail on, never to skip. */
+static int nvidia_smi_sees_gpu(void) {
+    FILE *p = popen("nvidia-smi -L 2>/dev/null", "r");
+    if (!p) return 0;
+    char line[256];
+    int gpus = 0;
+    while (fgets(line, sizeof line, p))
+        if (strncmp(line, "GPU ", 4) == 0) gpus++;
+    pclose(p);
+    return gpus > 0;
+}
+
+/* 0: a device to test on; 1: none (skip, or a failure when nvidia-smi sees a GPU); -1: CUDA failed. */
+static int find_device(env *e) {
+    int ndev = 0;
+    if (mx_cuda_device_count(&ndev, &e->st)) {
+        printf("FAIL test-cuda: %s\n", e->st.msg);
+        return -1;
+    }
+    if (ndev > 0) return 0;
+    if (nvidia_smi_sees_gpu()) {
+        printf("FAIL test-cuda: nvidia-smi lists a GPU but CUDA finds no device (CUDA_VISIBLE_DEVICES? "
+               "driver/runtime mismatch?)\n");
+        return -1;
+    }
+    return 1;
+}
+
 int main(void) {
     env e;
     memset(&e, 0, sizeof e);
     test_table_full();
-    int ndev = 0;
-    mx_cuda_device_count(&ndev, &e.st);
-    if (ndev == 0) {
+    int found = find_device(&e);
+    if (found < 0) return 1;
+    if (found > 0) {
         if (mx_test_failures) return mx_test_finish("test-cuda");
-        printf("test-cuda: the cuda table has all %d ops; no CUDA device: the op tests and the network goldens "
-               "skipped\n", MX_OP_COUNT);
+        printf("test-cuda: the cuda table has all %d ops; no CUDA device (and no GPU in nvidia-smi): the op tests "
+               "and the network goldens skipped\n", MX_OP_COUNT);
         return MX_TEST_SKIP;
     }
     if (mx_cuda_ctx_create(&e.gpu, 0, (size_t)64 << 20, &e.st) ||

@@ -1,0 +1,100 @@
+#!/bin/sh
+# make gpu-check: one run on a machine with an NVIDIA GPU whose output is the evidence for the CUDA
+# backend (issue 21): the GPU and its driver/runtime, make test-cuda (op tests at their own bounds,
+# the network goldens found in tests/data and $MATEX_TESTDATA), compute-sanitizer memcheck on the
+# tiny pipeline and on SD1.5-size random weights (one UNet call, one ControlNet call, one guided
+# step with two ControlNets), a default and a --fast `matex texture --device cuda` with their
+# per-stage times (report.json stages_s / work_s), and the same seed's texture on the CPU against
+# the GPU (PSNR). Uses the binaries of $GPU_CHECK_BIN (default build-cuda/gpu, made here by `make
+# gpu-check-pack`: stripped, small enough to carry), else builds `make cuda` (minutes).
+# Writes everything under $GPU_CHECK_OUT (default gpu-check-out): log.txt and the reports.
+# Budget: ~6 min on one H100 with 16 cores (weights ~1 min, CPU texture of the parity check ~2 min).
+set -u
+B=${GPU_CHECK_BIN:-build-cuda/gpu}
+O=${GPU_CHECK_OUT:-gpu-check-out}
+mkdir -p "$O"
+LOG="$O/log.txt"
+W="$O/sd15_fast.mxw"
+MESH=tests/data/assets/spot/spot_triangulated.obj
+PROMPT="a cow with brown and white patches"
+SAN=${COMPUTE_SANITIZER:-/usr/local/cuda/bin/compute-sanitizer}
+failed=0
+say() { printf '\n==== %s (%s)\n' "$*" "$(date -u +%H:%M:%S)" | tee -a "$LOG"; }
+# run NAME CMD...: runs CMD with its output in the log; counts a failure; prints its wall time.
+run() {
+    name=$1
+    shift
+    t0=$(date +%s.%N)
+    "$@" >>"$LOG" 2>&1
+    rc=$?
+    t1=$(date +%s.%N)
+    printf '%-58s rc=%d  %.1f s\n' "$name" "$rc" "$(echo "$t1 - $t0" | bc)" | tee -a "$LOG"
+    [ $rc -eq 0 ] || failed=$((failed + 1))
+    return $rc
+}
+stages() { # report.json -> its stage and work times, one line each
+    tr -d '\n ' <"$1" | grep -o '"\(stages_s\|work_s\)":{[^}]*}' | tee -a "$LOG"
+}
+
+: >"$LOG"
+if [ ! -x "$B/matex" ]; then
+    say "no prebuilt binaries in $B: make cuda"
+    run "make cuda" make -j"$(nproc)" cuda || exit 1
+    B=build-cuda
+fi
+M="$B/matex"
+[ -d "$B/data" ] && export MATEX_TESTDATA="$B/data" # the goldens packed beside the binaries
+
+say "GPU"
+run "nvidia-smi" nvidia-smi
+nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv | tee -a "$LOG"
+"$M" --version | tee -a "$LOG"
+
+say "make test-cuda (op tests, network goldens, tiny pipelines)"
+run "test-cuda" env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 sh tests/cuda/run.sh "$B/tests/cuda/test_cuda_ops" \
+    "$B"/tests/test_nn_*
+grep -E "FAIL|SKIP|rel_l2=.*FAIL|device|not TESTED|all checks" "$LOG" | sort | uniq -c | sort -rn | head -40
+
+say "compute-sanitizer memcheck: tiny pipeline"
+run "memcheck tiny pipeline" env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck --error-exitcode 99 \
+    "$B/tests/test_nn_pipeline"
+
+say "SD1.5-size random weights (fp16, with LCM-LoRA and TAESD)"
+run "make_sd15_weights --fast" sh tools/make_sd15_weights.sh "$M" "$W" --fast || exit 1
+
+say "compute-sanitizer memcheck: SD1.5-size networks"
+CN_IN="${MATEX_TESTDATA:-../shared}/golden/sd15_controlnet/inputs.safetensors" # 2 MB: carry it
+if [ -f "$CN_IN" ]; then
+    run "memcheck one UNet call" "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net unet --device cuda \
+        --weights "$W" --inputs "$CN_IN" --out "$O/unet_out.safetensors"
+    run "memcheck one ControlNet call" "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net controlnet \
+        --device cuda --weights "$W" --prefix controlnet_depth. --inputs "$CN_IN" --out "$O/cn_out.safetensors"
+else
+    echo "NOT RUN: the UNet and ControlNet calls need golden/sd15_controlnet/inputs.safetensors (carry it)" | tee -a "$LOG"
+    failed=$((failed + 1))
+fi
+run "memcheck guided steps, two ControlNets (texture 2 views, 1 step)" "$SAN" --tool memcheck --error-exitcode 99 \
+    "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --views 2 --steps 1 --texture-size 512 \
+    --render-size 512 -o "$O/memcheck_step" --force
+
+say "timed: default texture on the GPU (6 views, 10 steps, 1024^2)"
+run "texture --device cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --seed 1 -o "$O/gpu_default" --force &&
+    stages "$O/gpu_default/report.json"
+say "timed: texture --fast on the GPU"
+run "texture --fast --device cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --fast --seed 1 \
+    -o "$O/gpu_fast" --force && stages "$O/gpu_fast/report.json"
+
+say "same seed, CPU (fp32) vs GPU: PSNR of the textures (2 views, 4 steps, 512^2 texture)"
+small="--seed 7 --views 2 --steps 4 --texture-size 512 --render-size 512"
+# shellcheck disable=SC2086
+run "texture small, cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda $small -o "$O/par_gpu" --force
+# shellcheck disable=SC2086
+run "texture small, cpu fp32" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cpu --precision fp32 $small \
+    -o "$O/par_cpu" --force
+[ -f "$O/par_gpu/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
+    run "psnr cpu vs gpu (goal >= 40 dB)" python3 tools/png_psnr.py "$O/par_cpu/texture.png" "$O/par_gpu/texture.png" &&
+    tail -1 "$LOG"
+
+rm -f "$W"
+say "gpu-check: $failed step(s) failed; the whole log: $LOG"
+[ $failed -eq 0 ]
