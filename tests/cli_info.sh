@@ -47,12 +47,18 @@ check "weight file dispatch exits 1" [ "$(rc_of "$M" info "$T/w.mxw")" = 1 ]
 check "weight file error names it" grep -q "w.mxw" "$T/err"
 check "weight file --json exits 2" [ "$(rc_of "$M" info --json "$T/w.mxw")" = 2 ]
 # images: size, channels and per-channel min/mean/max (what the texture tests check content with)
-check "a render for info" [ "$(rc_of "$M" render tests/data/box.obj --views 1 --size 64 -o "$T/img")" = 0 ]
+check "a render for info" [ "$(rc_of "$M" render tests/data/box.obj --views 2 --size 64 -o "$T/img")" = 0 ]
 check "info reads an image" [ "$(rc_of "$M" info "$T/img/view_00.png")" = 0 ]
 check "info gives its size" grep -q "^size: *64 x 64$" "$T/out"
 check "info gives min, mean and max per channel" sh -c "grep -q '^min: *0\.[0-9]* 0\.[0-9]* 0\.[0-9]*$' '$T/out' && grep -q '^mean: ' '$T/out' && grep -q '^max: ' '$T/out'"
 check "info --json of an image" [ "$(rc_of "$M" info --json "$T/img/view_00.png")" = 0 ]
 check "its JSON has the size" grep -q '"width":64,"height":64,"channels":3,"min":\[' "$T/out"
+check "an image compared with itself" [ "$(rc_of "$M" info "$T/img/view_00.png" --compare "$T/img/view_00.png")" = 0 ]
+check "... has an infinite PSNR" grep -qx "psnr_db=inf" "$T/out"
+check "against another view" [ "$(rc_of "$M" info --json "$T/img/view_00.png" --compare "$T/img/view_01.png")" = 0 ]
+check "... a finite PSNR" grep -q '"psnr_db":[0-9][0-9.]*}' "$T/out"
+check "images of other sizes: exit 1" [ "$(rc_of "$M" info "$T/img/view_00.png" --compare "$T/img/contact_sheet.png")" = 1 ]
+check "... says the sizes must agree" grep -q "sizes must agree" "$T/err"
 check "info of a folder exits 1" [ "$(rc_of "$M" info "$T/img")" = 1 ]
 check "and says it is a directory" grep -q "img: is a directory" "$T/err"
 

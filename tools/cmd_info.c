@@ -1,5 +1,6 @@
 /* matex info FILE: mesh statistics (counts, UVs, topology, bbox, materials), or the table of
  * contents of a matex weight file. */
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -13,11 +14,13 @@
 #include "cli.h"
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex info [--json] FILE\n\n"
+    fprintf(f, "usage: matex info [--json] FILE\n"
+               "       matex info [--json] IMAGE --compare IMAGE2\n\n"
                "FILE is a mesh (.obj .ply .off .stl .gltf .glb), an image (PNG, JPEG, EXR, ...), a matex\n"
                "weight file, or an SD1.x checkpoint (.safetensors .ckpt .pt .pth: architecture, networks,\n"
                "dtypes, skipped keys). For an image: its size, channels and each channel's min, mean and max\n"
-               "(0..1 for 8-bit files).\n"
+               "(0..1 for 8-bit files). With --compare: the PSNR of IMAGE2 against IMAGE (dB, values in 0..1,\n"
+               "every channel; \"inf\" when equal), e.g. the same seed's texture on two devices.\n"
                "For a mesh: vertices and triangles as stored (polygons fan-triangulated), UV and normal\n"
                "presence, materials and their textures, and the topology after welding vertices with\n"
                "identical positions: watertightness, boundary and non-manifold edges, components,\n"
@@ -174,8 +177,46 @@ static int mesh_info(const char *path, int json) {
     return 0;
 }
 
+/* PSNR (dB) of b against a over every channel, values in 0..1: the CPU-vs-GPU texture check of
+ * tools/gpu_check.sh. */
+static int image_compare(const char *a_path, const char *b_path, int json) {
+    mx_image a = {0}, b = {0};
+    mx_status st;
+    int rc = 1;
+    if (mx_io_read_image(a_path, &a, &st) || mx_io_read_image(b_path, &b, &st)) {
+        fprintf(stderr, "matex info: %s\n", st.msg);
+        goto done;
+    }
+    if (a.w != b.w || a.h != b.h || a.c != b.c) {
+        fprintf(stderr, "matex info: %s is %d x %d x %d, %s is %d x %d x %d: the sizes must agree\n", a_path, a.w, a.h,
+                a.c, b_path, b.w, b.h, b.c);
+        goto done;
+    }
+    size_t n = (size_t)a.w * a.h * a.c;
+    double se = 0;
+    for (size_t i = 0; i < n; i++) se += ((double)a.data[i] - b.data[i]) * ((double)a.data[i] - b.data[i]);
+    double mse = n ? se / (double)n : 0;
+    char db[32];
+    if (mse > 0) snprintf(db, sizeof db, "%.3f", 10.0 * log10(1.0 / mse));
+    else snprintf(db, sizeof db, json ? "null" : "inf");
+    if (json) {
+        printf("{\"file\":");
+        json_str(stdout, a_path);
+        printf(",\"compare\":");
+        json_str(stdout, b_path);
+        printf(",\"psnr_db\":%s}\n", db);
+    } else {
+        printf("psnr_db=%s\n", db);
+    }
+    rc = 0;
+done:
+    mx_image_free(&a);
+    mx_image_free(&b);
+    return rc;
+}
+
 int cmd_info(int argc, char **argv) {
-    const char *file = NULL;
+    const char *file = NULL, *compare = NULL;
     int json = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
@@ -183,6 +224,12 @@ int cmd_info(int argc, char **argv) {
             return 0;
         } else if (!strcmp(argv[i], "--json")) {
             json = 1;
+        } else if (!strcmp(argv[i], "--compare")) {
+            if (i + 1 >= argc) {
+                fprintf(stderr, "matex info: --compare needs an image\n");
+                return 2;
+            }
+            compare = argv[++i];
         } else if (argv[i][0] == '-' && argv[i][1]) {
             fprintf(stderr, "matex info: unknown option '%s'\n", argv[i]);
             usage(stderr);
@@ -198,6 +245,7 @@ int cmd_info(int argc, char **argv) {
         usage(stderr);
         return 2;
     }
+    if (compare) return image_compare(file, compare, json);
     if (mx_wf_is_weightfile(file)) {
         if (json) {
             fprintf(stderr, "matex info: --json is for meshes; %s is a weight file\n", file);

@@ -92,7 +92,7 @@ run "texture small, cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device
 run "texture small, cpu fp32" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cpu --precision fp32 $small \
     -o "$O/par_cpu" --force
 [ -f "$O/par_gpu/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
-    run "psnr cpu vs gpu (goal >= 40 dB)" python3 tools/png_psnr.py "$O/par_cpu/texture.png" "$O/par_gpu/texture.png" &&
+    run "psnr cpu vs gpu (goal >= 40 dB)" "$M" info "$O/par_cpu/texture.png" --compare "$O/par_gpu/texture.png" &&
     tail -1 "$LOG"
 
 rm -f "$W"
