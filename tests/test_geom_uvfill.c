@@ -113,7 +113,7 @@ static int measure(const char *rel, fill_result *r, mx_status *st) {
         truth_texture(&m, pos, face, &truth);
         hide_blobs(chart, known, 1234 + (uint64_t)l);
         for (size_t t = 0; t < 3 * n; t++) a.data[t] = b.data[t] = known[t / 3] ? truth.data[t] : 0.5f;
-        rc = mx_uv_fill(&a, known, chart, 0, st) || mx_uv_fill_harmonic(&b, known, &m, l, nlayers, 0, st);
+        rc = mx_uv_fill(&a, known, chart, 0, st) || mx_uv_fill_harmonic(&b, known, &m, l, nlayers, 0, NULL, st);
         sa += psnr_hidden(&a, &truth, chart, known);
         sb += psnr_hidden(&b, &truth, chart, known);
     }
@@ -125,8 +125,44 @@ static int measure(const char *rel, fill_result *r, mx_status *st) {
     return rc;
 }
 
+typedef struct {
+    int n, stop_at, ordered;
+    double last;
+} tick_log;
+
+static int log_tick(void *user, double done) {
+    tick_log *t = user;
+    t->ordered = t->ordered && done >= t->last;
+    t->last = done;
+    t->n++;
+    return t->stop_at && t->n >= t->stop_at;
+}
+
+/* The fill reports its progress (issue 24 item 13: an 8192² fill ran minutes with no line) and stops
+ * when the ticker says so. */
+static void test_ticks(void) {
+    float pos[12] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}, uv[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+    int32_t faces[6] = {0, 1, 2, 0, 2, 3};
+    mx_mesh m = {.nverts = 4, .nfaces = 2, .pos = pos, .faces = faces, .nuv = 4, .uv = uv, .face_uv = faces};
+    enum { S = 32 };
+    uint8_t known[S * S];
+    mx_image tex = {0};
+    mx_status st;
+    CHECK(mx_image_alloc(&tex, S, S, 3, &st) == 0);
+    for (int i = 0; i < S * S; i++) known[i] = i % S < S / 2;
+    tick_log t = {.ordered = 1};
+    mx_uv_fill_ticker ticker = {.tick = log_tick, .user = &t};
+    CHECK(mx_uv_fill_harmonic(&tex, known, &m, 0, 1, 0, &ticker, &st) == 0);
+    CHECK(t.n == MX_UV_HARMONIC_ITERS / MX_UV_TICK_SWEEPS + 1 && t.ordered && t.last == 1.0);
+    tick_log stop = {.ordered = 1, .stop_at = 3};
+    ticker.user = &stop;
+    CHECK(mx_uv_fill_harmonic(&tex, known, &m, 0, 1, 0, &ticker, &st) == -1 && st.code == MX_ECANCEL && stop.n == 3);
+    mx_image_free(&tex);
+}
+
 int main(void) {
     mx_log_set_level(MX_LOG_ERROR);
+    test_ticks();
     double ta = 0, tb = 0;
     int measured = 0;
     printf("%-48s %10s %10s\n", "asset (20% of chart texels hidden in discs)", "push-pull", "harmonic");

@@ -415,10 +415,16 @@ static int build_graph(const mx_mesh *m, const int32_t *canon, const int32_t *fa
     return 0;
 }
 
+static int tick(const mx_uv_fill_ticker *t, double done, mx_status *st) {
+    if (t && t->tick && t->tick(t->user, done)) return mx_fail(st, MX_ECANCEL, "interrupted");
+    return 0;
+}
+
 /* Successive over-relaxation of the graph Laplace equation over the unknown texels. */
-static void solve_harmonic(const fill_graph *g, float *col) {
+static int solve_harmonic(const fill_graph *g, float *col, const mx_uv_fill_ticker *ticker, mx_status *st) {
     const float omega = 1.9f;
-    for (int it = 0; it < MX_UV_HARMONIC_ITERS; it++)
+    for (int it = 0; it < MX_UV_HARMONIC_ITERS; it++) {
+        if (it % MX_UV_TICK_SWEEPS == 0 && tick(ticker, (double)it / MX_UV_HARMONIC_ITERS, st)) return -1;
         for (size_t u = 0; u < g->nu; u++) {
             int32_t s = g->start[u], e = g->start[u + 1];
             if (s == e) continue;
@@ -428,10 +434,12 @@ static void solve_harmonic(const fill_graph *g, float *col) {
             float *x = col + 3 * (size_t)g->unknown[u];
             for (int c = 0; c < 3; c++) x[c] += omega * (sum[c] / (float)(e - s) - x[c]);
         }
+    }
+    return tick(ticker, 1.0, st);
 }
 
 int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, int layer, int nlayers, int gutter,
-                        mx_status *st) {
+                        const mx_uv_fill_ticker *ticker, mx_status *st) {
     if (tex->c != 3) return mx_fail(st, MX_EINPUT, "uv fill: texture must be RGB (has %d channels)", tex->c);
     if (!m->face_uv) return mx_fail(st, MX_EINPUT, "%s: no UVs to fill along", m->source_path);
     int w = tex->w, h = tex->h;
@@ -450,7 +458,7 @@ int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, i
         goto done;
     if (links.n) qsort(links.v, links.n, sizeof *links.v, cmp_link); /* links.v is NULL when there are none */
     if (build_graph(m, canon, face, chart, known, &links, w, h, &g, st)) goto done;
-    solve_harmonic(&g, tex->data);
+    if (solve_harmonic(&g, tex->data, ticker, st)) goto done;
     for (size_t i = 0; i < n; i++) valid[i] = known[i] || chart[i];
     for (int r = 0; r < gutter; r++) dilate_once(tex, valid, next);
     rc = 0;

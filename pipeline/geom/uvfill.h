@@ -34,8 +34,17 @@ int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gu
  * Push-pull gives the start; successive over-relaxation (MX_UV_HARMONIC_ITERS sweeps, omega
  * 1.9) solves. Then `gutter` rings of dilation outside the charts, as mx_uv_fill. */
 #define MX_UV_HARMONIC_ITERS 300
+/* A large texture's fill runs for minutes (8192²: ~200 s), so it reports how far it has come: `tick`
+ * is called after the texel graph is built (done 0) and every MX_UV_TICK_SWEEPS sweeps of the solve
+ * (done in (0, 1]); a non-zero return stops the fill with MX_ECANCEL ("interrupted"). */
+#define MX_UV_TICK_SWEEPS 20
+typedef struct mx_uv_fill_ticker {
+    int (*tick)(void *user, double done);
+    void *user;
+} mx_uv_fill_ticker;
+/* ticker may be NULL. */
 int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, int layer, int nlayers, int gutter,
-                        mx_status *st);
+                        const mx_uv_fill_ticker *ticker, mx_status *st);
 
 /* Spreads the colour of known texels `rings` texels into the unknown ones around them (each
  * ring: an unknown texel takes the mean of its already filled 8-neighbours), so that bilinear

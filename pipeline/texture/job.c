@@ -655,6 +655,24 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_end_obj(w);
 }
 
+/* What the fill of one texture reports: a progress line at most every FILL_TICK_S seconds, and the
+ * cancel flag at every tick. */
+#define FILL_TICK_S 2.0
+typedef struct {
+    mx_job *j;
+    int layer;
+    double last;
+} fill_ticks;
+
+static int fill_tick(void *user, double done) {
+    fill_ticks *f = user;
+    if (mx_now() - f->last >= FILL_TICK_S) {
+        mx_job_progress(f->j, "uv fill: texture %d/%d, solve %.0f%%", f->layer + 1, f->j->nlayers, 100 * done);
+        f->last = mx_now();
+    }
+    return f->j->o->cancel && *f->j->o->cancel;
+}
+
 /* Harmonic fill across UV seams of every layer's unreached chart texels, gutter dilation. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
@@ -664,7 +682,10 @@ int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
         for (size_t i = 0; i < plane; i++) open += j->sched.chart[l * plane + i] && !j->bake.known[l * plane + i];
         mx_job_progress(j, "uv fill: texture %d/%d, %lld texels to fill (%dx%d)", l + 1, j->nlayers, (long long)open,
                         j->o->tex_size, j->o->tex_size);
-        if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, st)) return -1;
+        fill_ticks ticks = {.j = j, .layer = l, .last = t};
+        mx_uv_fill_ticker ticker = {.tick = fill_tick, .user = &ticks};
+        if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, &ticker, st))
+            return -1;
         mx_job_progress(j, "uv fill: texture %d/%d done in %.1fs", l + 1, j->nlayers, mx_now() - t);
         if (mx_job_check_cancel(j, st)) return -1;
     }
