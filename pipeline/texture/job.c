@@ -185,7 +185,7 @@ static int check_fast_models(const mx_job *j, mx_status *st) {
                    "%s: --fast needs a weight file with the LCM-LoRA merged into the UNet and TAESD; this one has %s. "
                    "Make one with: matex convert SD15_DIR --controlnet depth=DIR --controlnet inpaint=DIR "
                    "--lcm-lora lcm-lora-sdv1-5.safetensors --taesd TAESD_DIR -o W.mxw",
-                   j->o->weights_path, !m->lcm && !m->taesd ? "neither" : !m->lcm ? "no LCM-LoRA (metadata unet.lcm_lora)"
+                   mx_models_path(m), !m->lcm && !m->taesd ? "neither" : !m->lcm ? "no LCM-LoRA (metadata unet.lcm_lora)"
                                                                                 : "no TAESD (taesd.*)");
 }
 

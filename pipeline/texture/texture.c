@@ -8,31 +8,6 @@
 #include "../geom/masks.h"
 #include "job.h"
 
-void mx_texture_opts_default(mx_texture_opts *o) {
-    memset(o, 0, sizeof *o);
-    o->negative_prompt = "";
-    o->steps = 10;
-    o->precision = MX_PREC_BF16;
-    o->views = 6;
-    o->candidates = 40;
-    o->tex_size = 1024;
-    o->render_size = 1024;
-    o->image_size = 512;
-    o->max_batch = 4;
-    o->guidance = 7.5f;
-    o->grid_depth_weight = 1.0f;
-    o->depth_weight[0] = 1.0f;
-    o->depth_weight[1] = 0.7f;
-    o->inpaint_weight[0] = 0.8f;
-    o->inpaint_weight[1] = 1.0f;
-    o->frontal_threshold = MX_FRONTAL_THRESHOLD_DEFAULT;
-    o->normal_source = MX_NORMAL_FROM_DEPTH;
-    o->coverage_stop = 0.995f;
-    o->up = MX_UP_Y;
-    o->strength = 0.5f;
-    o->grid_word = "front and back view of";
-}
-
 static void free_views(mx_job_view *v, int n) {
     for (int i = 0; i < n; i++) mx_job_view_free(&v[i]);
 }
