@@ -50,12 +50,15 @@ static int value_text(const mx_json *v, char *out, size_t cap, const char **text
     }
 }
 
-/* Why a key that names an option is not a manifest key (NULL: it is one). */
-static const char *not_a_key(const mx_option_spec *s) {
-    if (s->scope == MX_SCOPE_MODELS) return "is the model set's, one for the whole batch: give it to matex batch";
-    if (!strcmp(s->name, "force")) return "is not a job key: batch skips a job whose folder is complete (remove the folder to run it again)";
-    if (s->scope == MX_SCOPE_RUN) return "is not a job key: a job writes OUTROOT/NAME with the batch's weights";
-    return NULL;
+/* Why a key that names an option is not a manifest key, in why[] ("" when it is one). */
+static void not_a_key(const mx_option_spec *s, char *why, size_t cap) {
+    if (s->scope == MX_SCOPE_MODELS)
+        snprintf(why, cap, "is the model set's, one for the whole batch: give --%s to matex batch", s->name);
+    else if (!strcmp(s->name, "force"))
+        snprintf(why, cap, "is not a job key: batch skips a job whose folder is complete (remove the folder to run it again)");
+    else if (s->scope == MX_SCOPE_RUN)
+        snprintf(why, cap, "is not a job key: a job writes OUTROOT/NAME with the batch's weights");
+    else why[0] = 0;
 }
 
 /* The default name: the mesh's file name without extension, reduced to [A-Za-z0-9._-]. */
@@ -106,8 +109,10 @@ static int job_key(mx_batch_job *j, const char *key, const mx_json *v) {
     const char *text;
     int absent;
     mx_status st;
-    if (!s || s->type == MX_OPT_CLI) return job_error(j, "unknown key \"%s\"", key), -1;
-    if (not_a_key(s)) return job_error(j, "\"%s\" %s", key, not_a_key(s)), -1;
+    if (!s) return job_error(j, "unknown key \"%s\"", key), -1;
+    char why[160];
+    not_a_key(s, why, sizeof why);
+    if (why[0]) return job_error(j, "\"%s\" %s", key, why), -1;
     int is_flag = s->type == MX_OPT_FLAG, is_bool = mx_json_kind(v) == MX_JSON_BOOL;
     if (is_flag != is_bool)
         return job_error(j, "\"%s\" takes %s", key, is_flag ? "true or false" : "a number, a text or an array of numbers"), -1;
