@@ -338,12 +338,17 @@ int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_sta
         mx_outdir_discard(od);
         return -1;
     }
-    if (od->exists) return replace_existing(od, st);
+    if (od->exists) {
+        int rc = replace_existing(od, st);
+        mx_outdir_discard(od); /* the lock (and a staging folder left by a failure) */
+        return rc;
+    }
     if (rename(od->stage, od->dir)) {
         int e = errno;
         mx_outdir_discard(od);
         return mx_fail(st, MX_EIO, "%s: cannot write: %s", od->dir, strerror(e));
     }
     od->staged = 0;
+    release_lock(od);
     return 0;
 }

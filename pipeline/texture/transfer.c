@@ -136,7 +136,7 @@ static double psnr_against_source(const mx_job *j, const source *s, const mx_ima
     return n ? 10 * log10(1.0 / (se / (double)n + 1e-20)) : 0;
 }
 
-static int finish(mx_job *j, const source *s, mx_status *st) {
+static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status *st) {
     mx_image *tex = calloc((size_t)j->nlayers, sizeof *tex);
     if (!tex) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
     int rc = mx_job_current_textures(j, tex, st);
@@ -145,7 +145,7 @@ static int finish(mx_job *j, const source *s, mx_status *st) {
             j->psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->psnr_db);
         }
-        rc = mx_job_finish(j, tex, NULL, st);
+        rc = mx_job_finish(j, tex, res, st);
         for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
     }
     free(tex);
@@ -162,13 +162,7 @@ int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status 
     if (!rc) rc = mx_job_open(&j, o, MX_JOB_NO_MODELS, 0, st);
     if (!rc) rc = source_place(&j, &s, st);
     if (!rc) rc = transfer_views(&j, &s, st);
-    if (!rc) rc = finish(&j, &s, st);
-    if (!rc && res) {
-        memset(res, 0, sizeof *res);
-        res->coverage = mx_job_coverage(&j);
-        res->views = j.views_done;
-        res->seconds = mx_now() - j.t0;
-    }
+    if (!rc) rc = finish(&j, &s, res, st); /* res filled as texture's, in memory too with keep_outputs */
     source_free(&s);
     mx_job_close(&j);
     return rc;
