@@ -23,10 +23,10 @@
 
 static void base_opts(mx_texture_opts *o, const char *weights, const char *out) {
     mx_texture_opts_default(o);
-    o->mesh_path = "mesh.obj";
-    o->prompt = "a chair";
+    o->pub.mesh_path = "mesh.obj";
+    o->pub.prompt = "a chair";
     o->weights_path = weights;
-    o->out_dir = out;
+    o->pub.out_dir = out;
 }
 
 /* One impossible value: refused as a usage error whose message holds `want`. */
@@ -52,49 +52,40 @@ static void test_options(void) {
         o.field = value;                                                                                               \
         expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, want);                                                             \
     } while (0)
-    REFUSE(frontal_threshold, 1.5f, "--frontal-threshold must be in [0, 1), not 1.5");
-    REFUSE(frontal_threshold, -0.1f, "--frontal-threshold must be in [0, 1)");
-    REFUSE(coverage_stop, 2.0f, "--coverage-stop must be in (0, 1], not 2");
-    REFUSE(coverage_stop, 0.0f, "--coverage-stop must be in (0, 1]");
-    REFUSE(guidance, -3.0f, "--guidance must be in [0, 50], not -3");
-    REFUSE(guidance, (float)NAN, "--guidance must be in [0, 50]");
-    REFUSE(guidance, (float)INFINITY, "--guidance must be in [0, 50]");
-    REFUSE(grid_depth_weight, 3.0f, "--grid-depth-weight must be in [0, 2]");
-    REFUSE(depth_weight[1], -1.0f, "--depth-weight must be in [0, 2], not -1");
-    REFUSE(inpaint_weight[0], 2.5f, "--inpaint-weight must be in [0, 2]");
-    REFUSE(strength, 0.0f, "--strength must be in (0, 1]");
-    REFUSE(steps, 0, "--steps must be in 1..200, not 0");
-    REFUSE(views, 1, "--views must be in 2..64, not 1");
-    REFUSE(candidates, 0, "--candidates must be in 1..4096");
-    REFUSE(tex_size, 8, "--texture-size must be in 16..8192, not 8");
-    REFUSE(render_size, 100000, "--render-size must be in 16..8192");
-    REFUSE(image_size, 100, "--image-size must be a multiple of 8");
-    REFUSE(max_batch, 0, "--batch must be in 1..64, not 0");
-    REFUSE(threads, -1, "--threads must be in 0..1024");
-    REFUSE(prompt, "", "the prompt is empty");
-    REFUSE(prompt, " \t ", "the prompt is empty");
-    REFUSE(prompt, NULL, "no prompt");
-    REFUSE(out_dir, "", "no output folder");
+    /* ranges: the option table's (test_table checks every bound) */
+    REFUSE(pub.frontal_threshold, 1.5f, "--frontal-threshold must be a number in [0, 1), not '1.5'");
+    REFUSE(pub.guidance, (float)NAN, "--guidance must be a number in [0, 50]");
+    REFUSE(pub.depth_weight[1], -1.0f, "--depth-weight must be one or two numbers (A or A,B) in [0, 2], not '1,-1'");
+    REFUSE(pub.steps, 0, "--steps must be an integer in 1..200, not '0'");
+    REFUSE(pub.views, 1, "--views must be an integer in 2..64, not '1'");
+    REFUSE(pub.image_size, 100, "--image-size must be a multiple of 8 in 8..2048, not '100'");
+    REFUSE(pub.geometric_normals, 7, "--normals must be one of depth|geometric");
+    REFUSE(pub.precision, 5, "--precision");
+    REFUSE(pub.device, "tpu", "--device");
+    /* what the run is given */
+    REFUSE(pub.prompt, "", "the prompt is empty");
+    REFUSE(pub.prompt, " \t ", "the prompt is empty");
+    REFUSE(pub.prompt, NULL, "no prompt");
+    REFUSE(pub.out_dir, "", "no output folder");
     REFUSE(weights_path, NULL, "--weights");
-    REFUSE(normal_source, 7, "--normals");
-    REFUSE(precision, (mx_precision)5, "--precision");
-    REFUSE(device, (mx_backend_kind)9, "--device");
 #undef REFUSE
     /* enhance: the prompt may be empty and one view is enough */
     base_opts(&o, "w.mxw", "out");
-    o.prompt = "";
-    o.views = 1;
+    o.pub.prompt = "";
+    o.pub.views = 1;
     CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_ENHANCE, &st) == 0);
+    expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "--views must be an integer in 2..64, not '1'");
+    o.pub.views = 2;
     expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "the prompt is empty");
     /* transfer: a source, no weights, no prompt */
     base_opts(&o, NULL, "out");
-    o.prompt = NULL;
+    o.pub.prompt = NULL;
     expect_refused(&o, MX_TEXTURE_MODE_TRANSFER, "no source mesh");
-    o.source_path = "src.glb";
+    o.pub.source_path = "src.glb";
     CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, &st) == 0);
     /* mx_texture_run refuses before touching anything */
     base_opts(&o, "w.mxw", "out_never");
-    o.coverage_stop = 2;
+    o.pub.coverage_stop = 2;
     CHECK(mx_texture_run(&o, NULL, &st) == -1 && st.code == MX_EUSAGE);
 }
 
@@ -316,9 +307,9 @@ static void test_cancel(const char *weights, const char *tmp) {
         volatile sig_atomic_t flag = delays_us[i] < 0; /* set before the run */
         mx_texture_opts o;
         base_opts(&o, weights, out);
-        o.mesh_path = mesh;
-        o.steps = 2, o.candidates = 12, o.tex_size = 512, o.render_size = 256, o.image_size = 64;
-        o.quiet = 1, o.cancel = &flag;
+        o.pub.mesh_path = mesh;
+        o.pub.steps = 2, o.pub.candidates = 12, o.pub.texture_size = 512, o.pub.render_size = 256, o.pub.image_size = 64;
+        o.pub.verbose = 0, o.pub.cancel = &flag;
         stopper s = {&flag, delays_us[i]};
         pthread_t th;
         int threaded = delays_us[i] >= 0 && delays_us[i] < LONG_MAX && pthread_create(&th, NULL, stop_later, &s) == 0;

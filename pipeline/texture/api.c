@@ -11,7 +11,6 @@
 
 #include "../../runtime/version.h"
 #include "../geom/masks.h"
-#include "api_opts.h"
 #include "job.h"
 #include "models.h"
 #include "options.h"
@@ -52,6 +51,25 @@ static void set_error(matex_error *err, int code, const char *msg) {
     snprintf(err->message, sizeof err->message, "%s", msg);
 }
 
+/* The public options as a run's (pointers borrowed; negative prompt and grid words NULL: the defaults). */
+static void run_options(const matex_options *o, mx_texture_opts *t) {
+    memset(t, 0, sizeof *t);
+    t->pub = *o;
+    matex_options d;
+    matex_options_default(&d);
+    if (!t->pub.negative_prompt) t->pub.negative_prompt = d.negative_prompt;
+    if (!t->pub.front_back_words) t->pub.front_back_words = d.front_back_words;
+}
+
+/* A model set's own options: the device, threads and precision its context computes with. */
+static int check_model_options(const matex_options *o, mx_status *st) {
+    static const char *const names[] = {"device", "threads", "precision"};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (mx_option_check(mx_option_find(names[i], MX_VERB_TEXTURE), o, st)) return -1;
+    mx_backend_kind kind;
+    return o->device ? mx_backend_parse(o->device, &kind, st) : 0;
+}
+
 matex_models *matex_models_open(const char *weights_path, const matex_options *o, matex_error *err) {
     clear_error(err);
     mx_status st;
@@ -69,9 +87,10 @@ matex_models *matex_models_open(const char *weights_path, const matex_options *o
     }
     if (!weights_path) {
         mx_fail(&st, MX_EUSAGE, "no weight file given");
-    } else if (!mx_api_options_to_internal(o, &t, &st) && !mx_job_ctx_create(&m->ctx, &t, &st)) {
-        m->ctx_ready = 1;
-        if (!mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) return m;
+    } else if (!check_model_options(o, &st)) {
+        run_options(o, &t);
+        m->ctx_ready = !mx_job_ctx_create(&m->ctx, &t, &st);
+        if (m->ctx_ready && !mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) return m;
     }
     set_error(err, st.code, st.msg);
     matex_models_close(m);
@@ -83,53 +102,6 @@ void matex_models_close(matex_models *m) {
     if (m->m.wf) mx_models_free(&m->m);
     if (m->ctx_ready) mx_ctx_destroy(&m->ctx);
     free(m);
-}
-
-/* The public options as the pipeline's (typed, field by field; pointers borrowed). */
-int mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t, mx_status *st) {
-    *t = (mx_texture_opts){
-        .mesh_path = o->mesh_path,
-        .prompt = o->prompt,
-        .negative_prompt = o->negative_prompt ? o->negative_prompt : "",
-        .out_dir = o->out_dir,
-        .force = o->force,
-        .seed = o->seed,
-        .steps = o->steps,
-        .views = o->views,
-        .candidates = o->candidates,
-        .tex_size = o->texture_size,
-        .render_size = o->render_size,
-        .image_size = o->image_size,
-        .max_batch = o->batch,
-        .guidance = o->guidance,
-        .grid_depth_weight = o->grid_depth_weight,
-        .depth_weight = {o->depth_weight[0], o->depth_weight[1]},
-        .inpaint_weight = {o->inpaint_weight[0], o->inpaint_weight[1]},
-        .frontal_threshold = o->frontal_threshold,
-        .coverage_stop = o->coverage_stop,
-        .strength = o->strength,
-        .grid_word = o->front_back_words ? o->front_back_words : "front and back view of",
-        .threads = o->threads,
-        .cancel = o->cancel,
-        .fast = o->fast,
-        .source_path = o->source_path,
-        .background = {o->background[0], o->background[1], o->background[2]},
-        .first_wins = o->first_wins,
-        .through_model_image = o->through_model_image,
-        .normal_source = o->geometric_normals ? MX_NORMAL_GEOMETRIC : MX_NORMAL_FROM_DEPTH,
-        .up = o->z_up ? MX_UP_Z : MX_UP_Y,
-        .quiet = !o->verbose,
-        .precision = o->precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16,
-    };
-    return o->device ? mx_backend_parse(o->device, &t->device, st) : 0;
-}
-
-/* The defaults of the table (options.c), as the pipeline's options. */
-void mx_texture_opts_default(mx_texture_opts *o) {
-    matex_options d;
-    matex_options_default(&d);
-    mx_api_options_to_internal(&d, o, NULL); /* the table's device parses */
-    o->quiet = 0;
 }
 
 /* An mx_mesh that views the caller's arrays (never freed, never written: the job copies it). */
@@ -219,10 +191,11 @@ static int run(pipeline_fn fn, unsigned verb, matex_models *m, const matex_optio
     mx_status st;
     mx_status_clear(&st);
     mx_texture_opts t;
-    if (check_options(m, o, verb, &st) || mx_api_options_to_internal(o, &t, &st)) {
+    if (check_options(m, o, verb, &st)) {
         set_error(err, st.code, st.msg);
         return -1;
     }
+    run_options(o, &t);
     t.models = m ? &m->m : NULL;
     if (o->progress) {
         t.progress = forward_progress;

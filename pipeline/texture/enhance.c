@@ -31,7 +31,7 @@ static int copy_textures(const mx_image *in, mx_image *out, int n, mx_status *st
 
 /* The original textures resampled to the bake's size, one per layer (grey where missing). */
 static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
-    int T = j->o->tex_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
+    int T = j->o->pub.texture_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
     mx_image *src = calloc((size_t)nm, sizeof *src);
     if (!src) return mx_fail(st, MX_ENOMEM, "textures: out of memory");
     int rc = j->o->mesh_textures ? copy_textures(j->o->mesh_textures, src, nm, st)
@@ -59,11 +59,11 @@ static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
 /* Marks in `known` the texels under the backprojection mask of a prepared view. */
 static void mark_view_texels(const mx_job *j, const mx_job_view *v, uint8_t *known) {
     const mx_gbuffer *gb = &v->vb.gb;
-    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (size_t i = 0; i < (size_t)gb->w * gb->h; i++)
         if (v->vb.mask[i] && isfinite(gb->uv[2 * i]) && isfinite(gb->uv[2 * i + 1]))
             known[(size_t)mx_face_layer(&j->mesh, gb->face[i], j->nlayers) * plane +
-                  (size_t)mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], j->o->tex_size, j->o->tex_size)] = 1;
+                  (size_t)mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], j->o->pub.texture_size, j->o->pub.texture_size)] = 1;
 }
 
 /* Cameras: front, back, then the plan of Algorithm 1 over the whole texture, front and back
@@ -72,8 +72,8 @@ static int enhance_cameras(mx_job *j, mx_camera *cams, int *n, mx_status *st) {
     mx_job_camera(&cams[0], 0.0f, 0.0f);
     mx_job_camera(&cams[1], 180.0f, 0.0f);
     *n = 2;
-    if (j->o->views <= 2) return 0;
-    uint8_t *sim = calloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size, 1);
+    if (j->o->pub.views <= 2) return 0;
+    uint8_t *sim = calloc((size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size, 1);
     if (!sim) return mx_fail(st, MX_ENOMEM, "enhance: out of memory");
     int rc = 0;
     for (int k = 0; k < 2 && !rc; k++) {
@@ -85,12 +85,12 @@ static int enhance_cameras(mx_job *j, mx_camera *cams, int *n, mx_status *st) {
         mx_job_view_free(&v);
     }
     mx_view_plan plan;
-    if (rc || mx_view_plan_make(&j->vc, sim, j->o->views - 2, j->o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
+    if (rc || mx_view_plan_make(&j->vc, sim, j->o->pub.views - 2, j->o->pub.coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
                                 &plan, st)) {
         free(sim);
         return -1;
     }
-    for (int i = 0; i < plan.n && *n < j->o->views; i++) cams[(*n)++] = j->vc.cams[plan.cand[i]];
+    for (int i = 0; i < plan.n && *n < j->o->pub.views; i++) cams[(*n)++] = j->vc.cams[plan.cand[i]];
     mx_view_plan_free(&plan);
     free(sim);
     return 0;
@@ -102,7 +102,7 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
  * pixels kept (latent blending), backprojected into the texels not enhanced yet. */
 static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int index, mx_status *st) {
     const mx_texture_opts *o = j->o;
-    int S = o->image_size, rc = -1, merged = 0;
+    int S = o->pub.image_size, rc = -1, merged = 0;
     size_t per = (size_t)3 * S * S;
     float *buf = malloc(sizeof(float) * (4 * per + (size_t)S * S));
     mx_image *current = calloc((size_t)j->nlayers, sizeof *current);
@@ -111,7 +111,7 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
         goto done;
     }
     float *depth = buf, *inpaint = buf + per, *init = buf + 2 * per, *image = buf + 3 * per, *paint = buf + 4 * per;
-    snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->prompt);
+    snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->pub.prompt);
     mx_view_planes vp = {depth, inpaint, init, paint, S, 0};
     if (merge_textures(j, orig, current, st)) goto done;
     merged = 1;
@@ -119,10 +119,10 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
     const char *prompts[1] = {v->prompt};
     char stage[32];
     snprintf(stage, sizeof stage, "enhance view %d", index + 1);
-    mx_gen_batch b = {1,     S,     S, prompts, depth, NULL, o->depth_weight[0], 0.0f, NULL, NULL, init,
-                      paint, o->strength, (uint64_t)index, stage};
+    mx_gen_batch b = {1,     S,     S, prompts, depth, NULL, o->pub.depth_weight[0], 0.0f, NULL, NULL, init,
+                      paint, o->pub.strength, (uint64_t)index, stage};
     if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
-    mx_job_report_view(j, v, "enhance", index, j->models->cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
+    mx_job_report_view(j, v, "enhance", index, j->models->cn_depth ? o->pub.depth_weight[0] : 0.0f, 0.0f);
     rc = 0;
 done:
     for (int l = 0; merged && l < j->nlayers; l++) mx_image_free(&current[l]);
@@ -134,7 +134,7 @@ done:
 /* Final textures: enhanced texels where a view reached them, the original elsewhere. */
 static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_status *st) {
     if (mx_job_current_textures(j, out, st)) return -1;
-    size_t T2 = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t T2 = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
         for (size_t i = 0; i < T2; i++)
             if (!j->bake.known[l * T2 + i]) memcpy(out[l].data + 3 * i, orig[l].data + 3 * i, 3 * sizeof(float));
@@ -151,7 +151,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (!rc) {
         orig = calloc((size_t)j.nlayers, sizeof *orig);
         out = calloc((size_t)j.nlayers, sizeof *out);
-        cams = calloc((size_t)(o->views > 2 ? o->views : 2), sizeof *cams);
+        cams = calloc((size_t)(o->pub.views > 2 ? o->pub.views : 2), sizeof *cams);
         if (!orig || !out || !cams) rc = mx_fail(st, MX_ENOMEM, "enhance: out of memory");
     }
     j.keep_unreached = 1;
@@ -159,7 +159,7 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     if (!rc) rc = original_textures(&j, orig, st);
     if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
     double t = mx_now();
-    for (int i = 0; !rc && i < ncam && i < o->views; i++) {
+    for (int i = 0; !rc && i < ncam && i < o->pub.views; i++) {
         if ((rc = mx_job_check_cancel(&j, st))) break;
         mx_job_view v;
         memset(&v, 0, sizeof v);

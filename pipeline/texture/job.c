@@ -41,26 +41,26 @@ static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 static void emit_progress(mx_job *j, int step, int steps, const char *message) {
     const mx_texture_opts *o = j->o;
     if (!o->progress) return;
-    mx_texture_progress p = {j->phase, step, steps, j->views_done, o->views,
+    mx_texture_progress p = {j->phase, step, steps, j->views_done, o->pub.views,
                              j->visible ? mx_job_coverage(j) : 0.0, mx_now() - j->t0, message};
     if (o->progress(o->progress_user, &p)) j->stop = 1;
 }
 
 void mx_job_progress(mx_job *j, const char *fmt, ...) {
-    if (j->o->quiet && !j->o->progress) return;
+    if (!j->o->pub.verbose && !j->o->progress) return;
     char line[512];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(line, sizeof line, fmt, ap);
     va_end(ap);
-    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
     emit_progress(j, 0, 0, line);
 }
 
 void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->phase, sizeof j->phase, "%s", stage); }
 
 int mx_job_check_cancel(const mx_job *j, mx_status *st) {
-    if (j->stop || (j->o->cancel && *j->o->cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
+    if (j->stop || (j->o->pub.cancel && *j->o->pub.cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
     return 0;
 }
 
@@ -69,7 +69,7 @@ int mx_job_check_cancel(const mx_job *j, mx_status *st) {
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_mesh *m = &j->mesh;
     mx_uvatlas_opts ao = mx_uvatlas_defaults();
-    ao.texture_size = j->o->tex_size;
+    ao.texture_size = j->o->pub.texture_size;
     if (m->nuv > 0 && m->face_uv) {
         int atlas_faces = 0;
         if (mx_uvatlas_complete(m, &ao, &j->atlas, &atlas_faces, st)) return -1;
@@ -91,7 +91,7 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
 }
 
 int mx_job_ctx_create(mx_ctx *c, const mx_texture_opts *o, mx_status *st) {
-    return mx_ctx_create_on(c, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st);
+    return mx_ctx_create_on(c, mx_texture_opts_device(o), o->pub.threads, mx_cpu_isa_for(mx_texture_opts_precision(o)), SCRATCH_BYTES, st);
 }
 
 void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
@@ -99,27 +99,27 @@ void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
 }
 
 static int build_candidates(mx_job *j, mx_status *st) {
-    int n = j->o->candidates;
+    int n = j->o->pub.candidates;
     mx_camera tmpl, *cams = calloc((size_t)n, sizeof *cams);
     if (!cams) return mx_fail(st, MX_ENOMEM, "candidate cameras: out of memory");
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
-    int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
-                                 j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold,
-                                 mx_view_scale_radius(mx_view_erode_radius(j->o->render_size, j->o->image_size),
-                                                      j->o->render_size, CANDIDATE_RENDER_SIZE),
+    int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->pub.texture_size,
+                                 j->o->pub.texture_size, j->nlayers, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold,
+                                 mx_view_scale_radius(mx_view_erode_radius(j->o->pub.render_size, j->o->pub.image_size),
+                                                      j->o->pub.render_size, CANDIDATE_RENDER_SIZE),
                                  j->ctx->pool, st);
     free(cams);
     if (rc) return -1;
     j->vc_ready = 1;
-    size_t texels = (size_t)j->nlayers * j->o->tex_size * j->o->tex_size;
+    size_t texels = (size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size;
     j->visible = calloc(texels, 1);
     if (!j->visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
     mx_view_cache_visible(&j->vc, j->visible);
     j->n_visible = mx_mask_count(j->visible, (int64_t)texels);
     if (j->n_visible == 0)
         return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
-                       j->o->mesh_path);
+                       j->o->pub.mesh_path);
     return 0;
 }
 
@@ -128,7 +128,7 @@ static int encode_negative(mx_job *j, mx_status *st) {
     j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
     if (!j->uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
-    if (mx_models_encode_text(j->models, j->ctx, j->o->negative_prompt, j->uncond, &dropped, st)) return -1;
+    if (mx_models_encode_text(j->models, j->ctx, j->o->pub.negative_prompt, j->uncond, &dropped, st)) return -1;
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
@@ -140,18 +140,18 @@ static void report_header(mx_job *j) {
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", MX_VERSION);
     mx_jw_str(w, "mesh", j->mesh.source_path);
-    if (o->source_path) mx_jw_str(w, "source", o->source_path);
+    if (o->pub.source_path) mx_jw_str(w, "source", o->pub.source_path);
     if (j->models) {
-        mx_jw_str(w, "prompt", o->prompt);
-        mx_jw_str(w, "negative_prompt", o->negative_prompt);
-        mx_jw_int(w, "seed", (long long)o->seed);
-        mx_jw_int(w, "steps", o->steps);
-        mx_jw_bool(w, "fast", o->fast);
-        mx_jw_num(w, "guidance", o->guidance);
-        mx_jw_int(w, "image_size", o->image_size);
+        mx_jw_str(w, "prompt", o->pub.prompt);
+        mx_jw_str(w, "negative_prompt", o->pub.negative_prompt);
+        mx_jw_int(w, "seed", (long long)o->pub.seed);
+        mx_jw_int(w, "steps", o->pub.steps);
+        mx_jw_bool(w, "fast", o->pub.fast);
+        mx_jw_num(w, "guidance", o->pub.guidance);
+        mx_jw_int(w, "image_size", o->pub.image_size);
     }
-    mx_jw_int(w, "texture_size", o->tex_size);
-    mx_jw_int(w, "render_size", o->render_size);
+    mx_jw_int(w, "texture_size", o->pub.texture_size);
+    mx_jw_int(w, "render_size", o->pub.render_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->ctx->pool));
     if (j->models) {
         mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx->k->isa)));
@@ -171,7 +171,7 @@ static void report_header(mx_job *j) {
         mx_jw_num(w, "seconds", j->atlas.seconds);
         mx_jw_end_obj(w);
     }
-    mx_jw_int(w, "candidate_views", o->candidates);
+    mx_jw_int(w, "candidate_views", o->pub.candidates);
     mx_jw_num(w, "candidate_visible_texels", (double)j->n_visible);
     mx_jw_begin_arr(w, "views");
 }
@@ -195,9 +195,9 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->t0 = mx_now();
     mx_job_set_phase(j, "load");
     j->psnr_db = NAN;
-    j->write_flags = o->first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
-    const char *inputs[] = {o->mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->source_path};
-    if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, inputs, 3, st)) return -1;
+    j->write_flags = o->pub.first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
+    const char *inputs[] = {o->pub.mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->pub.source_path};
+    if (o->pub.out_dir && mx_outdir_open(&j->out, o->pub.out_dir, o->pub.force, inputs, 3, st)) return -1;
     if (o->models) { /* an opened model set computes on its own context */
         j->models = o->models;
         j->ctx = o->models->c;
@@ -207,27 +207,27 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
         j->ctx = &j->own_ctx;
     }
     if (model_needs != MX_JOB_NO_MODELS && !j->models) {
-        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_backend_name(o->device),
+        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_texture_opts_device_name(o),
                         mx_precision_name(mx_isa_precision(j->ctx->k->isa)), mx_isa_name(j->ctx->k->isa),
-                        mx_isa_precision(j->ctx->k->isa) != o->precision ? ": bf16 is not available on this CPU" : "");
+                        mx_isa_precision(j->ctx->k->isa) != mx_texture_opts_precision(o) ? ": bf16 is not available on this CPU" : "");
         if (mx_models_load(&j->own_models, j->ctx, o->weights_path, model_needs, st)) return -1;
         j->own_models_ready = 1;
         j->models = &j->own_models;
-        mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
+        mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->pub.fast ? " (fast: LCM + TAESD)" : "");
     }
     if (model_needs == MX_JOB_NO_MODELS) j->models = NULL;
-    else if (mx_models_check(j->models, model_needs, st) || (o->fast && check_fast_models(j, st))) return -1;
+    else if (mx_models_check(j->models, model_needs, st) || (o->pub.fast && check_fast_models(j, st))) return -1;
     if (mx_job_check_cancel(j, st)) return -1;
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
-                : mx_mesh_load(o->mesh_path, &j->mesh, st))
+                : mx_mesh_load(o->pub.mesh_path, &j->mesh, st))
         return -1;
     if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
-    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
-    if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
+    if (mx_mesh_normalized(&j->mesh, mx_texture_opts_up(o), &j->pos, j->center, &j->scale, st)) return -1;
+    if (mx_bake_init(&j->bake, o->pub.texture_size, o->pub.texture_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
     if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models && encode_negative(j, st))) return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
-                    j->nlayers, o->candidates);
+                    j->nlayers, o->pub.candidates);
     report_header(j);
     mx_job_stage_done(j, "load", mx_now() - j->t0);
     return 0;
@@ -289,9 +289,9 @@ static int report_step(void *user, int step, int n_steps, int64_t timestep, cons
     mx_job *j = user;
     char line[160];
     snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->phase, step + 1, n_steps, (long long)timestep);
-    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
     emit_progress(j, step + 1, n_steps, line);
-    return j->stop || (j->o->cancel && *j->o->cancel);
+    return j->stop || (j->o->pub.cancel && *j->o->pub.cancel);
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
@@ -311,14 +311,14 @@ static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float
 static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, float *lat, float *noise,
                          size_t per_item, int h, int w, mx_status *st) {
     for (int i = 0; i < b->n; i++)
-        mx_rng_fill_normal(noise + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
+        mx_rng_fill_normal(noise + i * per_item, per_item, j->o->pub.seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
         memcpy(lat, noise, per_item * b->n * sizeof *lat);
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
         return mx_sd_denoise(rq, j->ctx, lat, b->n, h, w, st);
     }
     mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength,
-                    j->o->fast ? j->models->taesd : NULL};
+                    j->o->pub.fast ? j->models->taesd : NULL};
     return mx_sd_edit_run(rq, &e, j->ctx, b->n, h, w, lat, st);
 }
 
@@ -340,12 +340,12 @@ static int fill_lcm_noise(void *user, int step, float *noise, size_t numel) {
 }
 
 static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float *images, mx_status *st) {
-    if (j->o->fast) return mx_taesd_decode_image(j->ctx, j->models->taesd, lat, n, h, w, images, st);
+    if (j->o->pub.fast) return mx_taesd_decode_image(j->ctx, j->models->taesd, lat, n, h, w, images, st);
     return mx_vae_decode_image_tiled(j->ctx, j->models->vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
-    int f = j->o->fast ? mx_taesd_factor(j->models->taesd) : mx_vae_factor(j->models->vae);
+    int f = j->o->pub.fast ? mx_taesd_factor(j->models->taesd) : mx_vae_factor(j->models->vae);
     if (b->image_h % f || b->image_w % f)
         return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
                        b->image_h, f);
@@ -355,16 +355,16 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
     mx_sched_config scfg = j->models->sched;
-    lcm_noise lcm = {j->o->seed, b->first_stream, b->n, per_item};
+    lcm_noise lcm = {j->o->pub.seed, b->first_stream, b->n, per_item};
     memset(&s, 0, sizeof s);
     int rc = -1, sched_ready = 0;
-    if (j->o->fast) mx_sched_config_lcm(&scfg, &j->models->sched);
+    if (j->o->pub.fast) mx_sched_config_lcm(&scfg, &j->models->sched);
     if (!lat || !cond || !uncond) {
         mx_fail(st, MX_ENOMEM, "generation buffers: out of memory");
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, j->ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, j->ctx, &scfg, j->o->pub.steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     s.noise_fn = fill_lcm_noise;
     s.noise_user = &lcm;
@@ -375,7 +375,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     if (b->inpaint_planes && j->models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
         controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
     mx_job_set_phase(j, b->stage);
-    mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->guidance, &s,
+    mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->pub.guidance, &s,
                         report_step, j, NULL, NULL};
     double t = mx_now();
     if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
@@ -397,12 +397,12 @@ done:
 }
 
 int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
-    int R = j->o->render_size;
+    int R = j->o->pub.render_size;
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
-    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->ctx->pool,
+    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold, j->ctx->pool,
                         st) ||
-        mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->image_size), st))
+        mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->pub.image_size), st))
         return -1;
     uint8_t *fg = malloc((size_t)R * R);
     if (!fg) return mx_fail(st, MX_ENOMEM, "view mask: out of memory");
@@ -419,7 +419,7 @@ void mx_job_view_free(mx_job_view *v) {
 }
 
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
-    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
         if (mx_bake_texture(&j->bake, l, GREY, &tex[l], st) ||
             mx_uv_dilate(&tex[l], j->bake.known + l * plane, CURRENT_DILATE_TEXELS, st)) {
@@ -443,20 +443,20 @@ static int place_control(const mx_image *full, mx_crop crop, int S, float *plane
  * the paint mask (untextured pixels, grown to whole latent cells) and the inpaint control (I′
  * with the painted pixels at -1). */
 static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const mx_view_planes *p, mx_status *st) {
-    int R = j->o->render_size, S = j->o->image_size, rc = -1;
+    int R = j->o->pub.render_size, S = j->o->pub.image_size, rc = -1;
     mx_image rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, paint = {0}, ctl = {0};
     uint8_t *mask = malloc((size_t)R * R), *open = NULL;
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
     const uint8_t *known = j->bake.known;
     if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will restart are repainted */
-        if (!(open = malloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size))) {
+        if (!(open = malloc((size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size))) {
             free(mask);
             return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
         }
         mx_bake_open_texels(&j->bake, &v->vb.gb, &j->mesh, v->vb.mask, open);
         known = open;
     }
-    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->tex_size, j->o->tex_size, mask);
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, mask);
     free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx->pool, &rgb, st) &&
@@ -483,14 +483,14 @@ int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, con
                          mx_status *st) {
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
-    int rc = place_control(&depth, v->crop, j->o->image_size, p->depth, p->plane_w, p->x0, st);
+    int rc = place_control(&depth, v->crop, j->o->pub.image_size, p->depth, p->plane_w, p->x0, st);
     mx_image_free(&depth);
     if (rc || !p->inpaint) return rc;
     return inpaint_inputs(j, v, current, p, st);
 }
 
 int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st) {
-    int R = j->o->render_size, S = j->o->image_size;
+    int R = j->o->pub.render_size, S = j->o->pub.image_size;
     double t = mx_now();
     mx_image gen, canvas;
     if (mx_planes_to_image(planes, 3, S, plane_w, x0, S, &gen, st)) return -1;
@@ -516,7 +516,7 @@ void mx_job_stage_done(mx_job *j, const char *name, double seconds) {
 
 double mx_job_coverage(const mx_job *j) {
     if (j->n_visible == 0) return 1.0;
-    int64_t n = (int64_t)j->nlayers * j->o->tex_size * j->o->tex_size, hit = 0;
+    int64_t n = (int64_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size, hit = 0;
     for (int64_t i = 0; i < n; i++) hit += j->visible[i] && j->bake.known[i];
     return (double)hit / (double)j->n_visible;
 }
@@ -543,7 +543,7 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
 
 /* Harmonic fill across UV seams of every layer's unreached chart texels, gutter dilation. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
-    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
         if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, st)) return -1;
     return 0;
@@ -603,12 +603,12 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *s
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
     if (mx_job_check_cancel(j, st) || (res && result_reserve(j, text, res, st))) return -1;
-    if (j->o->out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st)) {
+    if (j->o->pub.out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->pub.cancel, st)) {
         if (res) mx_texture_result_free(res);
         return -1;
     }
-    if (j->o->out_dir)
-        mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->out_dir, mx_job_coverage(j), j->views_done);
+    if (j->o->pub.out_dir)
+        mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->pub.out_dir, mx_job_coverage(j), j->views_done);
     if (res) result_fill(j, tex, res);
     return 0;
 }

@@ -279,6 +279,8 @@ static int check_device(const char *name, mx_status *st) {
     return 0;
 }
 
+int mx_option_check(const mx_option_spec *s, const matex_options *o, mx_status *st) { return check_one(s, o, NULL, st); }
+
 int mx_options_check(const matex_options *o, unsigned verb, mx_status *st) {
     for (size_t i = 0; i < sizeof TABLE / sizeof TABLE[0]; i++) {
         const mx_option_spec *s = &TABLE[i];
@@ -331,20 +333,30 @@ void mx_options_help(FILE *f, unsigned verb) {
         if (TABLE[i].verbs & verb) help_line(f, &TABLE[i]);
 }
 
-/* ---- the pipeline's own options (until they are matex_options) ---- */
+/* ---- a run's options (texture.h): pub by the table, then what the library gives the run ---- */
 
-static int int_in(const char *name, int v, int lo, int hi, mx_status *st) {
-    if (v < lo || v > hi) return mx_fail(st, MX_EUSAGE, "%s must be in %d..%d, not %d", name, lo, hi, v);
-    return 0;
+int mx_texture_opts_normals(const mx_texture_opts *o) {
+    return o->pub.geometric_normals ? MX_NORMAL_GEOMETRIC : MX_NORMAL_FROM_DEPTH;
 }
 
-/* lo <= v <= hi (lo_open: lo < v; hi_open: v < hi), and v finite. */
-static int float_in(const char *name, float v, float lo, int lo_open, float hi, int hi_open, mx_status *st) {
-    int ok = isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
-    if (!ok)
-        return mx_fail(st, MX_EUSAGE, "%s must be in %c%g, %g%c, not %g", name, lo_open ? '(' : '[', (double)lo,
-                       (double)hi, hi_open ? ')' : ']', (double)v);
-    return 0;
+mx_up_axis mx_texture_opts_up(const mx_texture_opts *o) { return o->pub.z_up ? MX_UP_Z : MX_UP_Y; }
+
+mx_precision mx_texture_opts_precision(const mx_texture_opts *o) {
+    return o->pub.precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16;
+}
+
+mx_backend_kind mx_texture_opts_device(const mx_texture_opts *o) {
+    mx_backend_kind kind = MX_BACKEND_CPU;
+    if (o->pub.device) mx_backend_parse(o->pub.device, &kind, NULL);
+    return kind;
+}
+
+const char *mx_texture_opts_device_name(const mx_texture_opts *o) { return mx_backend_name(mx_texture_opts_device(o)); }
+
+void mx_texture_opts_default(mx_texture_opts *o) {
+    memset(o, 0, sizeof *o);
+    matex_options_default(&o->pub);
+    o->pub.verbose = 1;
 }
 
 static int blank(const char *s) {
@@ -352,59 +364,24 @@ static int blank(const char *s) {
     return *s == 0;
 }
 
-static int check_paths(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
+static int check_given(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
+    const matex_options *p = &o->pub;
     /* the embedding API may give the mesh in memory, an opened model set, and keep the results */
-    if (!o->mesh && (!o->mesh_path || !*o->mesh_path)) return mx_fail(st, MX_EUSAGE, "no mesh given");
-    if (!o->keep_outputs && (!o->out_dir || !*o->out_dir))
+    if (!o->mesh && (!p->mesh_path || !*p->mesh_path)) return mx_fail(st, MX_EUSAGE, "no mesh given");
+    if (!o->keep_outputs && (!p->out_dir || !*p->out_dir))
         return mx_fail(st, MX_EUSAGE, "no output folder given (-o)");
     if (mode == MX_TEXTURE_MODE_TRANSFER)
-        return !o->source_path || !*o->source_path ? mx_fail(st, MX_EUSAGE, "no source mesh given") : 0;
+        return !p->source_path || !*p->source_path ? mx_fail(st, MX_EUSAGE, "no source mesh given") : 0;
     if (!o->models && (!o->weights_path || !*o->weights_path))
         return mx_fail(st, MX_EUSAGE, "no weight file given (--weights)");
-    if (!o->prompt) return mx_fail(st, MX_EUSAGE, "no prompt given");
-    if (mode == MX_TEXTURE_MODE_TEXTURE && blank(o->prompt))
+    if (!p->prompt) return mx_fail(st, MX_EUSAGE, "no prompt given");
+    if (mode == MX_TEXTURE_MODE_TEXTURE && blank(p->prompt))
         return mx_fail(st, MX_EUSAGE, "the prompt is empty: describe the texture, e.g. \"a rustic wooden chair\"");
-    if (!o->negative_prompt || !o->grid_word) return mx_fail(st, MX_EUSAGE, "--negative and --front-back-words need a text");
-    return 0;
-}
-
-static int check_sizes(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
-    if (int_in("--steps", o->steps, 1, 200, st) ||
-        int_in("--views", o->views, mode == MX_TEXTURE_MODE_ENHANCE ? 1 : 2, 64, st) ||
-        int_in("--candidates", o->candidates, 1, 4096, st) || int_in("--texture-size", o->tex_size, 16, 8192, st) ||
-        int_in("--render-size", o->render_size, 16, 8192, st) || int_in("--batch", o->max_batch, 1, 64, st) ||
-        int_in("--threads", o->threads, 0, 1024, st))
-        return -1;
-    if (o->image_size < 8 || o->image_size > 2048 || o->image_size % 8)
-        return mx_fail(st, MX_EUSAGE, "--image-size must be a multiple of 8 in 8..2048, not %d", o->image_size);
-    return 0;
-}
-
-static int check_weights(const mx_texture_opts *o, mx_status *st) {
-    if (float_in("--guidance", o->guidance, 0.0f, 0, 50.0f, 0, st) ||
-        float_in("--grid-depth-weight", o->grid_depth_weight, 0.0f, 0, 2.0f, 0, st))
-        return -1;
-    for (int i = 0; i < 2; i++)
-        if (float_in("--depth-weight", o->depth_weight[i], 0.0f, 0, 2.0f, 0, st) ||
-            float_in("--inpaint-weight", o->inpaint_weight[i], 0.0f, 0, 2.0f, 0, st))
-            return -1;
-    /* |n.v| <= 1: a threshold of 1 or more keeps no pixel, and the texture would be all fill */
-    if (float_in("--frontal-threshold", o->frontal_threshold, 0.0f, 0, 1.0f, 1, st) ||
-        float_in("--coverage-stop", o->coverage_stop, 0.0f, 1, 1.0f, 0, st) ||
-        float_in("--strength", o->strength, 0.0f, 1, 1.0f, 0, st))
-        return -1;
     return 0;
 }
 
 int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
-    if (check_paths(o, mode, st) || check_sizes(o, mode, st) || check_weights(o, st)) return -1;
-    if (o->normal_source != MX_NORMAL_FROM_DEPTH && o->normal_source != MX_NORMAL_GEOMETRIC)
-        return mx_fail(st, MX_EUSAGE, "--normals must be depth or geometric");
-    if (o->up != MX_UP_Y && o->up != MX_UP_Z) return mx_fail(st, MX_EUSAGE, "--up must be y or z");
-    if (o->precision != MX_PREC_FP32 && o->precision != MX_PREC_BF16)
-        return mx_fail(st, MX_EUSAGE, "--precision must be fp32 or bf16");
-    if ((int)o->device < 0 || (int)o->device >= MX_BACKEND_KINDS)
-        return mx_fail(st, MX_EUSAGE, "--device must be cpu, cpu-strict or cuda");
-    if (o->fast && mode == MX_TEXTURE_MODE_TRANSFER) return mx_fail(st, MX_EUSAGE, "--fast is for texture and enhance");
-    return 0;
+    static const unsigned verbs[] = {[MX_TEXTURE_MODE_TEXTURE] = MX_VERB_TEXTURE, [MX_TEXTURE_MODE_ENHANCE] = MX_VERB_ENHANCE,
+                                     [MX_TEXTURE_MODE_TRANSFER] = MX_VERB_TRANSFER};
+    return mx_options_check(&o->pub, verbs[mode], st) || check_given(o, mode, st) ? -1 : 0;
 }

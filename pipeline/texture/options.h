@@ -60,6 +60,8 @@ const mx_option_spec *mx_options_table(int *n);
 const mx_option_spec *mx_option_find(const char *name, unsigned verb);
 /* Parses `value` into o's field(s) and checks its range: MX_EUSAGE with "--NAME must be ... not 'VALUE'". */
 int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, mx_status *st);
+/* One option's value in o within its range (the same message). */
+int mx_option_check(const mx_option_spec *s, const matex_options *o, mx_status *st);
 /* Every option of a verb within its range (the message names the option, its value and the valid
  * values), before any work: the library's runs call it, the command line calls it after parsing. */
 int mx_options_check(const matex_options *o, unsigned verb, mx_status *st);

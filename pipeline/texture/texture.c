@@ -16,7 +16,7 @@ static void free_views(mx_job_view *v, int n) {
 static int grid_stage(mx_job *j, mx_status *st) {
     const mx_texture_opts *o = j->o;
     double t = mx_now();
-    int S = o->image_size, W = 2 * S, rc = -1;
+    int S = o->pub.image_size, W = 2 * S, rc = -1;
     mx_job_view v[2];
     memset(v, 0, sizeof v);
     mx_job_camera(&v[0].cam, 0.0f, 0.0f);
@@ -28,19 +28,19 @@ static int grid_stage(mx_job *j, mx_status *st) {
         goto done;
     }
     for (int i = 0; i < 2; i++) {
-        snprintf(v[i].prompt, sizeof v[i].prompt, "%s %s", o->grid_word, o->prompt);
+        snprintf(v[i].prompt, sizeof v[i].prompt, "%s %s", o->pub.front_back_words, o->pub.prompt);
         mx_view_planes vp = {planes, NULL, NULL, NULL, W, i * S};
         if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, NULL, st)) goto done;
     }
     prompts[0] = v[0].prompt;
     mx_job_set_phase(j, "grid");
-    mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->grid_depth_weight);
-    mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->grid_depth_weight, 0.0f, NULL, NULL, NULL, NULL, 0.0f, 0,
+    mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->pub.grid_depth_weight);
+    mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->pub.grid_depth_weight, 0.0f, NULL, NULL, NULL, NULL, 0.0f, 0,
                       "grid"};
     if (mx_job_generate(j, &b, image, st)) goto done;
     for (int i = 0; i < 2; i++) {
         if (mx_job_backproject(j, &v[i], image, W, i * S, st)) goto done;
-        mx_job_report_view(j, &v[i], "grid", 0, o->grid_depth_weight, 0.0f);
+        mx_job_report_view(j, &v[i], "grid", 0, o->pub.grid_depth_weight, 0.0f);
     }
     mx_job_progress(j, "stage grid done: coverage %.4f", mx_job_coverage(j));
     mx_job_stage_done(j, "grid", mx_now() - t);
@@ -98,7 +98,7 @@ static int batch_alloc(batch_buffers *bb, int n, int S, mx_status *st) {
  * its own weights, by its order k + i among the later views), then backprojection. */
 static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int batch_id, mx_status *st) {
     const mx_texture_opts *o = j->o;
-    int S = o->image_size, rc = -1;
+    int S = o->pub.image_size, rc = -1;
     size_t per = (size_t)3 * S * S;
     batch_buffers bb;
     mx_job_view *v = calloc((size_t)n, sizeof *v);
@@ -118,13 +118,13 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     mx_job_set_phase(j, stage);
     for (int i = 0; i < n; i++) {
         v[i].cam = j->vc.cams[cand[i]];
-        snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->prompt);
+        snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->pub.prompt);
         bb.prompts[i] = v[i].prompt;
-        bb.wd[i] = lerp_schedule(o->depth_weight, k + i, n_later);
-        bb.wi[i] = lerp_schedule(o->inpaint_weight, k + i, n_later);
+        bb.wd[i] = lerp_schedule(o->pub.depth_weight, k + i, n_later);
+        bb.wi[i] = lerp_schedule(o->pub.inpaint_weight, k + i, n_later);
         mx_view_planes vp = {bb.depth + i * per, bb.inpaint + i * per, bb.init + i * per, bb.paint + i * per / 3, S, 0};
         if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, current, st)) goto done;
-        mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->views,
+        mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->pub.views,
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
                         (long long)v[i].untextured_pixels);
     }
@@ -149,8 +149,8 @@ done:
 static int view_stage(mx_job *j, mx_status *st) {
     const mx_texture_opts *o = j->o;
     double t = mx_now();
-    int n_later = o->views - 2, k = 0, batch_id = 1;
-    int *cand = malloc(sizeof(int) * (o->max_batch > 0 ? o->max_batch : 1));
+    int n_later = o->pub.views - 2, k = 0, batch_id = 1;
+    int *cand = malloc(sizeof(int) * (o->pub.batch > 0 ? o->pub.batch : 1));
     if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
     while (k < n_later) {
         if (mx_job_check_cancel(j, st)) {
@@ -158,12 +158,12 @@ static int view_stage(mx_job *j, mx_status *st) {
             return -1;
         }
         mx_view_plan plan;
-        if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
+        if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->pub.coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
                               &plan, st)) {
             free(cand);
             return -1;
         }
-        int n = plan.n ? first_group(&plan, o->max_batch > 0 ? o->max_batch : 1, cand) : 0;
+        int n = plan.n ? first_group(&plan, o->pub.batch > 0 ? o->pub.batch : 1, cand) : 0;
         mx_view_plan_free(&plan);
         if (n == 0) {
             mx_job_progress(j, "view selection: nothing left to paint after %d views", k + 2);
@@ -184,7 +184,7 @@ static int view_stage(mx_job *j, mx_status *st) {
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_TEXTURE, st)) return -1;
     mx_job j;
-    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
+    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->pub.views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
     if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
     if (!rc) {

@@ -33,7 +33,7 @@ static void source_free(source *s) {
 
 /* The source mesh and its textures (before the job: bad input fails at once). */
 static int source_load(const mx_texture_opts *o, source *s, mx_status *st) {
-    const char *path = o->source_path;
+    const char *path = o->pub.source_path;
     if (mx_mesh_load(path, &s->mesh, st)) return -1;
     if (!s->mesh.face_uv || s->mesh.nmat < 1)
         return mx_fail(st, MX_EINPUT, "%s: the source has no UVs or no material to take a texture from", path);
@@ -49,8 +49,8 @@ static int source_load(const mx_texture_opts *o, source *s, mx_status *st) {
 
 /* The source in the job's frame, and its render buffer. */
 static int source_place(mx_job *j, source *s, mx_status *st) {
-    if (mx_mesh_placed(&s->mesh, j->o->up, j->center, j->scale, &s->pos, st)) return -1;
-    if (mx_gbuffer_init(&s->gb, j->o->render_size, j->o->render_size, st)) return -1;
+    if (mx_mesh_placed(&s->mesh, mx_texture_opts_up(j->o), j->center, j->scale, &s->pos, st)) return -1;
+    if (mx_gbuffer_init(&s->gb, j->o->pub.render_size, j->o->pub.render_size, st)) return -1;
     s->gb_ready = 1;
     return 0;
 }
@@ -61,7 +61,7 @@ static int source_place(mx_job *j, source *s, mx_status *st) {
  * to the destination's object, resized to image_size, pasted back bilinearly. */
 static int through_model_image(const mx_job *j, const mx_job_view *v, mx_image *img, mx_status *st) {
     mx_image small = {0};
-    if (mx_crop_resize(img, v->crop, j->o->image_size, &small, st)) return -1;
+    if (mx_crop_resize(img, v->crop, j->o->pub.image_size, &small, st)) return -1;
     memset(img->data, 0, (size_t)img->w * img->h * (size_t)img->c * sizeof *img->data);
     mx_crop_paste(&small, v->crop, img);
     mx_image_free(&small);
@@ -76,8 +76,8 @@ static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, 
     mx_image img = {0};
     int rc = mx_job_view_prepare(j, &v, st) ||
              mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->ctx->pool, &s->gb, st) ||
-             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->background, j->ctx->pool, &img, st) ||
-             (j->o->through_model_image && through_model_image(j, &v, &img, st));
+             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->pub.background, j->ctx->pool, &img, st) ||
+             (j->o->pub.through_model_image && through_model_image(j, &v, &img, st));
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) v.vb.mask[i] &= s->gb.face[i] >= 0;
         rc = mx_backproject(&j->bake, &v.vb.gb, &j->mesh, &img, v.vb.mask, j->write_flags, j->ctx->pool, st);
@@ -100,7 +100,7 @@ static int transfer_views(mx_job *j, source *s, mx_status *st) {
         if (mx_job_check_cancel(j, st) || transfer_view(j, s, &cam, k, st)) return -1;
     }
     mx_view_plan plan;
-    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->views - 2, j->o->coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
+    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->pub.views - 2, j->o->pub.coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
                           &plan, st))
         return -1;
     int rc = 0;
@@ -141,7 +141,7 @@ static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status 
     if (!tex) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
     int rc = mx_job_current_textures(j, tex, st);
     if (!rc) {
-        if (!strcmp(j->o->source_path, j->o->mesh_path)) {
+        if (!strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) {
             j->psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->psnr_db);
         }
