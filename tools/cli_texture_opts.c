@@ -143,6 +143,7 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     mx_cli_signals_output(c->o.out_dir);
     matex_result *r = NULL;
     int rc = run_once(run, c, c->json ? &r : NULL, &err);
+    mx_cli_signals_output(NULL);
     if (rc) {
         if (err.code == MATEX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", err.message);
         fprintf(stderr, "matex %s: %s\n", verb, err.message);

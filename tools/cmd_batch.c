@@ -270,6 +270,7 @@ static void batch_job(batch_run *r, const mx_batch_job *j) {
     char error[1024];
     mx_cli_signals_output(j->c.o.out_dir);
     int rc = run_job(r, j, &coverage, error, sizeof error);
+    mx_cli_signals_output(NULL); /* the job's folder and lock are its own no more */
     if (rc < 0) record_failure(r, j, error);
     add_result(r, j, rc == 0 ? JOB_DONE : rc > 0 ? JOB_INTERRUPTED : JOB_FAILED, mx_now() - t, coverage,
                rc < 0 ? error : NULL);
