@@ -6,6 +6,7 @@
  * read or write of an activation from outside the op layer ends in SIGSEGV. Made for tests:
  * each op pays two mprotect calls per live allocation. */
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -13,7 +14,7 @@
 #include "ops.h"
 
 #ifdef MX_WITH_CUDA
-int mx_cuda_backend_create(mx_backend **out, mx_status *st); /* ops/cuda/cuda_ops.cu */
+int mx_cuda_backend_create(mx_backend **out, mx_status *st); /* ops/cuda/cuda_backend.cu */
 #endif
 
 /* ---- cpu ---- */
@@ -118,14 +119,7 @@ static void strict_destroy(mx_backend *be) {
 
 /* ---- factory ---- */
 
-int mx_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa, mx_status *st) {
-    *out = NULL;
-    if (!mx_backend_compiled(kind))
-        return mx_fail(st, MX_EUSAGE, "this matex was built without the %s backend (build it with `make %s`)",
-                       mx_backend_name(kind), mx_backend_name(kind));
-#ifdef MX_WITH_CUDA
-    if (kind == MX_BACKEND_CUDA) return mx_cuda_backend_create(out, st);
-#endif
+static int cpu_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa, mx_status *st) {
     mx_backend *be = calloc(1, sizeof *be);
     if (!be) return mx_fail(st, MX_ENOMEM, "backend: out of memory");
     be->kind = kind;
@@ -150,6 +144,39 @@ int mx_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa, mx_sta
         be->destroy = strict_destroy;
     }
     *out = be;
+    return 0;
+}
+
+/* "cuda", or a CPU kind with its level: "cpu-strict (avx512)". */
+static void backend_label(const mx_backend *be, char *buf, size_t cap) {
+    if (be->kind == MX_BACKEND_CUDA)
+        snprintf(buf, cap, "%s", mx_backend_name(be->kind));
+    else
+        snprintf(buf, cap, "%s (%s)", mx_backend_name(be->kind), mx_isa_name(be->k->isa));
+}
+
+/* Every backend's table is checked full here, so a missing kernel is one clear line at context
+ * creation, never a NULL call in the middle of a run. */
+int mx_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa, mx_status *st) {
+    *out = NULL;
+    if (!mx_backend_compiled(kind))
+        return mx_fail(st, MX_EUSAGE, "this matex was built without the %s backend (build it with `make %s`)",
+                       mx_backend_name(kind), mx_backend_name(kind));
+    int rc;
+#ifdef MX_WITH_CUDA
+    if (kind == MX_BACKEND_CUDA)
+        rc = mx_cuda_backend_create(out, st);
+    else
+#endif
+        rc = cpu_backend_create(out, kind, isa, st);
+    if (rc) return rc;
+    char name[64];
+    backend_label(*out, name, sizeof name);
+    if (mx_kernels_check((*out)->k, name, st)) {
+        mx_backend_destroy(*out);
+        *out = NULL;
+        return -1;
+    }
     return 0;
 }
 

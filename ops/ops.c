@@ -1,5 +1,5 @@
-/* The op wrappers (ops.h), weight access, scalar conversions, the timestep embedding and
- * the ready-made context. */
+/* The op wrappers (ops.h, generated from op_list.h), the table check, weight access, scratch
+ * memory, the edges, the dry run and the ready-made context. */
 #include "ops.h"
 
 #include <math.h>
@@ -58,132 +58,32 @@ static void op_end(const mx_ctx *c) {
         }                                                                                                    \
     } while (0)
 
-void mx_linear(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
-    if (M > 0 && N > 0) RUN_OP(c, linear(c, y, x, w, bias, M, N, K));
-}
-
-void mx_conv2d(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
-               mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
-    if (B > 0 && Cout > 0) RUN_OP(c, conv2d(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad));
-}
-
-void mx_group_norm(const mx_ctx *c, float *y, const float *x, int B, int C, int HW, int groups, mx_wptr gamma,
-                   mx_wptr beta, float eps, int fuse_silu) {
-    if (B > 0 && C > 0 && HW > 0) RUN_OP(c, group_norm(c, y, x, B, C, HW, groups, gamma, beta, eps, fuse_silu));
-}
-
-void mx_layer_norm(const mx_ctx *c, float *y, const float *x, int M, int C, mx_wptr gamma, mx_wptr beta,
-                   float eps) {
-    if (M > 0 && C > 0) RUN_OP(c, layer_norm(c, y, x, M, C, gamma, beta, eps));
-}
-
-void mx_softmax(const mx_ctx *c, float *x, int M, int N) {
-    if (M > 0 && N > 0) RUN_OP(c, softmax(c, x, M, N));
-}
-
-void mx_attention(const mx_ctx *c, float *out, const float *q, const float *k, const float *v, int B, int H,
-                  int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal, float scale) {
-    if (B > 0 && H > 0 && Tq > 0 && Tk > 0 && D > 0)
-        RUN_OP(c, attention(c, out, q, k, v, B, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal, scale));
-}
-
-void mx_gelu(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, gelu(c, x, n)); }
-void mx_quick_gelu(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, quick_gelu(c, x, n)); }
-void mx_silu(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, silu(c, x, n)); }
-void mx_tanh(const mx_ctx *c, float *x, size_t n) { RUN_OP(c, tanh(c, x, n)); }
-
-void mx_geglu(const mx_ctx *c, float *y, const float *x, int M, int N) {
-    if (M > 0 && N > 0) RUN_OP(c, geglu(c, y, x, M, N));
-}
-
-void mx_binary(const mx_ctx *c, mx_binop op, float *y, const float *a, const int64_t *ashape, const float *b,
-               const int64_t *bshape, int ndim) {
-    RUN_OP(c, binary(c, op, y, a, ashape, b, bshape, ndim));
-}
+/* Every wrapper has the same shape (op_list.h): no work unless the guard holds, else the table
+ * entry. None needs more checking: the kernels take any sizes the guards let through. */
+#define MX_WRAPPER_DEF_(name, guard, params, args)                                                          \
+    void mx_##name(const mx_ctx *c, MX_SPLICE params) {                                                      \
+        if (guard) RUN_OP(c, name(c, MX_SPLICE args));                                                      \
+    }
+MX_OPS(MX_WRAPPER_DEF_)
 
 void mx_add(const mx_ctx *c, float *y, const float *a, const float *b, size_t n) {
     int64_t shape[1] = {(int64_t)n};
     mx_binary(c, MX_BIN_ADD, y, a, shape, b, shape, 1);
 }
 
-void mx_mul(const mx_ctx *c, float *y, const float *a, const float *b, size_t n) {
-    int64_t shape[1] = {(int64_t)n};
-    mx_binary(c, MX_BIN_MUL, y, a, shape, b, shape, 1);
+const char *mx_kernels_missing(const mx_kernels *k) {
+#define MX_MISSING_(name, guard, params, args)                                                               \
+    if (!k->name) return #name;
+    MX_OPS(MX_MISSING_)
+#undef MX_MISSING_
+    return NULL;
 }
 
-void mx_scale(const mx_ctx *c, float *y, const float *x, float s, size_t n) { RUN_OP(c, scale(c, y, x, s, n)); }
-
-void mx_upsample_nearest2x(const mx_ctx *c, float *y, const float *x, int BC, int H, int W) {
-    RUN_OP(c, upsample_nearest2x(c, y, x, BC, H, W));
+int mx_kernels_check(const mx_kernels *k, const char *backend, mx_status *st) {
+    const char *missing = mx_kernels_missing(k);
+    if (missing) return mx_fail(st, MX_EINTERNAL, "op %s is not available on backend %s", missing, backend);
+    return 0;
 }
-
-void mx_concat_channels(const mx_ctx *c, float *y, const float *a, int Ca, const float *b, int Cb, int B,
-                        int HW) {
-    RUN_OP(c, concat_channels(c, y, a, Ca, b, Cb, B, HW));
-}
-
-void mx_transpose_chw_hwc(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
-    RUN_OP(c, transpose_chw_hwc(c, y, x, B, C, HW));
-}
-
-void mx_transpose_hwc_chw(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
-    RUN_OP(c, transpose_hwc_chw(c, y, x, B, C, HW));
-}
-
-void mx_copy_rect(const mx_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
-                  int sx0, int BC, int h, int w) {
-    if (BC > 0 && h > 0 && w > 0) RUN_OP(c, copy_rect(c, y, Hy, Wy, y0, x0, x, Hx, Wx, sy0, sx0, BC, h, w));
-}
-
-void mx_resize_bilinear(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
-                        int align_corners) {
-    RUN_OP(c, resize_bilinear(c, y, x, BC, H, W, Ho, Wo, align_corners));
-}
-
-void mx_pad2d(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
-              int right) {
-    if (BC > 0 && H > 0 && W > 0) RUN_OP(c, pad2d(c, y, x, BC, H, W, top, bottom, left, right));
-}
-
-void mx_copy(const mx_ctx *c, float *y, const float *x, size_t n) {
-    if (n) RUN_OP(c, copy(c, y, x, n));
-}
-
-void mx_fill(const mx_ctx *c, float *y, float v, size_t n) {
-    if (n) RUN_OP(c, fill(c, y, v, n));
-}
-
-void mx_axpy(const mx_ctx *c, float *y, const float *x, float s, size_t n) {
-    if (n) RUN_OP(c, axpy(c, y, x, s, n));
-}
-
-void mx_lincomb(const mx_ctx *c, float *y, int k, const float *coef, const float *const *x, size_t n) {
-    if (n && k >= 1 && k <= MX_LINCOMB_MAX) RUN_OP(c, lincomb(c, y, k, coef, x, n));
-}
-
-void mx_clamp(const mx_ctx *c, float *y, const float *x, float lo, float hi, size_t n) {
-    if (n) RUN_OP(c, clamp(c, y, x, lo, hi, n));
-}
-
-void mx_affine(const mx_ctx *c, float *y, const float *x, float a, float b, size_t n) {
-    if (n) RUN_OP(c, affine(c, y, x, a, b, n));
-}
-
-void mx_embed_tokens(const mx_ctx *c, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
-                     mx_wptr positions) {
-    if (B > 0 && T > 0 && C > 0) RUN_OP(c, embed_tokens(c, y, ids, B, T, C, tokens, positions));
-}
-
-void mx_timestep_embedding(const mx_ctx *c, float *y, const float *t, int B, int dim, int flip_sin_to_cos,
-                           float downscale_freq_shift, float max_period) {
-    if (B > 0 && dim > 0)
-        RUN_OP(c, timestep_embedding(c, y, t, B, dim, flip_sin_to_cos, downscale_freq_shift, max_period));
-}
-
-void mx_f16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, f16_to_f32(c, y, x, n)); }
-void mx_f32_to_f16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_f16(c, y, x, n)); }
-void mx_bf16_to_f32(const mx_ctx *c, float *y, const uint16_t *x, size_t n) { RUN_OP(c, bf16_to_f32(c, y, x, n)); }
-void mx_f32_to_bf16(const mx_ctx *c, uint16_t *y, const float *x, size_t n) { RUN_OP(c, f32_to_bf16(c, y, x, n)); }
 
 /* ---- the edges ---- */
 

@@ -1,8 +1,10 @@
-/* The backends and the seam ops: names and what is compiled in; cpu-strict memory really is
- * out of reach outside the op layer (a direct read or write kills a child process with
- * SIGSEGV) while ops and the host copies work on it; a measuring context computes nothing;
- * the seam ops (pad, copy, fill, axpy, lincomb, clamp, affine, embed_tokens) on known values,
- * on the strict backend. */
+/* The backends: names and what is compiled in; every CPU kernel table compiled in (each level,
+ * whether or not this CPU runs it; test_cuda_ops checks CUDA's) has every op of ops/op_list.h, and a
+ * table that lacks one is refused with the op's name; cpu-strict memory really is out of reach
+ * outside the op layer (a direct read or write kills a child process with SIGSEGV) while ops and
+ * the host copies work on it; a measuring context computes nothing; the small layout, vector and
+ * embedding ops (pad, copy, fill, axpy, lincomb, clamp, affine, embed_tokens) on known values, on
+ * the strict backend. */
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -25,6 +27,40 @@ static void test_names(void) {
         CHECK(mx_ctx_create_on(&c, MX_BACKEND_CUDA, 1, MX_ISA_SCALAR, 1 << 16, &st) != 0);
         CHECK(strstr(st.msg, "without the cuda backend") != NULL);
     }
+}
+
+/* One table: every op of the list present (a failure names the op and the table). */
+static void check_table_full(const mx_kernels *k, const char *table) {
+    int present = 0;
+#define COUNT_PRESENT_(name, guard, params, args) present += k->name != NULL;
+    MX_OPS(COUNT_PRESENT_)
+#undef COUNT_PRESENT_
+    const char *missing = mx_kernels_missing(k);
+    if (missing) printf("FAIL: table %s has no kernel for op %s\n", table, missing);
+    CHECK(missing == NULL && present == MX_OP_COUNT);
+}
+
+static void test_tables_full(void) {
+    int tables = 0;
+    for (mx_isa isa = MX_ISA_SCALAR; strcmp(mx_isa_name(isa), "?") != 0; isa++) { /* every named level */
+        const mx_kernels *k = mx_kernels_compiled(isa);
+        if (!k) continue; /* a level of another architecture */
+        CHECK(k->isa == isa);
+        check_table_full(k, mx_isa_name(isa));
+        tables++;
+    }
+#ifndef MX_NO_X86_SIMD
+    CHECK(tables == MX_ISA_AMX + 1);
+#endif
+    printf("kernel tables full: %d tables x %d ops\n", tables, MX_OP_COUNT);
+    /* a table with a hole: refused with the op's name, never called */
+    mx_kernels holed = *mx_kernels_scalar();
+    holed.embed_tokens = NULL;
+    mx_status st = {0};
+    CHECK(mx_kernels_missing(&holed) != NULL && strcmp(mx_kernels_missing(&holed), "embed_tokens") == 0);
+    CHECK(mx_kernels_check(&holed, "test", &st) != 0);
+    CHECK(strcmp(st.msg, "op embed_tokens is not available on backend test") == 0);
+    CHECK(mx_kernels_check(mx_kernels_scalar(), "test", &st) == 0);
 }
 
 /* Runs fn(p) in a child; returns the signal that ended it (0: it exited). */
@@ -85,7 +121,7 @@ static void test_measuring(void) {
     CHECK(mx_run_ctx(NULL, &a) == m);
 }
 
-static void test_seam_ops(const mx_ctx *c) {
+static void test_small_ops(const mx_ctx *c) {
     mx_status st = {0};
     /* pad a 2x3 plane by (top 1, bottom 0, left 0, right 2) */
     const float x[6] = {1, 2, 3, 4, 5, 6};
@@ -131,6 +167,7 @@ static void test_seam_ops(const mx_ctx *c) {
 
 int main(void) {
     test_names();
+    test_tables_full();
     test_strict_guard();
     test_measuring();
     mx_ctx c;
@@ -139,7 +176,7 @@ int main(void) {
         fprintf(stderr, "%s\n", st.msg);
         return 1;
     }
-    test_seam_ops(&c);
+    test_small_ops(&c);
     mx_ctx_destroy(&c);
     return mx_test_finish("test_ops_backend");
 }

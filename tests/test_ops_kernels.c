@@ -272,20 +272,6 @@ static void test_layer_norm_case(const levels *lv, int M, int C, mx_dtype dt) {
     free(x), free(y), free(want), free(gs), free(bs);
 }
 
-static void test_softmax_case(const levels *lv, int M, int N) {
-    size_t n = (size_t)M * N;
-    float *x = rnd(n, 41), *want = malloc(n * sizeof *want);
-    for (size_t i = 0; i < n; i++) x[i] = i % 7 == 3 ? -INFINITY : 8 * x[i]; /* masked entries too */
-    x[0] = 0;
-    memcpy(want, x, n * sizeof *x);
-    mx_softmax(lv->ref, want, M, N);
-    mx_softmax(lv->simd, x, M, N);
-    char name[96];
-    snprintf(name, sizeof name, "%s softmax M=%d N=%d", lv->isa, M, N);
-    mx_check_close(name, x, want, n, 1e-5);
-    free(x), free(want);
-}
-
 typedef void (*unary_op)(const mx_ctx *, float *, size_t);
 
 static void test_unary_case(const levels *lv, const char *op, unary_op fn, size_t n, float range) {
@@ -355,9 +341,6 @@ static void test_elementwise_ops(const levels *lv) {
     test_layer_norm_case(lv, 7, 77, MX_F32);
     test_layer_norm_case(lv, 3, 768, MX_BF16);
     test_layer_norm_case(lv, 4, 5, MX_F16);
-    test_softmax_case(lv, 5, 77);
-    test_softmax_case(lv, 3, 1);
-    test_softmax_case(lv, 2, 4099);
     test_unary_case(lv, "gelu", mx_gelu, 100003, 8);
     test_unary_case(lv, "gelu", mx_gelu, 37, 0.5f);
     test_gelu_tail(lv);
@@ -382,33 +365,6 @@ static void test_elementwise_ops(const levels *lv) {
     free(x), free(y), free(want);
 }
 
-/* Conversions must be bit-exact, specials included. */
-static void test_conversion_ops(const levels *lv) {
-    enum { N = 1000 };
-    float *f = rnd(N, 91), back_ref[N], back[N];
-    uint16_t h_ref[N], h[N];
-    const float specials[] = {0.0f, -0.0f, INFINITY, -INFINITY, NAN, 65504.0f, 65520.0f, 1e-8f, 5.9604645e-8f,
-                              3e-5f, -7e-6f, 1e30f, 1.00390625f, 3.4e38f};
-    for (size_t i = 0; i < sizeof specials / sizeof *specials; i++) f[i * 37 % N] = specials[i];
-    for (int i = 0; i < N; i += 13) f[i] *= 1e5f;
-    int exact = 1;
-    mx_f32_to_f16(lv->ref, h_ref, f, N);
-    mx_f32_to_f16(lv->simd, h, f, N);
-    exact &= memcmp(h, h_ref, sizeof h) == 0;
-    mx_f16_to_f32(lv->ref, back_ref, h_ref, N);
-    mx_f16_to_f32(lv->simd, back, h_ref, N);
-    exact &= memcmp(back, back_ref, sizeof back) == 0;
-    mx_f32_to_bf16(lv->ref, h_ref, f, N);
-    mx_f32_to_bf16(lv->simd, h, f, N);
-    exact &= memcmp(h, h_ref, sizeof h) == 0;
-    mx_bf16_to_f32(lv->ref, back_ref, h_ref, N);
-    mx_bf16_to_f32(lv->simd, back, h_ref, N);
-    exact &= memcmp(back, back_ref, sizeof back) == 0;
-    printf("%s conversions f16/bf16 (specials included): %s\n", lv->isa, exact ? "exact" : "MISMATCH");
-    CHECK(exact);
-    free(f);
-}
-
 static void test_simd_levels(void) {
     mx_status st;
     mx_pool *pool = mx_pool_create(2, &st);
@@ -429,7 +385,6 @@ static void test_simd_levels(void) {
         test_gemm_ops(&lv);
         test_attention_ops(&lv);
         test_elementwise_ops(&lv);
-        test_conversion_ops(&lv);
         CHECK(scratch.used == 0);
     }
 #ifndef MX_NO_X86_SIMD
@@ -441,21 +396,8 @@ static void test_simd_levels(void) {
 
 /* Layout ops (reference only, shared by all levels): known answers. */
 static void test_known_layout(const mx_ctx *c) {
-    /* bilinear 2x2 -> 4x4: half-pixel centres (PyTorch align_corners=False) and align_corners=True */
     const float x[4] = {0, 1, 2, 3};
     float y[16];
-    mx_resize_bilinear(c, y, x, 1, 2, 2, 4, 4, 0);
-    const float want_hp[16] = {0,    0.25f, 0.75f, 1,     0.5f, 0.75f, 1.25f, 1.5f,
-                               1.5f, 1.75f, 2.25f, 2.5f, 2,    2.25f, 2.75f, 3};
-    mx_check_close("known resize_bilinear 2x2->4x4", y, want_hp, 16, 1e-7);
-    mx_resize_bilinear(c, y, x, 1, 2, 2, 4, 4, 1);
-    const float third = 1.0f / 3, want_ac[16] = {0, third, 2 * third, 1, 2 * third, 1, 4 * third, 5 * third,
-                                                 4 * third, 5 * third, 2, 7 * third, 2, 7 * third, 8 * third, 3};
-    mx_check_close("known resize_bilinear align_corners", y, want_ac, 16, 1e-6);
-    const float x3[9] = {0, 1, 2, 3, 4, 5, 6, 7, 8}; /* 3x3 -> 2x2 downscale, half-pixel: src 0.25, 1.75 */
-    mx_resize_bilinear(c, y, x3, 1, 3, 3, 2, 2, 0);
-    const float want_dn[4] = {1, 2.5f, 5.5f, 7};
-    mx_check_close("known resize_bilinear 3x3->2x2", y, want_dn, 4, 1e-7);
     mx_upsample_nearest2x(c, y, x, 1, 2, 2);
     const float want_up[16] = {0, 0, 1, 1, 0, 0, 1, 1, 2, 2, 3, 3, 2, 2, 3, 3};
     mx_check_close("known upsample_nearest2x", y, want_up, 16, 0);

@@ -42,55 +42,46 @@ static size_t run_op(const mx_ctx *c, int op, const inputs *in, float *y, const 
         mx_layer_norm(c, y, in->x, M, K, mx_w_f32(in->w), mx_w_f32(in->w + K), 1e-5f);
         return (size_t)M * K;
     case 4:
-        *name = "softmax";
-        memcpy(y, in->x, (size_t)M * K * sizeof *y);
-        mx_softmax(c, y, M, K);
-        return (size_t)M * K;
-    case 5:
         *name = "attention";
         mx_attention(c, y, in->q, in->k, in->v, 2, 4, 100, 77, 40, 160, 160, 160, 0, 0.158f);
         return (size_t)2 * 100 * 160;
-    case 6:
+    case 5:
         *name = "attention causal";
         mx_attention(c, y, in->q, in->k, in->v, 1, 2, 77, 77, 64, 128, 128, 128, 1, 0.125f);
         return (size_t)77 * 128;
+    case 6:
     case 7:
     case 8:
-    case 9:
         memcpy(y, in->big, in->nbig * sizeof *y);
-        *name = op == 7 ? "gelu" : op == 8 ? "quick_gelu" : "silu";
-        (op == 7 ? mx_gelu : op == 8 ? mx_quick_gelu : mx_silu)(c, y, in->nbig);
+        *name = op == 6 ? "gelu" : op == 7 ? "quick_gelu" : "silu";
+        (op == 6 ? mx_gelu : op == 7 ? mx_quick_gelu : mx_silu)(c, y, in->nbig);
         return in->nbig;
-    case 10:
+    case 9:
         *name = "geglu";
         mx_geglu(c, y, in->x, M, K / 2);
         return (size_t)M * (K / 2);
-    case 11: {
+    case 10: {
         *name = "binary broadcast";
         int64_t as[3] = {2, 64, 1000}, bs[3] = {2, 64, 1};
         mx_binary(c, MX_BIN_ADD, y, in->big, as, in->x, bs, 3);
         return in->nbig;
     }
-    case 12:
+    case 11:
         *name = "scale";
         mx_scale(c, y, in->big, 0.3f, in->nbig);
         return in->nbig;
-    case 13:
+    case 12:
         *name = "upsample_nearest2x";
         mx_upsample_nearest2x(c, y, in->big, 64, 20, 25);
         return (size_t)64 * 40 * 50;
-    case 14:
+    case 13:
         *name = "transpose_chw_hwc";
         mx_transpose_chw_hwc(c, y, in->big, 2, 64, 1000);
         return in->nbig;
-    case 15:
+    case 14:
         *name = "transpose_hwc_chw";
         mx_transpose_hwc_chw(c, y, in->big, 2, 64, 1000);
         return in->nbig;
-    case 16:
-        *name = "resize_bilinear";
-        mx_resize_bilinear(c, y, in->big, 64, 20, 25, 37, 11, 0);
-        return (size_t)64 * 37 * 11;
     default: return 0;
     }
 }

@@ -1,5 +1,5 @@
-/* Layout ops (upsample, concat, transposes, bilinear resize): plain loops, one plane or
- * batch item per task. They are shared by every ISA level. */
+/* Layout ops (upsample, rectangle copy, concat, transposes, pad, copy, fill): plain loops, one
+ * plane or batch item per task. They are shared by every ISA level. */
 #include <string.h>
 
 #include "kernels.h"
@@ -86,54 +86,6 @@ void mx_transpose_chw_hwc_ref(const mx_ctx *c, float *y, const float *x, int B, 
 void mx_transpose_hwc_chw_ref(const mx_ctx *c, float *y, const float *x, int B, int C, int HW) {
     transpose_args a = {y, x, C, HW, 0};
     mx_par_for(c, B * transpose_tasks_per_item(&a), transpose_task, &a);
-}
-
-typedef struct {
-    float *y;
-    const float *x;
-    int H, W, Ho, Wo, align_corners;
-} resize_args;
-
-/* PyTorch's area_pixel_compute_source_index + the index/weight rule of upsample_bilinear2d. */
-static void source_index(int dst, int in, int out, int align_corners, int *i0, int *i1, float *lambda) {
-    float src;
-    if (align_corners)
-        src = out > 1 ? (float)(in - 1) / (float)(out - 1) * (float)dst : 0.0f;
-    else {
-        src = (float)in / (float)out * ((float)dst + 0.5f) - 0.5f;
-        if (src < 0) src = 0;
-    }
-    int i = (int)src;
-    if (i > in - 1) i = in - 1;
-    *i0 = i;
-    *i1 = i < in - 1 ? i + 1 : i;
-    *lambda = src - (float)i;
-}
-
-static void resize_plane(void *arg, int p, int thread) {
-    (void)thread;
-    const resize_args *a = arg;
-    const float *xp = a->x + (size_t)p * a->H * a->W;
-    float *yp = a->y + (size_t)p * a->Ho * a->Wo;
-    for (int oy = 0; oy < a->Ho; oy++) {
-        int y0, y1;
-        float ly;
-        source_index(oy, a->H, a->Ho, a->align_corners, &y0, &y1, &ly);
-        for (int ox = 0; ox < a->Wo; ox++) {
-            int x0, x1;
-            float lx;
-            source_index(ox, a->W, a->Wo, a->align_corners, &x0, &x1, &lx);
-            const float *r0 = xp + (size_t)y0 * a->W, *r1 = xp + (size_t)y1 * a->W;
-            yp[(size_t)oy * a->Wo + ox] = (1 - ly) * ((1 - lx) * r0[x0] + lx * r0[x1]) +
-                                          ly * ((1 - lx) * r1[x0] + lx * r1[x1]);
-        }
-    }
-}
-
-void mx_resize_bilinear_ref(const mx_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
-                            int align_corners) {
-    resize_args a = {y, x, H, W, Ho, Wo, align_corners};
-    mx_par_for(c, BC, resize_plane, &a);
 }
 
 typedef struct {

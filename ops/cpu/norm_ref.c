@@ -1,4 +1,4 @@
-/* Scalar references of group norm, layer norm and softmax (statistics in double). */
+/* Scalar references of group norm and layer norm (statistics in double). */
 #include <math.h>
 
 #include "kernels.h"
@@ -75,29 +75,4 @@ void mx_layer_norm_ref(const mx_ctx *c, float *y, const float *x, int M, int C, 
                        float eps) {
     layer_norm_args a = {y, x, C, gamma, beta, eps};
     mx_par_for(c, M, layer_norm_row, &a);
-}
-
-typedef struct {
-    float *x;
-    int N;
-} softmax_args;
-
-static void softmax_row(void *arg, int m, int thread) {
-    (void)thread;
-    const softmax_args *a = arg;
-    float *r = a->x + (size_t)m * a->N;
-    float mx = -INFINITY;
-    for (int i = 0; i < a->N; i++) mx = r[i] > mx ? r[i] : mx;
-    double sum = 0;
-    for (int i = 0; i < a->N; i++) {
-        double e = exp((double)r[i] - mx);
-        r[i] = (float)e;
-        sum += e;
-    }
-    for (int i = 0; i < a->N; i++) r[i] = (float)(r[i] / sum);
-}
-
-void mx_softmax_ref(const mx_ctx *c, float *x, int M, int N) {
-    softmax_args a = {x, N};
-    mx_par_for(c, M, softmax_row, &a);
 }

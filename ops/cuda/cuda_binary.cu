@@ -1,4 +1,4 @@
-/* y = a op b with numpy broadcasting over 1..5 dims. The shapes become strides once on the host
+/* Element-wise arithmetic: y = s·x, and y = a op b with numpy broadcasting over 1..5 dims. The shapes become strides once on the host
  * (stride 0 along a broadcast dim), so the kernel only splits the output index. */
 #include "cuda_common.cuh"
 
@@ -53,4 +53,14 @@ int mx_cuda_binary(mx_cuda_ctx *c, mx_binop op, float *y, const float *a, const 
     if (bcast_make(&bc, ashape, bshape, ndim, &n, st)) return -1;
     binary_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>((int)op, y, a, b, bc, n);
     return mx_cuda_launched("cuda binary", st);
+}
+
+__global__ void scale_kernel(float *y, const float *x, float s, size_t n) {
+    MX_CUDA_GRID_STRIDE(i, n) y[i] = s * x[i];
+}
+
+int mx_cuda_scale(mx_cuda_ctx *c, float *y, const float *x, float s, size_t n, mx_status *st) {
+    if (n == 0) return 0;
+    scale_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(y, x, s, n);
+    return mx_cuda_launched("cuda scale", st);
 }

@@ -1,4 +1,5 @@
-/* Data movement: nearest 2x upsample, channel concat, [C, HW] <-> [HW, C] transposes, bilinear resize. */
+/* Data movement: nearest 2x upsample, rectangle copy, channel concat, [C, HW] <-> [HW, C] transposes,
+ * zero padding, copy and fill. */
 #include "cuda_common.cuh"
 
 __global__ void upsample_nearest2x_kernel(float *y, const float *x, int H, int W, size_t n) {
@@ -75,41 +76,55 @@ int mx_cuda_transpose_hwc_chw(mx_cuda_ctx *c, float *y, const float *x, int B, i
     return transpose(c, y, x, B, HW, C, "cuda transpose_hwc_chw", st);
 }
 
-/* Source coordinate as PyTorch's upsample_bilinear2d (area_pixel_compute_source_index):
- * align_corners: dst * (in-1)/(out-1); else (dst + 0.5) * in/out - 0.5, clamped at 0. */
-__device__ __forceinline__ float bilinear_src(int dst, float scale, int align_corners) {
-    if (align_corners) return scale * (float)dst;
-    float s = scale * ((float)dst + 0.5f) - 0.5f;
-    return s < 0.0f ? 0.0f : s;
-}
-
-__global__ void resize_bilinear_kernel(float *y, const float *x, int H, int W, int Ho, int Wo, float sh, float sw,
-                                       int align_corners, size_t n) {
+/* One thread per copied element: plane p, row r, column q of the h x w rectangle. */
+__global__ void copy_rect_kernel(float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx, int sy0,
+                                 int sx0, int h, int w, size_t n) {
     MX_CUDA_GRID_STRIDE(i, n) {
-        size_t plane = i / ((size_t)Ho * Wo);
-        int oy = (int)(i / Wo % Ho), ox = (int)(i % Wo);
-        float fy = bilinear_src(oy, sh, align_corners), fx = bilinear_src(ox, sw, align_corners);
-        int y0 = min((int)fy, H - 1), x0 = min((int)fx, W - 1);
-        int y1 = y0 + (y0 < H - 1), x1 = x0 + (x0 < W - 1);
-        float ly = fy - (float)y0, lx = fx - (float)x0;
-        const float *p = x + plane * H * W;
-        y[i] = (1.0f - ly) * ((1.0f - lx) * p[(size_t)y0 * W + x0] + lx * p[(size_t)y0 * W + x1]) +
-               ly * ((1.0f - lx) * p[(size_t)y1 * W + x0] + lx * p[(size_t)y1 * W + x1]);
+        size_t row = i / (size_t)w, p = row / (size_t)h;
+        int q = (int)(i % (size_t)w), r = (int)(row % (size_t)h);
+        y[(p * Hy + y0 + r) * (size_t)Wy + x0 + q] = x[(p * Hx + sy0 + r) * (size_t)Wx + sx0 + q];
     }
 }
 
-static float bilinear_scale(int in, int out, int align_corners) {
-    if (align_corners) return out > 1 ? (float)(in - 1) / (float)(out - 1) : 0.0f;
-    return (float)in / (float)out;
+int mx_cuda_copy_rect(mx_cuda_ctx *c, float *y, int Hy, int Wy, int y0, int x0, const float *x, int Hx, int Wx,
+                      int sy0, int sx0, int BC, int h, int w, mx_status *st) {
+    const long long dims[3] = {BC, h, w};
+    if (mx_cuda_check_dims("cuda copy_rect", st, 3, dims)) return -1;
+    size_t n = (size_t)BC * h * w;
+    copy_rect_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(y, Hy, Wy, y0, x0, x, Hx, Wx, sy0,
+                                                                                      sx0, h, w, n);
+    return mx_cuda_launched("cuda copy_rect", st);
 }
 
-int mx_cuda_resize_bilinear(mx_cuda_ctx *c, float *y, const float *x, int BC, int H, int W, int Ho, int Wo,
-                            int align_corners, mx_status *st) {
-    const long long dims[5] = {BC, H, W, Ho, Wo};
-    if (mx_cuda_check_dims("cuda resize_bilinear", st, 5, dims)) return -1;
-    size_t n = (size_t)BC * Ho * Wo;
-    resize_bilinear_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(
-        y, x, H, W, Ho, Wo, bilinear_scale(H, Ho, align_corners), bilinear_scale(W, Wo, align_corners),
-        align_corners, n);
-    return mx_cuda_launched("cuda resize_bilinear", st);
+__global__ void pad2d_kernel(float *y, const float *x, int H, int W, int top, int left, int Hp, int Wp, size_t n) {
+    MX_CUDA_GRID_STRIDE(i, n) {
+        size_t r = i / (size_t)Wp, p = r / (size_t)Hp;
+        int sw = (int)(i % (size_t)Wp) - left, sh = (int)(r % (size_t)Hp) - top;
+        y[i] = sh >= 0 && sh < H && sw >= 0 && sw < W ? x[(p * H + sh) * (size_t)W + sw] : 0.0f;
+    }
+}
+
+__global__ void fill_kernel(float *y, float v, size_t n) {
+    MX_CUDA_GRID_STRIDE(i, n) y[i] = v;
+}
+
+int mx_cuda_pad2d(mx_cuda_ctx *c, float *y, const float *x, int BC, int H, int W, int top, int bottom, int left,
+                  int right, mx_status *st) {
+    const long long dims[3] = {BC, H + top + bottom, W + left + right};
+    if (top < 0 || bottom < 0 || left < 0 || right < 0)
+        return mx_fail(st, MX_EINPUT, "cuda pad2d: negative padding");
+    if (mx_cuda_check_dims("cuda pad2d", st, 3, dims)) return -1;
+    size_t n = (size_t)dims[0] * dims[1] * dims[2];
+    pad2d_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(y, x, H, W, top, left, (int)dims[1], (int)dims[2], n);
+    return mx_cuda_launched("cuda pad2d", st);
+}
+
+int mx_cuda_copy(mx_cuda_ctx *c, float *y, const float *x, size_t n, mx_status *st) {
+    return mx_cuda_ok(cudaMemcpyAsync(y, x, n * sizeof(float), cudaMemcpyDeviceToDevice, c->stream), "cuda copy", st);
+}
+
+int mx_cuda_fill(mx_cuda_ctx *c, float *y, float v, size_t n, mx_status *st) {
+    if (n == 0) return 0;
+    fill_kernel<<<mx_cuda_blocks(n, 256), 256, 0, c->stream>>>(y, v, n);
+    return mx_cuda_launched("cuda fill", st);
 }

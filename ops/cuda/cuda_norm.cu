@@ -1,5 +1,4 @@
-/* Group norm (+ fused SiLU), layer norm and row softmax: one thread block per normalised group or
- * row, two passes over the data (mean, then the squared deviations) as in the CPU reference, so
+/* Group norm (+ fused SiLU) and layer norm: one thread block per normalised group or row, two passes over the data (mean, then the squared deviations) as in the CPU reference, so
  * that large means do not cost precision. */
 #include "cuda_common.cuh"
 
@@ -79,23 +78,4 @@ int mx_cuda_layer_norm(mx_cuda_ctx *c, float *y, const float *x, int M, int C, m
     layer_norm_kernel<<<M, 256, 0, c->stream>>>(y, x, C, gamma.data, (int)gamma.dtype, beta.data, (int)beta.dtype,
                                                 eps);
     return mx_cuda_launched("cuda layer_norm", st);
-}
-
-__global__ void softmax_kernel(float *x, int N) {
-    __shared__ float shm[32];
-    float *xr = x + (long long)blockIdx.x * N;
-    float m = -INFINITY;
-    for (int i = threadIdx.x; i < N; i += blockDim.x) m = fmaxf(m, xr[i]);
-    m = mx_cuda_block_max(m, shm);
-    float s = 0.0f;
-    for (int i = threadIdx.x; i < N; i += blockDim.x) s += expf(xr[i] - m);
-    float inv = 1.0f / mx_cuda_block_sum(s, shm);
-    for (int i = threadIdx.x; i < N; i += blockDim.x) xr[i] = expf(xr[i] - m) * inv;
-}
-
-int mx_cuda_softmax(mx_cuda_ctx *c, float *x, int M, int N, mx_status *st) {
-    const long long dims[2] = {M, N};
-    if (mx_cuda_check_dims("cuda softmax", st, 2, dims)) return -1;
-    softmax_kernel<<<M, 256, 0, c->stream>>>(x, N);
-    return mx_cuda_launched("cuda softmax", st);
 }

@@ -1,4 +1,5 @@
-/* Elementwise ops: GELU (erf), quick-GELU (CLIP), SiLU, GEGLU (diffusers), scale. */
+/* Activations: GELU (erf), quick-GELU (CLIP), SiLU, GEGLU (diffusers), and tanh (TAESD's latent
+ * clamp) in double as the CPU reference, rounded once to float. */
 #include "cuda_common.cuh"
 
 #define EW_THREADS 256
@@ -22,8 +23,8 @@ __global__ void geglu_kernel(float *y, const float *x, int N, size_t n) {
         y[i] = xr[col] * gelu_f(xr[N + col]);
     }
 }
-__global__ void scale_kernel(float *y, const float *x, float s, size_t n) {
-    MX_CUDA_GRID_STRIDE(i, n) y[i] = s * x[i];
+__global__ void tanh_kernel(float *x, size_t n) {
+    MX_CUDA_GRID_STRIDE(i, n) x[i] = (float)tanh((double)x[i]);
 }
 
 int mx_cuda_gelu(mx_cuda_ctx *c, float *x, size_t n, mx_status *st) {
@@ -52,8 +53,8 @@ int mx_cuda_geglu(mx_cuda_ctx *c, float *y, const float *x, int M, int N, mx_sta
     return mx_cuda_launched("cuda geglu", st);
 }
 
-int mx_cuda_scale(mx_cuda_ctx *c, float *y, const float *x, float s, size_t n, mx_status *st) {
+int mx_cuda_tanh(mx_cuda_ctx *c, float *x, size_t n, mx_status *st) {
     if (n == 0) return 0;
-    scale_kernel<<<mx_cuda_blocks(n, EW_THREADS), EW_THREADS, 0, c->stream>>>(y, x, s, n);
-    return mx_cuda_launched("cuda scale", st);
+    tanh_kernel<<<mx_cuda_blocks(n, EW_THREADS), EW_THREADS, 0, c->stream>>>(x, n);
+    return mx_cuda_launched("cuda tanh", st);
 }
