@@ -70,7 +70,7 @@ LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
 ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
 
-.PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm
+.PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm blender-addon test-blender
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) matex
@@ -167,7 +167,7 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data
 # each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz, FUZZ_JOBS (2) at a time ----
 FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
 FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
-FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_progress.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
@@ -211,6 +211,12 @@ TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
+# Every repository path named in the docs and the code exists (tools/check_paths.sh; under a
+# second; `make test` runs it as tests/cli_check_paths.sh).
+.PHONY: check
+check:
+	sh tools/check_paths.sh .
+
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: $(TEST_DEPS)
 	$(TEST_ENV) MATEX_FULL=1 sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
@@ -220,6 +226,16 @@ test-full: $(TEST_DEPS)
 test-slurm: all $(DEMO_WEIGHTS)
 	$(TEST_ENV) timeout 300 sh tests/slurm_cluster.sh
 
+# The Blender add-on (blender/matex_texture) as the zip Blender installs; `make test-blender` installs
+# it in a headless Blender (Debian's `blender`) and textures, renders, cancels (tests/blender/).
+ADDON_ZIP = $(BUILD)/matex_blender.zip
+$(ADDON_ZIP): $(wildcard blender/matex_texture/*.py)
+	@mkdir -p $(dir $@)
+	rm -f $@ && cd blender && zip -q -r -X $(abspath $@) matex_texture -x '*__pycache__*'
+blender-addon: $(ADDON_ZIP)
+test-blender: all $(DEMO_WEIGHTS) $(ADDON_ZIP)
+	$(TEST_ENV) MATEX_ADDON_ZIP=$(ADDON_ZIP) timeout 600 sh tests/blender/run.sh
+
 # End to end in seconds with tiny random weights (they paint noise: see README): the shipped
 # Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
 DEMO_OUT = demo/spot
@@ -228,7 +244,7 @@ demo: all $(DEMO_WEIGHTS)
 	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
 	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
 	$(BUILD)/matex render $(DEMO_OUT)/mesh.glb --views 8 --size 256 -o $(DEMO_OUT)/views
-	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, report.json)"
+	@echo "demo: textured mesh in $(CURDIR)/$(DEMO_OUT)/ (mesh.glb, mesh.obj + mesh.mtl, texture.png, texture.exr, report.json)"
 	@echo "demo: contact sheet of 8 views in $(CURDIR)/$(DEMO_OUT)/views/contact_sheet.png"
 
 asan:
@@ -256,6 +272,9 @@ install: all
 	install -D -m 644 $(LIBMATEX) $(DESTDIR)$(PREFIX)/lib/libmatex.a
 	install -D -m 644 $(LIB_IO) $(DESTDIR)$(PREFIX)/lib/libmatex_io.a
 	install -D -m 644 include/matex.h $(DESTDIR)$(PREFIX)/include/matex.h
+	# the CLIP vocabulary (MIT, OpenAI) for single-file checkpoints, which carry none (matex convert)
+	for f in vocab.json merges.txt LICENSE; do \
+	    install -D -m 644 tests/data/golden/tokenizer/$$f $(DESTDIR)$(PREFIX)/share/matex/tokenizer/$$f; done
 	@mkdir -p $(DESTDIR)$(PREFIX)/lib/pkgconfig
 	printf 'prefix=%s\nlibdir=$${prefix}/lib\nincludedir=$${prefix}/include\n\nName: matex\nDescription: %s\nVersion: %s\nCflags: -I$${includedir}\nLibs: %s\n' \
 	    '$(PREFIX)' 'text-to-texture for 3D meshes (Make-A-Texture)' \

@@ -99,7 +99,7 @@ typedef struct matex_progress {
     int step, steps;     /* denoising step (1-based) of the stage; 0, 0 for other events */
     int views_done;      /* views painted so far (front and back count as two) */
     int views_total;     /* the view budget */
-    double coverage;     /* fraction of the visible texels painted so far */
+    double coverage;     /* fraction of the mesh's texels (inside a face in UV space) painted so far */
     double seconds;      /* since the run started */
     const char *message; /* a readable line */
 } matex_progress;
@@ -163,7 +163,7 @@ void matex_options_default(matex_options *o);
 /* ---- runs ---- */
 
 typedef struct matex_result {
-    double coverage;       /* fraction of the visible texels painted by views */
+    double coverage;       /* fraction of the mesh's texels (inside a face in UV space) painted by views */
     int views;             /* views generated */
     double seconds;
     matex_mesh mesh;       /* the textured mesh: positions and faces as given, UVs (an atlas when

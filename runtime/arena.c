@@ -26,14 +26,6 @@ int mx_arena_create_on(mx_arena *a, mx_backend *be, size_t cap, mx_status *st) {
     return 0;
 }
 
-void mx_arena_wrap(mx_arena *a, void *buf, size_t cap) {
-    memset(a, 0, sizeof *a);
-    uintptr_t p = (uintptr_t)buf, q = (p + MX_ARENA_ALIGN - 1) & ~(uintptr_t)(MX_ARENA_ALIGN - 1);
-    if (cap < q - p) return;
-    a->base = (unsigned char *)q;
-    a->cap = (cap - (q - p)) & ~(size_t)(MX_ARENA_ALIGN - 1);
-}
-
 void mx_arena_measure(mx_arena *a) {
     memset(a, 0, sizeof *a);
     a->measuring = 1;

@@ -26,8 +26,6 @@ int mx_arena_create(mx_arena *a, size_t cap, mx_status *st);
 /* An arena in a backend's memory (be NULL: the host heap, as mx_arena_create). Only ops may
  * read or write what it hands out. */
 int mx_arena_create_on(mx_arena *a, mx_backend *be, size_t cap, mx_status *st);
-/* Arena over a caller's buffer (aligned to 64 inside). */
-void mx_arena_wrap(mx_arena *a, void *buf, size_t cap);
 /* An arena that only measures (dry run). */
 void mx_arena_measure(mx_arena *a);
 void mx_arena_destroy(mx_arena *a);

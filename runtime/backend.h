@@ -38,7 +38,8 @@ typedef enum {
 typedef enum { MX_PREC_FP32 = 0, MX_PREC_BF16 = 1 } mx_precision;
 
 /* Best level this CPU and OS support (cpuid + xgetbv; for amx also Linux's permission for the
- * tile data, asked once per process). MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx lowers it. */
+ * tile data, asked at each call: the grant is per process and asking again is harmless, so no
+ * process-wide flag remembers it). MATEX_ISA=scalar|avx2|avx512|avx512bf16|amx lowers it. */
 mx_isa mx_cpu_best_isa(void);
 /* Best level for a precision: fp32 never gets a bf16 level; bf16 gets the best level, which is
  * an fp32 one when the CPU has no bf16 arithmetic (check with mx_isa_precision). */

@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "json.h"
+
 void mx_buf_put(mx_buf *b, const void *data, size_t n) {
     if (b->oom) return;
     if (b->len + n + 1 > b->cap) {
@@ -48,13 +50,20 @@ void mx_buf_printf(mx_buf *b, const char *fmt, ...) {
 
 void mx_buf_json_str(mx_buf *b, const char *s) {
     mx_buf_put(b, "\"", 1);
-    for (const unsigned char *c = (const unsigned char *)s; *c; c++) {
+    const unsigned char *c = (const unsigned char *)s;
+    for (size_t left = strlen(s); left > 0;) {
+        uint32_t cp;
+        size_t k = mx_utf8_decode(c, left, &cp);
         if (*c == '"' || *c == '\\')
             mx_buf_printf(b, "\\%c", *c);
         else if (*c < 0x20)
             mx_buf_printf(b, "\\u%04x", *c);
+        else if (cp == 0xFFFD && k == 1)
+            mx_buf_printf(b, "\\ufffd"); /* a byte that is not UTF-8: JSON text must be */
         else
-            mx_buf_put(b, c, 1);
+            mx_buf_put(b, c, k);
+        c += k;
+        left -= k;
     }
     mx_buf_put(b, "\"", 1);
 }

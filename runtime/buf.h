@@ -14,7 +14,8 @@ typedef struct mx_buf {
 
 void mx_buf_put(mx_buf *b, const void *data, size_t n);
 void mx_buf_printf(mx_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* A JSON string literal: quotes, backslash and control characters escaped. */
+/* A JSON string literal: quotes, backslash and control characters escaped, and each byte that
+ * is not part of valid UTF-8 written as \ufffd (JSON text is UTF-8). */
 void mx_buf_json_str(mx_buf *b, const char *s);
 void mx_buf_free(mx_buf *b);
 

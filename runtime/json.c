@@ -121,6 +121,22 @@ static int sbuf_put(parser *p, size_t at, const char *bytes, size_t n) {
     return 0;
 }
 
+size_t mx_utf8_decode(const unsigned char *s, size_t n, uint32_t *cp) {
+    uint32_t c = s[0];
+    size_t len = c < 0x80 ? 1 : (c >> 5) == 6 ? 2 : (c >> 4) == 14 ? 3 : (c >> 3) == 30 ? 4 : 0;
+    *cp = 0xFFFD;
+    if (len == 0 || len > n) return 1;
+    uint32_t v = len == 1 ? c : len == 2 ? (c & 0x1F) : len == 3 ? (c & 0x0F) : (c & 0x07);
+    for (size_t i = 1; i < len; i++) {
+        if ((s[i] & 0xC0) != 0x80) return 1;
+        v = (v << 6) | (s[i] & 0x3F);
+    }
+    static const uint32_t min_for_len[5] = {0, 0, 0x80, 0x800, 0x10000};
+    if (v < min_for_len[len] || v > 0x10FFFF || (v >= 0xD800 && v <= 0xDFFF)) return 1;
+    *cp = v;
+    return len;
+}
+
 size_t mx_utf8_encode(uint32_t cp, char *out) {
     if (cp < 0x80) {
         out[0] = (char)cp;

@@ -37,5 +37,8 @@ int mx_json_get_bool(const mx_json *obj, const char *key, int dflt);
 
 /* UTF-8 bytes of code point cp (< 0x110000) into out[0..3]; returns the count (1..4). */
 size_t mx_utf8_encode(uint32_t cp, char *out);
+/* Decodes one UTF-8 sequence at s (n >= 1 bytes left): returns its length and the code point;
+ * an invalid, overlong, surrogate or truncated sequence gives 1 and *cp = 0xFFFD. */
+size_t mx_utf8_decode(const unsigned char *s, size_t n, uint32_t *cp);
 
 #endif

@@ -7,7 +7,6 @@
 static mx_log_level g_level = MX_LOG_INFO;
 
 void mx_log_set_level(mx_log_level level) { g_level = level; }
-mx_log_level mx_log_get_level(void) { return g_level; }
 
 void mx_log(mx_log_level level, const char *fmt, ...) {
     if (level > g_level) return;

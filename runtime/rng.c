@@ -53,12 +53,6 @@ float mx_rng_normal(uint64_t seed, uint64_t stream, uint64_t index) {
     return (float)(radius * ((index & 1) ? sin(angle) : cos(angle)));
 }
 
-float mx_rng_uniform(uint64_t seed, uint64_t stream, uint64_t index) {
-    uint32_t r[4];
-    philox_at(seed, stream, index, r);
-    return (float)((double)(r[0] >> 8) * (1.0 / 16777216.0));
-}
-
 void mx_rng_fill_normal(float *out, size_t n, uint64_t seed, uint64_t stream, uint64_t first) {
     for (size_t i = 0; i < n; i++) out[i] = mx_rng_normal(seed, stream, first + i);
 }

@@ -24,8 +24,6 @@
 
 void mx_philox4x32_10(const uint32_t counter[4], const uint32_t key[2], uint32_t out[4]);
 float mx_rng_normal(uint64_t seed, uint64_t stream, uint64_t index);
-/* Uniform in [0, 1) from r0 of the same counter (index = counter index). */
-float mx_rng_uniform(uint64_t seed, uint64_t stream, uint64_t index);
 /* Fills out[i] = mx_rng_normal(seed, stream, first + i) for i < n. */
 void mx_rng_fill_normal(float *out, size_t n, uint64_t seed, uint64_t stream, uint64_t first);
 

@@ -33,5 +33,14 @@ check "truncated weights exit 1" [ "$(rc_of "$M" convert "$T/broken" -o "$T/x.mx
 check "message names the file" grep -q "broken/diffusion_pytorch_model.safetensors" "$T/err"
 check "one error line" [ "$(wc -l < "$T/err")" = 1 ]
 check "missing LoRA exits 1" [ "$(rc_of "$M" convert "$G/unet_tiny" -o "$T/x.mxw" --lora "$T/none.safetensors")" = 1 ]
+# Single-file checkpoints (torch.save zips in the LDM layout: tests/fuzz/seeds/ckpt, made by
+# test_weights_single_file): a model and a ControlNet file convert; a hostile pickle is refused.
+S=tests/fuzz/seeds/ckpt
+check "single-file model converts" [ "$(rc_of "$M" convert "$S/model.ckpt" --controlnet depth="$S/control.pth" -o "$T/sf.mxw" --quiet --json)" = 0 ]
+check "single file: four networks" grep -q '"networks": 4' "$T/out"
+check "single file: tokenizer from the shipped copy" sh -c "\"$M\" info \"$T/sf.mxw\" | grep -q tokenizer.vocab"
+check "os.system pickle exits 1" [ "$(rc_of "$M" convert "$S/os_system.ckpt" -o "$T/x.mxw")" = 1 ]
+check "os.system pickle named" grep -q "global 'os.system' is not allowed" "$T/err"
+check "os.system one error line" [ "$(wc -l < "$T/err")" = 1 ]
 check "bad input leaves no output" no_output
 exit $fail

@@ -46,5 +46,22 @@ printf 'MATEXWF\000garbage' > "$T/w.mxw"
 check "weight file dispatch exits 1" [ "$(rc_of "$M" info "$T/w.mxw")" = 1 ]
 check "weight file error names it" grep -q "w.mxw" "$T/err"
 check "weight file --json exits 2" [ "$(rc_of "$M" info --json "$T/w.mxw")" = 2 ]
+# images: size, channels and per-channel min/mean/max (what the texture tests check content with)
+check "a render for info" [ "$(rc_of "$M" render tests/data/box.obj --views 1 --size 64 -o "$T/img")" = 0 ]
+check "info reads an image" [ "$(rc_of "$M" info "$T/img/view_00.png")" = 0 ]
+check "info gives its size" grep -q "^size: *64 x 64$" "$T/out"
+check "info gives min, mean and max per channel" sh -c "grep -q '^min: *0\.[0-9]* 0\.[0-9]* 0\.[0-9]*$' '$T/out' && grep -q '^mean: ' '$T/out' && grep -q '^max: ' '$T/out'"
+check "info --json of an image" [ "$(rc_of "$M" info --json "$T/img/view_00.png")" = 0 ]
+check "its JSON has the size" grep -q '"width":64,"height":64,"channels":3,"min":\[' "$T/out"
+check "info of a folder exits 1" [ "$(rc_of "$M" info "$T/img")" = 1 ]
+check "and says it is a directory" grep -q "img: is a directory" "$T/err"
+
+# Single-file checkpoints: what they hold; a hostile one is refused.
+check "checkpoint info" [ "$(rc_of "$M" info tests/fuzz/seeds/ckpt/model.ckpt)" = 0 ]
+check "checkpoint container" grep -q "^container: *PyTorch zip" "$T/out"
+check "checkpoint networks" grep -q "^network: *text_encoder" "$T/out"
+check "checkpoint schedule" grep -q "alphas_cumprod matches" "$T/out"
+check "hostile checkpoint exits 1" [ "$(rc_of "$M" info tests/fuzz/seeds/ckpt/eval.ckpt)" = 1 ]
+check "hostile checkpoint message" grep -q "builtins.eval" "$T/err"
 
 exit $fail

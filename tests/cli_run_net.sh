@@ -66,4 +66,15 @@ check "convert --lcm-lora merges it" sh -c ""$M" convert '$T/gen' --lcm-lora '$T
 check "run-net on the merged UNet" [ "$(rc_of "$M" run-net unet --weights "$T/lcm.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/l.safetensors")" = 0 ]
 check "gen-weights --lcm-lora refuses a VAE" [ "$(rc_of "$M" gen-weights "$G/vae_tiny/config.json" --lcm-lora 4 -o "$T/x.safetensors")" = 1 ]
 check "gen-weights --lcm-lora 0 exits 2" [ "$(rc_of "$M" gen-weights "$T/gen/config.json" --lcm-lora 0 -o "$T/x.safetensors")" = 2 ]
+
+# A single-file checkpoint (the tiny goldens in the LDM layout, a torch.save zip written by
+# test_weights_single_file) runs the UNet and the VAE exactly as the diffusers folders do.
+mkdir "$T/sf"
+check "tiny single-file checkpoints written" env MX_WRITE_CKPT_TINY="$T/sf" "${BUILD:-build}/tests/test_weights_single_file"
+check "single file converts" [ "$(rc_of "$M" convert "$T/sf/model.ckpt" -o "$T/sf.mxw" --dtype f32 --quiet)" = 0 ]
+check "convert vae_tiny" [ "$(rc_of "$M" convert "$G/vae_tiny" -o "$T/v.mxw" --dtype f32 --quiet)" = 0 ]
+for w in sf u; do rc_of "$M" run-net unet --threads 1 --weights "$T/$w.mxw" --inputs "$G/unet_tiny/inputs.safetensors" --out "$T/unet_$w.safetensors" > /dev/null; done
+check "single-file UNet output = folder UNet output" cmp "$T/unet_sf.safetensors" "$T/unet_u.safetensors"
+for w in sf v; do rc_of "$M" run-net vae-decode --threads 1 --weights "$T/$w.mxw" --inputs "$G/vae_tiny/inputs.safetensors" --out "$T/vae_$w.safetensors" > /dev/null; done
+check "single-file VAE output = folder VAE output" cmp "$T/vae_sf.safetensors" "$T/vae_v.safetensors"
 exit $fail

@@ -1,12 +1,32 @@
 #!/bin/sh
 # matex texture / enhance / render / transfer on the command line: exit codes (0, 1 bad input with
-# a message naming the file and no output, 2 usage), --json summary, outputs. Uses the demo weights
+# a message naming the file and no output, 2 usage), --json summary, outputs (image sizes and content
+# by `matex info`, meshes with UVs, report keys). Uses the demo weights
 # that `make test` builds (MATEX_DEMO_WEIGHTS).
 NAME=texture
 . "$(dirname "$0")/lib_cli.sh"
 A=$(data assets)
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
 SMALL="--image-size 64 --steps 1 --texture-size 256 --render-size 256 --candidates 12 --quiet"
+
+# image_ok FILE W H: an image of W x H whose pixels are not one flat value (matex info: size and
+# per-channel min/max); image_mean FILE: the mean over its channels, 0..1
+image_ok() {
+    "$M" info "$1" > "$T/img" 2> /dev/null && grep -q "^size: *$2 x $3\$" "$T/img" &&
+        awk '/^min:/ { for (i = 2; i <= NF; i++) lo[i] = $i }
+             /^max:/ { for (i = 2; i <= NF; i++) if ($i - lo[i] > 0.1) ok = 1 } END { exit !ok }' "$T/img"
+}
+image_mean() { "$M" info "$1" 2> /dev/null | awk '/^mean:/ { for (i = 2; i <= NF; i++) s += $i; print s / (NF - 1) }'; }
+# mesh_ok FILE: a mesh with triangles, every face with UVs
+mesh_ok() {
+    "$M" info "$1" > "$T/mesh" 2> /dev/null && grep -q "^triangles: *[1-9]" "$T/mesh" &&
+        grep -q "^uvs: *yes" "$T/mesh"
+}
+# report_ok DIR: report.json is UTF-8 and has the keys the README lists
+report_ok() {
+    iconv -f UTF-8 -t UTF-8 "$1/report.json" > /dev/null 2>&1 || return 1
+    for k in views coverage_after stages_s work_s seed weights_digest; do grep -q "\"$k\":" "$1/report.json" || return 1; done
+}
 
 check "texture --help exits 0" [ "$(rc_of "$M" texture --help)" = 0 ]
 check "texture --help lists --seed" grep -q -- "--seed" "$T/out"
@@ -52,9 +72,14 @@ check "--json summary" grep -q '"ok":true' "$T/out"
 want=fp32
 case "${MATEX_ISA:-avx512bf16}" in avx512bf16 | amx) grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null && want=bf16 ;; esac
 check "report names the precision ($want)" grep -q "\"precision\": *\"$want\"" "$T/hat/report.json"
-for f in texture.png texture.exr mesh.obj mesh.mtl mesh.glb report.json; do
+for f in texture.png texture.exr mesh.mtl; do
     check "texture wrote $f" [ -s "$T/hat/$f" ]
 done
+check "texture.png is 256 x 256 with content" image_ok "$T/hat/texture.png" 256 256
+check "texture.exr is 256 x 256 with content" image_ok "$T/hat/texture.exr" 256 256
+check "mesh.obj has triangles and UVs" mesh_ok "$T/hat/mesh.obj"
+check "mesh.glb has triangles and UVs" mesh_ok "$T/hat/mesh.glb"
+check "report.json has its keys" report_ok "$T/hat"
 # --fast: refused clearly without the LCM-LoRA mark and TAESD, runs 4 LCM steps with them
 WF=${MATEX_DEMO_FAST_WEIGHTS:-build/demo/demo_fast.mxw}
 check "--fast without LCM/TAESD exits 1" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]
@@ -67,16 +92,46 @@ check "... never (null)" sh -c "! grep -q null '$T/out' '$T/err'"
 check "texture --fast runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$WF" -o "$T/fast" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
 check "--fast report: 4 steps, guidance 1" grep -q '"steps":4,"fast":true,"guidance":1,' "$T/fast/report.json"
 check "--fast ran the LCM timesteps" grep -q "step 4/4 (t=259)" "$T/err"
+# the fast demo weights paint colour noise around mid grey, as the default ones (they painted
+# near black: mean 0.23 on this mesh before tools/make_demo_weights.sh set TAESD's last conv)
+fast_mean=$(image_mean "$T/fast/texture.png")
+echo "fast demo texture mean: $fast_mean"
+check "--fast texture has content" image_ok "$T/fast/texture.png" 256 256
+check "--fast texture is not near black" awk "BEGIN { exit !($fast_mean > 0.35 && $fast_mean < 0.65) }"
 # enhance --fast: LCM at the SDEdit strength (0.5 of 4 steps: the last 2), TAESD encoder and decoder
 check "enhance --fast runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$WF" -o "$T/hatf" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
 check "enhance --fast ran the last 2 LCM timesteps" sh -c "grep -q 'step 1/2 (t=499)' '$T/err' && grep -q 'step 2/2 (t=259)' '$T/err'"
-check "enhance --fast wrote mesh.glb" [ -s "$T/hatf/mesh.glb" ]
+check "enhance --fast wrote a textured mesh.glb" mesh_ok "$T/hatf/mesh.glb"
+check "enhance --fast texture has content" image_ok "$T/hatf/texture.png" 256 256
 check "enhance --fast without LCM/TAESD exits 1" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]
 check "enhance runs" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" "a blue hat" --strength 0.5 --views 3 --weights "$W" -o "$T/hat2" $SMALL)" = 0 ]
-check "enhance wrote mesh.glb" [ -s "$T/hat2/mesh.glb" ]
+check "enhance wrote a textured mesh.glb" mesh_ok "$T/hat2/mesh.glb"
+check "enhance texture has content" image_ok "$T/hat2/texture.png" 256 256
+check "enhance report has its keys" report_ok "$T/hat2"
 check "bad strength exits 2" [ "$(rc_of "$M" enhance "$T/hat/mesh.obj" --strength 2 --weights "$W" -o "$T/b")" = 2 ]
 check "render runs" [ "$(rc_of "$M" render "$T/hat/mesh.glb" --views 4 --size 128 -o "$T/render")" = 0 ]
-check "render wrote a contact sheet" [ -s "$T/render/contact_sheet.png" ]
+check "render wrote a contact sheet with content" image_ok "$T/render/contact_sheet.png" 128 128
+check "render wrote 4 views of 128 x 128" sh -c "ls '$T/render'/view_0[0-3].png | wc -l | grep -qx 4"
+check "render view 0 has content" image_ok "$T/render/view_00.png" 128 128
 check "transfer runs" [ "$(rc_of "$M" transfer "$T/hat/mesh.obj" "$A/fedora_hat/fedora.obj" --size 256 -o "$T/tr")" = 0 ]
-check "transfer wrote mesh.glb" [ -s "$T/tr/mesh.glb" ]
+check "transfer wrote a textured mesh.glb" mesh_ok "$T/tr/mesh.glb"
+check "transfer texture has content" image_ok "$T/tr/texture.png" 256 256
+# prompts (issue 24 item 9): bytes that are not UTF-8 reach report.json as \ufffd, valid JSON text
+check "a prompt that is not UTF-8 runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "$(printf 'a \377\376 hat')" --weights "$W" -o "$T/utf" $SMALL --views 2)" = 0 ]
+check "its report is UTF-8 with the bytes escaped" sh -c "iconv -f UTF-8 -t UTF-8 '$T/utf/report.json' > /dev/null && grep -q 'a \\\\ufffd\\\\ufffd hat' '$T/utf/report.json'"
+# a long prompt: the warning counts what matex tokenize counts, and quotes a little of it
+long=""
+for i in $(seq 1 500); do long="$long word$((i % 37))"; done
+"$M" tokenize --weights "$W" --json "$long" > "$T/tok" 2> /dev/null
+tok_dropped=$(sed -n 's/.*"dropped": \([0-9]*\).*/\1/p' "$T/tok")
+check "a long prompt runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "$long" --weights "$W" -o "$T/long" ${SMALL% --quiet} --views 2)" = 0 ]
+check "its warning counts $tok_dropped dropped tokens, as tokenize" grep -q "prompt longer than the 75 tokens CLIP reads: $tok_dropped tokens dropped" "$T/err"
+check "the warning is one short line" sh -c "[ \$(grep -c 'tokens dropped' '$T/err') = 1 ] && [ \$(grep 'tokens dropped' '$T/err' | wc -c) -lt 200 ]"
+# transfer times its backprojection like texture does (issue 24 item 12: work_s.backproject was 0)
+check "transfer reports its backprojection time" grep -q '"backproject":[0-9.e-]*[1-9]' "$T/tr/report.json"
+check "transfer reports both coverages" grep -q '"candidate_coverage":' "$T/tr/report.json"
+# a render coarser than the texture leaves texels unseen: a warning says so (issue 24 item 13)
+check "coarse render runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/coarse" --views 2 --image-size 64 --steps 1 --texture-size 256 --render-size 128 --candidates 12)" = 0 ]
+check "coarse render warns" grep -q "render size 128 is below the texture size 256" "$T/err"
+check "the uv fill prints progress" grep -q "uv fill: texture 1/1" "$T/err"
 exit $fail

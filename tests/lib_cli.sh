@@ -9,7 +9,7 @@ check() { # check NAME COMMAND...: the command must succeed
     if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
 }
 rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; } # runs a command, prints its exit code
-# Test data as in tests/util_test.h: data REL prints tests/data/REL when the repository ships it,
+# Test data as in tests/util_test.h: data REL prints tests/data/<REL> when the repository ships it,
 # else $MATEX_TESTDATA/REL (default ../shared). have REL is true when it exists; otherwise it
 # prints a SKIP line (a failure when CI=true, where that data must be there).
 data() {

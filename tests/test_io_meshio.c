@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../pipeline/geom/image.h"
@@ -125,6 +126,28 @@ static void test_obj_features(void) {
     mx_mesh_free(&m);
 }
 
+/* A binary STL of n separate triangles; with nan, the second vertex of the last one is NaN. */
+static void write_binary_stl(const char *name, uint32_t n, int nan) {
+    char p[512];
+    tmp_path(p, sizeof p, name);
+    FILE *f = fopen(p, "wb");
+    if (!f) {
+        perror(p);
+        exit(2);
+    }
+    char header[80] = "binary stl";
+    fwrite(header, 1, sizeof header, f);
+    fwrite(&n, 4, 1, f);
+    for (uint32_t t = 0; t < n; t++) {
+        float v[12] = {0, 0, 1, (float)t, 0, 0, (float)t + 1, 0, 0, (float)t, 1, 0};
+        if (nan && t == n - 1) v[7] = NAN;
+        uint16_t attr = 0;
+        fwrite(v, sizeof v, 1, f);
+        fwrite(&attr, 2, 1, f);
+    }
+    fclose(f);
+}
+
 /* A file that must fail with a message that names it and `expect`. */
 static void expect_fail(const char *name, const char *text, const char *expect) {
     if (text) write_text(name, text);
@@ -162,6 +185,43 @@ static void test_hostile(void) {
     expect_fail("one_line.off", "COFF 0 0 0\n", "line of their own");
     expect_fail("empty.off", "OFF\n0 0 0\n", "no faces");
     expect_fail("signed.off", "OFF\n+3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "counts missing");
+    /* Non-finite and absurd coordinates, whatever the format (issue 24 item 10) */
+    const char *ply_head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                           "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    char ply[512];
+    snprintf(ply, sizeof ply, "%snan 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", ply_head);
+    expect_fail("nan.ply", ply, "non-finite coordinate");
+    snprintf(ply, sizeof ply, "%s1e39 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", ply_head);
+    expect_fail("overflow.ply", ply, "non-finite coordinate");
+    expect_fail("inf.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex inf 0 0\nvertex 1 0 0\nvertex 1 1 0\n"
+                           "endloop\nendfacet\nendsolid t\n", "non-finite coordinate");
+    write_binary_stl("nan_bin.stl", 4, 1);
+    expect_fail("nan_bin.stl", NULL, "non-finite coordinate");
+    expect_fail("huge.obj", "v 3e38 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "coordinate out of range");
+    expect_fail("huge.off", "OFF\n3 1 0\n0 0 -3e38\n1 0 0\n0 1 0\n3 0 1 2\n", "coordinate out of range");
+    /* What the file is, when it is not the mesh its name says (issue 24 item 11) */
+    static const char png_magic[] = "\x89PNG\r\n\x1a\n\x01\x02";
+    expect_fail("image.obj", png_magic, "a PNG image, not an OBJ mesh");
+    expect_fail("image.glb", png_magic, "a PNG image, not a glTF mesh");
+    expect_fail("jpeg.stl", "\xff\xd8\xff\xe0 JFIF", "a JPEG image, not an STL mesh");
+    expect_fail("zip.ply", "PK\x03\x04 zip", "a zip archive, not a PLY mesh");
+    expect_fail("ply_named.obj", ply, "a PLY mesh, not an OBJ mesh");
+    expect_fail("glb_named.off", "glTF\x02", "a binary glTF (GLB) mesh, not an OFF mesh");
+    expect_fail("cube.txt", "v 0 0 0\n", ".obj .ply .off .stl .gltf .glb");
+    expect_fail("noext", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "no file extension");
+    snprintf(ply, sizeof ply, "%s0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", ply_head);
+    expect_fail("plymesh", ply, "no file extension (its content is a PLY mesh");
+    char dir[512];
+    tmp_path(dir, sizeof dir, "folder.obj");
+    CHECK(mkdir(dir, 0700) == 0);
+    expect_fail("folder.obj", NULL, "is a directory, not a mesh file");
+    /* A binary STL without NaN still loads: 4 triangles stay 4 */
+    write_binary_stl("four.stl", 4, 0);
+    tmp_path(dir, sizeof dir, "four.stl");
+    mx_mesh b;
+    mx_status bst;
+    CHECK(mx_mesh_load(dir, &b, &bst) == 0 && b.nfaces == 4);
+    if (b.pos) mx_mesh_free(&b);
     /* A missing MTL is a warning; degenerate faces load and are counted. */
     write_text("degen.obj", "mtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\nf 1 2 4\n");
     char p[512];
@@ -186,7 +246,9 @@ static void test_hostile(void) {
     CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "out of range"));
     faces[2] = 2;
     pos[4] = NAN;
-    CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "NaN"));
+    CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "non-finite coordinate"));
+    pos[4] = -1e30f;
+    CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "coordinate out of range"));
     h.nfaces = 0;
     CHECK(mx_mesh_validate(&h, &st) == -1 && strstr(st.msg, "empty"));
 }

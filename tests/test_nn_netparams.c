@@ -6,7 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../pipeline/nn/netcfg.h"
+#include "../pipeline/nn/registry.h"
 #include "../pipeline/nn/params.h"
 #include "../runtime/json.h"
 #include "../weights/golden_rule.h"

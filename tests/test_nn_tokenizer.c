@@ -99,6 +99,21 @@ static void test_weight_file(const char *vocab_path, const char *merges_path) {
 }
 
 /* Hostile sizes stay fast: a 2 MB single word and 2 MB of one-letter words. */
+/* Where the dropped part begins: 75 one-token words are kept, the quote starts at the 76th
+ * (lower-cased, about 40 bytes, "..."), and a prompt that fits quotes nothing. */
+static void test_dropped_from(const mx_tokenizer *tok) {
+    char text[2048] = "";
+    for (int i = 0; i < MX_CLIP_CONTEXT - 2; i++) strcat(text, "red ");
+    strcat(text, "Blue green yellow purple orange brown black white grey pink");
+    mx_tok_result r;
+    mx_status st = {0};
+    CHECK(mx_tok_encode(tok, text, &r, &st) == 0 && r.n_dropped == 10);
+    printf("dropped %d from \"%s\"\n", r.n_dropped, r.dropped_from);
+    CHECK(!strncmp(r.dropped_from, "blue green yellow", 17) && strlen(r.dropped_from) <= 48);
+    CHECK(strcmp(r.dropped_from + strlen(r.dropped_from) - 3, "...") == 0);
+    CHECK(mx_tok_encode(tok, "a red chair", &r, &st) == 0 && r.n_dropped == 0 && r.dropped_from[0] == 0);
+}
+
 static void test_huge_prompts(const mx_tokenizer *tok) {
     size_t n = (size_t)2 << 20;
     char *word = malloc(n + 1), *words = malloc(n + 1);
@@ -144,6 +159,7 @@ int main(void) {
         test_golden(tok);
         test_bad_utf8(tok);
         test_weight_file(v, m);
+        test_dropped_from(tok);
         test_huge_prompts(tok);
     }
     test_bad_files();

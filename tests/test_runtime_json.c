@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../runtime/buf.h"
 #include "../runtime/json.h"
 #include "util_test.h"
 
@@ -182,7 +183,22 @@ static void test_large_object(void) {
     free(s);
 }
 
+/* The JSON writer keeps valid UTF-8 and writes each byte that is not UTF-8 as \ufffd (a prompt
+ * of raw 0xFF 0xFE bytes made report.json invalid JSON); the result parses back. */
+static void test_writer_utf8(void) {
+    mx_buf b = {0};
+    mx_buf_json_str(&b, "\xff\xfe caf\xc3\xa9 \xe2\x82 \"q\"\x01");
+    printf("written: %s\n", b.p);
+    CHECK(b.p && !strcmp(b.p, "\"\\ufffd\\ufffd caf\xc3\xa9 \\ufffd\\ufffd \\\"q\\\"\\u0001\""));
+    mx_status st = {0};
+    mx_json *j = b.p ? mx_json_parse(b.p, b.len, "written", &st) : NULL;
+    CHECK(j && mx_json_kind(j) == MX_JSON_STR && !strncmp(mx_json_str(j), "\xef\xbf\xbd\xef\xbf\xbd caf\xc3\xa9", 11));
+    mx_json_free(j);
+    mx_buf_free(&b);
+}
+
 int main(void) {
+    test_writer_utf8();
     test_values();
     test_errors();
     test_depth();

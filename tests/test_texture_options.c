@@ -103,7 +103,7 @@ static void test_table(void) {
     for (int i = 0; i < n; i++) {
         const mx_option_spec *s = &t[i];
         if (s->def) CHECK(mx_option_set(s, &o, s->def, &st) == 0);
-        if (s->type != MX_OPT_INT) continue;
+        if (s->type != MX_OPTION_INT) continue;
         char v[64], msg_want[200];
         int step = s->multiple ? s->multiple : 1;
         snprintf(v, sizeof v, "%.0f", s->lo);

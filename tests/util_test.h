@@ -25,7 +25,7 @@ double mx_rel_l2(const float *got, const float *want, size_t n);
 /* Deterministic uniform values in [lo, hi) from a seed (splitmix64). */
 void mx_fill_random(float *x, size_t n, uint64_t seed, float lo, float hi);
 /* Test data, named by its path REL under the data root ("golden/unet_tiny/config.json",
- * "assets/spot/spot_triangulated.obj"): tests/data/REL when the repository ships it, otherwise
+ * "assets/spot/spot_triangulated.obj"): tests/data/<REL> when the repository ships it, otherwise
  * $MATEX_TESTDATA/REL (default ../shared), where the larger cases live (mini, SD1.5-size, the
  * full mesh library). Tests run from the repository root (tests/data/README.md). */
 #define MX_PRINTF(f, a) __attribute__((format(printf, f, a)))

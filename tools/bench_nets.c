@@ -31,16 +31,6 @@ static double peak_rss_mb(void) {
 
 /* ---- the runs ---- */
 
-static float *filled(size_t n, float lo, float hi, unsigned seed) {
-    float *x = malloc(n * sizeof *x);
-    unsigned s = seed * 2654435761u + 7;
-    for (size_t i = 0; x && i < n; i++) {
-        s = s * 1664525u + 1013904223u;
-        x[i] = lo + (hi - lo) * (float)(s >> 8) / 16777216.0f;
-    }
-    return x;
-}
-
 static const char *config_of(const mx_weightfile *wf, const char *prefix, mx_status *st) {
     char key[96];
     snprintf(key, sizeof key, "%sconfig", prefix);
@@ -124,7 +114,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     double peak[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
     int B = 2, H = 64, W = 64, T = 77, D = ucfg.cross_attention_dim;
     size_t ns = (size_t)B * ucfg.in_channels * H * W;
-    float *sample = filled(ns, -1, 1, 1), *ehs = filled((size_t)B * T * D, -1, 1, 2), ts[2] = {981, 37};
+    float *sample = bench_filled(ns, -1, 1, 1), *ehs = bench_filled((size_t)B * T * D, -1, 1, 2), ts[2] = {981, 37};
     float *out = malloc(ns * sizeof *out);
     size_t ub, cb, vb;
     mx_arena a;
@@ -143,7 +133,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         mx_unet_residual_shape(&ccfg, i, H, W, &C, &h, &w);
         res[i] = calloc((size_t)B * C * h * w, sizeof(float));
     }
-    float *cond = filled((size_t)B * 3 * H * 8 * W * 8, 0, 1, 3);
+    float *cond = bench_filled((size_t)B * 3 * H * 8 * W * 8, 0, 1, 3);
     float *img = malloc((size_t)3 * H * 8 * W * 8 * sizeof *img);
     net_time nt_cn = {"ControlNet 64x64 batch 2", {0, 0}, {0, 0}, mx_controlnet_flops(cn[0], B, H, W, T)};
     net_time nt_unet = {"UNet 64x64 batch 2 (+residuals)", {0, 0}, {0, 0}, mx_unet_flops(u, B, H, W, T)};

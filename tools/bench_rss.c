@@ -40,16 +40,6 @@ static double status_mb(const char *field) {
     return v;
 }
 
-static float *filled(size_t n, float lo, float hi, unsigned seed) {
-    float *x = malloc(n * sizeof *x);
-    unsigned s = seed * 2654435761u + 7;
-    for (size_t i = 0; x && i < n; i++) {
-        s = s * 1664525u + 1013904223u;
-        x[i] = lo + (hi - lo) * (float)(s >> 8) / 16777216.0f;
-    }
-    return x;
-}
-
 typedef struct stage_env {
     mx_weightfile *wf;
     mx_binder bu, bd, bi, bv;
@@ -88,7 +78,7 @@ static int env_open(stage_env *e, const bench_cfg *o, mx_status *st) {
 
 /* Decode of n latents h x w: tile 0 = the untiled pipeline helper. */
 static int stage_decode(stage_env *e, int n, int h, int w, int tile, mx_status *st) {
-    float *lat = filled((size_t)n * 4 * h * w, -3, 3, 5), *img = malloc(sizeof(float) * n * 3 * 64 * h * w);
+    float *lat = bench_filled((size_t)n * 4 * h * w, -3, 3, 5), *img = malloc(sizeof(float) * n * 3 * 64 * h * w);
     int rc = !lat || !img ? mx_fail(st, MX_ENOMEM, "out of memory")
              : tile     ? mx_vae_decode_image_tiled(&e->ctx, e->vae, lat, n, h, w, tile, img, st)
                         : mx_sd_decode_latents(&e->ctx, e->vae, lat, n, h, w, img, st);
@@ -100,8 +90,8 @@ static int stage_decode(stage_env *e, int n, int h, int w, int tile, mx_status *
 /* One DPM-Solver++ step of n views at 64x64 with both ControlNets and guidance 7.5. */
 static int stage_step(stage_env *e, int n, mx_status *st) {
     size_t lat = (size_t)n * 4 * 64 * 64, txt = (size_t)n * 77 * 768, ctl = (size_t)n * 3 * 512 * 512;
-    float *x = filled(lat, -1, 1, 1), *c = filled(txt, -1, 1, 2), *u = filled(txt, -1, 1, 3);
-    float *d = filled(ctl, 0, 1, 4), *p = filled(ctl, 0, 1, 6);
+    float *x = bench_filled(lat, -1, 1, 1), *c = bench_filled(txt, -1, 1, 2), *u = bench_filled(txt, -1, 1, 3);
+    float *d = bench_filled(ctl, 0, 1, 4), *p = bench_filled(ctl, 0, 1, 6);
     mx_sched_config cfg;
     mx_sched s;
     mx_sched_config_sd15(&cfg);

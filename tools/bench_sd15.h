@@ -15,6 +15,18 @@
 #include "../ops/ops.h"
 #include "../runtime/log.h"
 
+/* n floats uniform in [lo, hi) from a fixed LCG (malloc'd; NULL when out of memory): the
+ * benchmarks' inputs, the same for a seed on every run. */
+static inline float *bench_filled(size_t n, float lo, float hi, unsigned seed) {
+    float *x = malloc(n * sizeof *x);
+    unsigned s = seed * 2654435761u + 7;
+    for (size_t i = 0; x && i < n; i++) {
+        s = s * 1664525u + 1013904223u;
+        x[i] = lo + (hi - lo) * (float)(s >> 8) / 16777216.0f;
+    }
+    return x;
+}
+
 /* The weight file's path into buf; makes the file when absent. Returns -1 when it cannot. fast: the
  * file of `texture --fast` (the same plus a random LCM-LoRA merged and a random TAESD). */
 static inline int bench_sd15_file(char *buf, size_t cap, int fast) {

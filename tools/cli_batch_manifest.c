@@ -113,7 +113,7 @@ static int job_key(mx_batch_job *j, const char *key, const mx_json *v) {
     char why[160];
     not_a_key(s, why, sizeof why);
     if (why[0]) return job_error(j, "\"%s\" %s", key, why), -1;
-    int is_flag = s->type == MX_OPT_FLAG, is_bool = mx_json_kind(v) == MX_JSON_BOOL;
+    int is_flag = s->type == MX_OPTION_FLAG, is_bool = mx_json_kind(v) == MX_JSON_BOOL;
     if (is_flag != is_bool)
         return job_error(j, "\"%s\" takes %s", key, is_flag ? "true or false" : "a number, a text or an array of numbers"), -1;
     if (value_text(v, value, sizeof value, &text, &absent)) return job_error(j, "bad value for \"%s\"", key), -1;

@@ -7,6 +7,7 @@
 
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
+#include "cli_progress.h"
 #include "cli_signals.h"
 
 static void print_json_error(const char *msg) {
@@ -25,7 +26,8 @@ int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
     fprintf(stderr, "matex %s: %s\n(matex %s --help for usage)\n", verb, msg, verb);
-    if (json) print_json_error(msg);
+    if (json == MX_CLI_JSON_STREAM) mx_cli_progress_result(stdout, 2, msg, NULL, NULL);
+    else if (json) print_json_error(msg);
     return 2;
 }
 
@@ -52,10 +54,13 @@ int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value
     if (takes_value && !value) return mx_fail(st, MX_EUSAGE, "missing value after %s%s", dashes, name);
     c->steps_given |= !strcmp(s->name, "steps");
     c->guidance_given |= !strcmp(s->name, "guidance");
-    if (s->type != MX_OPT_CLI) return mx_option_set(s, &c->o, value, st);
+    if (s->type != MX_OPTION_CLI) return mx_option_set(s, &c->o, value, st);
+    int stream;
     if (!strcmp(s->name, "weights")) c->weights_path = value;
     else if (!strcmp(s->name, "quiet")) c->quiet = 1;
-    else if (!strcmp(s->name, "json")) c->json = 1;
+    else if (!strcmp(s->name, "json") && !c->json) c->json = MX_CLI_JSON_SUMMARY; /* the stream wins */
+    else if (!strcmp(s->name, "progress") && mx_cli_progress_parse(value, &stream))
+        return mx_fail(st, MX_EUSAGE, "--progress must be text or json, not '%s'", value);
     return 0;
 }
 
@@ -89,7 +94,7 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, unsigned verb
     memset(c, 0, sizeof *c);
     matex_options_default(&c->o);
     c->verb = verb;
-    for (int i = 1; i < argc; i++) c->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
+    c->json = mx_cli_progress_scan(argc, argv); /* usage errors in JSON too */
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i];
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) return usage(stdout), 0;
@@ -124,6 +129,19 @@ static int run_once(api_fn fn, const mx_cli_texture *c, matex_result **res, mate
     return rc;
 }
 
+/* The API's progress events as the stream's (tools/cli_progress.h; user: its FILE *). */
+static int stream_event(void *user, const matex_progress *p) {
+    mx_texture_progress q = {p->stage, p->step, p->steps, p->views_done, p->views_total, p->coverage, p->seconds, p->message};
+    return mx_cli_progress_event(user, &q);
+}
+
+/* The stream's final line. */
+static void stream_result(const mx_cli_texture *c, int code, const char *error, const matex_result *r) {
+    mx_texture_result res = {0};
+    if (r) res.coverage = r->coverage, res.views = r->views, res.seconds = r->seconds;
+    mx_cli_progress_result(stdout, code, error, r ? c->o.out_dir : NULL, r ? &res : NULL);
+}
+
 static void print_json_summary(const mx_cli_texture *c, const matex_result *r) {
     mx_buf b = {0};
     mx_buf_printf(&b, "{\"ok\":true,\"out\":");
@@ -134,6 +152,11 @@ static void print_json_summary(const mx_cli_texture *c, const matex_result *r) {
 }
 
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
+    if (c->json == MX_CLI_JSON_STREAM) { /* the events replace the human lines */
+        c->quiet = 1;
+        c->o.progress = stream_event;
+        c->o.progress_user = stdout;
+    }
     if (c->quiet) mx_log_set_level(MX_LOG_ERROR);
     c->o.verbose = !c->quiet;
     matex_error err = {0};
@@ -147,10 +170,13 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     if (rc) {
         if (err.code == MATEX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", err.message);
         fprintf(stderr, "matex %s: %s\n", verb, err.message);
-        if (c->json) print_json_error(err.message);
-        return err.code == MATEX_ECANCELLED ? 130 : 1;
+        int code = err.code == MATEX_ECANCELLED ? 130 : 1;
+        if (c->json == MX_CLI_JSON_STREAM) stream_result(c, code, err.message, NULL);
+        else if (c->json) print_json_error(err.message);
+        return code;
     }
-    if (c->json) print_json_summary(c, r);
+    if (c->json == MX_CLI_JSON_STREAM) stream_result(c, 0, NULL, r);
+    else if (c->json) print_json_summary(c, r);
     matex_result_free(r);
     return 0;
 }

@@ -12,7 +12,9 @@ typedef struct mx_cli_texture {
     matex_options o;
     unsigned verb;            /* MX_VERB_TEXTURE, _ENHANCE or _TRANSFER */
     const char *weights_path; /* --weights (texture, enhance) */
-    int json, quiet;
+    int json;                 /* stdout: MX_CLI_JSON_NONE, _SUMMARY (--json) or _STREAM (--progress json;
+                                 tools/cli_progress.h) */
+    int quiet;
     int steps_given, guidance_given; /* --fast sets steps 4 and guidance 1 unless they are given */
 } mx_cli_texture;
 
@@ -24,8 +26,9 @@ int mx_cli_texture_parse(mx_cli_texture *c, int argc, char **argv, unsigned verb
  * message in st (an unknown option, a flag given a value, a value out of range). `name` is
  * "--steps", "-o" or a manifest key ("steps"). */
 int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value, mx_status *st);
-/* A usage error: "matex VERB: MESSAGE" and the --help hint on stderr, and with json
- * {"ok":false,"error":MESSAGE} on stdout. Returns 2 (the usage-error exit code). */
+/* A usage error: "matex VERB: MESSAGE" and the --help hint on stderr, and on stdout with json
+ * {"ok":false,"error":MESSAGE} (the stream's result line when json is MX_CLI_JSON_STREAM).
+ * Returns 2 (the usage-error exit code). */
 int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 /* Checks the options (mx_options_check), opens the weights (texture, enhance), runs the verb's API
  * call with SIGINT/SIGTERM setting its cancel flag, prints errors (also in the --json summary)

@@ -1,5 +1,5 @@
 /* matex bench: times matex's own kernels (GEMM, 3×3 conv, attention) on the SD1.5 UNet shapes
- * at a 64×64 latent and prints GFLOP/s (no OpenBLAS; tools/bench_ops compares with it). */
+ * at a 64×64 latent and prints GFLOP/s (no OpenBLAS; tools/bench_ops.c compares with it). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

@@ -13,7 +13,7 @@
 #include "../ops/ops.h"
 #include "../runtime/atomic_file.h"
 #include "../runtime/fileio.h"
-#include "../pipeline/nn/netcfg.h"
+#include "../pipeline/nn/registry.h"
 #include "../pipeline/nn/params.h"
 #include "../runtime/log.h"
 #include "../weights/golden_rule.h"

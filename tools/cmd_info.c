@@ -3,19 +3,26 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../pipeline/geom/filekind.h"
 #include "../pipeline/geom/mesh.h"
+#include "../pipeline/io/io.h"
+#include "../runtime/buf.h"
 #include "../runtime/log.h"
+#include "../weights/single_file.h"
 #include "../weights/wfinfo.h"
 #include "cli.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex info [--json] FILE\n\n"
-               "FILE is a mesh (.obj .ply .off .stl .gltf .glb) or a matex weight file.\n"
+               "FILE is a mesh (.obj .ply .off .stl .gltf .glb), an image (PNG, JPEG, EXR, ...), a matex\n"
+               "weight file, or an SD1.x checkpoint (.safetensors .ckpt .pt .pth: architecture, networks,\n"
+               "dtypes, skipped keys). For an image: its size, channels and each channel's min, mean and max\n"
+               "(0..1 for 8-bit files).\n"
                "For a mesh: vertices and triangles as stored (polygons fan-triangulated), UV and normal\n"
                "presence, materials and their textures, and the topology after welding vertices with\n"
                "identical positions: watertightness, boundary and non-manifold edges, components,\n"
                "degenerate faces; the bounding box in the file's units.\n\n"
-               "  --json   one JSON object on stdout instead of text (meshes only)\n"
+               "  --json   one JSON object on stdout instead of text (meshes and images)\n"
                "  --help   this text\n");
 }
 
@@ -34,14 +41,10 @@ static int count_faces_with(const mx_mesh *m, const int32_t *idx) {
 static const char *presence(int with, int total) { return with == 0 ? "no" : with == total ? "yes" : "partial"; }
 
 static void json_str(FILE *out, const char *s) {
-    fputc('"', out);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\') fprintf(out, "\\%c", c);
-        else if (c < 0x20) fprintf(out, "\\u%04x", c);
-        else fputc(c, out);
-    }
-    fputc('"', out);
+    mx_buf b = {0};
+    mx_buf_json_str(&b, s);
+    fputs(b.oom ? "\"\"" : b.p, out);
+    mx_buf_free(&b);
 }
 
 static void print_text(const char *path, const mx_mesh *m, const mesh_stats *s) {
@@ -83,6 +86,70 @@ static void print_json(const char *path, const mx_mesh *m, const mesh_stats *s) 
         printf("}");
     }
     printf("]}\n");
+}
+
+/* An image's size, channels and per-channel min, mean and max: what a script checks to see
+ * that a texture or a render has content (not empty, not one flat colour). */
+static int image_info(const char *path, int json) {
+    mx_image img;
+    mx_status st;
+    if (mx_io_read_image(path, &img, &st)) {
+        fprintf(stderr, "matex info: %s\n", st.msg);
+        return 1;
+    }
+    double lo[4] = {0}, hi[4] = {0}, sum[4] = {0};
+    int c = img.c < 4 ? img.c : 4;
+    size_t n = (size_t)img.w * img.h;
+    for (int k = 0; k < c; k++) lo[k] = hi[k] = n ? img.data[k] : 0;
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < c; k++) {
+            double v = img.data[i * (size_t)img.c + (size_t)k];
+            lo[k] = v < lo[k] ? v : lo[k];
+            hi[k] = v > hi[k] ? v : hi[k];
+            sum[k] += v;
+        }
+    const char *names[3] = {"min", "mean", "max"};
+    if (json) {
+        printf("{\"file\":");
+        json_str(stdout, path);
+        printf(",\"width\":%d,\"height\":%d,\"channels\":%d", img.w, img.h, img.c);
+    } else {
+        printf("file:     %s\nsize:     %d x %d\nchannels: %d\n", path, img.w, img.h, img.c);
+    }
+    for (int s = 0; s < 3; s++) {
+        printf(json ? ",\"%s\":[" : "%-9s", json ? names[s] : (s == 0 ? "min:" : s == 1 ? "mean:" : "max:"));
+        for (int k = 0; k < c; k++) {
+            double v = s == 0 ? lo[k] : s == 1 ? (n ? sum[k] / (double)n : 0) : hi[k];
+            printf(json ? "%s%.6g" : "%s%.4f", k ? (json ? "," : " ") : (json ? "" : " "), v);
+        }
+        printf(json ? "]" : "\n");
+    }
+    if (json) printf("}\n");
+    mx_image_free(&img);
+    return 0;
+}
+
+/* .safetensors, .ckpt, .pt, .pth: a single-file checkpoint (weights/single_file.h). */
+static int is_checkpoint_name(const char *path) {
+    static const char *const ext[] = {".safetensors", ".ckpt", ".pt", ".pth"};
+    size_t n = strlen(path);
+    for (size_t i = 0; i < sizeof ext / sizeof ext[0]; i++)
+        if (n > strlen(ext[i]) && !strcmp(path + n - strlen(ext[i]), ext[i])) return 1;
+    return 0;
+}
+
+static int checkpoint_info(const char *path) {
+    mx_single_file sf;
+    mx_status st;
+    mx_status st_vae;
+    /* a VAE file of its own (vae-ft-mse-...) holds none of a model's networks */
+    if (mx_sf_open(&sf, path, 0, &st) && mx_sf_open(&sf, path, MX_SF_VAE_ONLY, &st_vae)) {
+        fprintf(stderr, "matex info: %s\n", st.msg);
+        return 1;
+    }
+    mx_sf_print_info(&sf, stdout);
+    mx_sf_close(&sf);
+    return 0;
 }
 
 static int mesh_info(const char *path, int json) {
@@ -143,5 +210,19 @@ int cmd_info(int argc, char **argv) {
         }
         return 0;
     }
-    return mesh_info(file, json);
+    if (is_checkpoint_name(file)) {
+        if (json) {
+            fprintf(stderr, "matex info: --json is for meshes and images; %s is a checkpoint\n", file);
+            return 2;
+        }
+        return checkpoint_info(file);
+    }
+    const char *kind;
+    int definite;
+    mx_status st;
+    if (mx_file_kind_of(file, "a mesh, an image, a weight file or a checkpoint", &kind, &definite, &st)) {
+        fprintf(stderr, "matex info: %s\n", st.msg);
+        return 1;
+    }
+    return strstr(kind, " image") ? image_info(file, json) : mesh_info(file, json);
 }

@@ -5,13 +5,11 @@
 #include <string.h>
 
 #include "../ops/ops.h"
-#include "../pipeline/nn/clip.h"
-#include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/registry.h"
 #include "../pipeline/nn/sd_edit.h"
-#include "../pipeline/texture/models.h"
-#include "../pipeline/nn/taesd.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
+#include "../pipeline/texture/models.h"
 #include "../runtime/log.h"
 #include "../weights/safetensors.h"
 #include "../weights/weights.h"
@@ -22,20 +20,14 @@
 #define SCRATCH_BYTES ((size_t)256 << 20)
 
 static void usage(FILE *f) {
+    fprintf(f, "usage: matex run-net NET --weights W.mxw --inputs IN.safetensors --out OUT.safetensors [options]\n"
+               "\n"
+               "Runs one network of a matex weight file on the tensors of IN and writes its outputs (fp32).\n"
+               "NET and its tensors (B = batch; any batch and any valid size):\n");
+    for (size_t i = 0; i < mx_net_count; i++)
+        for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name; v++)
+            fprintf(f, "  %-12s %s\n", mx_nets[i].verbs[v].name, mx_nets[i].verbs[v].help);
     fprintf(f,
-            "usage: matex run-net NET --weights W.mxw --inputs IN.safetensors --out OUT.safetensors [options]\n"
-            "\n"
-            "Runs one network of a matex weight file on the tensors of IN and writes its outputs (fp32).\n"
-            "NET and its tensors (B = batch; any batch and any valid size):\n"
-            "  unet        sample [B,C,H,W], timestep [B] or [1] (I64, I32 or F32), encoder_hidden_states [B,T,D],\n"
-            "              optional down_block_res_sample.{i} and mid_block_res_sample   -> out\n"
-            "  controlnet  sample, timestep, encoder_hidden_states, controlnet_cond [B,3,8H,8W],\n"
-            "              conditioning_scale (one float, default 1)  -> down_block_res_sample.{i}, mid_block_res_sample\n"
-            "  vae-encode  image [B,3,H,W] in [-1,1]                  -> mean, logvar\n"
-            "  vae-decode  latents [B,4,h,w] (unscaled)               -> image\n"
-            "  clip        input_ids [B,T] (I64 or I32)               -> last_hidden_state, pooler_output, hidden_states.{i}\n"
-            "  taesd-encode  image [B,3,H,W] in [-1,1]                -> latents (SD latents, scaling factor 1)\n"
-            "  taesd-decode  latents [B,4,h,w]                        -> image (in about [-1,1], unclamped)\n"
             "  inpaint-pipeline  (W: a model set with controlnet_depth and controlnet_inpaint; --steps N [--guidance G])\n"
             "              prompt_embeds, negative_prompt_embeds [B,T,D], image [B,3,H,W] in [0,1], mask [B,1,H,W]\n"
             "              (1 = paint), control_depth, control_inpaint [B,3,H,W], noise [B,4,H/8,W/8],\n"
@@ -45,8 +37,8 @@ static void usage(FILE *f) {
             "              optional conditioning_scales [1] (default 1)  -> timesteps, latents_after_step, image\n"
             "\n"
             "options:\n"
-            "  --prefix P      network prefix in the weight file (default unet., controlnet., vae., taesd., text_encoder.;\n"
-            "                  e.g. controlnet_depth. for a file with several ControlNets)\n"
+            "  --prefix P      network prefix in the weight file (default: the network's, unet., controlnet., vae.,\n"
+            "                  text_encoder., taesd.; e.g. controlnet_depth. for a file with several ControlNets)\n"
             "  --threads N     worker threads (default: all CPUs)\n"
             "  --steps N       pipelines: scheduler steps before strength (required)\n"
             "  --guidance G    pipelines: classifier-free guidance scale (default 7.5)\n"
@@ -76,6 +68,7 @@ typedef struct run_io {
     mx_st_out outs[MAX_OUTS];
     char names[MAX_OUTS][48];
     int nout;
+    mx_net_io iface; /* the network's view of the above (net_io.h); impl = this */
 } run_io;
 
 static float *keep(run_io *io, float *p) {
@@ -116,33 +109,11 @@ static float *input(run_io *io, const char *name, int ndim, int64_t *want, int r
     return keep(io, mx_st_to_f32(&io->in, t, st));
 }
 
-/* Timesteps: one per batch item or a single one (any dtype, any shape of 1 or B elements). */
-static float *timesteps(run_io *io, int B, mx_status *st) {
-    const mx_st_tensor *t = mx_st_find(&io->in, "timestep");
-    if (!t) return mx_fail(st, MX_EINPUT, "%s: missing input tensor timestep", io->in_path), NULL;
-    int64_t n = t->ndim == 0 ? 1 : mx_shape_numel(t->ndim, t->shape);
-    if (n != 1 && n != B)
-        return mx_fail(st, MX_EINPUT, "%s: tensor timestep has %lld elements, expected 1 or %d", io->in_path,
-                       (long long)n, B), NULL;
-    float *v = keep(io, mx_st_to_f32(&io->in, t, st)), *ts = new_floats(io, (size_t)B, st);
-    if (!v || !ts) return NULL;
-    for (int i = 0; i < B; i++) ts[i] = v[n == 1 ? 0 : i];
-    return ts;
-}
-
 /* Device memory for n floats, a copy of host data when host is not NULL (freed by io_free). */
 static float *on_device(run_io *io, const float *host, size_t n, mx_status *st) {
     if (io->ndev == (int)(sizeof io->dev / sizeof io->dev[0])) return mx_fail(st, MX_EINTERNAL, "too many tensors"), NULL;
     float *p = host ? mx_dev_from_host(&io->ctx, host, n, st) : mx_dev_alloc(&io->ctx, n, st);
     if (p) io->dev[io->ndev++] = p;
-    return p;
-}
-
-/* The device copy of an optional host input (NULL stays NULL); *err set on failure. */
-static const float *dev_input(run_io *io, const float *host, size_t n, int *err, mx_status *st) {
-    if (!host) return NULL;
-    const float *p = on_device(io, host, n, st);
-    if (!p) *err = 1;
     return p;
 }
 
@@ -179,10 +150,36 @@ static float *dev_output(run_io *io, const char *name, int ndim, const int64_t *
     return d;
 }
 
-static int make_arena(run_io *io, size_t bytes, mx_status *st) {
-    if (mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)) return -1;
+/* ---- the network's view of the call (net_io.h) ---- */
+
+static int io_has(mx_net_io *n, const char *name) { return mx_st_find(&((run_io *)n->impl)->in, name) != NULL; }
+
+static const float *io_host(mx_net_io *n, const char *name, int ndim, int64_t *shape, mx_status *st) {
+    return input(n->impl, name, ndim, shape, 1, st);
+}
+
+static const float *io_host_flat(mx_net_io *n, const char *name, size_t *numel, mx_status *st) {
+    run_io *io = n->impl;
+    const mx_st_tensor *t = mx_st_find(&io->in, name);
+    if (!t) return mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name), NULL;
+    *numel = t->ndim == 0 ? 1 : (size_t)mx_shape_numel(t->ndim, t->shape);
+    return keep(io, mx_st_to_f32(&io->in, t, st));
+}
+
+static const float *io_device(mx_net_io *n, const float *host, size_t count, mx_status *st) {
+    return on_device(n->impl, host, count, st);
+}
+
+static float *io_output(mx_net_io *n, const char *name, int ndim, const int64_t *shape, mx_status *st) {
+    return dev_output(n->impl, name, ndim, shape, st);
+}
+
+static mx_arena *io_arena(mx_net_io *n, size_t bytes, mx_status *st) {
+    run_io *io = n->impl;
+    if (io->arena_ok) return mx_fail(st, MX_EINTERNAL, "run-net: a second arena"), NULL;
+    if (mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)) return NULL;
     io->arena_ok = 1;
-    return 0;
+    return &io->arena;
 }
 
 /* The binder of the network under `prefix`: weight file, weights kept on the device. */
@@ -198,217 +195,22 @@ static const char *net_config(run_io *io, const char *prefix, char *key, size_t 
     return cfg;
 }
 
-static int run_unet(run_io *io, const char *prefix, mx_status *st) {
+/* Any network of the registry: its config and weights under `prefix`, loaded, run by the verb. */
+static int run_network(run_io *io, const mx_net_def *def, const mx_net_verb *verb, const char *prefix, mx_status *st) {
     char key[96];
-    mx_unet_config cfg;
-    mx_unet *u = NULL;
+    void *net = NULL;
     const char *text = net_config(io, prefix, key, sizeof key, st);
-    if (!text || mx_unet_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (bind_weights(io, prefix, st) || mx_unet_load(&u, &cfg, &io->b, st)) return -1;
-    int rc = -1;
-    int64_t ss[4] = {-1, cfg.in_channels, -1, -1}, es[3] = {-1, -1, cfg.cross_attention_dim};
-    float *sample = input(io, "sample", 4, ss, 1, st), *ehs = NULL, *ts = NULL, *out;
-    if (sample) es[0] = ss[0];
-    if (sample) ehs = input(io, "encoder_hidden_states", 3, es, 1, st);
-    if (ehs) ts = timesteps(io, (int)ss[0], st);
-    if (!ts) goto done;
-    int B = (int)ss[0], H = (int)ss[2], W = (int)ss[3], n = mx_unet_num_residuals(&cfg), C, h, w;
-    const float *res[MX_UNET_MAX_RES];
-    mx_unet_input in = {sample, ts, ehs, B, H, W, (int)es[1], NULL, NULL};
-    if (mx_unet_check_sizes(&cfg, B, H, W, in.T, st)) goto done;
-    int have = mx_st_find(&io->in, "down_block_res_sample.0") != NULL;
-    for (int i = 0; i <= n && (have || mx_st_find(&io->in, "mid_block_res_sample")); i++) {
-        char name[48];
-        if (i < n) snprintf(name, sizeof name, "down_block_res_sample.%d", i);
-        else snprintf(name, sizeof name, "mid_block_res_sample");
-        mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
-        int64_t rs[4] = {B, C, h, w};
-        const float *p = input(io, name, 4, rs, 1, st);
-        if (!p) goto done;
-        if (i < n) res[i] = p;
-        else in.mid_residual = p;
-    }
-    if (have) in.down_residuals = res;
-    size_t bytes;
-    int64_t os[4] = {B, cfg.out_channels, H, W};
-    int err = 0;
-    in.sample = dev_input(io, sample, (size_t)B * cfg.in_channels * H * W, &err, st);
-    in.timesteps = dev_input(io, ts, (size_t)B, &err, st);
-    in.encoder_hidden_states = dev_input(io, ehs, (size_t)B * in.T * cfg.cross_attention_dim, &err, st);
-    for (int i = 0; i <= n && (have || in.mid_residual); i++) {
-        mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
-        if (i < n && have) res[i] = dev_input(io, res[i], (size_t)B * C * h * w, &err, st);
-        if (i == n) in.mid_residual = dev_input(io, in.mid_residual, (size_t)B * C * h * w, &err, st);
-    }
-    if (err || !(out = dev_output(io, "out", 4, os, st))) goto done;
-    if (mx_unet_arena_bytes(u, B, H, W, in.T, &bytes, st) || make_arena(io, bytes, st) ||
-        mx_unet_forward(&io->ctx, u, &in, out, &io->arena, st))
-        goto done;
-    rc = 0;
-done:
-    mx_unet_free(u);
-    return rc;
-}
-
-static int run_controlnet(run_io *io, const char *prefix, mx_status *st) {
-    char key[96];
-    mx_unet_config cfg;
-    mx_controlnet *m = NULL;
-    const char *text = net_config(io, prefix, key, sizeof key, st);
-    if (!text || mx_unet_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (!cfg.is_controlnet) return mx_fail(st, MX_EINPUT, "%s: \"%s\" is not a ControlNetModel config", mx_wf_path(io->wf), key);
-    if (bind_weights(io, prefix, st) || mx_controlnet_load(&m, &cfg, &io->b, st)) return -1;
-    int rc = -1, n = mx_unet_num_residuals(&cfg), f = 1 << (cfg.n_cond_emb - 1), C, h, w;
-    int64_t ss[4] = {-1, cfg.in_channels, -1, -1}, es[3] = {-1, -1, cfg.cross_attention_dim}, cs[4], one[1] = {1};
-    float *sample = input(io, "sample", 4, ss, 1, st), *ehs = NULL, *ts = NULL, *cond = NULL, *scale = NULL;
-    float *down[MX_UNET_MAX_RES + 1];
-    if (sample) {
-        es[0] = ss[0];
-        ehs = input(io, "encoder_hidden_states", 3, es, 1, st);
-    }
-    if (ehs) ts = timesteps(io, (int)ss[0], st);
-    if (ts) {
-        cs[0] = ss[0], cs[1] = cfg.conditioning_channels, cs[2] = ss[2] * f, cs[3] = ss[3] * f;
-        cond = input(io, "controlnet_cond", 4, cs, 1, st);
-    }
-    if (!cond) goto done;
-    if (mx_st_find(&io->in, "conditioning_scale") && !(scale = input(io, "conditioning_scale", 1, one, 1, st))) goto done;
-    int B = (int)ss[0], H = (int)ss[2], W = (int)ss[3];
-    mx_controlnet_input in = {sample, ts, ehs, cond, B, H, W, (int)es[1], scale ? scale[0] : 1.0f};
-    if (mx_unet_check_sizes(&cfg, B, H, W, in.T, st)) goto done;
-    int err = 0;
-    in.sample = dev_input(io, sample, (size_t)B * cfg.in_channels * H * W, &err, st);
-    in.timesteps = dev_input(io, ts, (size_t)B, &err, st);
-    in.encoder_hidden_states = dev_input(io, ehs, (size_t)B * in.T * cfg.cross_attention_dim, &err, st);
-    in.cond = dev_input(io, cond, (size_t)B * cs[1] * cs[2] * cs[3], &err, st);
-    if (err) goto done;
-    for (int i = 0; i <= n; i++) {
-        char name[48];
-        mx_unet_residual_shape(&cfg, i, H, W, &C, &h, &w);
-        int64_t rs[4] = {B, C, h, w};
-        if (i < n) snprintf(name, sizeof name, "down_block_res_sample.%d", i);
-        else snprintf(name, sizeof name, "mid_block_res_sample");
-        if (!(down[i] = dev_output(io, name, 4, rs, st))) goto done;
-    }
-    size_t bytes;
-    if (mx_controlnet_arena_bytes(m, B, H, W, in.T, &bytes, st) || make_arena(io, bytes, st) ||
-        mx_controlnet_forward(&io->ctx, m, &in, down, down[n], 0, &io->arena, st))
-        goto done;
-    rc = 0;
-done:
-    mx_controlnet_free(m);
-    return rc;
-}
-
-static int run_vae(run_io *io, const char *prefix, int decode, mx_status *st) {
-    char key[96];
-    mx_vae_config cfg;
-    mx_vae *v = NULL;
-    const char *text = net_config(io, prefix, key, sizeof key, st);
-    if (!text || mx_vae_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (bind_weights(io, prefix, st) || mx_vae_load(&v, &cfg, &io->b, st)) return -1;
-    int rc = -1, f = mx_vae_factor(v), lc = cfg.latent_channels;
-    size_t bytes;
-    if (decode) {
-        int64_t ls[4] = {-1, lc, -1, -1};
-        float *lat = input(io, "latents", 4, ls, 1, st), *img;
-        if (!lat) goto done;
-        int B = (int)ls[0], h = (int)ls[2], w = (int)ls[3];
-        int64_t os[4] = {B, cfg.out_channels, (int64_t)h * f, (int64_t)w * f};
-        if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, st) || make_arena(io, bytes, st) ||
-            !(lat = on_device(io, lat, (size_t)B * lc * h * w, st)) || !(img = dev_output(io, "image", 4, os, st)) ||
-            mx_vae_decode(&io->ctx, v, lat, B, h, w, img, &io->arena, st))
-            goto done;
-        rc = 0;
-    } else {
-        int64_t is[4] = {-1, cfg.in_channels, -1, -1};
-        float *img = input(io, "image", 4, is, 1, st), *mean, *logvar;
-        if (!img) goto done;
-        int B = (int)is[0], H = (int)is[2], W = (int)is[3];
-        if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, st) || make_arena(io, bytes, st)) goto done;
-        int64_t os[4] = {B, lc, H / f, W / f};
-        if (!(img = on_device(io, img, (size_t)B * cfg.in_channels * H * W, st)) ||
-            !(mean = dev_output(io, "mean", 4, os, st)) || !(logvar = dev_output(io, "logvar", 4, os, st)) ||
-            mx_vae_encode(&io->ctx, v, img, B, H, W, mean, logvar, &io->arena, st))
-            goto done;
-        rc = 0;
-    }
-done:
-    mx_vae_free(v);
-    return rc;
-}
-
-/* TAESD: image -> latents (encode) or latents -> image (decode), one input and one output. */
-static int run_taesd(run_io *io, const char *prefix, int decode, mx_status *st) {
-    char key[96];
-    mx_taesd_config cfg;
-    mx_taesd *t = NULL;
-    const char *text = net_config(io, prefix, key, sizeof key, st);
-    if (!text || mx_taesd_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (bind_weights(io, prefix, st) || mx_taesd_load(&t, &cfg, &io->b, st)) return -1;
-    int rc = -1, f = mx_taesd_factor(t), cin = decode ? cfg.latent_channels : cfg.in_channels;
-    int cout = decode ? cfg.out_channels : cfg.latent_channels;
-    int64_t is[4] = {-1, cin, -1, -1};
-    float *x = input(io, decode ? "latents" : "image", 4, is, 1, st), *y;
-    size_t bytes;
-    if (!x) goto done;
-    int B = (int)is[0], H = (int)is[2], W = (int)is[3], Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
-    int64_t os[4] = {B, cout, Ho, Wo};
-    if ((decode ? mx_taesd_decode_arena_bytes(t, B, H, W, &bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, &bytes, st)) ||
-        make_arena(io, bytes, st) || !(x = on_device(io, x, (size_t)B * cin * H * W, st)) ||
-        !(y = dev_output(io, decode ? "image" : "latents", 4, os, st)) ||
-        (decode ? mx_taesd_decode(&io->ctx, t, x, B, H, W, y, &io->arena, st)
-                : mx_taesd_encode(&io->ctx, t, x, B, H, W, y, &io->arena, st)))
-        goto done;
-    rc = 0;
-done:
-    mx_taesd_free(t);
-    return rc;
-}
-
-static int run_clip(run_io *io, const char *prefix, mx_status *st) {
-    char key[96];
-    mx_clip_config cfg;
-    mx_clip m;
-    memset(&m, 0, sizeof m);
-    const char *text = net_config(io, prefix, key, sizeof key, st);
-    if (!text || mx_clip_config_parse(&cfg, text, strlen(text), key, st)) return -1;
-    if (bind_weights(io, prefix, st) || mx_clip_load(&m, &cfg, &io->b, st)) return -1;
-    int rc = -1, L = cfg.num_hidden_layers, C = cfg.hidden_size;
-    int64_t is[2] = {-1, -1};
-    float *idf = input(io, "input_ids", 2, is, 1, st), *last, *pooled;
-    float **hs = calloc((size_t)L + 1, sizeof *hs);
-    int32_t *ids = NULL;
-    if (!idf || !hs) goto done;
-    int B = (int)is[0], T = (int)is[1];
-    if (T > cfg.max_position_embeddings) {
-        mx_fail(st, MX_EINPUT, "%s: input_ids has %d tokens, the model takes at most %d", io->in_path, T,
-                cfg.max_position_embeddings);
-        goto done;
-    }
-    ids = malloc((size_t)B * T * sizeof *ids);
-    if (!ids) goto done;
-    for (size_t i = 0; i < (size_t)B * T; i++) ids[i] = (int32_t)idf[i];
-    int64_t hshape[3] = {B, T, C}, pshape[2] = {B, C};
-    if (!(last = dev_output(io, "last_hidden_state", 3, hshape, st)) ||
-        !(pooled = dev_output(io, "pooler_output", 2, pshape, st)))
-        goto done;
-    for (int i = 0; i <= L; i++) {
-        char name[48];
-        snprintf(name, sizeof name, "hidden_states.%d", i);
-        if (!(hs[i] = dev_output(io, name, 3, hshape, st))) goto done;
-    }
-    mx_arena dry;
-    mx_arena_measure(&dry);
-    if (mx_clip_forward(&m, &io->ctx, &dry, ids, B, T, last, pooled, hs, st) ||
-        make_arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st) ||
-        mx_clip_forward(&m, &io->ctx, &io->arena, ids, B, T, last, pooled, hs, st))
-        goto done;
-    rc = 0;
-done:
-    free(ids);
-    free(hs);
-    mx_clip_free(&m);
+    if (!text || bind_weights(io, prefix, st)) return -1;
+    io->iface = (mx_net_io){.impl = io,
+                            .source = io->in_path,
+                            .has = io_has,
+                            .host = io_host,
+                            .host_flat = io_host_flat,
+                            .device = io_device,
+                            .output = io_output,
+                            .arena = io_arena};
+    int rc = def->load(&net, text, strlen(text), key, &io->b, st) || verb->run(&io->ctx, net, &io->iface, st) ? -1 : 0;
+    def->free(net);
     return rc;
 }
 
@@ -512,94 +314,76 @@ static void io_free(run_io *io) {
     for (int i = 0; i < io->ntmp; i++) free(io->tmp[i]);
 }
 
-static const char *default_prefix(const char *net) {
-    if (!strcmp(net, "unet")) return "unet.";
-    if (!strcmp(net, "controlnet")) return "controlnet.";
-    if (!strcmp(net, "vae-encode") || !strcmp(net, "vae-decode")) return "vae.";
-    if (!strcmp(net, "clip")) return "text_encoder.";
-    if (!strcmp(net, "taesd-encode") || !strcmp(net, "taesd-decode")) return "taesd.";
-    if (!strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline")) return "";
-    return NULL;
+static int is_pipeline(const char *net) { return !strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline"); }
+
+/* "unet, controlnet, ..., inpaint-pipeline or img2img-pipeline": the NETs, for the usage error. */
+static void net_names(char *buf, size_t cap) {
+    size_t len = 0;
+    for (size_t i = 0; i < mx_net_count && len < cap; i++)
+        for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name && len < cap; v++)
+            len += (size_t)snprintf(buf + len, cap - len, "%s, ", mx_nets[i].verbs[v].name);
+    if (len < cap) snprintf(buf + len, cap - len, "inpaint-pipeline or img2img-pipeline");
 }
 
 static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
                mx_backend_kind device, const pipe_opts *po, mx_status *st) {
-    int pipeline = !*default_prefix(net);
+    const mx_net_def *def = NULL;
+    const mx_net_verb *verb = mx_net_verb_named(net, &def);
     if (mx_ctx_create_on(&io->ctx, device, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
     io->ctx_ok = 1;
     if (device != MX_BACKEND_CUDA && mx_isa_precision(io->ctx.k->isa) != prec)
         mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
-    if (!pipeline && mx_wf_open(&io->wf, weights, st)) return -1;
+    if (verb && mx_wf_open(&io->wf, weights, st)) return -1;
     double t0 = mx_now();
-    int rc = pipeline                     ? run_pipeline(io, weights, po, st)
-             : !strcmp(net, "unet")       ? run_unet(io, prefix, st)
-             : !strcmp(net, "controlnet") ? run_controlnet(io, prefix, st)
-             : !strcmp(net, "vae-encode") ? run_vae(io, prefix, 0, st)
-             : !strcmp(net, "vae-decode") ? run_vae(io, prefix, 1, st)
-             : !strcmp(net, "taesd-encode") ? run_taesd(io, prefix, 0, st)
-             : !strcmp(net, "taesd-decode") ? run_taesd(io, prefix, 1, st)
-                                          : run_clip(io, prefix, st);
+    int rc = verb ? run_network(io, def, verb, prefix, st) : run_pipeline(io, weights, po, st);
     if (rc || fetch_outputs(io, st)) return -1;
     mx_info("run-net %s on %s: %.3f s", net, mx_backend_name(device), mx_now() - t0);
     return mx_st_write(io->out_path, io->outs, (size_t)io->nout, st);
 }
 
 int cmd_run_net(int argc, char **argv) {
-    const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu";
+    const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu", *precision = "fp32";
     int threads = 0;
     pipe_opts po = {0, 0, 7.5f};
     mx_precision prec = MX_PREC_FP32;
+    const mx_net_def *def = NULL;
     run_io io;
     memset(&io, 0, sizeof io);
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-            usage(stdout);
-            return 0;
-        }
-        int has_val = i + 1 < argc;
-        if (!strcmp(a, "--weights") && has_val) weights = argv[++i];
-        else if (!strcmp(a, "--inputs") && has_val) io.in_path = argv[++i];
-        else if ((!strcmp(a, "--out") || !strcmp(a, "-o")) && has_val) io.out_path = argv[++i];
-        else if (!strcmp(a, "--prefix") && has_val) prefix = argv[++i];
-        else if (!strcmp(a, "--threads") && has_val) {
-            if (mx_arg_int("run-net", a, argv[++i], 0, 1024, &threads)) return 2;
-        } else if (!strcmp(a, "--steps") && has_val) {
-            if (mx_arg_int("run-net", a, argv[++i], 1, MX_SCHED_MAX_STEPS, &po.steps)) return 2;
-        } else if (!strcmp(a, "--guidance") && has_val) {
-            if (mx_parse_float(argv[++i], &po.guidance)) {
-                fprintf(stderr, "matex run-net: bad value for --guidance: '%s'\n", argv[i]);
-                return 2;
-            }
-        } else if (!strcmp(a, "--device") && has_val) {
-            device = argv[++i];
-        } else if (!strcmp(a, "--precision") && has_val) {
-            if (mx_precision_parse(argv[++i], &prec)) {
-                fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", argv[i]);
-                return 2;
-            }
-        } else if (a[0] != '-' && !net) net = a;
-        else {
-            fprintf(stderr, "matex run-net: unknown or incomplete argument '%s'\n", a);
-            usage(stderr);
-            return 2;
-        }
+    const mx_opt opts[] = {
+        {"--weights", NULL, MX_OPT_STR, &weights, 0, 0},
+        {"--inputs", NULL, MX_OPT_STR, &io.in_path, 0, 0},
+        {"--out", "-o", MX_OPT_STR, &io.out_path, 0, 0},
+        {"--prefix", NULL, MX_OPT_STR, &prefix, 0, 0},
+        {"--threads", NULL, MX_OPT_INT, &threads, 0, 1024},
+        {"--steps", NULL, MX_OPT_INT, &po.steps, 1, MX_SCHED_MAX_STEPS},
+        {"--guidance", NULL, MX_OPT_FLOAT, &po.guidance, 0, 0},
+        {"--device", NULL, MX_OPT_STR, &device, 0, 0},
+        {"--precision", NULL, MX_OPT_STR, &precision, 0, 0},
+    };
+    int parsed = mx_args_parse("run-net", argc, argv, opts, sizeof opts / sizeof opts[0], &net, usage);
+    if (parsed) return parsed == 1 ? 0 : 2;
+    if (mx_precision_parse(precision, &prec)) {
+        fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", precision);
+        return 2;
     }
-    if (!net || !weights || !io.in_path || !io.out_path || !default_prefix(net)) {
-        fprintf(stderr, "matex run-net: %s\n", !net || default_prefix(net) ? "NET, --weights, --inputs and --out are required"
-                                                                         : "NET must be clip, unet, controlnet, vae-encode, vae-decode, taesd-encode, taesd-decode, inpaint-pipeline or img2img-pipeline");
+    int known = net && (mx_net_verb_named(net, &def) || is_pipeline(net));
+    if (!net || !weights || !io.in_path || !io.out_path || !known) {
+        char names[256];
+        net_names(names, sizeof names);
+        if (!net || known) fprintf(stderr, "matex run-net: NET, --weights, --inputs and --out are required\n");
+        else fprintf(stderr, "matex run-net: NET must be %s\n", names);
         usage(stderr);
         return 2;
     }
     po.inpaint = !strcmp(net, "inpaint-pipeline");
-    if (!*default_prefix(net) && (po.steps < 1 || po.steps > MX_SCHED_MAX_STEPS || !(po.guidance >= 0.0f))) {
+    if (is_pipeline(net) && (po.steps < 1 || po.steps > MX_SCHED_MAX_STEPS || !(po.guidance >= 0.0f))) {
         fprintf(stderr, "matex run-net: %s needs --steps in 1..%d and a guidance >= 0\n", net, MX_SCHED_MAX_STEPS);
         return 2;
     }
     char pfx[80];
-    if (!prefix) prefix = default_prefix(net);
+    if (!prefix) prefix = def ? def->kind : "";
     if (strlen(prefix) > 64) {
         fprintf(stderr, "matex run-net: --prefix is too long\n");
         return 2;

@@ -26,6 +26,28 @@ net vae vae.json 14 diffusion_pytorch_model.safetensors
 net text_encoder clip.json 15 model.safetensors
 mkdir -p "$DIR/taesd"
 net taesd taesd.json 16 diffusion_pytorch_model.safetensors
+# A random TAESD decoder paints near black: its last conv gives about 0 in [0, 1] (the VAE's
+# gives 0 in [-1, 1], mid grey) with little spread. That conv (decoder.layers.18: the 18 follows
+# from num_decoder_blocks in taesd.json) gets bias 0.5 and weights of 1, -1, 0.5, -0.5, 1, -1, 0
+# in turn (sum 0: no drift to black or white; 7 does not divide the 144 weights of a channel: the
+# channels differ), so that the fast demo paints colour noise around mid grey, as the default
+# demo does.
+set_f32() { # file tensor 4-byte-pattern (octal escapes, little-endian floats): the tensor's bytes
+    n=$(od -An -tu8 -N8 "$1" | tr -d ' ')
+    off=$(head -c $((8 + n)) "$1" | tail -c "$n" |
+        sed -n "s/.*\"$2\":{[^}]*\"data_offsets\":\[\([0-9]*\),\([0-9]*\)\].*/\1 \2/p")
+    [ -n "$off" ] || { echo "make_demo_weights: $2 not in $1" >&2; exit 1; }
+    set -- "$1" "$2" "$3" $off
+    i=$4
+    while [ "$i" -lt "$5" ]; do
+        printf "$3"
+        i=$((i + ${#3} / 4))
+    done | head -c $(($5 - $4)) | dd of="$1" bs=1 seek=$((8 + n + $4)) conv=notrunc 2>/dev/null
+}
+T=$DIR/taesd/diffusion_pytorch_model.safetensors
+set_f32 "$T" decoder.layers.18.bias '\000\000\000\077'                            # 0.5
+set_f32 "$T" decoder.layers.18.weight \
+    '\000\000\200\077\000\000\200\277\000\000\000\077\000\000\000\277\000\000\200\077\000\000\200\277\000\000\000\000'
 cp tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt "$DIR/tokenizer/"
 cp "$CFG/scheduler_config.json" "$DIR/scheduler/scheduler_config.json"
 "$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \

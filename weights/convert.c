@@ -15,7 +15,10 @@
 #include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "lora.h"
+#include "networks.h"
 #include "safetensors.h"
+#include "single_file.h"
+#include "taesd_file.h"
 #include "weights.h"
 
 #define CONVERTER_VERSION "matex-convert 1"
@@ -32,6 +35,8 @@ typedef struct {
     void **bufs; /* converted tensor data owned by the converter */
     size_t n_bufs, cap_bufs;
     mx_lora *loras[MX_CONVERT_MAX_EXTRA];
+    mx_single_file *singles[MX_CONVERT_MAX_EXTRA + 1]; /* single-file inputs, mapped until the end */
+    size_t n_singles;
     text_buf sources; /* provenance: JSON array items */
     mx_convert_result res;
 } converter;
@@ -92,25 +97,18 @@ static int own_buffer(converter *cv, void *p, mx_status *st) {
 
 /* ---- network type from config.json ---- */
 
-static const char *json_array_has(const mx_json *arr, const char *s) {
-    for (size_t i = 0; i < mx_json_len(arr); i++) {
-        const char *v = mx_json_str(mx_json_at(arr, i));
-        if (v && !strcmp(v, s)) return v;
+/* The network a config names: diffusers' "_class_name", else a known class among transformers'
+ * "architectures" or, for CLIP, its "model_type". NULL when none is known. */
+static const mx_net_kind *network_kind(const mx_json *cfg) {
+    const char *cls = mx_json_get_str(cfg, "_class_name", NULL);
+    if (cls) return mx_net_kind_of_class(cls);
+    const mx_json *arch = mx_json_get(cfg, "architectures");
+    for (size_t i = 0; i < mx_json_len(arch); i++) {
+        const mx_net_kind *k = mx_net_kind_of_class(mx_json_str(mx_json_at(arch, i)));
+        if (k) return k;
     }
-    return NULL;
-}
-
-/* "unet", "controlnet", "vae", "text_encoder", or NULL. */
-static const char *network_kind(const mx_json *cfg) {
-    const char *cls = mx_json_get_str(cfg, "_class_name", "");
-    if (!strcmp(cls, "UNet2DConditionModel")) return "unet";
-    if (!strcmp(cls, "ControlNetModel")) return "controlnet";
-    if (!strcmp(cls, "AutoencoderKL")) return "vae";
-    if (!strcmp(cls, "AutoencoderTiny")) return "taesd";
-    if (json_array_has(mx_json_get(cfg, "architectures"), "CLIPTextModel") ||
-        !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model"))
-        return "text_encoder";
-    return NULL;
+    return !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model") ? mx_net_kind_of_class("CLIPTextModel")
+                                                                              : NULL;
 }
 
 /* ---- locating weight files ---- */
@@ -180,7 +178,8 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
 /* ---- adding tensors ---- */
 
 static int lora_targets(const converter *cv, const char *kind) {
-    return cv->o->n_loras > 0 && (!strcmp(kind, "unet") || !strcmp(kind, "text_encoder"));
+    const mx_net_kind *k = mx_net_kind_named(kind);
+    return cv->o->n_loras > 0 && k && k->lora_prefix;
 }
 
 static int add_integer_tensor(converter *cv, const char *name, const mx_safetensors *f, const mx_st_tensor *t,
@@ -273,14 +272,15 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
     char *cfg_text = read_text(cfg_path, st);
     if (!cfg_text) return -1;
     mx_json *cfg = mx_json_parse(cfg_text, strlen(cfg_text), cfg_path, st);
-    const char *kind = cfg ? network_kind(cfg) : NULL;
+    const mx_net_kind *known = cfg ? network_kind(cfg) : NULL;
+    const char *kind = known ? known->name : NULL;
+    char classes[256];
+    mx_net_kind_classes(classes, sizeof classes);
     int rc = 0;
     if (!cfg) rc = -1;
     else if (!kind)
-        rc = mx_fail(st, MX_EINPUT,
-                     "%s: unknown network type (need _class_name UNet2DConditionModel, ControlNetModel, "
-                     "AutoencoderKL, AutoencoderTiny or architectures CLIPTextModel)",
-                     cfg_path);
+        rc = mx_fail(st, MX_EINPUT, "%s: unknown network type (need _class_name or architectures %s)", cfg_path,
+                     classes);
     else if (want_kind && strcmp(kind, want_kind))
         rc = mx_fail(st, MX_EINPUT, "%s: holds a %s, expected a %s", cfg_path, kind, want_kind);
     char resolved_prefix[96];
@@ -346,13 +346,15 @@ static int add_tokenizer(converter *cv, const char *dir, mx_status *st) {
 /* ---- the whole conversion ---- */
 
 static int convert_model_set(converter *cv, const char *root, mx_status *st) {
-    static const char *subs[4] = {"unet", "controlnet", "vae", "text_encoder"};
     char dir[PATH_MAX];
     size_t found = 0;
-    for (int i = 0; i < 4; i++) {
-        if (mx_path_join(dir, sizeof dir, root, subs[i], st)) return -1;
+    for (size_t i = 0; i < mx_net_kind_count; i++) {
+        const char *sub = mx_net_kinds[i].name;
+        if (!mx_net_kinds[i].in_model_set) continue;
+        if (mx_path_join(dir, sizeof dir, root, sub, st)) return -1;
         if (!is_dir(dir)) continue;
-        if (add_network(cv, dir, subs[i], subs[i], st)) return -1;
+        if (cv->o->vae && !strcmp(sub, "vae")) continue; /* replaced by --vae */
+        if (add_network(cv, dir, sub, sub, st)) return -1;
         found++;
     }
     if (mx_path_join(dir, sizeof dir, root, "tokenizer", NULL) == 0 && is_dir(dir)) {
@@ -370,6 +372,53 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
     return 0;
 }
 
+/* ---- single-file checkpoints (single_file.h) ---- */
+
+static int add_single_net(converter *cv, const mx_single_file *sf, const mx_sf_net *n, const char *prefix,
+                          mx_status *st) {
+    char key[128];
+    snprintf(key, sizeof key, "%s.config", prefix);
+    if (mx_wf_writer_meta(cv->w, key, n->config, st)) return -1;
+    for (size_t i = 0; i < n->count; i++) {
+        if (add_tensor(cv, prefix, n->kind, &sf->src, &n->tensors[i], st)) return -1;
+        cv->res.tensors++;
+    }
+    mx_buf_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
+    mx_buf_json_str(&cv->sources, prefix);
+    mx_buf_put(&cv->sources, ", \"files\": [", 12);
+    mx_buf_json_str(&cv->sources, sf->src.path);
+    mx_buf_put(&cv->sources, "]}", 2);
+    cv->res.networks++;
+    mx_info("convert: %s <- %s (%zu tensors, %s)", prefix, sf->src.path, n->count, sf->container);
+    return 0;
+}
+
+/* A single-file checkpoint: its networks under their kinds (the VAE left out when --vae replaces
+ * it), or with only = MX_SF_CONTROLNET_ONLY or MX_SF_VAE_ONLY that one network under `prefix`. The
+ * CLIP vocabulary comes from o->tokenizer. */
+static int add_single_file(converter *cv, const char *path, int only, const char *prefix, mx_status *st) {
+    mx_single_file *sf = calloc(1, sizeof *sf);
+    if (!sf) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    int flags = (cv->o->ema && !only ? MX_SF_EMA : 0) | only;
+    if (only == MX_SF_TAESD ? mx_taesd_files_open(sf, path, st) : mx_sf_open(sf, path, flags, st)) {
+        free(sf);
+        return -1;
+    }
+    cv->singles[cv->n_singles++] = sf;
+    if ((flags & MX_SF_EMA) && !sf->has_ema) return mx_fail(st, MX_EUSAGE, "%s: --ema: the file has no EMA copy", path);
+    int has_clip = 0;
+    for (size_t k = 0; k < sf->n_nets; k++) {
+        const mx_sf_net *n = &sf->nets[k];
+        has_clip |= !strcmp(n->kind, "text_encoder");
+        if (!only && cv->o->vae && !strcmp(n->kind, "vae")) continue;
+        if (add_single_net(cv, sf, n, only ? prefix : n->kind, st)) return -1;
+    }
+    if (sf->skipped) mx_info("convert: %s: %zu entries skipped (e.g. %s)", path, sf->skipped, sf->skipped_example);
+    if (has_clip && cv->o->tokenizer) return add_tokenizer(cv, cv->o->tokenizer, st);
+    if (has_clip) mx_warn("convert: no CLIP vocabulary found: prompts cannot be tokenized with this file");
+    return 0;
+}
+
 static int valid_controlnet_name(const char *s) {
     if (!*s || strlen(s) > 32) return 0;
     for (; *s; s++)
@@ -379,9 +428,11 @@ static int valid_controlnet_name(const char *s) {
 
 static int convert_inputs(converter *cv, mx_status *st) {
     const mx_convert_opts *o = cv->o;
-    if (o->input) {
+    if (o->input && mx_sf_is_file(o->input)) {
+        if (add_single_file(cv, o->input, 0, NULL, st)) return -1;
+    } else if (o->input) {
         char cfg[PATH_MAX];
-        if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder", o->input);
+        if (!is_dir(o->input)) return mx_fail(st, MX_EINPUT, "%s: not a folder or a checkpoint file", o->input);
         if (mx_path_join(cfg, sizeof cfg, o->input, "config.json", st)) return -1;
         if (is_file(cfg) ? add_network(cv, o->input, NULL, NULL, st) : convert_model_set(cv, o->input, st)) return -1;
     }
@@ -390,9 +441,17 @@ static int convert_inputs(converter *cv, mx_status *st) {
         if (!valid_controlnet_name(o->controlnets[i].name))
             return mx_fail(st, MX_EUSAGE, "--controlnet %s: the name must be 1-32 of [a-z0-9_]", o->controlnets[i].name);
         snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
-        if (add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st)) return -1;
+        if (mx_sf_is_file(o->controlnets[i].dir) ? add_single_file(cv, o->controlnets[i].dir, MX_SF_CONTROLNET_ONLY, prefix, st)
+                                                 : add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st))
+            return -1;
     }
-    if (o->taesd && add_network(cv, o->taesd, "taesd", "taesd", st)) return -1;
+    if (o->vae && (mx_sf_is_file(o->vae) ? add_single_file(cv, o->vae, MX_SF_VAE_ONLY, "vae", st)
+                                         : add_network(cv, o->vae, "vae", "vae", st)))
+        return -1;
+    int taesd_files = o->taesd && (mx_sf_is_file(o->taesd) || mx_taesd_files_given(o->taesd));
+    if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
+                                 : add_network(cv, o->taesd, "taesd", "taesd", st)))
+        return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -452,6 +511,10 @@ static void converter_free(converter *cv) {
     for (size_t i = 0; i < cv->n_bufs; i++) free(cv->bufs[i]);
     free(cv->bufs);
     for (size_t k = 0; k < MX_CONVERT_MAX_EXTRA; k++) mx_lora_close(cv->loras[k]);
+    for (size_t k = 0; k < cv->n_singles; k++) {
+        mx_sf_close(cv->singles[k]);
+        free(cv->singles[k]);
+    }
     free(cv->sources.p);
 }
 

@@ -15,16 +15,19 @@
 #define MX_CONVERT_MAX_EXTRA 8
 
 typedef struct mx_convert_opts {
-    const char *input;  /* model-set or network folder; may be NULL when controlnets are given */
+    const char *input;  /* model-set or network folder, or a single-file checkpoint (single_file.h); may be NULL when controlnets are given */
     const char *output; /* the .mxw file, written atomically */
     mx_dtype dtype;     /* for floating tensors with >= 2 dims: MX_F32, MX_F16 or MX_BF16 */
     int prefer_fp16;    /* --variant fp16: read the *.fp16.safetensors files */
     size_t n_controlnets;
     struct {
         const char *name; /* [a-z0-9_]+, gives the prefix "controlnet_<name>." */
-        const char *dir;
+        const char *dir; /* a diffusers folder or a single file (single_file.h) */
     } controlnets[MX_CONVERT_MAX_EXTRA];
     const char *taesd;  /* AutoencoderTiny folder -> taesd.*, or NULL */
+    int ema;            /* single-file checkpoints: take the EMA copy of the UNet */
+    const char *vae;    /* a VAE replacing the model's: a single file (single_file.h) or an AutoencoderKL folder */
+    const char *tokenizer; /* folder with vocab.json + merges.txt for single files (no tokenizer/), or NULL */
     size_t n_loras;
     struct {
         const char *path;

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "networks.h"
 #include "safetensors.h"
 
 typedef struct {
@@ -185,7 +186,8 @@ static lora_module *module_for(const mx_lora *l, const char *net, const char *na
     sprintf(key, "%s.%.*s", net, (int)(n - 7), name);
     lora_module *m = find_module(l, key);
     if (!m) {
-        const char *kp = !strcmp(net, "unet") ? "lora_unet_" : !strcmp(net, "text_encoder") ? "lora_te_" : NULL;
+        const mx_net_kind *k = mx_net_kind_named(net);
+        const char *kp = k ? k->lora_prefix : NULL;
         if (kp) {
             sprintf(key, "%s%.*s", kp, (int)(n - 7), name);
             for (char *p = key + strlen(kp); *p; p++)

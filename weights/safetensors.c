@@ -51,7 +51,8 @@ static int json_uint(const mx_json *j, uint64_t *out) {
     return 0;
 }
 
-static int read_whole_map(mx_safetensors *f, const char *path, mx_status *st) {
+int mx_st_map_file(mx_safetensors *f, const char *path, long long min_len, const char *kind, const char *too_short,
+                   mx_status *st) {
     int fd = open(path, O_RDONLY);
     if (fd < 0) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
     struct stat sb;
@@ -59,10 +60,9 @@ static int read_whole_map(mx_safetensors *f, const char *path, mx_status *st) {
         close(fd);
         return mx_fail(st, MX_EINPUT, "%s: not a regular file", path);
     }
-    if (sb.st_size < 8) {
+    if (sb.st_size < min_len) {
         close(fd);
-        return mx_fail(st, MX_EINPUT, "%s: not a safetensors file (%lld bytes, header length needs 8)", path,
-                       (long long)sb.st_size);
+        return mx_fail(st, MX_EINPUT, "%s: not a %s (%lld bytes, %s)", path, kind, (long long)sb.st_size, too_short);
     }
     void *m = mmap(NULL, (size_t)sb.st_size, PROT_READ, MAP_PRIVATE, fd, 0);
     close(fd);
@@ -230,7 +230,7 @@ int mx_st_open(mx_safetensors *f, const char *path, mx_status *st) {
     memset(f, 0, sizeof *f);
     f->path = strdup(path);
     if (!f->path) return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
-    if (read_whole_map(f, path, st) || parse_header(f, st)) {
+    if (mx_st_map_file(f, path, 8, "safetensors file", "header length needs 8", st) || parse_header(f, st)) {
         mx_st_close(f);
         return -1;
     }
@@ -246,6 +246,8 @@ void mx_st_close(mx_safetensors *f) {
     free(f->path);
     memset(f, 0, sizeof *f);
 }
+
+void mx_st_sort(mx_safetensors *f) { qsort(f->tensors, f->count, sizeof *f->tensors, cmp_tensor_name); }
 
 const mx_st_tensor *mx_st_find(const mx_safetensors *f, const char *name) {
     size_t lo = 0, hi = f->count;

@@ -32,8 +32,14 @@ typedef struct mx_safetensors {
 } mx_safetensors;
 
 int mx_st_open(mx_safetensors *f, const char *path, mx_status *st);
+/* Maps the whole of PATH read-only into f->map / f->map_len (closed by mx_st_close); a file shorter
+ * than min_len is "not a KIND (N bytes, TOO_SHORT)". */
+int mx_st_map_file(mx_safetensors *f, const char *path, long long min_len, const char *kind, const char *too_short,
+                   mx_status *st);
 void mx_st_close(mx_safetensors *f);
 const mx_st_tensor *mx_st_find(const mx_safetensors *f, const char *name);
+/* Sorts the tensors by name again (after a caller renamed them), as mx_st_find needs. */
+void mx_st_sort(mx_safetensors *f);
 /* Copies a floating tensor (F32/F16/BF16/F64) into a new malloc'ed fp32 array; I64/I32 are
  * converted to float too. Returns NULL with an error naming file and tensor. */
 float *mx_st_to_f32(const mx_safetensors *f, const mx_st_tensor *t, mx_status *st);

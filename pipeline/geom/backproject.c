@@ -19,7 +19,13 @@ typedef struct bp_scratch {
     int32_t *counts;          /* [nchunks][nbins] then write offsets */
     int32_t *bin_start;       /* [nbins + 1] */
     struct splat_rec *recs;   /* records grouped by bin, in pixel order */
-    float *view_q;            /* [nlayers][h][w] this view's best |n.v| per texel */
+    float *view_w;            /* [nlayers][h][w] this view's splat weight per texel */
+    float *view_wc;           /* [nlayers][h][w][3] this view's sum(w colour) */
+    float *view_q;            /* [nlayers][h][w] this view's best |n.v| */
+    uint8_t *reach;           /* [nlayers][h][w] 1: the view reaches the texel with a full share */
+    uint8_t *near_row, *near_col; /* [nlayers][h][w] reach within HOLE_TEXELS along the row / column */
+    uint8_t *hole;            /* [nlayers][h][w] 1: an aliasing hole of this view, filled from its neighbours */
+    uint8_t *claim;           /* [nlayers][h][w] this view's raw claim on known texels, 0..255 */
     struct splat_rec *staged; /* [image pixels]: chunk c's records from its first pixel on */
     int32_t *nstaged;         /* [nchunks] */
 } bp_scratch;
@@ -52,7 +58,14 @@ void mx_bake_free(mx_bake *b) {
         free(s->counts);
         free(s->bin_start);
         free(s->recs);
+        free(s->view_w);
+        free(s->view_wc);
         free(s->view_q);
+        free(s->reach);
+        free(s->near_row);
+        free(s->near_col);
+        free(s->hole);
+        free(s->claim);
         free(s->staged);
         free(s->nstaged);
         free(s);
@@ -209,70 +222,256 @@ static int splat_texels(const splat_rec *sp, int w, int h, int r0, int r1, size_
     return n;
 }
 
-/* Better-angle overwrite: texels this view sees clearly better than their writers are
- * restarted (sums cleared, out of T^B) before the splat. */
-static void restart_better_texels(bp_job *j, size_t plane, int r0, int r1, int32_t k0, int32_t k1) {
-    mx_bake *b = j->b;
-    float *vq = j->s->view_q;
-    for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++) vq[t] = 0;
-    for (int32_t k = k0; k < k1; k++) {
-        const splat_rec *r = &j->s->recs[k];
-        size_t tex[4];
-        float wt[4];
-        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
-        for (int e = 0; e < n; e++)
-            if (r->q > vq[plane + tex[e]]) vq[plane + tex[e]] = r->q;
-    }
-    for (size_t t = plane + (size_t)r0 * b->w; t < plane + (size_t)r1 * b->w; t++)
-        if (b->known[t] && vq[t] > b->quality[t] + b->overwrite_margin) {
-            b->known[t] = 0;
-            b->sum_w[t] = 0;
-            b->sum_wc[3 * t] = b->sum_wc[3 * t + 1] = b->sum_wc[3 * t + 2] = 0;
-            b->quality[t] = 0;
-        }
-}
+/* Each view is first splatted into its own accumulators (view_w, view_wc, view_q), then merged
+ * into the bake texel by texel (issue 24 item 2: no screen-door stipple where views overlap):
+ * - aliasing holes: where the view's pixels are coarser than the texels (a surface seen at a
+ *   slant, or a texture finer than the render), bilinear splats leave single texels with no or
+ *   little weight inside the view's footprint (runs of up to 2-3 texels at the slant the frontal
+ *   filter allows); they would be painted by a later view, its texels in a grid over this
+ *   one. A texel without a full share (weight <= eps) surrounded by texels that have one
+ *   (within HOLE_TEXELS on its left, right, above and below) takes their mean (weights and
+ *   colours), as if splatted by them;
+ * - texels not in T^B take the view's splat (added to what they had);
+ * - texels in T^B (angle-aware, MX_BACKPROJECT_OVERWRITE) blend towards the view by its claim:
+ *   the claim rises from 0 to 1 as the view's |n.v| exceeds the texel's quality by
+ *   overwrite_margin -/+ CLAIM_RAMP / 2, and is then averaged over the texels the view reaches
+ *   within FEATHER_TEXELS, so the source of a texel changes over a feathered border instead of
+ *   texel by texel (an isolated claim is averaged away, as is an isolated refusal); a texel
+ *   between the view's pixels takes their mean colour. The texel keeps its weight: only its
+ *   colour and quality move. */
+#define CLAIM_RAMP 0.1f
+#define FEATHER_TEXELS 2
+#define HOLE_TEXELS 3
 
-/* Adds one texel's share of a splat (skipping texels in T^B before this view, which were
- * written by an earlier view). */
-static inline void splat_texel(mx_bake *b, size_t plane, size_t t, float wt, const splat_rec *r) {
-    t += plane;
-    if (wt <= 0 || b->known[t]) return;
-    b->sum_w[t] += wt;
-    b->sum_wc[3 * t] += wt * r->col[0];
-    b->sum_wc[3 * t + 1] += wt * r->col[1];
-    b->sum_wc[3 * t + 2] += wt * r->col[2];
-    if (r->q > b->quality[t]) b->quality[t] = r->q;
-}
-
-static void splat_band_task(void *ctx, int task, int thread) {
+/* Pass 1, one bin: the view's splats of its rows, in pixel order; reach[t] = the view reaches
+ * texel t with a full share (weight > eps). */
+static void splat_view_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
     mx_bake *b = j->b;
+    bp_scratch *s = j->s;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    size_t plane = (size_t)layer * b->w * b->h, t0 = plane + (size_t)r0 * b->w, t1 = plane + (size_t)r1 * b->w;
+    int32_t k0 = s->bin_start[task], k1 = s->bin_start[task + 1];
+    if (k0 == k1) { /* the accumulators of an empty bin are never read (reach is 0, bin_empty) */
+        memset(s->reach + t0, 0, t1 - t0);
+        return;
+    }
+    memset(s->view_w + t0, 0, (t1 - t0) * sizeof *s->view_w);
+    memset(s->view_wc + 3 * t0, 0, 3 * (t1 - t0) * sizeof *s->view_wc);
+    memset(s->view_q + t0, 0, (t1 - t0) * sizeof *s->view_q);
+    for (int32_t k = k0; k < k1; k++) {
+        const splat_rec *r = &s->recs[k];
+        size_t tex[4];
+        float wt[4];
+        int n = splat_texels(r, b->w, b->h, r0, r1, tex, wt);
+        for (int e = 0; e < n; e++) {
+            size_t t = plane + tex[e];
+            s->view_w[t] += wt[e];
+            s->view_wc[3 * t] += wt[e] * r->col[0];
+            s->view_wc[3 * t + 1] += wt[e] * r->col[1];
+            s->view_wc[3 * t + 2] += wt[e] * r->col[2];
+            if (r->q > s->view_q[t]) s->view_q[t] = r->q;
+        }
+    }
+    for (size_t t = t0; t < t1; t++) s->reach[t] = s->view_w[t] > b->eps;
+}
+
+static int bin_empty(const bp_job *j, int layer, int y) {
+    int bin = layer * j->nbands + y / BAND_ROWS;
+    return j->s->bin_start[bin] == j->s->bin_start[bin + 1];
+}
+
+/* Pass 2, one bin: near_row[t] / near_col[t] = some texel within HOLE_TEXELS along the row /
+ * the column of t is reached (separable, so the hole test reads 12 bytes, not a window). */
+static void mark_near_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    const mx_bake *b = j->b;
+    bp_scratch *s = j->s;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    const uint8_t *reach = s->reach + (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            uint8_t row = 0, col = 0;
+            for (int d = -HOLE_TEXELS; d <= HOLE_TEXELS; d++) {
+                if (x + d >= 0 && x + d < b->w) row |= reach[(size_t)y * b->w + x + d];
+                if (y + d >= 0 && y + d < b->h) col |= reach[(size_t)(y + d) * b->w + x];
+            }
+            s->near_row[(size_t)layer * b->w * b->h + (size_t)y * b->w + x] = row;
+            s->near_col[(size_t)layer * b->w * b->h + (size_t)y * b->w + x] = col;
+        }
+}
+
+/* Some texel of `near` (near_col or near_row of a layer) at 1..HOLE_TEXELS steps (dx, dy) from
+ * (x, y) is set. */
+static int near_towards(const mx_bake *b, const uint8_t *near, int x, int y, int dx, int dy) {
+    for (int k = 1; k <= HOLE_TEXELS; k++) {
+        int u = x + k * dx, v = y + k * dy;
+        if (u >= 0 && v >= 0 && u < b->w && v < b->h && near[(size_t)v * b->w + u]) return 1;
+    }
+    return 0;
+}
+
+/* Pass 3, one bin: marks the aliasing holes: texels not reached that have reached texels within
+ * HOLE_TEXELS on their left and on their right, above and below (surrounded; a texel beside a
+ * straight border of the footprint is not). 0 in an empty bin. */
+static void mark_holes_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
     int layer = task / j->nbands, band = task % j->nbands;
     int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
     size_t plane = (size_t)layer * b->w * b->h;
-    int32_t k0 = j->s->bin_start[task], k1 = j->s->bin_start[task + 1];
-    if (k0 == k1) return;
-    if (j->flags & MX_BACKPROJECT_OVERWRITE) restart_better_texels(j, plane, r0, r1, k0, k1);
-    /* the texels in the order of splat_texels: row y0 (x0, x1), then row y1 (x0, x1) */
-    for (int32_t k = k0; k < k1; k++) {
-        const splat_rec *r = &j->s->recs[k];
-        int x0 = r->x0, x1 = x0 + 1 == b->w ? 0 : x0 + 1;
-        int y0 = r->y0, y1 = y0 + 1 == b->h ? 0 : y0 + 1;
-        float wy0 = 1 - r->fy, wx0 = 1 - r->fx;
-        if (y0 >= r0 && y0 < r1) {
-            splat_texel(b, plane, (size_t)y0 * b->w + x0, wy0 * wx0, r);
-            splat_texel(b, plane, (size_t)y0 * b->w + x1, wy0 * r->fx, r);
+    const uint8_t *reach = s->reach + plane, *row = s->near_row + plane, *col = s->near_col + plane;
+    uint8_t *hole = s->hole + plane;
+    int empty = bin_empty(j, layer, r0);
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            size_t t = (size_t)y * b->w + x;
+            hole[t] = (uint8_t)(!empty && !reach[t] && near_towards(b, col, x, y, -1, 0) &&
+                                near_towards(b, col, x, y, 1, 0) && near_towards(b, row, x, y, 0, -1) &&
+                                near_towards(b, row, x, y, 0, 1));
         }
-        if (y1 >= r0 && y1 < r1) {
-            splat_texel(b, plane, (size_t)y1 * b->w + x0, r->fy * wx0, r);
-            splat_texel(b, plane, (size_t)y1 * b->w + x1, r->fy * r->fx, r);
+}
+
+/* The view has a splat at (x, y): it reaches the texel (reach, pass 1) or, after pass 4, fills
+ * it as a hole. */
+static int reached(const bp_job *j, int layer, int x, int y, int with_holes) {
+    const mx_bake *b = j->b;
+    if (x < 0 || y < 0 || x >= b->w || y >= b->h) return 0;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    return j->s->reach[t] || (with_holes && j->s->hole[t]);
+}
+
+/* The raw claim (0..255) of the view on a texel from its best |n.v| there. */
+static uint8_t texel_claim(const bp_job *j, size_t t) {
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    if (!(j->flags & MX_BACKPROJECT_OVERWRITE) || !b->known[t] || !(s->view_w[t] > b->eps)) return 0;
+    float gain = s->view_q[t] - b->quality[t];
+    float c = (gain - (b->overwrite_margin - 0.5f * CLAIM_RAMP)) / CLAIM_RAMP;
+    c = c < 0 ? 0 : c > 1 ? 1 : c;
+    return (uint8_t)lroundf(255.0f * c);
+}
+
+/* The view's splats summed over the texels within `radius` of (x, y) that it reaches (holes
+ * excluded with `solid`, in pass 4): weights, colours, the best |n.v|, their count and (not
+ * `solid`, pass 5) their raw claims. */
+typedef struct window_sum {
+    float w, wc[3], q;
+    int claim, n;
+} window_sum;
+
+static window_sum sum_window(const bp_job *j, int layer, int x, int y, int radius, int solid) {
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    size_t plane = (size_t)layer * b->w * b->h;
+    window_sum a = {.w = 0};
+    for (int v = y - radius; v <= y + radius; v++)
+        for (int u = x - radius; u <= x + radius; u++) {
+            if (!reached(j, layer, u, v, !solid)) continue;
+            size_t o = plane + (size_t)v * b->w + u;
+            a.w += s->view_w[o];
+            for (int c = 0; c < 3; c++) a.wc[c] += s->view_wc[3 * o + c];
+            if (s->view_q[o] > a.q) a.q = s->view_q[o];
+            if (!solid) a.claim += s->claim[o]; /* pass 4 writes the claims while filling holes */
+            a.n++;
         }
+    return a;
+}
+
+/* A hole takes the mean of the reached texels within HOLE_TEXELS (weights, colours; the best
+ * |n.v| among them): as if their pixels had splatted into it. Other holes, filled in the same
+ * pass, are not read. */
+static void fill_hole(const bp_job *j, int layer, int x, int y) {
+    const mx_bake *b = j->b;
+    bp_scratch *s = j->s;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    window_sum a = sum_window(j, layer, x, y, HOLE_TEXELS, 1);
+    s->view_w[t] = a.w / (float)a.n;
+    for (int c = 0; c < 3; c++) s->view_wc[3 * t + c] = a.wc[c] / (float)a.n;
+    s->view_q[t] = a.q;
+}
+
+/* Pass 4, one bin: fills the holes from the reached texels around (not holes, so not written
+ * in this pass), then the raw claims. */
+static void fill_holes_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    const mx_bake *b = j->b;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    if (bin_empty(j, layer, r0)) return;
+    size_t plane = (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            size_t t = plane + (size_t)y * b->w + x;
+            if (j->s->hole[t]) fill_hole(j, layer, x, y);
+            j->s->claim[t] = texel_claim(j, t);
+        }
+}
+
+/* What the view offers a texel in T^B, from the reached texels within FEATHER_TEXELS: the mean
+ * of their claims (the feathered claim), and the colour and |n.v| of the texel's own splat, or
+ * of their mean where the view does not reach the texel itself (its pixels sparser than the
+ * texels). Returns the claim, 0 when there is nothing to take. */
+static float texel_offer(const bp_job *j, int layer, int x, int y, float col[3], float *q) {
+    const mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    size_t t = (size_t)layer * b->w * b->h + (size_t)y * b->w + x;
+    window_sum a = sum_window(j, layer, x, y, FEATHER_TEXELS, 0);
+    if (a.n == 0 || a.claim == 0) return 0.0f;
+    if (reached(j, layer, x, y, 1)) {
+        a.w = s->view_w[t];
+        for (int c = 0; c < 3; c++) a.wc[c] = s->view_wc[3 * t + c];
+        a.q = s->view_q[t];
     }
-    uint8_t *known = b->known + plane;
-    const float *sw = b->sum_w + plane;
-    for (size_t t = (size_t)r0 * b->w; t < (size_t)r1 * b->w; t++)
-        known[t] = (uint8_t)(known[t] | (sw[t] > b->eps));
+    for (int c = 0; c < 3; c++) col[c] = a.wc[c] / a.w;
+    *q = a.q;
+    return (float)a.claim / (255.0f * (float)a.n);
+}
+
+/* A texel in T^B moves towards the view's colour and |n.v| by `a`. */
+static void blend_texel(mx_bake *b, size_t t, float a, const float col[3], float q) {
+    for (int c = 0; c < 3; c++)
+        b->sum_wc[3 * t + c] += a * (col[c] * b->sum_w[t] - b->sum_wc[3 * t + c]);
+    b->quality[t] += a * (q - b->quality[t]);
+}
+
+/* A texel not in T^B takes the view's splat. */
+static void add_texel(mx_bake *b, const bp_scratch *s, size_t t) {
+    float w = s->view_w[t];
+    b->sum_w[t] += w;
+    for (int c = 0; c < 3; c++) b->sum_wc[3 * t + c] += s->view_wc[3 * t + c];
+    if (s->view_q[t] > b->quality[t]) b->quality[t] = s->view_q[t];
+    b->known[t] = b->sum_w[t] > b->eps;
+}
+
+/* Pass 5, one bin: the merge. */
+static void merge_view_task(void *ctx, int task, int thread) {
+    (void)thread;
+    bp_job *j = ctx;
+    mx_bake *b = j->b;
+    const bp_scratch *s = j->s;
+    int layer = task / j->nbands, band = task % j->nbands;
+    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    if (bin_empty(j, layer, r0)) return;
+    size_t plane = (size_t)layer * b->w * b->h;
+    for (int y = r0; y < r1; y++)
+        for (int x = 0; x < b->w; x++) {
+            size_t t = plane + (size_t)y * b->w + x;
+            if (!b->known[t]) {
+                if (s->view_w[t] > 0) add_texel(b, s, t);
+                continue;
+            }
+            if (!(j->flags & MX_BACKPROJECT_OVERWRITE)) continue;
+            float col[3], q, a = texel_offer(j, layer, x, y, col, &q);
+            if (a > 0) blend_texel(b, t, a, col, q);
+        }
 }
 
 static int reserve(bp_job *j, mx_status *st) {
@@ -290,10 +489,26 @@ static int reserve(bp_job *j, mx_status *st) {
         s->bin_start = malloc(((size_t)j->nbins + 1) * sizeof *s->bin_start);
         s->bin_cap = s->bin_start ? (size_t)j->nbins + 1 : 0;
     }
-    if ((j->flags & MX_BACKPROJECT_OVERWRITE) && need_q > s->q_cap) {
+    if (need_q > s->q_cap) {
+        free(s->view_w);
+        free(s->view_wc);
         free(s->view_q);
+        free(s->reach);
+        free(s->near_row);
+        free(s->near_col);
+        free(s->hole);
+        free(s->claim);
+        s->view_w = malloc(need_q * sizeof *s->view_w);
+        s->view_wc = malloc(3 * need_q * sizeof *s->view_wc);
         s->view_q = malloc(need_q * sizeof *s->view_q);
-        s->q_cap = s->view_q ? need_q : 0;
+        s->reach = malloc(need_q);
+        s->near_row = malloc(need_q);
+        s->near_col = malloc(need_q);
+        s->hole = malloc(need_q);
+        s->claim = malloc(need_q);
+        s->q_cap = s->view_w && s->view_wc && s->view_q && s->reach && s->near_row && s->near_col && s->hole && s->claim
+                       ? need_q
+                       : 0;
     }
     if (npix > s->staged_cap) {
         free(s->staged);
@@ -305,8 +520,7 @@ static int reserve(bp_job *j, mx_status *st) {
         s->nstaged = malloc((size_t)j->nchunks * sizeof *s->nstaged);
         s->nstaged_cap = s->nstaged ? (size_t)j->nchunks : 0;
     }
-    if (!s->counts || !s->bin_start || !s->staged || !s->nstaged ||
-        ((j->flags & MX_BACKPROJECT_OVERWRITE) && !s->view_q))
+    if (!s->counts || !s->bin_start || !s->staged || !s->nstaged || !s->q_cap)
         return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     return 0;
 }
@@ -342,7 +556,11 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
         if (!j.s->recs) return mx_fail(st, MX_ENOMEM, "backprojection: out of memory");
     }
     mx_pool_for(pool, j.nchunks, fill_task, &j);
-    mx_pool_for(pool, j.nbins, splat_band_task, &j);
+    mx_pool_for(pool, j.nbins, splat_view_task, &j);
+    mx_pool_for(pool, j.nbins, mark_near_task, &j);
+    mx_pool_for(pool, j.nbins, mark_holes_task, &j);
+    mx_pool_for(pool, j.nbins, fill_holes_task, &j);
+    mx_pool_for(pool, j.nbins, merge_view_task, &j);
     return 0;
 }
 

@@ -1,10 +1,12 @@
 /* Fast backprojection (paper §3.5): every visible, unmasked pixel of a view is bilinearly
  * splatted into the 4 texels around its UV; texels accumulate sum(w * colour) and sum(w).
  * The texture is T = sum(w c) / sum(w), and T^B (`known`) marks texels with sum(w) > eps.
- * A view writes only texels that were not in T^B before it (MX_BACKPROJECT_OVERWRITE also
- * lets it restart texels it sees at a clearly better angle than the views that wrote them:
- * |n.v| higher by overwrite_margin = 0.15, the angle-aware policy of `matex texture` and
- * `matex transfer`; |n.v| from the face normals).
+ * A view writes texels that were not in T^B before it; its aliasing holes (texels between its
+ * pixels) take the mean of the texels around (backproject.c). MX_BACKPROJECT_OVERWRITE also
+ * lets it repaint texels it sees at a clearly better angle than the views that wrote them
+ * (|n.v| higher by overwrite_margin = 0.15, from the face normals; the angle-aware policy of
+ * `matex texture` and `matex transfer`), blended over a feathered border so that the source
+ * of the texels changes smoothly, never one isolated texel of a view inside another's region.
  *
  * Meshes whose materials keep their own UV sets get one layer per material (nlayers =
  * max(1, nmat)); a pixel goes to the layer of its face's material.
@@ -31,7 +33,7 @@ enum { MX_BACKPROJECT_OVERWRITE = 1 };
 typedef struct mx_bake {
     int w, h, nlayers;
     float eps;       /* T^B threshold on sum(w); MX_BAKE_KNOWN_WEIGHT by default */
-    float overwrite_margin; /* |n.v| gain needed to restart a texel (OVERWRITE); 0.15 */
+    float overwrite_margin; /* |n.v| gain at which a view takes half of a texel (OVERWRITE); 0.15 */
     float *sum_wc;   /* [nlayers][h][w][3] */
     float *sum_w;    /* [nlayers][h][w] */
     uint8_t *known;  /* [nlayers][h][w] T^B */
@@ -51,7 +53,7 @@ int mx_backproject(mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const mx_
                    const uint8_t *mask, int flags, mx_pool *pool, mx_status *st);
 
 /* T^B as the view in gb would leave it open for painting: out = b->known without the texels
- * that mx_backproject with MX_BACKPROJECT_OVERWRITE would restart for this view (its |n.v|
+ * that mx_backproject with MX_BACKPROJECT_OVERWRITE would mostly repaint for this view (its |n.v|
  * at a pixel over the texel exceeds the texel's quality by overwrite_margin; nearest texel of
  * each pixel where mask != 0, NULL: every foreground pixel). out has b's size. */
 void mx_bake_open_texels(const mx_bake *b, const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *mask,

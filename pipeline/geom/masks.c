@@ -131,10 +131,6 @@ void mx_mask_and_not(const uint8_t *a, const uint8_t *b, uint8_t *dst, int64_t n
     for (int64_t i = 0; i < n; i++) dst[i] = a[i] && !b[i];
 }
 
-void mx_mask_and(const uint8_t *a, const uint8_t *b, uint8_t *dst, int64_t n) {
-    for (int64_t i = 0; i < n; i++) dst[i] = a[i] && b[i];
-}
-
 int64_t mx_mask_count(const uint8_t *mask, int64_t n) {
     int64_t c = 0;
     for (int64_t i = 0; i < n; i++) c += mask[i] != 0;

@@ -40,8 +40,6 @@ void mx_mask_inpaint(const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *allo
 
 /* dst = a & ~b (pixelwise), n pixels. */
 void mx_mask_and_not(const uint8_t *a, const uint8_t *b, uint8_t *dst, int64_t n);
-/* dst = a & b. */
-void mx_mask_and(const uint8_t *a, const uint8_t *b, uint8_t *dst, int64_t n);
 /* Number of set pixels. */
 int64_t mx_mask_count(const uint8_t *mask, int64_t n);
 

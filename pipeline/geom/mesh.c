@@ -9,6 +9,7 @@
 
 #include "../../runtime/log.h"
 #include "../io/io.h"
+#include "filekind.h"
 #include "gltf.h"
 #include "image.h"
 
@@ -47,6 +48,8 @@ static int has_ext(const char *path, const char *ext) {
 }
 
 int mx_mesh_load(const char *path, mx_mesh *m, mx_status *st) {
+    memset(m, 0, sizeof *m);
+    if (mx_mesh_check_file(path, st)) return -1;
     int rc = has_ext(path, "gltf") || has_ext(path, "glb") ? mx_gltf_load(path, m, st) : mx_io_read_mesh(path, m, st);
     if (rc) return -1;
     if (mx_mesh_validate(m, st)) {
@@ -103,9 +106,13 @@ int mx_mesh_validate(const mx_mesh *m, mx_status *st) {
     const char *src = m->source_path[0] ? m->source_path : "mesh";
     if (m->nverts <= 0 || m->nfaces <= 0 || !m->pos || !m->faces)
         return mx_fail(st, MX_EINPUT, "%s: empty mesh (%d vertices, %d faces)", src, m->nverts, m->nfaces);
-    for (size_t i = 0; i < (size_t)m->nverts * 3; i++)
+    for (size_t i = 0; i < (size_t)m->nverts * 3; i++) {
         if (!isfinite(m->pos[i]))
-            return mx_fail(st, MX_EINPUT, "%s: vertex %zu has a NaN or infinite coordinate", src, i / 3);
+            return mx_fail(st, MX_EINPUT, "%s: vertex %zu has a non-finite coordinate", src, i / 3);
+        if (fabsf(m->pos[i]) > MX_MESH_MAX_COORD)
+            return mx_fail(st, MX_EINPUT, "%s: vertex %zu: coordinate out of range (%g; at most %g in magnitude)", src,
+                           i / 3, (double)m->pos[i], MX_MESH_MAX_COORD);
+    }
     if (check_index_list(m, m->faces, m->nverts, 0, "vertex", st)) return -1;
     if (m->face_uv && (!m->uv || check_index_list(m, m->face_uv, m->nuv, 1, "uv", st))) {
         if (!m->uv) return mx_fail(st, MX_EINPUT, "%s: face UV indices without UVs", src);
@@ -217,18 +224,6 @@ int mx_mesh_face_normals(const mx_mesh *m, const float *pos, float **nrm_out, mx
 /* ---- topology ---- */
 
 typedef struct {
-    int32_t a, b; /* a < b */
-    int32_t face;
-} edge_rec;
-
-static int cmp_edge(const void *x, const void *y) {
-    const edge_rec *e = x, *f = y;
-    if (e->a != f->a) return e->a < f->a ? -1 : 1;
-    if (e->b != f->b) return e->b < f->b ? -1 : 1;
-    return (e->face > f->face) - (e->face < f->face);
-}
-
-typedef struct {
     int32_t v;
     uint32_t key[3];
 } weld_rec;
@@ -240,25 +235,61 @@ static int cmp_weld(const void *x, const void *y) {
     return (e->v > f->v) - (e->v < f->v);
 }
 
-/* canon[v] = smallest vertex index with bit-identical position (or v itself without weld). */
-static int weld_map(const mx_mesh *m, int weld, int32_t *canon, mx_status *st);
-
-int mx_mesh_weld_map(const mx_mesh *m, int32_t *canon, mx_status *st) { return weld_map(m, 1, canon, st); }
-
-static int weld_map(const mx_mesh *m, int weld, int32_t *canon, mx_status *st) {
+static int identity_map(const mx_mesh *m, int32_t *canon) {
     for (int v = 0; v < m->nverts; v++) canon[v] = v;
-    if (!weld) return 0;
+    return 0;
+}
+
+/* The bits of a coordinate with -0 made +0, so that equal keys are equal values (positions are
+ * finite: mx_mesh_validate). */
+static uint32_t weld_key(float x) {
+    float z = x + 0.0f; /* -0 + 0 = +0; every other value unchanged */
+    uint32_t k;
+    memcpy(&k, &z, sizeof k);
+    return k;
+}
+
+int mx_mesh_weld_map(const mx_mesh *m, int32_t *canon, mx_status *st) {
+    identity_map(m, canon);
     weld_rec *w = malloc((size_t)m->nverts * sizeof *w + 1);
     if (!w) return mx_fail(st, MX_ENOMEM, "%s: out of memory welding vertices", m->source_path);
     for (int v = 0; v < m->nverts; v++) {
         w[v].v = v;
-        memcpy(w[v].key, m->pos + 3 * (size_t)v, sizeof w[v].key);
+        for (int k = 0; k < 3; k++) w[v].key[k] = weld_key(m->pos[3 * (size_t)v + k]);
     }
     qsort(w, (size_t)m->nverts, sizeof *w, cmp_weld);
     for (int i = 1; i < m->nverts; i++)
         if (!memcmp(w[i].key, w[i - 1].key, sizeof w[i].key)) canon[w[i].v] = canon[w[i - 1].v];
     free(w);
     return 0;
+}
+
+static int cmp_edge(const void *x, const void *y) {
+    const mx_mesh_edge *e = x, *f = y;
+    if (e->lo != f->lo) return e->lo < f->lo ? -1 : 1;
+    if (e->hi != f->hi) return e->hi < f->hi ? -1 : 1;
+    return (e->corner > f->corner) - (e->corner < f->corner);
+}
+
+int mx_mesh_sorted_edges(const mx_mesh *m, const int32_t *canon, mx_mesh_edge **out, size_t *n, mx_status *st) {
+    size_t nc = 3 * (size_t)m->nfaces, ne = 0;
+    mx_mesh_edge *e = malloc(nc * sizeof *e + 1);
+    if (!e) return mx_fail(st, MX_ENOMEM, "%s: out of memory for edge connectivity", m->source_path);
+    for (size_t c = 0; c < nc; c++) {
+        int32_t a = canon[m->faces[c]], b = canon[m->faces[c % 3 == 2 ? c - 2 : c + 1]];
+        if (a == b) continue; /* collapsed edge of a degenerate face */
+        e[ne++] = (mx_mesh_edge){.lo = a < b ? a : b, .hi = a < b ? b : a, .corner = (int32_t)c};
+    }
+    qsort(e, ne, sizeof *e, cmp_edge);
+    *out = e;
+    *n = ne;
+    return 0;
+}
+
+size_t mx_mesh_edge_run(const mx_mesh_edge *e, size_t n, size_t i) {
+    size_t j = i + 1;
+    while (j < n && e[j].lo == e[i].lo && e[j].hi == e[i].hi) j++;
+    return j;
 }
 
 static int32_t uf_find(int32_t *parent, int32_t x) {
@@ -285,10 +316,9 @@ static int is_degenerate(const mx_mesh *m, const int32_t *canon, int f) {
 }
 
 /* Counts edges, boundary (one face) and non-manifold (more than two faces) edges. */
-static void count_edges(const edge_rec *e, size_t ne, mx_mesh_topology *t) {
+static void count_edges(const mx_mesh_edge *e, size_t ne, mx_mesh_topology *t) {
     for (size_t i = 0; i < ne;) {
-        size_t j = i + 1;
-        while (j < ne && e[j].a == e[i].a && e[j].b == e[i].b) j++;
+        size_t j = mx_mesh_edge_run(e, ne, i);
         t->edges++;
         if (j - i == 1) t->boundary_edges++;
         if (j - i > 2) t->nonmanifold_edges++;
@@ -319,23 +349,17 @@ int mx_mesh_topology_compute(const mx_mesh *m, int weld, mx_mesh_topology *t, in
     int32_t *canon = malloc(nv * sizeof *canon + 1);
     int32_t *parent = malloc(nv * sizeof *parent + 1);
     int32_t *comp_of_root = malloc(nv * sizeof *comp_of_root + 1);
-    edge_rec *e = malloc(nf * 3 * sizeof *e + 1);
+    mx_mesh_edge *e = NULL;
+    size_t ne = 0;
     int rc = -1;
-    if (!canon || !parent || !comp_of_root || !e) {
+    if (!canon || !parent || !comp_of_root) {
         mx_fail(st, MX_ENOMEM, "%s: out of memory for edge connectivity", m->source_path);
         goto done;
     }
-    if (weld_map(m, weld, canon, st)) goto done;
-    size_t ne = 0;
-    for (size_t f = 0; f < nf; f++) {
+    if (weld ? mx_mesh_weld_map(m, canon, st) : identity_map(m, canon)) goto done;
+    for (size_t f = 0; f < nf; f++)
         if (is_degenerate(m, canon, (int)f)) t->degenerate_faces++;
-        for (int k = 0; k < 3; k++) {
-            int32_t a = canon[m->faces[3 * f + k]], b = canon[m->faces[3 * f + (k + 1) % 3]];
-            if (a == b) continue; /* collapsed edge of a degenerate face */
-            e[ne++] = (edge_rec){a < b ? a : b, a < b ? b : a, (int32_t)f};
-        }
-    }
-    qsort(e, ne, sizeof *e, cmp_edge);
+    if (mx_mesh_sorted_edges(m, canon, &e, &ne, st)) goto done;
     count_edges(e, ne, t);
     t->watertight = t->boundary_edges == 0 && t->nonmanifold_edges == 0;
     t->components = label_components(m, canon, parent, comp_of_root, face_comp);

@@ -24,8 +24,13 @@ int mx_mesh_load(const char *path, mx_mesh *m, mx_status *st);
  * glTF (buffer view or data: URI). Free each with mx_image_free. */
 int mx_mesh_load_textures(const mx_mesh *m, struct mx_image *tex, mx_status *st);
 
-/* Empty mesh, NaN/Inf positions, vertex/UV/normal/material indices out of range -> error
- * naming m->source_path. UV index -1 (a face without vt in an OBJ) is allowed. */
+/* Positions beyond this magnitude are refused: the bounding box, normals and areas of the
+ * geometry stages square and sum coordinates in float (3e38 overflowed into an atlas of
+ * infinite size). 1e15 is far beyond any real unit (a light-day is 2.6e13 m). */
+#define MX_MESH_MAX_COORD 1e15
+
+/* Empty mesh, NaN/Inf or out-of-range positions, vertex/UV/normal/material indices out of
+ * range -> error naming m->source_path. UV index -1 (a face without vt in an OBJ) is allowed. */
 int mx_mesh_validate(const mx_mesh *m, mx_status *st);
 
 /* Up axis of the input: y (glTF/OBJ default) or z (CAD, scans). Rendering works y-up. */
@@ -49,9 +54,22 @@ int mx_mesh_placed(const mx_mesh *m, mx_up_axis up, const float center[3], float
  * (m->pos or a normalised copy); zero vector for a degenerate face. */
 int mx_mesh_face_normals(const mx_mesh *m, const float *pos, float **nrm_out, mx_status *st);
 
-/* canon[v] (nverts entries) = the smallest vertex index with a bit-identical position: the
- * vertices glTF and OBJ files duplicate along UV seams become one. */
+/* canon[v] (nverts entries) = the smallest vertex index with an equal position (-0 = +0): the
+ * vertices glTF and OBJ files duplicate along UV seams, and triangle soups, become one. */
 int mx_mesh_weld_map(const mx_mesh *m, int32_t *canon, mx_status *st);
+
+/* One face edge between vertex ids lo < hi (after canon); corner = 3 * face + k: the edge from
+ * the face's corner k to corner k + 1 (mod 3). */
+typedef struct mx_mesh_edge {
+    int32_t lo, hi, corner;
+} mx_mesh_edge;
+
+/* The edge adjacency of every face, under canon (a weld map, or the identity): all face edges
+ * but collapsed ones (lo == hi), sorted by (lo, hi, corner), so that the faces sharing an edge
+ * are one run. *out is malloc'ed (free it), *n its length. */
+int mx_mesh_sorted_edges(const mx_mesh *m, const int32_t *canon, mx_mesh_edge **out, size_t *n, mx_status *st);
+/* The end of the run of edges equal to e[i] (same lo and hi): e[i..end) share one edge. */
+size_t mx_mesh_edge_run(const mx_mesh_edge *e, size_t n, size_t i);
 
 /* Edge connectivity. With weld = 1, vertices with bit-identical positions count as one
  * (glTF duplicates vertices along UV seams); with weld = 0 the raw indices are used. */

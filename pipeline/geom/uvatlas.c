@@ -19,6 +19,7 @@
 #include <string.h>
 
 #include "../../runtime/log.h"
+#include "mesh.h"
 
 /* A projected face may tilt at most max_chart_angle + HARD_MARGIN_DEG from its chart's plane
  * (the chart's mean normal drifts while it grows): 70 degrees by default, area stretch <= 2.9. */
@@ -132,66 +133,17 @@ static void compute_face_geometry(atlas *a) {
 
 /* ---------- edge adjacency: an edge shared by exactly two faces links them ---------- */
 
-typedef struct half_edge {
-    int32_t lo, hi, corner; /* corner = 3 * face + k */
-} half_edge;
-
-static int half_edge_cmp(const void *pa, const void *pb) {
-    const half_edge *a = pa, *b = pb;
-    if (a->lo != b->lo) return a->lo < b->lo ? -1 : 1;
-    if (a->hi != b->hi) return a->hi < b->hi ? -1 : 1;
-    return (a->corner > b->corner) - (a->corner < b->corner);
-}
-
-typedef struct keyed_vertex {
-    float p[3];
-    int32_t v;
-} keyed_vertex;
-
-static int keyed_vertex_cmp(const void *pa, const void *pb) {
-    const keyed_vertex *a = pa, *b = pb;
-    for (int k = 0; k < 3; k++)
-        if (a->p[k] != b->p[k]) return a->p[k] < b->p[k] ? -1 : 1;
-    return (a->v > b->v) - (a->v < b->v);
-}
-
-/* weld[v]: the lowest index of a vertex with the same position as v, so that meshes stored
- * with split vertices (seams of an old layout, triangle soups) still have face neighbours. */
-static int weld_vertices(atlas *a) {
-    const mx_mesh *m = a->m;
-    keyed_vertex *kv = malloc((size_t)m->nverts * sizeof *kv);
-    if (!kv) return -1;
-    for (int v = 0; v < m->nverts; v++) {
-        memcpy(kv[v].p, m->pos + 3 * (size_t)v, sizeof kv[v].p);
-        kv[v].v = v;
-    }
-    qsort(kv, m->nverts, sizeof *kv, keyed_vertex_cmp);
-    for (int i = 0; i < m->nverts;) {
-        int j = i + 1;
-        while (j < m->nverts && keyed_vertex_cmp(&(keyed_vertex){{kv[i].p[0], kv[i].p[1], kv[i].p[2]}, kv[j].v}, &kv[j]) == 0) j++;
-        for (int k = i; k < j; k++) a->weld[kv[k].v] = kv[i].v; /* ties sort by index: kv[i] is lowest */
-        i = j;
-    }
-    free(kv);
-    return 0;
-}
-
+/* Faces are neighbours across an edge of welded vertices (mx_mesh_weld_map), so that meshes
+ * stored with split vertices (seams of an old layout, triangle soups) still have neighbours. */
 static int build_adjacency(atlas *a, mx_status *st) {
     const mx_mesh *m = a->m;
-    size_t ne = 3 * (size_t)m->nfaces;
-    if (weld_vertices(a)) return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory for %d vertices", m->nverts);
-    half_edge *e = malloc(ne * sizeof *e);
-    if (!e) return mx_fail(st, MX_ENOMEM, "uv atlas: out of memory for %zu edges", ne);
-    for (size_t c = 0; c < ne; c++) {
-        int32_t v0 = a->weld[m->faces[c]], v1 = a->weld[m->faces[c % 3 == 2 ? c - 2 : c + 1]];
-        e[c] = (half_edge){v0 < v1 ? v0 : v1, v0 < v1 ? v1 : v0, (int32_t)c};
-        a->adj[c] = -1;
-    }
-    qsort(e, ne, sizeof *e, half_edge_cmp);
+    for (size_t c = 0; c < 3 * (size_t)m->nfaces; c++) a->adj[c] = -1;
+    mx_mesh_edge *e;
+    size_t ne;
+    if (mx_mesh_weld_map(m, a->weld, st) || mx_mesh_sorted_edges(m, a->weld, &e, &ne, st)) return -1;
     for (size_t i = 0; i < ne;) {
-        size_t j = i + 1;
-        while (j < ne && e[j].lo == e[i].lo && e[j].hi == e[i].hi) j++;
-        if (j - i == 2 && e[i].lo != e[i].hi) { /* manifold edge; non-manifold ones stay seams */
+        size_t j = mx_mesh_edge_run(e, ne, i);
+        if (j - i == 2) { /* manifold edge; non-manifold ones stay seams */
             a->adj[e[i].corner] = e[i + 1].corner / 3;
             a->adj[e[i + 1].corner] = e[i].corner / 3;
         }

@@ -259,15 +259,16 @@ static int cmp_link(const void *x, const void *y) {
 }
 
 /* One face edge under welded vertex ids a < b, with the UV indices at a and b. */
-typedef struct edge_rec {
-    int32_t a, b, face, ua, ub;
-} edge_rec;
+typedef struct uv_edge {
+    int32_t face, ua, ub;
+} uv_edge;
 
-static int cmp_edge(const void *x, const void *y) {
-    const edge_rec *e = x, *f = y;
-    if (e->a != f->a) return e->a < f->a ? -1 : 1;
-    if (e->b != f->b) return e->b < f->b ? -1 : 1;
-    return (e->face > f->face) - (e->face < f->face);
+/* The UV indices of edge e at its lo and hi ends. */
+static uv_edge uv_edge_of(const mx_mesh *m, const int32_t *canon, const mx_mesh_edge *e) {
+    int32_t f = e->corner / 3, k = e->corner % 3, k1 = (k + 1) % 3;
+    const int32_t *fu = m->face_uv + 3 * (size_t)f;
+    int forward = canon[m->faces[3 * (size_t)f + k]] == e->lo;
+    return (uv_edge){.face = f, .ua = forward ? fu[k] : fu[k1], .ub = forward ? fu[k1] : fu[k]};
 }
 
 static int same_uv(const mx_mesh *m, int32_t i, int32_t j) {
@@ -280,10 +281,10 @@ static int64_t texel_at(const mx_mesh *m, int32_t u0, int32_t u1, float t, int w
 }
 
 /* Links, along a seam edge seen by faces e and f, the texels at the same points of the edge. */
-static int link_seam(const mx_mesh *m, const edge_rec *e, const edge_rec *f, int w, int h, const uint8_t *chart,
+static int link_seam(const mx_mesh *m, const uv_edge *e, const uv_edge *f, int w, int h, const uint8_t *chart,
                      link_list *l) {
     float len = 0;
-    const edge_rec *side[2] = {e, f};
+    const uv_edge *side[2] = {e, f};
     for (int s = 0; s < 2; s++) {
         const float *p = m->uv + 2 * (size_t)side[s]->ua, *q = m->uv + 2 * (size_t)side[s]->ub;
         float d = hypotf((q[0] - p[0]) * (float)w, (q[1] - p[1]) * (float)h);
@@ -299,30 +300,35 @@ static int link_seam(const mx_mesh *m, const edge_rec *e, const edge_rec *f, int
     return 0;
 }
 
+/* An edge of face f takes part in the seams of this layer: f is in it and has UVs. */
+static int edge_in_layer(const mx_mesh *m, const mx_mesh_edge *e, int layer, int nlayers) {
+    int f = e->corner / 3;
+    const int32_t *fu = m->face_uv + 3 * (size_t)f;
+    return face_in_layer(m, f, layer, nlayers) && fu[0] >= 0 && fu[1] >= 0 && fu[2] >= 0;
+}
+
+/* Links the texels along edge p and q when their faces give it different UVs. */
+static int link_if_seam(const mx_mesh *m, const int32_t *canon, const mx_mesh_edge *p, const mx_mesh_edge *q, int w,
+                        int h, const uint8_t *chart, link_list *l) {
+    uv_edge a = uv_edge_of(m, canon, p), b = uv_edge_of(m, canon, q);
+    if (same_uv(m, a.ua, b.ua) && same_uv(m, a.ub, b.ub)) return 0;
+    return link_seam(m, &a, &b, w, h, chart, l);
+}
+
 /* Seam links of one layer: every welded edge whose faces give it different UVs. */
 static int seam_links(const mx_mesh *m, const int32_t *canon, int layer, int nlayers, int w, int h,
                       const uint8_t *chart, link_list *l, mx_status *st) {
-    edge_rec *e = malloc(3 * (size_t)m->nfaces * sizeof *e + 1);
-    if (!e) return mx_fail(st, MX_ENOMEM, "uv fill: out of memory");
-    size_t n = 0;
-    for (int f = 0; f < m->nfaces; f++) {
-        const int32_t *fv = m->faces + 3 * (size_t)f, *fu = m->face_uv + 3 * (size_t)f;
-        if (!face_in_layer(m, f, layer, nlayers) || fu[0] < 0 || fu[1] < 0 || fu[2] < 0) continue;
-        for (int k = 0; k < 3; k++) {
-            int32_t a = canon[fv[k]], b = canon[fv[(k + 1) % 3]], ua = fu[k], ub = fu[(k + 1) % 3];
-            if (a == b) continue;
-            e[n++] = a < b ? (edge_rec){a, b, f, ua, ub} : (edge_rec){b, a, f, ub, ua};
-        }
-    }
-    qsort(e, n, sizeof *e, cmp_edge);
+    mx_mesh_edge *e;
+    size_t n;
+    if (mx_mesh_sorted_edges(m, canon, &e, &n, st)) return -1;
     int rc = 0;
     for (size_t i = 0; i < n && !rc;) {
-        size_t j = i + 1;
-        while (j < n && e[j].a == e[i].a && e[j].b == e[i].b) j++;
+        size_t j = mx_mesh_edge_run(e, n, i);
         for (size_t p = i; p < j && !rc; p++)
             for (size_t q = p + 1; q < j && !rc; q++)
-                if (!same_uv(m, e[p].ua, e[q].ua) || !same_uv(m, e[p].ub, e[q].ub))
-                    rc = link_seam(m, &e[p], &e[q], w, h, chart, l) ? mx_fail(st, MX_ENOMEM, "uv fill: out of memory") : 0;
+                if (edge_in_layer(m, &e[p], layer, nlayers) && edge_in_layer(m, &e[q], layer, nlayers) &&
+                    link_if_seam(m, canon, &e[p], &e[q], w, h, chart, l))
+                    rc = mx_fail(st, MX_ENOMEM, "uv fill: out of memory");
         i = j;
     }
     free(e);

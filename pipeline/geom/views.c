@@ -198,7 +198,8 @@ static double simulated_coverage(const uint8_t *sim, const uint8_t *visible, siz
     return vis ? (double)got / (double)vis : 1.0;
 }
 
-int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
+/* mx_view_plan_make, with the candidates in `chosen` (may be NULL) excluded. */
+static int plan_views(const mx_view_cache *vc, const uint8_t *known, const uint8_t *chosen, int budget,
                       double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st) {
     memset(plan, 0, sizeof *plan);
     size_t n = (size_t)vc->tex_w * vc->tex_h * vc->nlayers;
@@ -214,6 +215,7 @@ int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
     }
     memcpy(sim, known, n);
     memcpy(group_known, known, n);
+    if (chosen) memcpy(used, chosen, (size_t)vc->ncand);
     mx_view_cache_visible(vc, visible);
     int group = 0;
     plan->coverage = simulated_coverage(sim, visible, n);
@@ -246,6 +248,42 @@ int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
         plan->coverage = simulated_coverage(sim, visible, n);
     }
     free(sim), free(visible), free(claimed), free(used), free(group_known);
+    return 0;
+}
+
+int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
+                      double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st) {
+    return plan_views(vc, known, NULL, budget, coverage_stop, min_pixels, plan, st);
+}
+
+int mx_view_schedule_init(mx_view_schedule *s, const mx_view_cache *vc, const mx_view_schedule_params *p,
+                          mx_status *st) {
+    *s = (mx_view_schedule){.vc = vc, .p = *p};
+    if (s->p.max_batch < 1) s->p.max_batch = 1;
+    s->used = calloc((size_t)vc->ncand, 1);
+    if (!s->used) return mx_fail(st, MX_ENOMEM, "view selection: out of memory");
+    return 0;
+}
+
+void mx_view_schedule_free(mx_view_schedule *s) {
+    free(s->used);
+    memset(s, 0, sizeof *s);
+}
+
+/* The plan of the next max_batch views is the greedy sequence from T^B; its first group (views
+ * whose untextured texels do not overlap) is the step. */
+int mx_view_schedule_next(mx_view_schedule *s, const uint8_t *known, int *cand, int *n, mx_status *st) {
+    *n = 0;
+    int left = s->p.budget - s->done, budget = left < s->p.max_batch ? left : s->p.max_batch;
+    if (budget <= 0) return 0;
+    mx_view_plan plan;
+    if (plan_views(s->vc, known, s->used, budget, s->p.coverage_stop, s->p.min_gain, &plan, st)) return -1;
+    for (int i = 0; i < plan.n && plan.group[i] == plan.group[0]; i++) {
+        cand[(*n)++] = plan.cand[i];
+        s->used[plan.cand[i]] = 1;
+    }
+    s->done += *n;
+    mx_view_plan_free(&plan);
     return 0;
 }
 

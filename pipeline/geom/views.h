@@ -66,6 +66,35 @@ int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
                       double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st);
 void mx_view_plan_free(mx_view_plan *plan);
 
+/* The view schedule after front and back (paper Alg. 1), one for `matex texture`, `enhance` and
+ * `transfer`: each call of mx_view_schedule_next plans from T^B as it is then (the views already
+ * backprojected), so the schedule follows what the views really painted. What differs between
+ * the commands is a parameter: how many views one step may return (texture: a batch of views
+ * whose untextured texels do not overlap, generated together; enhance and transfer: one, each
+ * view seeing the one before). A chosen candidate is never chosen again; the schedule ends when
+ * the budget is spent, when the candidates' coverage reaches coverage_stop, or when no
+ * candidate left would paint min_gain untextured pixels (at the candidate render size). */
+typedef struct mx_view_schedule_params {
+    int budget;            /* views after front and back */
+    int max_batch;         /* most views one step returns (>= 1) */
+    double coverage_stop;  /* of candidate-visible texels */
+    int64_t min_gain;      /* the gain floor: fewer untextured pixels end the schedule */
+} mx_view_schedule_params;
+
+typedef struct mx_view_schedule {
+    const mx_view_cache *vc;
+    mx_view_schedule_params p;
+    uint8_t *used; /* [ncand] candidates chosen so far */
+    int done;      /* views returned so far */
+} mx_view_schedule;
+
+int mx_view_schedule_init(mx_view_schedule *s, const mx_view_cache *vc, const mx_view_schedule_params *p,
+                          mx_status *st);
+/* The next views (candidate indices into cand[max_batch], in generation order) from `known`;
+ * *n = 0 when the schedule has ended. */
+int mx_view_schedule_next(mx_view_schedule *s, const uint8_t *known, int *cand, int *n, mx_status *st);
+void mx_view_schedule_free(mx_view_schedule *s);
+
 /* One view ready for backprojection: its culled render with UVs and the unculled depth
  * (gb: depth, images, UVs, internal faces), and the backprojection mask
  * (foreground & frontal & not internal). */
@@ -98,7 +127,7 @@ void mx_view_masks(mx_view_buffers *vb, int normal_source, float frontal_thresho
  * rejects anyway, or a jump between surfaces). The radius is MX_VIEW_ERODE_MODEL_PX pixels of
  * the model image in render pixels, ceil(1.5 · render_size / image_size): 3 pixels at the
  * default 1024 render / 512 model size (image_size 0: no resampling, 2 pixels). Measured by
- * tests/test_geom_bleed.c: 2 render pixels at a 2:1 ratio still let background through. */
+ * tests/test_texture_bleed.c: 2 render pixels at a 2:1 ratio still let background through. */
 #define MX_VIEW_ERODE_MODEL_PX 1.5f
 #define MX_VIEW_DEPTH_JUMP 4.0f
 int mx_view_erode_radius(int render_size, int image_size);

@@ -18,7 +18,7 @@
 
 #include <stddef.h>
 
-/* The runtime/geom headers have no C++ guards of their own. */
+/* The runtime and geometry headers have no C++ guards of their own. */
 #ifdef __cplusplus
 extern "C" {
 #endif

@@ -17,6 +17,7 @@
 #pragma GCC diagnostic pop
 #endif
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <climits>
@@ -417,6 +418,67 @@ bool is_number(const std::string &w) {
     return end == w.c_str() + w.size() && std::isfinite(v);
 }
 
+// A whole word that is a number but not a finite one (nan, inf, 1e39). OpenMesh's text readers
+// stop at one and report no faces; its binary STL reader merges vertices by position, so NaN
+// corners lose their faces silently. Such files are refused here first.
+bool is_nonfinite_number(const std::string &w) {
+    char *end;
+    float v = strtof(w.c_str(), &end); // as the readers store it: 1e39 is inf
+    return !w.empty() && end == w.c_str() + w.size() && !std::isfinite(v);
+}
+
+int fail_nonfinite(const char *path, long line, const std::string &w, mx_status *st) {
+    return mx_fail(st, MX_EINPUT, "%s:%ld: non-finite coordinate '%s'", path, line, w.c_str());
+}
+
+// Every number word of text from `from` on is finite; with after_vertex, only the three words
+// after each "vertex" (ASCII STL, whose solid name may be any word).
+int check_text_coordinates(const char *path, const std::string &text, size_t from, bool after_vertex, mx_status *st) {
+    long line = 1 + (long)std::count(text.begin(), text.begin() + (long)from, '\n');
+    int want = after_vertex ? 0 : -1; // words still to check after "vertex"; -1: all
+    for (size_t i = from; i < text.size();) {
+        if (text[i] == '\n') line++;
+        if (isspace((unsigned char)text[i])) {
+            i++;
+            continue;
+        }
+        size_t j = i;
+        while (j < text.size() && !isspace((unsigned char)text[j])) j++;
+        std::string w = text.substr(i, j - i);
+        if (want != 0 && is_nonfinite_number(w)) return fail_nonfinite(path, line, w, st);
+        if (after_vertex) want = w == "vertex" ? 3 : want > 0 ? want - 1 : 0;
+        i = j;
+    }
+    return 0;
+}
+
+// An ASCII PLY's body (after end_header) holds only numbers: all finite.
+int check_ply_coordinates(const char *path, mx_status *st) {
+    std::string text;
+    if (read_text_file(path, text, st)) return -1;
+    size_t end = text.find("end_header");
+    if (text.find("format ascii") > end || end == std::string::npos) return 0; // binary: checked after the read
+    return check_text_coordinates(path, text, end + 10, false, st);
+}
+
+// STL: a binary file (84 + 50 bytes per triangle) has 9 finite corner floats per triangle; an
+// ASCII one finite words after each "vertex".
+int check_stl_coordinates(const char *path, mx_status *st) {
+    std::string d;
+    if (read_text_file(path, d, st)) return -1;
+    uint32_t n = 0;
+    if (d.size() >= 84) memcpy(&n, d.data() + 80, 4);
+    if (d.size() < 84 || 84 + 50 * (uint64_t)n != d.size()) return check_text_coordinates(path, d, 0, true, st);
+    for (uint32_t t = 0; t < n; t++) {
+        float v[9];
+        memcpy(v, d.data() + 84 + 50 * (size_t)t + 12, sizeof v); // after the facet normal
+        for (int k = 0; k < 9; k++)
+            if (!std::isfinite(v[k]))
+                return mx_fail(st, MX_EINPUT, "%s: triangle %u: non-finite coordinate", path, t);
+    }
+    return 0;
+}
+
 // OpenMesh's OFF reader reads words, not lines, and trusts each face's corner count: one word
 // too many or too few (or a word that is not a number) shifts every later word, and a corner count
 // of 10^20 then costs gigabytes. So ASCII OFF is checked here first, line by line, as OFF writers
@@ -464,7 +526,11 @@ int check_off_counts(const char *path, mx_status *st) {
     for (size_t v = 0; v < nv; v++) {
         const std::vector<std::string> &w = lines[first + v];
         bool ok = w.size() == vwords && vwords >= 3;
-        for (size_t k = 0; ok && k < w.size(); k++) ok = is_number(w[k]);
+        for (size_t k = 0; ok && k < w.size(); k++) {
+            if (is_nonfinite_number(w[k]))
+                return mx_fail(st, MX_EINPUT, "%s: OFF vertex %zu: non-finite coordinate '%s'", path, v, w[k].c_str());
+            ok = is_number(w[k]);
+        }
         if (!ok) return mx_fail(st, MX_EINPUT, "%s: OFF vertex %zu: expected %zu numbers on its line", path, v, vwords);
     }
     for (size_t f = 0; f < nf; f++) {
@@ -482,8 +548,10 @@ int check_off_counts(const char *path, mx_status *st) {
 // PLY / OFF / STL through OpenMesh. Vertex order is the file's (OpenMesh appends vertices it
 // must duplicate to represent non-manifold faces at the end).
 int read_openmesh(const char *path, mx_mesh *m, mx_status *st) {
-    if (lower_ext(path) == "ply" && check_ply_header(path, st)) return -1;
-    if (lower_ext(path) == "off" && check_off_counts(path, st)) return -1;
+    std::string ext = lower_ext(path);
+    if (ext == "ply" && (check_ply_header(path, st) || check_ply_coordinates(path, st))) return -1;
+    if (ext == "off" && check_off_counts(path, st)) return -1;
+    if (ext == "stl" && check_stl_coordinates(path, st)) return -1;
     typedef OpenMesh::PolyMesh_ArrayKernelT<> Mesh;
     Mesh mesh;
     mesh.request_vertex_texcoords2D();

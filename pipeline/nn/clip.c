@@ -18,7 +18,7 @@ void mx_clip_config_sd15(mx_clip_config *cfg) {
     cfg->vocab_size = 49408;
     cfg->eos_token_id = 2;
     cfg->layer_norm_eps = 1e-5f;
-    cfg->hidden_act = MX_CLIP_ACT_QUICK_GELU;
+    cfg->hidden_act = MX_TF_ACT_QUICK_GELU;
 }
 
 /* Reads an integer member in [lo, hi] (absent: keeps *v). */
@@ -53,9 +53,9 @@ int mx_clip_config_parse(mx_clip_config *cfg, const char *json_text, size_t len,
     cfg->layer_norm_eps = (float)mx_json_get_num(root, "layer_norm_eps", cfg->layer_norm_eps);
     const char *act = mx_json_get_str(root, "hidden_act", "quick_gelu");
     if (!strcmp(act, "quick_gelu")) {
-        cfg->hidden_act = MX_CLIP_ACT_QUICK_GELU;
+        cfg->hidden_act = MX_TF_ACT_QUICK_GELU;
     } else if (!strcmp(act, "gelu")) {
-        cfg->hidden_act = MX_CLIP_ACT_GELU;
+        cfg->hidden_act = MX_TF_ACT_GELU;
     } else {
         mx_fail(st, MX_EINPUT, "%s: hidden_act \"%s\" is not supported (quick_gelu, gelu)", what, act);
         goto done;
@@ -77,44 +77,21 @@ done:
 
 /* ---- parameters ---- */
 
-static int bind_linear(mx_binder *b, const char *base, int64_t out, int64_t in, mx_wptr *w, mx_wptr *bias,
-                       mx_status *st) {
-    char name[256];
-    snprintf(name, sizeof name, "%s.weight", base);
-    if (mx_bind(b, w, st, name, 2, out, in)) return -1;
-    snprintf(name, sizeof name, "%s.bias", base);
-    return mx_bind(b, bias, st, name, 1, out);
-}
-
-static int bind_norm(mx_binder *b, const char *base, int64_t c, mx_wptr *w, mx_wptr *bias, mx_status *st) {
-    char name[256];
-    snprintf(name, sizeof name, "%s.weight", base);
-    if (mx_bind(b, w, st, name, 1, c)) return -1;
-    snprintf(name, sizeof name, "%s.bias", base);
-    return mx_bind(b, bias, st, name, 1, c);
-}
-
-static int bind_layer(mx_binder *b, const mx_clip_config *cfg, int i, mx_clip_layer *l, mx_status *st) {
-    char base[128], sub[192];
-    int64_t C = cfg->hidden_size, I = cfg->intermediate_size;
-    snprintf(base, sizeof base, "text_model.encoder.layers.%d", i);
-#define SUB(s) (snprintf(sub, sizeof sub, "%s.%s", base, s), sub)
-    if (bind_norm(b, SUB("layer_norm1"), C, &l->ln1_w, &l->ln1_b, st) ||
-        bind_linear(b, SUB("self_attn.q_proj"), C, C, &l->q_w, &l->q_b, st) ||
-        bind_linear(b, SUB("self_attn.k_proj"), C, C, &l->k_w, &l->k_b, st) ||
-        bind_linear(b, SUB("self_attn.v_proj"), C, C, &l->v_w, &l->v_b, st) ||
-        bind_linear(b, SUB("self_attn.out_proj"), C, C, &l->out_w, &l->out_b, st) ||
-        bind_norm(b, SUB("layer_norm2"), C, &l->ln2_w, &l->ln2_b, st) ||
-        bind_linear(b, SUB("mlp.fc1"), I, C, &l->fc1_w, &l->fc1_b, st) ||
-        bind_linear(b, SUB("mlp.fc2"), C, I, &l->fc2_w, &l->fc2_b, st))
-        return -1;
-#undef SUB
-    return 0;
+static int bind_layer(mx_binder *b, const mx_tf_shape *s, int i, mx_tf_layer *l, mx_status *st) {
+    char path[64];
+    snprintf(path, sizeof path, "text_model.encoder.layers.%d", i);
+    return mx_tf_layer_bind(b, path, s, l, st);
 }
 
 int mx_clip_load(mx_clip *m, const mx_clip_config *cfg, mx_binder *b, mx_status *st) {
     memset(m, 0, sizeof *m);
     m->cfg = *cfg;
+    m->shape = (mx_tf_shape){.hidden = cfg->hidden_size,
+                             .intermediate = cfg->intermediate_size,
+                             .heads = cfg->num_attention_heads,
+                             .eps = cfg->layer_norm_eps,
+                             .act = cfg->hidden_act,
+                             .causal = 1};
     int64_t C = cfg->hidden_size;
     m->layers = calloc((size_t)cfg->num_hidden_layers, sizeof *m->layers);
     if (!m->layers) return mx_fail(st, MX_ENOMEM, "clip: out of memory");
@@ -124,8 +101,8 @@ int mx_clip_load(mx_clip *m, const mx_clip_config *cfg, mx_binder *b, mx_status 
                 (int64_t)cfg->max_position_embeddings, C))
         goto fail;
     for (int i = 0; i < cfg->num_hidden_layers; i++)
-        if (bind_layer(b, cfg, i, &m->layers[i], st)) goto fail;
-    if (bind_norm(b, "text_model.final_layer_norm", C, &m->final_ln_w, &m->final_ln_b, st)) goto fail;
+        if (bind_layer(b, &m->shape, i, &m->layers[i], st)) goto fail;
+    if (mx_tf_norm_bind(b, "text_model.final_layer_norm", C, &m->final_ln_w, &m->final_ln_b, st)) goto fail;
     return 0;
 fail:
     mx_clip_free(m);
@@ -138,49 +115,6 @@ void mx_clip_free(mx_clip *m) {
 }
 
 /* ---- forward ---- */
-
-/* Activations of one forward pass, M = B*T rows. */
-typedef struct clip_buffers {
-    float *h, *q, *k, *v, *attn, *mlp;
-} clip_buffers;
-
-static int alloc_buffers(mx_arena *a, size_t M, const mx_clip_config *cfg, clip_buffers *bf, mx_status *st) {
-    size_t MC = M * (size_t)cfg->hidden_size;
-    float **bufs[] = {&bf->h, &bf->q, &bf->k, &bf->v, &bf->attn};
-    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
-        if (!(*bufs[i] = mx_act_alloc(a, MC, st))) return -1;
-    bf->mlp = mx_act_alloc(a, M * (size_t)cfg->intermediate_size, st);
-    return bf->mlp ? 0 : -1;
-}
-
-/* x += out_proj(attention(LN1(x))) with a causal mask. */
-static void attention_block(const mx_clip *m, const mx_clip_layer *l, const mx_ctx *c, float *x, int B, int T,
-                            const clip_buffers *bf) {
-    const mx_clip_config *cfg = &m->cfg;
-    int C = cfg->hidden_size, H = cfg->num_attention_heads, D = C / H, M = B * T;
-    mx_layer_norm(c, bf->h, x, M, C, l->ln1_w, l->ln1_b, cfg->layer_norm_eps);
-    mx_linear(c, bf->q, bf->h, l->q_w, l->q_b, M, C, C);
-    mx_linear(c, bf->k, bf->h, l->k_w, l->k_b, M, C, C);
-    mx_linear(c, bf->v, bf->h, l->v_w, l->v_b, M, C, C);
-    mx_attention(c, bf->attn, bf->q, bf->k, bf->v, B, H, T, T, D, C, C, C, 1, 1.0f / sqrtf((float)D));
-    mx_linear(c, bf->h, bf->attn, l->out_w, l->out_b, M, C, C);
-    mx_add(c, x, x, bf->h, (size_t)M * (size_t)C);
-}
-
-/* x += fc2(act(fc1(LN2(x)))). */
-static void mlp_block(const mx_clip *m, const mx_clip_layer *l, const mx_ctx *c, float *x, int M,
-                      const clip_buffers *bf) {
-    const mx_clip_config *cfg = &m->cfg;
-    int C = cfg->hidden_size, I = cfg->intermediate_size;
-    mx_layer_norm(c, bf->h, x, M, C, l->ln2_w, l->ln2_b, cfg->layer_norm_eps);
-    mx_linear(c, bf->mlp, bf->h, l->fc1_w, l->fc1_b, M, I, C);
-    if (cfg->hidden_act == MX_CLIP_ACT_QUICK_GELU)
-        mx_quick_gelu(c, bf->mlp, (size_t)M * (size_t)I);
-    else
-        mx_gelu(c, bf->mlp, (size_t)M * (size_t)I);
-    mx_linear(c, bf->h, bf->mlp, l->fc2_w, l->fc2_b, M, C, I);
-    mx_add(c, x, x, bf->h, (size_t)M * (size_t)C);
-}
 
 /* transformers 4.39: with the legacy eos_token_id == 2 the pooled token is argmax(ids) (the
  * highest id, which is <|endoftext|> in CLIP's vocabulary); otherwise the first position
@@ -214,15 +148,14 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
     if (check_ids(cfg, ids, B, T, st)) return -1;
     int C = cfg->hidden_size, M = B * T;
     size_t MC = (size_t)M * (size_t)C, mark = mx_arena_mark(arena);
-    clip_buffers bf;
+    mx_tf_buffers bf;
     c = mx_run_ctx(c, arena);
     float *x = mx_act_alloc(arena, MC, st);
-    if (!x || alloc_buffers(arena, (size_t)M, cfg, &bf, st)) return mx_fail_prefix(st, "clip forward: ");
+    if (!x || mx_tf_buffers_alloc(arena, (size_t)M, &m->shape, &bf, st)) return mx_fail_prefix(st, "clip forward: ");
     mx_embed_tokens(c, x, ids, B, T, C, m->token_embedding, m->position_embedding);
     if (hidden_states && hidden_states[0]) mx_copy(c, hidden_states[0], x, MC);
     for (int i = 0; i < cfg->num_hidden_layers; i++) {
-        attention_block(m, &m->layers[i], c, x, B, T, &bf);
-        mlp_block(m, &m->layers[i], c, x, M, &bf);
+        mx_tf_layer_forward(c, &m->shape, &m->layers[i], x, B, T, &bf);
         if (hidden_states && hidden_states[i + 1]) mx_copy(c, hidden_states[i + 1], x, MC);
     }
     mx_layer_norm(c, last_hidden, x, M, C, m->final_ln_w, m->final_ln_b, cfg->layer_norm_eps);
@@ -232,4 +165,61 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
     }
     mx_arena_reset(arena, mark);
     return 0;
+}
+
+/* ---- the registry's entry points (registry.h) ---- */
+
+int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st) {
+    mx_clip_config cfg;
+    if (mx_clip_config_parse(&cfg, text, len, what, st)) return -1;
+    mx_clip *m = calloc(1, sizeof *m);
+    if (!m) return mx_fail(st, MX_ENOMEM, "clip: out of memory");
+    *net = m;
+    return mx_clip_load(m, &cfg, b, st);
+}
+
+void mx_clip_destroy(void *net) {
+    if (!net) return;
+    mx_clip_free(net);
+    free(net);
+}
+
+/* run-net clip: input_ids [B,T] -> last_hidden_state, pooler_output, hidden_states.{i}. */
+int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    const mx_clip *m = net;
+    int L = m->cfg.num_hidden_layers, C = m->cfg.hidden_size, rc = -1;
+    int64_t is[2] = {-1, -1};
+    const float *idf = io->host(io, "input_ids", 2, is, st);
+    if (!idf) return -1;
+    int B = (int)is[0], T = (int)is[1];
+    if (T > m->cfg.max_position_embeddings)
+        return mx_fail(st, MX_EINPUT, "%s: input_ids has %d tokens, the model takes at most %d", io->source, T,
+                       m->cfg.max_position_embeddings);
+    float **hs = calloc((size_t)L + 1, sizeof *hs), *last, *pooled;
+    int32_t *ids = malloc((size_t)B * T * sizeof *ids);
+    if (!hs || !ids) {
+        mx_fail(st, MX_ENOMEM, "clip: out of memory");
+        goto done;
+    }
+    for (size_t i = 0; i < (size_t)B * T; i++) ids[i] = (int32_t)idf[i];
+    int64_t hshape[3] = {B, T, C}, pshape[2] = {B, C};
+    if (!(last = io->output(io, "last_hidden_state", 3, hshape, st)) ||
+        !(pooled = io->output(io, "pooler_output", 2, pshape, st)))
+        goto done;
+    for (int i = 0; i <= L; i++) {
+        char name[48];
+        snprintf(name, sizeof name, "hidden_states.%d", i);
+        if (!(hs[i] = io->output(io, name, 3, hshape, st))) goto done;
+    }
+    mx_arena dry, *a;
+    mx_arena_measure(&dry);
+    if (mx_clip_forward(m, c, &dry, ids, B, T, last, pooled, hs, st) ||
+        !(a = io->arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st)) ||
+        mx_clip_forward(m, c, a, ids, B, T, last, pooled, hs, st))
+        goto done;
+    rc = 0;
+done:
+    free(ids);
+    free(hs);
+    return rc;
 }

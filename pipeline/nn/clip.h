@@ -13,9 +13,9 @@
 
 #include "../../ops/ops.h"
 #include "../../runtime/status.h"
+#include "net_io.h"
 #include "params.h"
-
-typedef enum { MX_CLIP_ACT_QUICK_GELU = 0, MX_CLIP_ACT_GELU = 1 } mx_clip_act;
+#include "transformer.h"
 
 typedef struct mx_clip_config {
     int hidden_size;             /* 768 for SD1.5 */
@@ -26,7 +26,7 @@ typedef struct mx_clip_config {
     int vocab_size;              /* 49408 */
     int eos_token_id;            /* 2 in the SD1.5 config: pooling then uses argmax(ids), as transformers */
     float layer_norm_eps;        /* 1e-5 */
-    mx_clip_act hidden_act;      /* "quick_gelu" or "gelu" */
+    mx_tf_act hidden_act;        /* "quick_gelu" or "gelu" */
 } mx_clip_config;
 
 /* The SD1.5 text encoder (CLIP ViT-L/14) configuration. */
@@ -36,19 +36,13 @@ void mx_clip_config_sd15(mx_clip_config *cfg);
 int mx_clip_config_parse(mx_clip_config *cfg, const char *json_text, size_t len, const char *what,
                          mx_status *st);
 
-typedef struct mx_clip_layer {
-    mx_wptr ln1_w, ln1_b;
-    mx_wptr q_w, q_b, k_w, k_b, v_w, v_b, out_w, out_b;
-    mx_wptr ln2_w, ln2_b;
-    mx_wptr fc1_w, fc1_b, fc2_w, fc2_b;
-} mx_clip_layer;
-
 typedef struct mx_clip {
     mx_clip_config cfg;
     mx_wptr token_embedding;    /* [vocab, C] */
     mx_wptr position_embedding; /* [max_pos, C] */
     mx_wptr final_ln_w, final_ln_b;
-    mx_clip_layer *layers; /* num_hidden_layers, malloc'ed */
+    mx_tf_shape shape;     /* of every encoder layer: causal */
+    mx_tf_layer *layers;   /* num_hidden_layers, malloc'ed */
 } mx_clip;
 
 /* Binds every parameter through b (or only enumerates them when b->enumerating). */
@@ -66,5 +60,11 @@ void mx_clip_free(mx_clip *m);
  * sizes the arena). */
 int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const int32_t *ids, int B, int T,
                     float *last_hidden, float *pooled, float **hidden_states, mx_status *st);
+
+/* The registry's entry points (registry.h): config parse + load into a malloc'ed mx_clip, its
+ * free, the run-net adapter. */
+int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
+void mx_clip_destroy(void *net);
+int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
 
 #endif

@@ -200,3 +200,47 @@ double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T) {
         return 0.0;
     return r.flops;
 }
+
+/* ---- the registry's entry points (registry.h) ---- */
+
+int mx_controlnet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b,
+                              mx_status *st) {
+    mx_unet_config cfg;
+    if (mx_unet_config_parse(&cfg, text, len, what, st)) return -1;
+    if (!cfg.is_controlnet) return mx_fail(st, MX_EINPUT, "%s: not a ControlNetModel config", what);
+    return mx_controlnet_load((mx_controlnet **)net, &cfg, b, st);
+}
+
+/* run-net controlnet: sample, timestep, encoder_hidden_states, controlnet_cond, optional
+ * conditioning_scale -> the residuals. */
+int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    const mx_controlnet *m = net;
+    const mx_unet_config *cfg = mx_controlnet_cfg(m);
+    int n = mx_unet_num_residuals(cfg), f = 1 << (cfg->n_cond_emb - 1), C, h, w;
+    int64_t ss[4] = {-1, cfg->in_channels, -1, -1}, es[3] = {-1, -1, cfg->cross_attention_dim}, one[1] = {1};
+    mx_controlnet_input in = {.sample = mx_net_io_input(io, "sample", 4, ss, st), .scale = 1.0f};
+    if (!in.sample) return -1;
+    es[0] = ss[0];
+    if (!(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st))) return -1;
+    in.B = (int)ss[0], in.H = (int)ss[2], in.W = (int)ss[3], in.T = (int)es[1];
+    if (!(in.timesteps = mx_net_io_timesteps(io, in.B, st))) return -1;
+    int64_t cs[4] = {in.B, cfg->conditioning_channels, ss[2] * f, ss[3] * f};
+    if (!(in.cond = mx_net_io_input(io, "controlnet_cond", 4, cs, st))) return -1;
+    if (io->has(io, "conditioning_scale")) {
+        const float *scale = io->host(io, "conditioning_scale", 1, one, st);
+        if (!scale) return -1;
+        in.scale = scale[0];
+    }
+    if (check_cond_sizes(cfg, &in, st)) return -1;
+    float *down[MX_UNET_MAX_RES + 1];
+    for (int i = 0; i <= n; i++) {
+        char name[48];
+        mx_unet_residual_name(name, sizeof name, cfg, i);
+        mx_unet_residual_shape(cfg, i, in.H, in.W, &C, &h, &w);
+        int64_t rs[4] = {in.B, C, h, w};
+        if (!(down[i] = io->output(io, name, 4, rs, st))) return -1;
+    }
+    size_t bytes;
+    mx_arena *a = mx_controlnet_arena_bytes(m, in.B, in.H, in.W, in.T, &bytes, st) ? NULL : io->arena(io, bytes, st);
+    return a ? mx_controlnet_forward(c, m, &in, down, down[n], 0, a, st) : -1;
+}

@@ -6,11 +6,6 @@
 #include <string.h>
 
 #include "../../runtime/json.h"
-#include "clip.h"
-#include "controlnet.h"
-#include "taesd.h"
-#include "unet.h"
-#include "vae.h"
 
 #define MAX_CHANNELS 16384
 #define MAX_LAYERS 16
@@ -336,51 +331,4 @@ int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, co
     snprintf(buf, cap, "%s", cls ? cls : "");
     mx_json_free(root);
     return 0;
-}
-
-int mx_net_enumerate(mx_binder *b, const char *text, size_t len, const char *what, mx_status *st) {
-    char cls[64];
-    if (!b->enumerating) return mx_fail(st, MX_EINTERNAL, "mx_net_enumerate needs an enumerating binder");
-    if (mx_config_class_name(cls, sizeof cls, text, len, what, st)) return -1;
-    if (!strcmp(cls, "UNet2DConditionModel") || !strcmp(cls, "ControlNetModel")) {
-        mx_unet_config c;
-        if (mx_unet_config_parse(&c, text, len, what, st)) return -1;
-        if (c.is_controlnet) {
-            mx_controlnet *m = NULL;
-            int rc = mx_controlnet_load(&m, &c, b, st);
-            mx_controlnet_free(m);
-            return rc;
-        }
-        mx_unet *u = NULL;
-        int rc = mx_unet_load(&u, &c, b, st);
-        mx_unet_free(u);
-        return rc;
-    }
-    if (!strcmp(cls, "AutoencoderKL")) {
-        mx_vae_config c;
-        mx_vae *v = NULL;
-        if (mx_vae_config_parse(&c, text, len, what, st)) return -1;
-        int rc = mx_vae_load(&v, &c, b, st);
-        mx_vae_free(v);
-        return rc;
-    }
-    if (!strcmp(cls, "AutoencoderTiny")) {
-        mx_taesd_config c;
-        mx_taesd *t = NULL;
-        if (mx_taesd_config_parse(&c, text, len, what, st)) return -1;
-        int rc = mx_taesd_load(&t, &c, b, st);
-        mx_taesd_free(t);
-        return rc;
-    }
-    if (!strcmp(cls, "CLIPTextModel")) {
-        mx_clip_config c;
-        mx_clip m;
-        memset(&m, 0, sizeof m);
-        if (mx_clip_config_parse(&c, text, len, what, st)) return -1;
-        int rc = mx_clip_load(&m, &c, b, st);
-        mx_clip_free(&m);
-        return rc;
-    }
-    return mx_fail(st, MX_EINPUT, "%s: \"_class_name\" \"%s\" is not one of UNet2DConditionModel, ControlNetModel, "
-                   "AutoencoderKL, AutoencoderTiny, CLIPTextModel", what, cls);
 }

@@ -73,10 +73,4 @@ int mx_taesd_config_parse(mx_taesd_config *cfg, const char *text, size_t len, co
  * model_type clip_text_model), copied into buf (empty when none). */
 int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, const char *what, mx_status *st);
 
-/* Enumerates the parameter list (names without prefix, shapes) of the network a config text
- * describes (UNet2DConditionModel, ControlNetModel, AutoencoderKL, AutoencoderTiny or CLIPTextModel) into an
- * enumerating binder (mx_binder_enum), through the networks' own load code. */
-struct mx_binder;
-int mx_net_enumerate(struct mx_binder *b, const char *text, size_t len, const char *what, mx_status *st);
-
 #endif

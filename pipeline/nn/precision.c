@@ -3,6 +3,8 @@
 
 #include <string.h>
 
+#include "registry.h"
+
 /* The fp32 convolutions of UNet and ControlNet by parameter path: first component... */
 static const char *const fp32_first[] = {"conv_in", "controlnet_cond_embedding", "controlnet_down_blocks",
                                          "controlnet_mid_block"};
@@ -27,4 +29,7 @@ int mx_prec_conv_fp32(const char *path) {
     return 0;
 }
 
-int mx_prec_net_fp32(const char *net) { return !strcmp(net, "vae"); }
+int mx_prec_net_fp32(const char *net) {
+    const mx_net_def *d = mx_net_named(net);
+    return d && d->fp32_under_bf16;
+}

@@ -25,7 +25,8 @@
  * "down_blocks.0.resnets.1.conv_shortcut") runs in fp32 under a bf16 context. */
 int mx_prec_conv_fp32(const char *path);
 
-/* 1 when the network runs in fp32 under a bf16 context ("vae"). */
+/* 1 when the network of that kind (registry.h: "vae") runs in fp32 under a bf16 context: its
+ * registry entry's fp32_under_bf16. */
 int mx_prec_net_fp32(const char *net);
 
 #endif

@@ -258,3 +258,36 @@ double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w) {
     if (check_sizes(t, B, h * f, w * f, &st) || mx_ae_dry_run(decode_run, t, B, h, w, NULL, &flops, &st)) return 0.0;
     return flops;
 }
+
+/* ---- the registry's entry points (registry.h) ---- */
+
+int mx_taesd_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st) {
+    mx_taesd_config cfg;
+    return mx_taesd_config_parse(&cfg, text, len, what, st) ? -1 : mx_taesd_load((mx_taesd **)net, &cfg, b, st);
+}
+
+/* image -> latents (encode) or latents -> image (decode), one input and one output. */
+static int run_io(const mx_ctx *c, const mx_taesd *t, int decode, mx_net_io *io, mx_status *st) {
+    const mx_taesd_config *cfg = &t->cfg;
+    int f = mx_taesd_factor(t), cin = decode ? cfg->latent_channels : cfg->in_channels;
+    int64_t is[4] = {-1, cin, -1, -1};
+    const float *x = mx_net_io_input(io, decode ? "latents" : "image", 4, is, st);
+    if (!x) return -1;
+    int B = (int)is[0], H = (int)is[2], W = (int)is[3], Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
+    int64_t os[4] = {B, decode ? cfg->out_channels : cfg->latent_channels, Ho, Wo};
+    size_t bytes;
+    if (decode ? mx_taesd_decode_arena_bytes(t, B, H, W, &bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, &bytes, st))
+        return -1;
+    float *y = io->output(io, decode ? "image" : "latents", 4, os, st);
+    mx_arena *a = y ? io->arena(io, bytes, st) : NULL;
+    if (!a) return -1;
+    return decode ? mx_taesd_decode(c, t, x, B, H, W, y, a, st) : mx_taesd_encode(c, t, x, B, H, W, y, a, st);
+}
+
+int mx_taesd_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    return run_io(c, net, 0, io, st);
+}
+
+int mx_taesd_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    return run_io(c, net, 1, io, st);
+}

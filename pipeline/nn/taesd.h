@@ -15,6 +15,7 @@
 #define MX_TAESD_H
 
 #include "../../ops/ops.h"
+#include "net_io.h"
 #include "netcfg.h"
 #include "params.h"
 
@@ -44,5 +45,10 @@ int mx_taesd_decode_image(const mx_ctx *c, const mx_taesd *t, const float *laten
 int mx_taesd_encode_image(const mx_ctx *c, const mx_taesd *t, const float *image, int n, int H, int W, float *latents,
                           mx_status *st);
 double mx_taesd_decode_flops(const mx_taesd *t, int B, int h, int w);
+
+/* The registry's entry points (registry.h): config parse + load, the run-net adapters. */
+int mx_taesd_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
+int mx_taesd_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_taesd_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
 
 #endif

@@ -527,23 +527,6 @@ static unsigned to_lower(unsigned cp) {
     return cp;
 }
 
-/* Decodes one UTF-8 sequence at s (n bytes left); returns its length, *cp = 0xFFFD when invalid. */
-static size_t utf8_get(const unsigned char *s, size_t n, unsigned *cp) {
-    unsigned c = s[0];
-    size_t len = c < 0x80 ? 1 : (c >> 5) == 6 ? 2 : (c >> 4) == 14 ? 3 : (c >> 3) == 30 ? 4 : 0;
-    *cp = 0xFFFD;
-    if (len == 0 || len > n) return 1;
-    unsigned v = len == 1 ? c : len == 2 ? (c & 0x1F) : len == 3 ? (c & 0x0F) : (c & 0x07);
-    for (size_t i = 1; i < len; i++) {
-        if ((s[i] & 0xC0) != 0x80) return 1;
-        v = (v << 6) | (s[i] & 0x3F);
-    }
-    static const unsigned min_for_len[5] = {0, 0, 0x80, 0x800, 0x10000};
-    if (v < min_for_len[len] || v > 0x10FFFF || (v >= 0xD800 && v <= 0xDFFF)) return 1;
-    *cp = v;
-    return len;
-}
-
 /* Step 1: the cleaned, lower-cased text as code points, with single spaces between words
  * (leading/trailing spaces are harmless: the pattern never matches a space). */
 static unsigned *clean_text(const char *text, size_t *out_n, mx_status *st) {
@@ -553,8 +536,8 @@ static unsigned *clean_text(const char *text, size_t *out_n, mx_status *st) {
     if (!cps) return mx_fail(st, MX_ENOMEM, "tokenizer: out of memory for a %zu-byte prompt", len), NULL;
     size_t n = 0;
     for (size_t i = 0; i < len;) {
-        unsigned cp;
-        i += utf8_get((const unsigned char *)text + i, len - i, &cp);
+        uint32_t cp;
+        i += mx_utf8_decode((const unsigned char *)text + i, len - i, &cp);
         if (cp == 0 || cp == 0xFFFD || is_control(cp)) continue;
         if (is_space(cp)) {
             cps[n++] = ' ';
@@ -696,6 +679,19 @@ static int encode_pretoken(const mx_tokenizer *t, const unsigned *cps, size_t n,
     return 0;
 }
 
+/* The cleaned text from cps[i] on, as UTF-8 in out (at most ~40 bytes, "..." when cut). */
+static void quote_from(const unsigned *cps, size_t n, size_t i, char *out, size_t cap) {
+    size_t len = 0;
+    char u[4];
+    for (; i < n && len + 4 + 4 < cap && len < 40; i++) {
+        size_t k = mx_utf8_encode(cps[i], u);
+        memcpy(out + len, u, k);
+        len += k;
+    }
+    if (i < n) memcpy(out + len, "...", 3), len += 3;
+    out[len] = 0;
+}
+
 static void frame_ids(const id_list *tokens, mx_tok_result *out) {
     int keep = MX_CLIP_CONTEXT - 2;
     int n = tokens->n < (size_t)keep ? (int)tokens->n : keep;
@@ -718,15 +714,18 @@ int mx_tok_encode(const mx_tokenizer *t, const char *text, mx_tok_result *out, m
         mx_fail(st, MX_ENOMEM, "tokenizer: out of memory");
         goto done;
     }
+    out->dropped_from[0] = 0;
     for (size_t i = 0; i < n && tokens.n < MX_TOK_MAX_COUNTED;) {
         if (cps[i] == ' ') {
             i++;
             continue;
         }
         int32_t special;
-        size_t k = pretoken_at(cps, n, i, &special);
+        size_t k = pretoken_at(cps, n, i, &special), before = tokens.n;
         if (special >= 0 ? id_push(&tokens, special, st) : encode_pretoken(t, cps + i, k, &tokens, sym, st))
             goto done;
+        if (before <= MX_CLIP_CONTEXT - 2 && tokens.n > MX_CLIP_CONTEXT - 2) /* this word is cut */
+            quote_from(cps, n, i, out->dropped_from, sizeof out->dropped_from);
         i += k;
     }
     frame_ids(&tokens, out);

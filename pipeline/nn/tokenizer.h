@@ -39,6 +39,9 @@ typedef struct mx_tok_result {
     int32_t ids[MX_CLIP_CONTEXT]; /* BOS, tokens, EOS, then EOS padding */
     int n_tokens;                 /* ids used before padding, BOS and EOS included (2..77) */
     int n_dropped;                /* BPE tokens cut by truncation (0: the prompt fit) */
+    char dropped_from[64];        /* where the dropped tokens begin: the cleaned (lower-case) text
+                                     of the first word cut, and a little more, "..." when longer;
+                                     "" when nothing was dropped */
 } mx_tok_result;
 
 /* Encodes a NUL-terminated UTF-8 prompt. Truncation keeps the first 75 tokens and the EOS;

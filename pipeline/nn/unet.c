@@ -203,3 +203,50 @@ double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T) {
     if (mx_unet_check_sizes(&u->enc.cfg, B, H, W, T, &st) || unet_run(&r, u, &in, NULL)) return 0.0;
     return r.flops;
 }
+
+/* ---- the registry's entry points (registry.h) ---- */
+
+int mx_unet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st) {
+    mx_unet_config cfg;
+    if (mx_unet_config_parse(&cfg, text, len, what, st)) return -1;
+    if (cfg.is_controlnet) return mx_fail(st, MX_EINPUT, "%s: a ControlNetModel config, not a UNet2DConditionModel", what);
+    return mx_unet_load((mx_unet **)net, &cfg, b, st);
+}
+
+void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int i) {
+    if (i < mx_unet_num_residuals(cfg)) snprintf(buf, cap, "down_block_res_sample.%d", i);
+    else snprintf(buf, cap, "mid_block_res_sample");
+}
+
+/* run-net unet: sample, timestep, encoder_hidden_states, optional residuals -> out. */
+int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    const mx_unet *u = net;
+    const mx_unet_config *cfg = mx_unet_cfg(u);
+    int64_t ss[4] = {-1, cfg->in_channels, -1, -1}, es[3] = {-1, -1, cfg->cross_attention_dim};
+    mx_unet_input in = {.sample = mx_net_io_input(io, "sample", 4, ss, st)};
+    if (!in.sample) return -1;
+    es[0] = ss[0];
+    if (!(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st))) return -1;
+    in.B = (int)ss[0], in.H = (int)ss[2], in.W = (int)ss[3], in.T = (int)es[1];
+    if (!(in.timesteps = mx_net_io_timesteps(io, in.B, st)) || mx_unet_check_sizes(cfg, in.B, in.H, in.W, in.T, st))
+        return -1;
+    int n = mx_unet_num_residuals(cfg), C, h, w;
+    const float *res[MX_UNET_MAX_RES];
+    int have = io->has(io, "down_block_res_sample.0");
+    for (int i = 0; i <= n && (have || io->has(io, "mid_block_res_sample")); i++) {
+        char name[48];
+        mx_unet_residual_name(name, sizeof name, cfg, i);
+        mx_unet_residual_shape(cfg, i, in.H, in.W, &C, &h, &w);
+        int64_t rs[4] = {in.B, C, h, w};
+        const float *p = mx_net_io_input(io, name, 4, rs, st);
+        if (!p) return -1;
+        if (i < n) res[i] = p;
+        else in.mid_residual = p;
+    }
+    if (have) in.down_residuals = res;
+    int64_t os[4] = {in.B, cfg->out_channels, in.H, in.W};
+    size_t bytes;
+    float *out = io->output(io, "out", 4, os, st);
+    mx_arena *a = out && !mx_unet_arena_bytes(u, in.B, in.H, in.W, in.T, &bytes, st) ? io->arena(io, bytes, st) : NULL;
+    return a ? mx_unet_forward(c, u, &in, out, a, st) : -1;
+}

@@ -14,6 +14,7 @@
 #define MX_UNET_H
 
 #include "../../ops/ops.h"
+#include "net_io.h"
 #include "netcfg.h"
 #include "params.h"
 
@@ -59,5 +60,11 @@ int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, 
                     mx_status *st);
 /* Multiply-add count ×2 of one forward (for benchmarks). */
 double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T);
+
+/* The registry's entry points (registry.h): config parse + load, the run-net adapter, and the name
+ * of residual i in run-net's tensors (down_block_res_sample.{i}, then mid_block_res_sample). */
+int mx_unet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
+int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int i);
 
 #endif

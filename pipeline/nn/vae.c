@@ -301,3 +301,42 @@ double mx_vae_decode_flops(const mx_vae *v, int B, int h, int w) {
     if (check_sizes(v, B, h * f, w * f, f, &st) || mx_ae_dry_run(decode_run, v, B, h, w, NULL, &flops, &st)) return 0.0;
     return flops;
 }
+
+/* ---- the registry's entry points (registry.h) ---- */
+
+int mx_vae_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st) {
+    mx_vae_config cfg;
+    return mx_vae_config_parse(&cfg, text, len, what, st) ? -1 : mx_vae_load((mx_vae **)net, &cfg, b, st);
+}
+
+/* run-net vae-encode: image [B,3,H,W] in [-1,1] -> mean, logvar. */
+int mx_vae_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    const mx_vae *v = net;
+    int f = mx_vae_factor(v), lc = v->cfg.latent_channels;
+    int64_t is[4] = {-1, v->cfg.in_channels, -1, -1};
+    const float *img = mx_net_io_input(io, "image", 4, is, st);
+    if (!img) return -1;
+    int B = (int)is[0], H = (int)is[2], W = (int)is[3];
+    size_t bytes;
+    if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, st)) return -1;
+    int64_t os[4] = {B, lc, H / f, W / f};
+    float *mean = io->output(io, "mean", 4, os, st), *logvar = mean ? io->output(io, "logvar", 4, os, st) : NULL;
+    mx_arena *a = logvar ? io->arena(io, bytes, st) : NULL;
+    return a ? mx_vae_encode(c, v, img, B, H, W, mean, logvar, a, st) : -1;
+}
+
+/* run-net vae-decode: latents [B,4,h,w] (unscaled) -> image. */
+int mx_vae_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+    const mx_vae *v = net;
+    int f = mx_vae_factor(v);
+    int64_t ls[4] = {-1, v->cfg.latent_channels, -1, -1};
+    const float *lat = mx_net_io_input(io, "latents", 4, ls, st);
+    if (!lat) return -1;
+    int B = (int)ls[0], h = (int)ls[2], w = (int)ls[3];
+    int64_t os[4] = {B, v->cfg.out_channels, (int64_t)h * f, (int64_t)w * f};
+    size_t bytes;
+    if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, st)) return -1;
+    float *img = io->output(io, "image", 4, os, st);
+    mx_arena *a = img ? io->arena(io, bytes, st) : NULL;
+    return a ? mx_vae_decode(c, v, lat, B, h, w, img, a, st) : -1;
+}

@@ -5,6 +5,7 @@
 #define MX_VAE_H
 
 #include "../../ops/ops.h"
+#include "net_io.h"
 #include "netcfg.h"
 #include "params.h"
 
@@ -26,5 +27,10 @@ int mx_vae_decode_arena_bytes(const mx_vae *v, int B, int h, int w, size_t *byte
 int mx_vae_decode(const mx_ctx *c, const mx_vae *v, const float *latents, int B, int h, int w, float *image,
                   mx_arena *a, mx_status *st);
 double mx_vae_decode_flops(const mx_vae *v, int B, int h, int w);
+
+/* The registry's entry points (registry.h): config parse + load, the run-net adapters. */
+int mx_vae_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
+int mx_vae_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_vae_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
 
 #endif

@@ -1,7 +1,7 @@
 /* `matex enhance` (paper §4.4, texture enhancement): SDEdit over views of a textured mesh.
- * Views: front and back, then the candidates Algorithm 1 picks over the whole texture, with
- * the texels front and back will reach already counted as painted. The views run one after
- * the other on the texture as enhanced so far (the original where no view has been): each
+ * Views: front and back, then the view schedule (Alg. 1, views.h) one view at a time from the
+ * texels enhanced so far. The views run one after the other on the texture as enhanced so far
+ * (the original where no view has been): each
  * view's render is the init image of the inpaint pipeline at `strength` (noised to strength,
  * SDEdit), the pixels of texels an earlier view already enhanced are the known region put back
  * after every step (latent blending), so each view continues its neighbours at the border;
@@ -56,46 +56,6 @@ static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
     return rc;
 }
 
-/* Marks in `known` the texels under the backprojection mask of a prepared view. */
-static void mark_view_texels(const mx_job *j, const mx_job_view *v, uint8_t *known) {
-    const mx_gbuffer *gb = &v->vb.gb;
-    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
-    for (size_t i = 0; i < (size_t)gb->w * gb->h; i++)
-        if (v->vb.mask[i] && isfinite(gb->uv[2 * i]) && isfinite(gb->uv[2 * i + 1]))
-            known[(size_t)mx_face_layer(&j->mesh, gb->face[i], j->nlayers) * plane +
-                  (size_t)mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], j->o->pub.texture_size, j->o->pub.texture_size)] = 1;
-}
-
-/* Cameras: front, back, then the plan of Algorithm 1 over the whole texture, front and back
- * counted as painted. */
-static int enhance_cameras(mx_job *j, mx_camera *cams, int *n, mx_status *st) {
-    mx_job_camera(&cams[0], 0.0f, 0.0f);
-    mx_job_camera(&cams[1], 180.0f, 0.0f);
-    *n = 2;
-    if (j->o->pub.views <= 2) return 0;
-    uint8_t *sim = calloc((size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size, 1);
-    if (!sim) return mx_fail(st, MX_ENOMEM, "enhance: out of memory");
-    int rc = 0;
-    for (int k = 0; k < 2 && !rc; k++) {
-        mx_job_view v;
-        memset(&v, 0, sizeof v);
-        v.cam = cams[k];
-        rc = mx_job_view_prepare(j, &v, st);
-        if (!rc) mark_view_texels(j, &v, sim);
-        mx_job_view_free(&v);
-    }
-    mx_view_plan plan;
-    if (rc || mx_view_plan_make(&j->vc, sim, j->o->pub.views - 2, j->o->pub.coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
-                                &plan, st)) {
-        free(sim);
-        return -1;
-    }
-    for (int i = 0; i < plan.n && *n < j->o->pub.views; i++) cams[(*n)++] = j->vc.cams[plan.cand[i]];
-    mx_view_plan_free(&plan);
-    free(sim);
-    return 0;
-}
-
 static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_status *st);
 
 /* One view on the texture enhanced so far: SDEdit of its render with the already enhanced
@@ -111,18 +71,27 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
         goto done;
     }
     float *depth = buf, *inpaint = buf + per, *init = buf + 2 * per, *image = buf + 3 * per, *paint = buf + 4 * per;
-    snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), o->pub.prompt);
-    mx_view_planes vp = {depth, inpaint, init, paint, S, 0};
+    mx_job_view_prompt(j, v, 0);
+    mx_view_planes vp = {.depth = depth, .inpaint = inpaint, .init = init, .paint = paint, .plane_w = S, .x0 = 0};
     if (merge_textures(j, orig, current, st)) goto done;
     merged = 1;
     if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, &vp, current, st)) goto done;
     const char *prompts[1] = {v->prompt};
     char stage[32];
     snprintf(stage, sizeof stage, "enhance view %d", index + 1);
-    mx_gen_batch b = {1,     S,     S, prompts, depth, NULL, o->pub.depth_weight[0], 0.0f, NULL, NULL, init,
-                      paint, o->pub.strength, (uint64_t)index, stage};
+    mx_gen_batch b = {.n = 1,
+                      .image_h = S,
+                      .image_w = S,
+                      .prompts = prompts,
+                      .depth_planes = depth,
+                      .w_depth = o->pub.depth_weight[0],
+                      .init_images = init,
+                      .paint_masks = paint,
+                      .strength = o->pub.strength,
+                      .first_stream = (uint64_t)index,
+                      .stage = stage};
     if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
-    mx_job_report_view(j, v, "enhance", index, j->models->cn_depth ? o->pub.depth_weight[0] : 0.0f, 0.0f);
+    mx_job_report_view(j, v, "enhance", index, j->gen.models->cn_depth ? o->pub.depth_weight[0] : 0.0f, 0.0f);
     rc = 0;
 done:
     for (int l = 0; merged && l < j->nlayers; l++) mx_image_free(&current[l]);
@@ -141,42 +110,56 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
     return 0;
 }
 
+/* One view at (azimuth, elevation) of cam, as enhance_view. */
+static int enhance_camera(mx_job *j, const mx_image *orig, const mx_camera *cam, int index, mx_status *st) {
+    mx_job_view v;
+    memset(&v, 0, sizeof v);
+    v.cam = *cam;
+    int rc = mx_job_check_cancel(j, st) || enhance_view(j, orig, &v, index, st);
+    mx_job_view_free(&v);
+    return rc ? -1 : 0;
+}
+
+/* Front and back, then the schedule (views.h) one view at a time from the texels enhanced so
+ * far: each view sees the ones before it. */
+static int enhance_views(mx_job *j, const mx_image *orig, mx_status *st) {
+    double t = mx_now();
+    mx_camera cam;
+    int index = 0, cand = 0, n = 0;
+    for (int k = 0; k < 2 && k < j->o->pub.views; k++) {
+        mx_job_camera(&cam, k ? 180.0f : 0.0f, 0.0f);
+        if (enhance_camera(j, orig, &cam, index++, st)) return -1;
+    }
+    if (mx_job_schedule_begin(j, 1, st)) return -1;
+    while (1) {
+        if (mx_job_schedule_next(j, &cand, &n, st)) return -1;
+        if (n == 0) break;
+        if (enhance_camera(j, orig, &j->sched.vc.cams[cand], index++, st)) return -1;
+    }
+    mx_job_stage_done(j, "views", mx_now() - t);
+    return 0;
+}
+
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_ENHANCE, st)) return -1;
     mx_job j;
     int rc = mx_job_open(&j, o, 0, 1, st);
     mx_image *orig = NULL, *out = NULL;
-    mx_camera *cams = NULL;
-    int ncam = 0;
     if (!rc) {
         orig = calloc((size_t)j.nlayers, sizeof *orig);
         out = calloc((size_t)j.nlayers, sizeof *out);
-        cams = calloc((size_t)(o->pub.views > 2 ? o->pub.views : 2), sizeof *cams);
-        if (!orig || !out || !cams) rc = mx_fail(st, MX_ENOMEM, "enhance: out of memory");
+        if (!orig || !out) rc = mx_fail(st, MX_ENOMEM, "enhance: out of memory");
     }
     j.keep_unreached = 1;
     j.write_flags = 0; /* the first enhanced view of a texel keeps it: later views blend it in */
     if (!rc) rc = original_textures(&j, orig, st);
-    if (!rc) rc = enhance_cameras(&j, cams, &ncam, st);
-    double t = mx_now();
-    for (int i = 0; !rc && i < ncam && i < o->pub.views; i++) {
-        if ((rc = mx_job_check_cancel(&j, st))) break;
-        mx_job_view v;
-        memset(&v, 0, sizeof v);
-        v.cam = cams[i];
-        rc = enhance_view(&j, orig, &v, i, st);
-        mx_job_view_free(&v);
-    }
-    if (!rc) {
-        mx_job_stage_done(&j, "views", mx_now() - t);
-        rc = merge_textures(&j, orig, out, st);
-    }
+    if (!rc) rc = enhance_views(&j, orig, st);
+    if (!rc) rc = merge_textures(&j, orig, out, st);
     if (!rc) rc = mx_job_finish(&j, out, res, st);
     for (int l = 0; orig && l < j.nlayers; l++) mx_image_free(&orig[l]);
     for (int l = 0; out && l < j.nlayers; l++) mx_image_free(&out[l]);
     free(orig);
     free(out);
-    free(cams);
     mx_job_close(&j);
     return rc;
 }

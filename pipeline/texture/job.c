@@ -32,8 +32,8 @@
  * neighbouring cell holds an untextured pixel (mx_paint_mask_cells). */
 #define PAINT_DILATE_CELLS 1
 /* VAE decode in tiles of this many latents (384 pixels), one image at a time: bounds the decode's
- * memory (SD1.5: ~0.5 GB instead of ~0.94 GB per 512x512 image and ~1.9 GB for the 1024x512
- * grid) at ~1.4x its work; blend as diffusers' tiled_decode (pipeline/nn/vae_tiled.h). */
+ * memory at ~1.4x its work (the figures: docs/DESIGN.md §3, "Memory of a run"); blend as diffusers'
+ * tiled_decode (pipeline/nn/vae_tiled.h). */
 #define VAE_TILE 48
 static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 
@@ -41,9 +41,15 @@ static const float GREY[3] = {0.5f, 0.5f, 0.5f};
 static void emit_progress(mx_job *j, int step, int steps, const char *message) {
     const mx_texture_opts *o = j->o;
     if (!o->progress) return;
-    mx_texture_progress p = {j->phase, step, steps, j->views_done, o->pub.views,
-                             j->visible ? mx_job_coverage(j) : 0.0, mx_now() - j->t0, message};
-    if (o->progress(o->progress_user, &p)) j->stop = 1;
+    mx_texture_progress p = {.stage = j->rep.phase,
+                             .step = step,
+                             .steps = steps,
+                             .views_done = j->rep.views_done,
+                             .views_total = o->pub.views,
+                             .coverage = j->sched.chart ? mx_job_coverage(j) : 0.0,
+                             .seconds = mx_now() - j->rep.t0,
+                             .message = message};
+    if (o->progress(o->progress_user, &p)) j->rep.stop = 1;
 }
 
 void mx_job_progress(mx_job *j, const char *fmt, ...) {
@@ -53,14 +59,14 @@ void mx_job_progress(mx_job *j, const char *fmt, ...) {
     va_start(ap, fmt);
     vsnprintf(line, sizeof line, fmt, ap);
     va_end(ap);
-    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->rep.t0, line);
     emit_progress(j, 0, 0, line);
 }
 
-void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->phase, sizeof j->phase, "%s", stage); }
+void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->rep.phase, sizeof j->rep.phase, "%s", stage); }
 
 int mx_job_check_cancel(const mx_job *j, mx_status *st) {
-    if (j->stop || (j->o->pub.cancel && *j->o->pub.cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
+    if (j->rep.stop || (j->o->pub.cancel && *j->o->pub.cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
     return 0;
 }
 
@@ -104,44 +110,78 @@ static int build_candidates(mx_job *j, mx_status *st) {
     if (!cams) return mx_fail(st, MX_ENOMEM, "candidate cameras: out of memory");
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
-    int rc = mx_view_cache_build(&j->vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->pub.texture_size,
+    int rc = mx_view_cache_build(&j->sched.vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->pub.texture_size,
                                  j->o->pub.texture_size, j->nlayers, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold,
                                  mx_view_scale_radius(mx_view_erode_radius(j->o->pub.render_size, j->o->pub.image_size),
                                                       j->o->pub.render_size, CANDIDATE_RENDER_SIZE),
-                                 j->ctx->pool, st);
+                                 j->gen.ctx->pool, st);
     free(cams);
     if (rc) return -1;
-    j->vc_ready = 1;
+    j->sched.vc_ready = 1;
     size_t texels = (size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size;
-    j->visible = calloc(texels, 1);
-    if (!j->visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
-    mx_view_cache_visible(&j->vc, j->visible);
-    j->n_visible = mx_mask_count(j->visible, (int64_t)texels);
-    if (j->n_visible == 0)
+    j->sched.visible = calloc(texels, 1);
+    if (!j->sched.visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
+    mx_view_cache_visible(&j->sched.vc, j->sched.visible);
+    j->sched.n_visible = mx_mask_count(j->sched.visible, (int64_t)texels);
+    if (j->sched.n_visible == 0)
         return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
                        j->o->pub.mesh_path);
     return 0;
 }
 
+/* Warns, once per job, when `text` is longer than the 75 tokens CLIP reads: how many tokens are
+ * dropped (the count `matex tokenize` gives) and where the dropped part begins. */
+static int warn_if_truncated(mx_job *j, const char *what, const char *text, mx_status *st) {
+    if (j->gen.truncation_warned || !j->gen.models->tok) return 0;
+    mx_tok_result r;
+    if (mx_tok_encode(j->gen.models->tok, text, &r, st)) return -1;
+    if (r.n_dropped == 0) return 0;
+    mx_warn("%s longer than the %d tokens CLIP reads: %d%s tokens dropped, from \"%s\"", what, MX_CLIP_CONTEXT - 2,
+            r.n_dropped, r.n_dropped + MX_CLIP_CONTEXT - 2 >= MX_TOK_MAX_COUNTED ? " or more" : "", r.dropped_from);
+    j->gen.truncation_warned = 1;
+    return 0;
+}
+
+/* The texels of the mesh (inside a face in UV space), what coverage is measured against. */
+static int build_chart(mx_job *j, mx_status *st) {
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
+    j->sched.chart = malloc(plane * (size_t)j->nlayers);
+    if (!j->sched.chart) return mx_fail(st, MX_ENOMEM, "chart mask: out of memory");
+    for (int l = 0; l < j->nlayers; l++)
+        if (mx_uv_chart_mask(&j->mesh, l, j->nlayers, j->o->pub.texture_size, j->o->pub.texture_size, j->sched.chart + l * plane, st))
+            return -1;
+    j->sched.n_chart = mx_mask_count(j->sched.chart, (int64_t)(plane * (size_t)j->nlayers));
+    return 0;
+}
+
+/* A render coarser than the texture leaves texels between a view's pixels: they are filled from
+ * their neighbours (backproject.h), and texels no view reaches are filled, not painted. */
+static void warn_render_size(const mx_texture_opts *o) {
+    if (o->pub.render_size < o->pub.texture_size)
+        mx_warn("render size %d is below the texture size %d: a view's pixels are sparser than the texels, so "
+                "texels between them are interpolated and fine ones may stay unseen (--render-size %d matches)",
+                o->pub.render_size, o->pub.texture_size, o->pub.texture_size);
+}
+
 static int encode_negative(mx_job *j, mx_status *st) {
-    int C = mx_models_text_dim(j->models);
-    j->uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
-    if (!j->uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
+    int C = mx_models_text_dim(j->gen.models);
+    j->gen.uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
+    if (!j->gen.uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
-    if (mx_models_encode_text(j->models, j->ctx, j->o->pub.negative_prompt, j->uncond, &dropped, st)) return -1;
+    if (mx_models_encode_text(j->gen.models, j->gen.ctx, j->o->pub.negative_prompt, j->gen.uncond, &dropped, st)) return -1;
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
 
 static void report_header(mx_job *j) {
     const mx_texture_opts *o = j->o;
-    mx_jw *w = &j->report;
+    mx_jw *w = &j->rep.json;
     mx_jw_init(w);
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", MX_VERSION);
     mx_jw_str(w, "mesh", j->mesh.source_path);
     if (o->pub.source_path) mx_jw_str(w, "source", o->pub.source_path);
-    if (j->models) {
+    if (j->gen.models) {
         mx_jw_str(w, "prompt", o->pub.prompt);
         mx_jw_str(w, "negative_prompt", o->pub.negative_prompt);
         mx_jw_int(w, "seed", (long long)o->pub.seed);
@@ -152,12 +192,12 @@ static void report_header(mx_job *j) {
     }
     mx_jw_int(w, "texture_size", o->pub.texture_size);
     mx_jw_int(w, "render_size", o->pub.render_size);
-    mx_jw_int(w, "threads", mx_pool_threads(j->ctx->pool));
-    if (j->models) {
-        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->ctx->k->isa)));
-        mx_jw_str(w, "kernels", mx_isa_name(j->ctx->k->isa));
-        mx_jw_str(w, "weights", mx_models_path(j->models));
-        mx_jw_str(w, "weights_digest", j->models->digest);
+    mx_jw_int(w, "threads", mx_pool_threads(j->gen.ctx->pool));
+    if (j->gen.models) {
+        mx_jw_str(w, "precision", mx_precision_name(mx_isa_precision(j->gen.ctx->k->isa)));
+        mx_jw_str(w, "kernels", mx_isa_name(j->gen.ctx->k->isa));
+        mx_jw_str(w, "weights", mx_models_path(j->gen.models));
+        mx_jw_str(w, "weights_digest", j->gen.models->digest);
     }
     mx_jw_int(w, "faces", j->mesh.nfaces);
     mx_jw_int(w, "vertices", j->mesh.nverts);
@@ -172,14 +212,15 @@ static void report_header(mx_job *j) {
         mx_jw_end_obj(w);
     }
     mx_jw_int(w, "candidate_views", o->pub.candidates);
-    mx_jw_num(w, "candidate_visible_texels", (double)j->n_visible);
+    mx_jw_num(w, "candidate_visible_texels", (double)j->sched.n_visible);
+    mx_jw_num(w, "mesh_texels", (double)j->sched.n_chart);
     mx_jw_begin_arr(w, "views");
 }
 
 /* --fast runs the LCM scheduler on an LCM-distilled UNet and decodes with TAESD: both must be in
  * the weight file. */
 static int check_fast_models(const mx_job *j, mx_status *st) {
-    const mx_models *m = j->models;
+    const mx_models *m = j->gen.models;
     if (m->lcm && m->taesd) return 0;
     return mx_fail(st, MX_EINPUT,
                    "%s: --fast needs a weight file with the LCM-LoRA merged into the UNet and TAESD; this one has %s. "
@@ -192,31 +233,31 @@ static int check_fast_models(const mx_job *j, mx_status *st) {
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st) {
     memset(j, 0, sizeof *j);
     j->o = o;
-    j->t0 = mx_now();
+    j->rep.t0 = mx_now();
     mx_job_set_phase(j, "load");
-    j->psnr_db = NAN;
+    j->rep.psnr_db = NAN;
     j->write_flags = o->pub.first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
     const char *inputs[] = {o->pub.mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->pub.source_path};
     if (o->pub.out_dir && mx_outdir_open(&j->out, o->pub.out_dir, o->pub.force, inputs, 3, st)) return -1;
     if (o->models) { /* an opened model set computes on its own context */
-        j->models = o->models;
-        j->ctx = o->models->c;
+        j->gen.models = o->models;
+        j->gen.ctx = o->models->c;
     } else {
-        if (mx_job_ctx_create(&j->own_ctx, o, st)) return -1;
-        j->own_ctx_ready = 1;
-        j->ctx = &j->own_ctx;
+        if (mx_job_ctx_create(&j->gen.own_ctx, o, st)) return -1;
+        j->gen.own_ctx_ready = 1;
+        j->gen.ctx = &j->gen.own_ctx;
     }
-    if (model_needs != MX_JOB_NO_MODELS && !j->models) {
+    if (model_needs != MX_JOB_NO_MODELS && !j->gen.models) {
         mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_texture_opts_device_name(o),
-                        mx_precision_name(mx_isa_precision(j->ctx->k->isa)), mx_isa_name(j->ctx->k->isa),
-                        mx_isa_precision(j->ctx->k->isa) != mx_texture_opts_precision(o) ? ": bf16 is not available on this CPU" : "");
-        if (mx_models_load(&j->own_models, j->ctx, o->weights_path, model_needs, st)) return -1;
-        j->own_models_ready = 1;
-        j->models = &j->own_models;
+                        mx_precision_name(mx_isa_precision(j->gen.ctx->k->isa)), mx_isa_name(j->gen.ctx->k->isa),
+                        mx_isa_precision(j->gen.ctx->k->isa) != mx_texture_opts_precision(o) ? ": bf16 is not available on this CPU" : "");
+        if (mx_models_load(&j->gen.own_models, j->gen.ctx, o->weights_path, model_needs, st)) return -1;
+        j->gen.own_models_ready = 1;
+        j->gen.models = &j->gen.own_models;
         mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->pub.fast ? " (fast: LCM + TAESD)" : "");
     }
-    if (model_needs == MX_JOB_NO_MODELS) j->models = NULL;
-    else if (mx_models_check(j->models, model_needs, st) || (o->pub.fast && check_fast_models(j, st))) return -1;
+    if (model_needs == MX_JOB_NO_MODELS) j->gen.models = NULL;
+    else if (mx_models_check(j->gen.models, model_needs, st) || (o->pub.fast && check_fast_models(j, st))) return -1;
     if (mx_job_check_cancel(j, st)) return -1;
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
                 : mx_mesh_load(o->pub.mesh_path, &j->mesh, st))
@@ -225,35 +266,40 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     if (mx_mesh_normalized(&j->mesh, mx_texture_opts_up(o), &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->pub.texture_size, o->pub.texture_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
-    if (build_candidates(j, st) || mx_job_check_cancel(j, st) || (j->models && encode_negative(j, st))) return -1;
+    warn_render_size(o);
+    if (build_candidates(j, st) || build_chart(j, st) || mx_job_check_cancel(j, st) ||
+        (j->gen.models && (encode_negative(j, st) || (j->o->pub.prompt && warn_if_truncated(j, "prompt", j->o->pub.prompt, st)))))
+        return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
                     j->nlayers, o->pub.candidates);
     report_header(j);
-    mx_job_stage_done(j, "load", mx_now() - j->t0);
+    mx_job_stage_done(j, "load", mx_now() - j->rep.t0);
     return 0;
 }
 
 void mx_job_close(mx_job *j) {
     mx_outdir_discard(&j->out);
-    for (int i = 0; i < j->prompts.n; i++) {
-        free(j->prompts.text[i]);
-        free(j->prompts.emb[i]);
+    for (int i = 0; i < j->gen.prompts.n; i++) {
+        free(j->gen.prompts.text[i]);
+        free(j->gen.prompts.emb[i]);
     }
-    free(j->uncond);
-    free(j->visible);
-    if (j->vc_ready) mx_view_cache_free(&j->vc);
+    free(j->gen.uncond);
+    free(j->sched.visible);
+    free(j->sched.chart);
+    if (j->sched.schedule_ready) mx_view_schedule_free(&j->sched.schedule);
+    if (j->sched.vc_ready) mx_view_cache_free(&j->sched.vc);
     if (j->bake_ready) mx_bake_free(&j->bake);
     free(j->pos);
     mx_mesh_free(&j->mesh);
-    if (j->own_models_ready) mx_models_free(&j->own_models);
-    if (j->own_ctx_ready) mx_ctx_destroy(&j->own_ctx);
-    mx_jw_free(&j->report);
+    if (j->gen.own_models_ready) mx_models_free(&j->gen.own_models);
+    if (j->gen.own_ctx_ready) mx_ctx_destroy(&j->gen.own_ctx);
+    mx_jw_free(&j->rep.json);
     memset(j, 0, sizeof *j);
 }
 
 /* Cached CLIP embedding of a prompt ([77][C], owned by the cache). */
 static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st) {
-    mx_prompt_cache *pc = &j->prompts;
+    mx_prompt_cache *pc = &j->gen.prompts;
     for (int i = 0; i < pc->n; i++)
         if (!strcmp(pc->text[i], text)) return pc->emb[i];
     if (pc->n == MX_JOB_MAX_PROMPTS) {
@@ -263,19 +309,20 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
         memmove(pc->emb, pc->emb + 1, sizeof(pc->emb[0]) * (MX_JOB_MAX_PROMPTS - 1));
         pc->n--;
     }
-    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
+    size_t floats = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->gen.models);
     float *emb = malloc(floats * sizeof *emb);
     char *copy = strdup(text);
     int dropped = 0;
-    if (!emb || !copy || mx_models_encode_text(j->models, j->ctx, text, emb, &dropped, st)) {
+    if (!emb || !copy || mx_models_encode_text(j->gen.models, j->gen.ctx, text, emb, &dropped, st)) {
         free(emb);
         free(copy);
         if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
         return NULL;
     }
-    if (dropped && !j->truncation_warned) {
-        mx_warn("prompt longer than 77 tokens: truncated (%d tokens dropped): \"%s\"", dropped, text);
-        j->truncation_warned = 1;
+    if (dropped && warn_if_truncated(j, "view prompt", text, st)) {
+        free(emb);
+        free(copy);
+        return NULL;
     }
     pc->text[pc->n] = copy;
     pc->emb[pc->n] = emb;
@@ -288,20 +335,20 @@ static int report_step(void *user, int step, int n_steps, int64_t timestep, cons
     (void)numel;
     mx_job *j = user;
     char line[160];
-    snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->phase, step + 1, n_steps, (long long)timestep);
-    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->t0, line);
+    snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->rep.phase, step + 1, n_steps, (long long)timestep);
+    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->rep.t0, line);
     emit_progress(j, step + 1, n_steps, line);
-    return j->stop || (j->o->pub.cancel && *j->o->pub.cancel);
+    return j->rep.stop || (j->o->pub.cancel && *j->o->pub.cancel);
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
 static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float *uncond, mx_status *st) {
-    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
+    size_t per = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->gen.models);
     for (int i = 0; i < b->n; i++) {
         const float *e = prompt_embedding(j, b->prompts[i], st);
         if (!e) return -1;
         memcpy(cond + i * per, e, per * sizeof *e);
-        memcpy(uncond + i * per, j->uncond, per * sizeof *e);
+        memcpy(uncond + i * per, j->gen.uncond, per * sizeof *e);
     }
     return 0;
 }
@@ -315,11 +362,15 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
     if (!b->init_images) {
         memcpy(lat, noise, per_item * b->n * sizeof *lat);
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
-        return mx_sd_denoise(rq, j->ctx, lat, b->n, h, w, st);
+        return mx_sd_denoise(rq, j->gen.ctx, lat, b->n, h, w, st);
     }
-    mx_sd_edit e = {j->models->vae, b->init_images, b->paint_masks, noise, b->strength,
-                    j->o->pub.fast ? j->models->taesd : NULL};
-    return mx_sd_edit_run(rq, &e, j->ctx, b->n, h, w, lat, st);
+    mx_sd_edit e = {.vae = j->gen.models->vae,
+                    .image = b->init_images,
+                    .mask = b->paint_masks,
+                    .noise = noise,
+                    .strength = b->strength,
+                    .taesd = j->o->pub.fast ? j->gen.models->taesd : NULL};
+    return mx_sd_edit_run(rq, &e, j->gen.ctx, b->n, h, w, lat, st);
 }
 
 /* LCM step noise: item i draws from its own stream (first_stream + i) after its start latents,
@@ -340,54 +391,62 @@ static int fill_lcm_noise(void *user, int step, float *noise, size_t numel) {
 }
 
 static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float *images, mx_status *st) {
-    if (j->o->pub.fast) return mx_taesd_decode_image(j->ctx, j->models->taesd, lat, n, h, w, images, st);
-    return mx_vae_decode_image_tiled(j->ctx, j->models->vae, lat, n, h, w, VAE_TILE, images, st);
+    if (j->o->pub.fast) return mx_taesd_decode_image(j->gen.ctx, j->gen.models->taesd, lat, n, h, w, images, st);
+    return mx_vae_decode_image_tiled(j->gen.ctx, j->gen.models->vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
-    int f = j->o->pub.fast ? mx_taesd_factor(j->models->taesd) : mx_vae_factor(j->models->vae);
+    int f = j->o->pub.fast ? mx_taesd_factor(j->gen.models->taesd) : mx_vae_factor(j->gen.models->vae);
     if (b->image_h % f || b->image_w % f)
         return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
                        b->image_h, f);
     int h = b->image_h / f, w = b->image_w / f;
-    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->models);
+    size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->gen.models);
     float *lat = malloc(2 * per_item * b->n * sizeof *lat), *noise = lat + per_item * b->n;
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
-    mx_sched_config scfg = j->models->sched;
-    lcm_noise lcm = {j->o->pub.seed, b->first_stream, b->n, per_item};
+    mx_sched_config scfg = j->gen.models->sched;
+    lcm_noise lcm = {.seed = j->o->pub.seed, .first_stream = b->first_stream, .n = b->n, .per_item = per_item};
     memset(&s, 0, sizeof s);
     int rc = -1, sched_ready = 0;
-    if (j->o->pub.fast) mx_sched_config_lcm(&scfg, &j->models->sched);
+    if (j->o->pub.fast) mx_sched_config_lcm(&scfg, &j->gen.models->sched);
     if (!lat || !cond || !uncond) {
         mx_fail(st, MX_ENOMEM, "generation buffers: out of memory");
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, j->ctx, &scfg, j->o->pub.steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, j->gen.ctx, &scfg, j->o->pub.steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     s.noise_fn = fill_lcm_noise;
     s.noise_user = &lcm;
     mx_sd_control controls[2];
     int nc = 0;
-    if (b->depth_planes && j->models->cn_depth && (b->w_depth != 0 || b->w_depth_items))
-        controls[nc++] = (mx_sd_control){j->models->cn_depth, b->depth_planes, b->w_depth, b->w_depth_items};
-    if (b->inpaint_planes && j->models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
-        controls[nc++] = (mx_sd_control){j->models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
+    if (b->depth_planes && j->gen.models->cn_depth && (b->w_depth != 0 || b->w_depth_items))
+        controls[nc++] = (mx_sd_control){j->gen.models->cn_depth, b->depth_planes, b->w_depth, b->w_depth_items};
+    if (b->inpaint_planes && j->gen.models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
+        controls[nc++] = (mx_sd_control){j->gen.models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
     mx_job_set_phase(j, b->stage);
-    mx_sd_request rq = {j->models->unet, controls, nc, cond, uncond, MX_CLIP_CONTEXT, j->o->pub.guidance, &s,
-                        report_step, j, NULL, NULL};
+    mx_sd_request rq = {.unet = j->gen.models->unet,
+                        .controls = controls,
+                        .n_controls = nc,
+                        .cond_text = cond,
+                        .uncond_text = uncond,
+                        .T = MX_CLIP_CONTEXT,
+                        .guidance = j->o->pub.guidance,
+                        .sched = &s,
+                        .progress = report_step,
+                        .progress_user = j};
     double t = mx_now();
     if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
         goto done;
     }
-    j->last_denoise_s = mx_now() - t;
-    j->denoise_s += j->last_denoise_s;
+    j->rep.last_denoise_s = mx_now() - t;
+    j->rep.denoise_s += j->rep.last_denoise_s;
     t = mx_now();
     rc = decode_images(j, lat, b->n, h, w, images, st);
-    j->last_decode_s = mx_now() - t;
-    j->decode_s += j->last_decode_s;
+    j->rep.last_decode_s = mx_now() - t;
+    j->rep.decode_s += j->rep.last_decode_s;
 done:
     if (sched_ready) mx_sched_free(&s);
     free(lat);
@@ -400,7 +459,7 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     int R = j->o->pub.render_size;
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
-    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold, j->ctx->pool,
+    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold, j->gen.ctx->pool,
                         st) ||
         mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->pub.image_size), st))
         return -1;
@@ -448,7 +507,7 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
     uint8_t *mask = malloc((size_t)R * R), *open = NULL;
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
     const uint8_t *known = j->bake.known;
-    if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will restart are repainted */
+    if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will take over are repainted */
         if (!(open = malloc((size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size))) {
             free(mask);
             return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
@@ -459,10 +518,10 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
     mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, mask);
     free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
-    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->ctx->pool, &rgb, st) &&
+    if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->gen.ctx->pool, &rgb, st) &&
         !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
         !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) &&
-        !mx_paint_mask_cells(&mask_s, mx_vae_factor(j->models->vae), PAINT_DILATE_CELLS, &paint, st) &&
+        !mx_paint_mask_cells(&mask_s, mx_vae_factor(j->gen.models->vae), PAINT_DILATE_CELLS, &paint, st) &&
         !mx_inpaint_image(&rgb_s, &paint, &ctl, st)) {
         mx_image_to_planes(&ctl, p->inpaint, p->plane_w, p->x0);
         if (p->init) mx_image_to_planes(&rgb_s, p->init, p->plane_w, p->x0);
@@ -499,31 +558,74 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         return -1;
     }
     mx_crop_paste(&gen, v->crop, &canvas);
-    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, &canvas, v->vb.mask, j->write_flags, j->ctx->pool, st);
+    j->rep.backproject_s += mx_now() - t; /* mx_job_backproject_render adds its own time */
+    int rc = mx_job_backproject_render(j, v, &canvas, v->vb.mask, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
-    j->backproject_s += mx_now() - t;
-    j->views_done++;
-    if (!rc) emit_progress(j, 0, 0, "view backprojected");
     return rc;
 }
 
-void mx_job_stage_done(mx_job *j, const char *name, double seconds) {
-    if (j->nstages == (int)(sizeof j->stage_s / sizeof j->stage_s[0])) return;
-    j->stage_name[j->nstages] = name;
-    j->stage_s[j->nstages++] = seconds;
+int mx_job_backproject_render(mx_job *j, mx_job_view *v, const mx_image *img, const uint8_t *mask, mx_status *st) {
+    double t = mx_now();
+    int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, img, mask, j->write_flags, j->gen.ctx->pool, st);
+    j->rep.backproject_s += mx_now() - t;
+    if (rc) return -1;
+    j->rep.views_done++;
+    emit_progress(j, 0, 0, "view backprojected");
+    return 0;
 }
 
-double mx_job_coverage(const mx_job *j) {
-    if (j->n_visible == 0) return 1.0;
+void mx_job_stage_done(mx_job *j, const char *name, double seconds) {
+    if (j->rep.nstages == (int)(sizeof j->rep.stage_s / sizeof j->rep.stage_s[0])) return;
+    j->rep.stage_name[j->rep.nstages] = name;
+    j->rep.stage_s[j->rep.nstages++] = seconds;
+}
+
+/* Fraction of the texels in `of` (n_of of them) that are in T^B. */
+static double painted_fraction(const mx_job *j, const uint8_t *of, int64_t n_of) {
+    if (n_of == 0) return 1.0;
     int64_t n = (int64_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size, hit = 0;
-    for (int64_t i = 0; i < n; i++) hit += j->visible[i] && j->bake.known[i];
-    return (double)hit / (double)j->n_visible;
+    for (int64_t i = 0; i < n; i++) hit += of[i] && j->bake.known[i];
+    return (double)hit / (double)n_of;
+}
+
+double mx_job_coverage(const mx_job *j) { return painted_fraction(j, j->sched.chart, j->sched.n_chart); }
+
+double mx_job_candidate_coverage(const mx_job *j) {
+    return painted_fraction(j, j->sched.visible, j->sched.n_visible);
+}
+
+int mx_job_schedule_begin(mx_job *j, int max_batch, mx_status *st) {
+    mx_view_schedule_params p = {.budget = j->o->pub.views - 2,
+                                 .max_batch = max_batch,
+                                 .coverage_stop = j->o->pub.coverage_stop,
+                                 .min_gain = MX_JOB_MIN_UNTEXTURED_PIXELS};
+    if (mx_view_schedule_init(&j->sched.schedule, &j->sched.vc, &p, st)) return -1;
+    j->sched.schedule_ready = 1;
+    return 0;
+}
+
+int mx_job_schedule_next(mx_job *j, int *cand, int *n, mx_status *st) {
+    if (mx_view_schedule_next(&j->sched.schedule, j->bake.known, cand, n, st)) return -1;
+    if (*n == 0)
+        mx_job_progress(j, "view selection: schedule ended after %d views (budget, coverage or gain floor)",
+                        j->rep.views_done);
+    return 0;
+}
+
+void mx_job_view_prompt(const mx_job *j, mx_job_view *v, int grid) {
+    const char *prompt = j->o->pub.prompt ? j->o->pub.prompt : "";
+    if (grid)
+        snprintf(v->prompt, sizeof v->prompt, "%s %s", j->o->pub.front_back_words, prompt);
+    else if (j->gen.models)
+        snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), prompt);
+    else /* transfer: no prompt, the view word names the view in the report */
+        snprintf(v->prompt, sizeof v->prompt, "%s view", mx_camera_view_word(&v->cam));
 }
 
 void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int batch, float w_depth,
                         float w_inpaint) {
-    mx_jw *w = &j->report;
+    mx_jw *w = &j->rep.json;
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "stage", stage);
     mx_jw_int(w, "batch", batch);
@@ -535,17 +637,26 @@ void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int 
     mx_jw_num(w, "inpaint_weight", w_inpaint);
     mx_jw_int(w, "untextured_pixels", v->untextured_pixels);
     mx_jw_num(w, "coverage_after", mx_job_coverage(j));
-    mx_jw_num(w, "batch_denoise_s", j->last_denoise_s);
-    mx_jw_num(w, "batch_decode_s", j->last_decode_s);
-    mx_jw_num(w, "time_s", mx_now() - j->t0);
+    mx_jw_num(w, "candidate_coverage_after", mx_job_candidate_coverage(j));
+    mx_jw_num(w, "batch_denoise_s", j->rep.last_denoise_s);
+    mx_jw_num(w, "batch_decode_s", j->rep.last_decode_s);
+    mx_jw_num(w, "time_s", mx_now() - j->rep.t0);
     mx_jw_end_obj(w);
 }
 
 /* Harmonic fill across UV seams of every layer's unreached chart texels, gutter dilation. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
     size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
-    for (int l = 0; l < j->nlayers; l++)
+    for (int l = 0; l < j->nlayers; l++) {
+        double t = mx_now();
+        int64_t open = 0;
+        for (size_t i = 0; i < plane; i++) open += j->sched.chart[l * plane + i] && !j->bake.known[l * plane + i];
+        mx_job_progress(j, "uv fill: texture %d/%d, %lld texels to fill (%dx%d)", l + 1, j->nlayers, (long long)open,
+                        j->o->pub.texture_size, j->o->pub.texture_size);
         if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, st)) return -1;
+        mx_job_progress(j, "uv fill: texture %d/%d done in %.1fs", l + 1, j->nlayers, mx_now() - t);
+        if (mx_job_check_cancel(j, st)) return -1;
+    }
     return 0;
 }
 
@@ -568,8 +679,9 @@ static int result_reserve(const mx_job *j, const char *report, mx_texture_result
 
 static void result_fill(mx_job *j, mx_image *tex, mx_texture_result *res) {
     res->coverage = mx_job_coverage(j);
-    res->views = j->views_done;
-    res->seconds = mx_now() - j->t0;
+    res->candidate_coverage = mx_job_candidate_coverage(j);
+    res->views = j->rep.views_done;
+    res->seconds = mx_now() - j->rep.t0;
     if (!j->o->keep_outputs) return;
     res->ntex = j->nlayers;
     for (int l = 0; l < j->nlayers; l++) {
@@ -584,21 +696,22 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *s
     double t = mx_now();
     mx_job_set_phase(j, "finish");
     if (mx_job_check_cancel(j, st) || (!j->keep_unreached && mx_job_fill_textures(j, tex, st))) return -1;
-    mx_jw *w = &j->report;
+    mx_jw *w = &j->rep.json;
     mx_jw_end_arr(w); /* views */
     mx_jw_num(w, "coverage", mx_job_coverage(j));
-    mx_jw_int(w, "views_generated", j->views_done);
-    if (!isnan(j->psnr_db)) mx_jw_num(w, "psnr_db", j->psnr_db);
+    mx_jw_num(w, "candidate_coverage", mx_job_candidate_coverage(j));
+    mx_jw_int(w, "views_generated", j->rep.views_done);
+    if (!isnan(j->rep.psnr_db)) mx_jw_num(w, "psnr_db", j->rep.psnr_db);
     mx_job_stage_done(j, "uv_fill", mx_now() - t);
     mx_jw_begin_obj(w, "stages_s");
-    for (int i = 0; i < j->nstages; i++) mx_jw_num(w, j->stage_name[i], j->stage_s[i]);
+    for (int i = 0; i < j->rep.nstages; i++) mx_jw_num(w, j->rep.stage_name[i], j->rep.stage_s[i]);
     mx_jw_end_obj(w);
     mx_jw_begin_obj(w, "work_s"); /* inside grid and views: the networks and the backprojection */
-    mx_jw_num(w, "denoise", j->denoise_s);
-    mx_jw_num(w, "decode", j->decode_s);
-    mx_jw_num(w, "backproject", j->backproject_s);
+    mx_jw_num(w, "denoise", j->rep.denoise_s);
+    mx_jw_num(w, "decode", j->rep.decode_s);
+    mx_jw_num(w, "backproject", j->rep.backproject_s);
     mx_jw_end_obj(w);
-    mx_jw_num(w, "total_s", mx_now() - j->t0);
+    mx_jw_num(w, "total_s", mx_now() - j->rep.t0);
     mx_jw_end_obj(w);
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
@@ -608,7 +721,8 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *s
         return -1;
     }
     if (j->o->pub.out_dir)
-        mx_job_progress(j, "wrote %s (coverage %.4f, %d views)", j->o->pub.out_dir, mx_job_coverage(j), j->views_done);
+        mx_job_progress(j, "wrote %s (coverage %.4f of the mesh's texels, %.4f of the candidates', %d views)",
+                        j->o->pub.out_dir, mx_job_coverage(j), mx_job_candidate_coverage(j), j->rep.views_done);
     if (res) result_fill(j, tex, res);
     return 0;
 }

@@ -16,7 +16,8 @@
 #include "texture.h"
 
 #define MX_JOB_MAX_PROMPTS 16
-/* A candidate with fewer untextured pixels (at the candidate render size) is not worth a view. */
+/* The gain floor: a candidate with fewer untextured pixels (at the candidate render size, 256)
+ * is not worth a view, and the schedule ends. */
 #define MX_JOB_MIN_UNTEXTURED_PIXELS 16
 /* model_needs of mx_job_open for a job without networks (transfer). */
 #define MX_JOB_NO_MODELS (-1)
@@ -27,43 +28,62 @@ typedef struct mx_prompt_cache {
     float *emb[MX_JOB_MAX_PROMPTS]; /* [77][C] */
 } mx_prompt_cache;
 
-typedef struct mx_job {
-    const mx_texture_opts *o;
-    mx_outdir out; /* opened (checked, staging folder created) before anything else */
+/* Generation: where the networks run, the networks, the prompt embeddings. */
+typedef struct mx_job_gen {
     const mx_ctx *ctx; /* the model set's context (o->models), or own_ctx */
     mx_ctx own_ctx;
     int own_ctx_ready;
     const mx_models *models; /* o->models, or own_models; NULL with MX_JOB_NO_MODELS */
     mx_models own_models;
     int own_models_ready;
-    char phase[32];    /* stage of the progress events */
-    int stop;          /* the progress callback asked to cancel */
-    mx_mesh mesh;
-    float *pos;  /* normalised positions for rendering: (R p - center) * scale */
-    float center[3], scale;
-    int nlayers; /* textures: one per material keeping its own UVs, else 1 */
-    int keep_unreached; /* enhance: texels no view reached keep their colour (mx_job_finish does not fill) */
-    int write_flags;    /* backprojection policy: MX_BACKPROJECT_OVERWRITE (angle-aware) or 0 (first wins), from o->first_wins */
-    mx_bake bake;
-    int bake_ready;
+    mx_prompt_cache prompts;
+    float *uncond; /* negative prompt embedding [77][C] */
+    int truncation_warned;
+} mx_job_gen;
+
+/* The views: candidates, what they see, what the mesh has, and the schedule (views.h). */
+typedef struct mx_job_sched {
     mx_view_cache vc;
     int vc_ready;
     uint8_t *visible; /* texels seen by some candidate [nlayers][tex][tex] */
     int64_t n_visible;
-    mx_prompt_cache prompts;
-    float *uncond; /* negative prompt embedding [77][C] */
-    int truncation_warned;
-    int atlas_built;
-    mx_uvatlas_report atlas;
-    mx_jw report; /* open object; the views array is written as views are generated */
+    uint8_t *chart;   /* texels of the mesh: inside a face in UV space [nlayers][tex][tex] */
+    int64_t n_chart;
+    mx_view_schedule schedule;
+    int schedule_ready;
+} mx_job_sched;
+
+/* Progress and the report: report.json as it is written, times of stages and work. */
+typedef struct mx_job_rep {
+    mx_jw json;     /* open object; the views array is written as views are generated */
+    char phase[32]; /* stage of the progress events */
+    int stop;       /* the progress callback asked to cancel */
     int views_done;
     double t0;
-    double last_denoise_s, last_decode_s; /* of the latest mx_job_generate, for the report */
+    double last_denoise_s, last_decode_s;      /* of the latest mx_job_generate, for the report */
     double denoise_s, decode_s, backproject_s; /* summed over the run: the report's work_s */
     double psnr_db; /* transfer onto its own mesh: PSNR of the painted texels (report), else NAN */
-    int nstages; /* seconds per stage, for the report */
+    int nstages;    /* seconds per stage, for the report */
     const char *stage_name[8];
     double stage_s[8];
+} mx_job_rep;
+
+typedef struct mx_job {
+    const mx_texture_opts *o;
+    mx_outdir out; /* opened (checked, staging folder created) before anything else */
+    mx_job_gen gen;
+    mx_mesh mesh;
+    float *pos;  /* normalised positions for rendering: (R p - center) * scale */
+    float center[3], scale;
+    int nlayers; /* textures: one per material keeping its own UVs, else 1 */
+    int atlas_built;
+    mx_uvatlas_report atlas;
+    int keep_unreached; /* enhance: texels no view reached keep their colour (mx_job_finish does not fill) */
+    int write_flags;    /* backprojection policy: MX_BACKPROJECT_OVERWRITE (angle-aware) or 0 (first wins), from o->pub.first_wins */
+    mx_bake bake;
+    int bake_ready;
+    mx_job_sched sched;
+    mx_job_rep rep;
 } mx_job;
 
 /* One view of a batch: its camera, prompt word, renders and crop. */
@@ -95,9 +115,9 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Output folder when o->out_dir is set (checked, staging folder created), context and models
+/* Output folder when o->pub.out_dir is set (checked, staging folder created), context and models
  * (o->models with its context, else loaded from o->weights_path; needs: MX_MODELS_NEED_*, or
- * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->mesh_path) and its normalised
+ * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->pub.mesh_path) and its normalised
  * copy, bake sized tex_size with nlayers layers, candidate cache and the report's header.
  * mx_job_close removes the staging folder of a run that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
@@ -134,16 +154,32 @@ int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Pastes a generated image (planes [3][S][plane_w] from column x0) back into the view's crop
  * and backprojects it into the untextured texels. */
 int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st);
+/* Backprojects a render-size image of the view where mask != 0 (timed: the report's
+ * work_s.backproject; counted in views_done). */
+int mx_job_backproject_render(mx_job *j, mx_job_view *v, const mx_image *img, const uint8_t *mask, mx_status *st);
+/* The view's prompt, built here only: the grid's "<grid_word> <prompt>", a later view's
+ * "<side|front|...> view of <prompt>" (paper §3.1: the view in the prompt against the Janus
+ * problem), a transfer view's "<word> view" (no prompt; the report names the view). */
+void mx_job_view_prompt(const mx_job *j, mx_job_view *v, int grid);
+/* The view schedule after front and back (mx_view_schedule, views.h) over the job's candidates,
+ * o->pub.views - 2 views, o->pub.coverage_stop and the MX_JOB_MIN_UNTEXTURED_PIXELS gain floor; max_batch:
+ * the most views one step returns. mx_job_schedule_next plans the next step from T^B as it is
+ * now: candidates into cand[max_batch], *n = 0 when the schedule has ended. */
+int mx_job_schedule_begin(mx_job *j, int max_batch, mx_status *st);
+int mx_job_schedule_next(mx_job *j, int *cand, int *n, mx_status *st);
 /* Adds the view to the report. */
 void mx_job_report_view(mx_job *j, const mx_job_view *v, const char *stage, int batch, float w_depth,
                         float w_inpaint);
-/* Fraction of candidate-visible texels in T^B. */
+/* Coverage: the fraction of the mesh's texels (inside a face in UV space) in T^B, what the
+ * texture has; the candidate coverage: of the texels some candidate sees (what the schedule
+ * can reach, and what coverage_stop is measured against). */
 double mx_job_coverage(const mx_job *j);
+double mx_job_candidate_coverage(const mx_job *j);
 /* Fills unreached texels (harmonic fill across UV seams inside the charts, mx_uv_fill_harmonic;
  * gutter dilation) of every layer. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Fills unreached texels, writes the output folder (staged, then moved into place) when
- * o->out_dir is set, and fills res (may be NULL): with o->keep_outputs it takes the textures
+ * o->pub.out_dir is set, and fills res (may be NULL): with o->keep_outputs it takes the textures
  * (their data is moved: textures[l] is left empty), the mesh and the report. Fails without writing
  * anything once the run is cancelled; nothing can fail after the folder is published. */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);

@@ -22,92 +22,94 @@ _Static_assert(offsetof(matex_options, mesh_path) == 0, "offset 0 means 'no fiel
 enum { TEX = MX_VERB_TEXTURE, ENH = MX_VERB_ENHANCE, TRA = MX_VERB_TRANSFER, BAT = MX_VERB_BATCH, ALL = TEX | ENH | TRA };
 
 static const mx_option_spec TABLE[] = {
-    {.name = "weights", .arg = "FILE", .type = MX_OPT_CLI, .verbs = TEX | ENH, .scope = MX_SCOPE_RUN,
+    {.name = "weights", .arg = "FILE", .type = MX_OPTION_CLI, .verbs = TEX | ENH, .scope = MX_SCOPE_RUN,
      .help = "matex weight file (matex convert); required"},
-    {.name = "output", .short_name = 'o', .arg = "DIR", .type = MX_OPT_TEXT, .field = FIELD(out_dir, text),
+    {.name = "output", .short_name = 'o', .arg = "DIR", .type = MX_OPTION_TEXT, .field = FIELD(out_dir, text),
      .verbs = ALL, .scope = MX_SCOPE_RUN,
      .help = "output folder: texture.png/.exr, mesh.obj/.mtl, mesh.glb, report.json; required"},
-    {.name = "strength", .arg = "S", .type = MX_OPT_FLOAT, .field = FIELD(strength, float), .lo = 0, .lo_open = 1,
+    {.name = "strength", .arg = "S", .type = MX_OPTION_FLOAT, .field = FIELD(strength, float), .lo = 0, .lo_open = 1,
      .hi = 1, .def = "0.5", .verbs = ENH, .scope = MX_SCOPE_JOB, .help = "SDEdit strength (1 = repaint)"},
-    {.name = "seed", .arg = "N", .type = MX_OPT_U64, .field = FIELD(seed, uint64_t), .lo = 0, .hi = (double)UINT64_MAX,
+    {.name = "seed", .arg = "N", .type = MX_OPTION_U64, .field = FIELD(seed, uint64_t), .lo = 0, .hi = (double)UINT64_MAX,
      .def = "0", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "noise seed; the same seed gives the same texture"},
-    {.name = "steps", .arg = "N", .type = MX_OPT_INT, .field = FIELD(steps, int), .lo = 1, .hi = 200, .def = "10",
+    {.name = "steps", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(steps, int), .lo = 1, .hi = 200, .def = "10",
      .def_help = "10; 4 with --fast", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "denoising steps"},
-    {.name = "views", .arg = "N", .type = MX_OPT_INT, .field = FIELD(views, int), .lo = 2, .hi = 64, .def = "6",
+    {.name = "views", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(views, int), .lo = 2, .hi = 64, .def = "6",
      .verbs = TEX | TRA | BAT, .scope = MX_SCOPE_JOB, .help = "view budget, front and back included"},
-    {.name = "views", .arg = "N", .type = MX_OPT_INT, .field = FIELD(views, int), .lo = 1, .hi = 64, .def = "6",
+    {.name = "views", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(views, int), .lo = 1, .hi = 64, .def = "6",
      .verbs = ENH, .scope = MX_SCOPE_JOB, .help = "view budget"},
-    {.name = "candidates", .arg = "N", .type = MX_OPT_INT, .field = FIELD(candidates, int), .lo = 1, .hi = 4096,
+    {.name = "candidates", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(candidates, int), .lo = 1, .hi = 4096,
      .def = "40", .verbs = ALL | BAT, .scope = MX_SCOPE_JOB, .help = "candidate cameras on a Fibonacci sphere"},
-    {.name = "texture-size", .arg = "N", .type = MX_OPT_INT, .field = FIELD(texture_size, int), .lo = 16, .hi = 8192,
+    {.name = "texture-size", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(texture_size, int), .lo = 16, .hi = 8192,
      .def = "1024", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "texture side in texels"},
-    {.name = "render-size", .arg = "N", .type = MX_OPT_INT, .field = FIELD(render_size, int), .lo = 16, .hi = 8192,
+    {.name = "render-size", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(render_size, int), .lo = 16, .hi = 8192,
      .def = "1024", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "side of the renders that are backprojected"},
-    {.name = "size", .arg = "S", .type = MX_OPT_INT, .field = FIELD(texture_size, int), .twin = FIELD(render_size, int),
+    {.name = "size", .arg = "S", .type = MX_OPTION_INT, .field = FIELD(texture_size, int), .twin = FIELD(render_size, int),
      .lo = 16, .hi = 8192, .def = "1024", .verbs = TRA, .scope = MX_SCOPE_JOB, .help = "texture side and render side"},
-    {.name = "image-size", .arg = "N", .type = MX_OPT_INT, .field = FIELD(image_size, int), .lo = 8, .hi = 2048,
+    {.name = "image-size", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(image_size, int), .lo = 8, .hi = 2048,
      .multiple = 8, .def = "512", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "side of one generated image; the weights also want a multiple of\n"
              "8 x 2^(UNet levels - 1): 64 for SD1.5, checked when they are open"},
-    {.name = "image-size", .arg = "M", .type = MX_OPT_INT, .field = FIELD(image_size, int),
+    {.name = "image-size", .arg = "M", .type = MX_OPTION_INT, .field = FIELD(image_size, int),
      .marks = FIELD(through_model_image, int), .lo = 8, .hi = 2048, .multiple = 8, .def_help = "off", .verbs = TRA,
      .scope = MX_SCOPE_JOB,
      .help = "send each render through the texture job's model image (crop to\n"
              "the object, M x M, back): its resampling at the silhouettes"},
-    {.name = "batch", .arg = "N", .type = MX_OPT_INT, .field = FIELD(batch, int), .lo = 1, .hi = 64, .def = "4",
+    {.name = "batch", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(batch, int), .lo = 1, .hi = 64, .def = "4",
      .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "most views generated in one batch"},
-    {.name = "negative", .arg = "TEXT", .type = MX_OPT_TEXT, .field = FIELD(negative_prompt, text), .def = "",
+    {.name = "negative", .arg = "TEXT", .type = MX_OPTION_TEXT, .field = FIELD(negative_prompt, text), .def = "",
      .def_help = "empty", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "negative prompt"},
-    {.name = "guidance", .arg = "G", .type = MX_OPT_FLOAT, .field = FIELD(guidance, float), .lo = 0, .hi = 50,
+    {.name = "guidance", .arg = "G", .type = MX_OPTION_FLOAT, .field = FIELD(guidance, float), .lo = 0, .hi = 50,
      .def = "7.5", .def_help = "7.5; 1 with --fast: none, batch not doubled", .verbs = TEX | ENH | BAT,
      .scope = MX_SCOPE_JOB, .help = "classifier-free guidance scale"},
-    {.name = "fast", .type = MX_OPT_FLAG, .field = FIELD(fast, int), .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+    {.name = "fast", .type = MX_OPTION_FLAG, .field = FIELD(fast, int), .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "few-step path: LCM scheduler, TAESD encoder/decoder; needs a weight file\n"
              "made with convert --lcm-lora FILE --taesd DIR"},
-    {.name = "grid-depth-weight", .arg = "W", .type = MX_OPT_FLOAT, .field = FIELD(grid_depth_weight, float), .lo = 0,
+    {.name = "grid-depth-weight", .arg = "W", .type = MX_OPTION_FLOAT, .field = FIELD(grid_depth_weight, float), .lo = 0,
      .hi = 2, .def = "1.0", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "depth control weight of the front+back grid"},
-    {.name = "depth-weight", .arg = "A[,B]", .type = MX_OPT_FLOAT2, .field = FIELD(depth_weight, float2), .lo = 0,
+    {.name = "depth-weight", .arg = "A[,B]", .type = MX_OPTION_FLOAT2, .field = FIELD(depth_weight, float2), .lo = 0,
      .hi = 2, .def = "1.0,0.7", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "depth control weight of the first[,last] later view"},
-    {.name = "inpaint-weight", .arg = "A[,B]", .type = MX_OPT_FLOAT2, .field = FIELD(inpaint_weight, float2), .lo = 0,
+    {.name = "inpaint-weight", .arg = "A[,B]", .type = MX_OPTION_FLOAT2, .field = FIELD(inpaint_weight, float2), .lo = 0,
      .hi = 2, .def = "0.8,1.0", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "inpainting control weight of the first[,last] later view"},
-    {.name = "frontal-threshold", .arg = "T", .type = MX_OPT_FLOAT, .field = FIELD(frontal_threshold, float), .lo = 0,
+    {.name = "frontal-threshold", .arg = "T", .type = MX_OPTION_FLOAT, .field = FIELD(frontal_threshold, float), .lo = 0,
      .hi = 1, .hi_open = 1, .def = "0.3", .verbs = ALL | BAT, .scope = MX_SCOPE_JOB,
      .help = "min |n.v| of a backprojected pixel"},
-    {.name = "normals", .arg = "depth|geometric", .type = MX_OPT_CHOICE, .field = FIELD(geometric_normals, int),
+    {.name = "normals", .arg = "depth|geometric", .type = MX_OPTION_CHOICE, .field = FIELD(geometric_normals, int),
      .choices = "depth|geometric", .def = "depth", .verbs = ALL | BAT, .scope = MX_SCOPE_JOB,
      .help = "normal used by the frontal mask (depth: as the paper)"},
-    {.name = "coverage-stop", .arg = "C", .type = MX_OPT_FLOAT, .field = FIELD(coverage_stop, float), .lo = 0,
+    {.name = "coverage-stop", .arg = "C", .type = MX_OPTION_FLOAT, .field = FIELD(coverage_stop, float), .lo = 0,
      .lo_open = 1, .hi = 1, .def = "0.995", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "stop adding views at this painted fraction"},
-    {.name = "front-back-words", .arg = "TEXT", .type = MX_OPT_TEXT, .field = FIELD(front_back_words, text),
+    {.name = "front-back-words", .arg = "TEXT", .type = MX_OPTION_TEXT, .field = FIELD(front_back_words, text),
      .def = "front and back view of", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "prompt prefix of the grid"},
-    {.name = "write", .arg = "angle-aware|first-wins", .type = MX_OPT_CHOICE, .field = FIELD(first_wins, int),
+    {.name = "write", .arg = "angle-aware|first-wins", .type = MX_OPTION_CHOICE, .field = FIELD(first_wins, int),
      .choices = "angle-aware|first-wins", .def = "angle-aware", .verbs = TRA, .scope = MX_SCOPE_JOB,
      .help = "a later view that sees a texel with |n.v| higher by 0.15\n"
              "restarts it, or the first writer keeps it"},
-    {.name = "background", .arg = "R,G,B", .type = MX_OPT_FLOAT3, .field = FIELD(background, float3), .lo = 0,
+    {.name = "background", .arg = "R,G,B", .type = MX_OPTION_FLOAT3, .field = FIELD(background, float3), .lo = 0,
      .hi = 1, .def = "0,0,0", .verbs = TRA, .scope = MX_SCOPE_JOB, .help = "colour behind the source in its renders"},
-    {.name = "up", .arg = "y|z", .type = MX_OPT_CHOICE, .field = FIELD(z_up, int), .choices = "y|z", .def = "y",
+    {.name = "up", .arg = "y|z", .type = MX_OPTION_CHOICE, .field = FIELD(z_up, int), .choices = "y|z", .def = "y",
      .verbs = ALL | BAT, .scope = MX_SCOPE_JOB, .help = "up axis of the mesh"},
-    {.name = "threads", .arg = "N", .type = MX_OPT_INT, .field = FIELD(threads, int), .lo = 0, .hi = 1024, .def = "0",
+    {.name = "threads", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(threads, int), .lo = 0, .hi = 1024, .def = "0",
      .def_help = "0: all", .verbs = ALL | BAT, .scope = MX_SCOPE_MODELS, .help = "CPU threads"},
-    {.name = "precision", .arg = "fp32|bf16", .type = MX_OPT_CHOICE, .field = FIELD(precision, int),
+    {.name = "precision", .arg = "fp32|bf16", .type = MX_OPTION_CHOICE, .field = FIELD(precision, int),
      .choices = "fp32|bf16", .def = "bf16", .def_help = "bf16 where the CPU has AVX512_BF16, else fp32",
      .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_MODELS,
      .help = "arithmetic of the networks: bf16 products with fp32 sums, about 2x faster"},
-    {.name = "device", .arg = "D", .type = MX_OPT_TEXT, .field = FIELD(device, text),
+    {.name = "device", .arg = "D", .type = MX_OPTION_TEXT, .field = FIELD(device, text),
      .choices = "cpu|cpu-strict|cuda", .def = "cpu", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_MODELS,
      .help = "cpu, cpu-strict (activations guarded, for tests) or cuda\n(in binaries built by `make cuda`)"},
-    {.name = "force", .type = MX_OPT_FLAG, .field = FIELD(force, int), .verbs = ALL, .scope = MX_SCOPE_RUN,
+    {.name = "force", .type = MX_OPTION_FLAG, .field = FIELD(force, int), .verbs = ALL, .scope = MX_SCOPE_RUN,
      .help = "replace an earlier output of matex (atomically; never other files)"},
-    {.name = "quiet", .type = MX_OPT_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN, .help = "no progress on stderr"},
-    {.name = "json", .type = MX_OPT_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN, .help = "print a JSON summary on stdout"},
-    {.name = "help", .short_name = 'h', .type = MX_OPT_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN, .help = "this help"},
+    {.name = "quiet", .type = MX_OPTION_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN, .help = "no progress on stderr"},
+    {.name = "progress", .arg = "text|json", .type = MX_OPTION_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN,
+     .help = "text: progress lines on stderr (default); json: one JSON object per line\non stdout (README \"Progress stream\")"},
+    {.name = "json", .type = MX_OPTION_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN, .help = "print a JSON summary on stdout"},
+    {.name = "help", .short_name = 'h', .type = MX_OPTION_CLI, .verbs = ALL, .scope = MX_SCOPE_RUN, .help = "this help"},
 };
 
 const mx_option_spec *mx_options_table(int *n) {
@@ -139,20 +141,20 @@ static const void *cfield(const matex_options *o, size_t offset) { return (const
 /* The valid values of an option, as the messages and --help state them. */
 static void describe_range(const mx_option_spec *s, char *out, size_t cap) {
     switch (s->type) {
-    case MX_OPT_INT:
+    case MX_OPTION_INT:
         if (s->multiple) snprintf(out, cap, "a multiple of %d in %.0f..%.0f", s->multiple, s->lo, s->hi);
         else snprintf(out, cap, "an integer in %.0f..%.0f", s->lo, s->hi);
         return;
-    case MX_OPT_U64: snprintf(out, cap, "an integer in 0..%llu", (unsigned long long)UINT64_MAX); return;
-    case MX_OPT_FLOAT:
-    case MX_OPT_FLOAT2:
-    case MX_OPT_FLOAT3:
+    case MX_OPTION_U64: snprintf(out, cap, "an integer in 0..%llu", (unsigned long long)UINT64_MAX); return;
+    case MX_OPTION_FLOAT:
+    case MX_OPTION_FLOAT2:
+    case MX_OPTION_FLOAT3:
         snprintf(out, cap, "%s in %c%g, %g%c",
-                 s->type == MX_OPT_FLOAT ? "a number" : s->type == MX_OPT_FLOAT2 ? "one or two numbers (A or A,B)"
+                 s->type == MX_OPTION_FLOAT ? "a number" : s->type == MX_OPTION_FLOAT2 ? "one or two numbers (A or A,B)"
                                                                                   : "three numbers (R,G,B)",
                  s->lo_open ? '(' : '[', s->lo, s->hi, s->hi_open ? ')' : ']');
         return;
-    case MX_OPT_CHOICE: snprintf(out, cap, "one of %s", s->choices); return;
+    case MX_OPTION_CHOICE: snprintf(out, cap, "one of %s", s->choices); return;
     default: snprintf(out, cap, "a text"); return;
     }
 }
@@ -187,30 +189,30 @@ static int check_one(const mx_option_spec *s, const matex_options *o, const char
     const void *f = cfield(o, s->field);
     int ok = 1;
     switch (s->type) {
-    case MX_OPT_INT: {
+    case MX_OPTION_INT: {
         int v = *(const int *)f;
         ok = v >= s->lo && v <= s->hi && (!s->multiple || v % s->multiple == 0);
         snprintf(own, sizeof own, "%d", v);
         break;
     }
-    case MX_OPT_FLOAT: ok = float_ok(s, *(const float *)f); snprintf(own, sizeof own, "%g", *(const float *)f); break;
-    case MX_OPT_FLOAT2:
-    case MX_OPT_FLOAT3: {
+    case MX_OPTION_FLOAT: ok = float_ok(s, *(const float *)f); snprintf(own, sizeof own, "%g", *(const float *)f); break;
+    case MX_OPTION_FLOAT2:
+    case MX_OPTION_FLOAT3: {
         const float *v = f;
-        int n = s->type == MX_OPT_FLOAT2 ? 2 : 3;
+        int n = s->type == MX_OPTION_FLOAT2 ? 2 : 3;
         for (int i = 0; i < n; i++) ok = ok && float_ok(s, v[i]);
         if (n == 2) snprintf(own, sizeof own, "%g,%g", v[0], v[1]);
         else snprintf(own, sizeof own, "%g,%g,%g", v[0], v[1], v[2]);
         break;
     }
-    case MX_OPT_CHOICE: {
+    case MX_OPTION_CHOICE: {
         int v = *(const int *)f, n = 1;
         for (const char *p = s->choices; *p; p++) n += *p == '|';
         ok = v >= 0 && v < n;
         snprintf(own, sizeof own, "%d", v);
         break;
     }
-    case MX_OPT_TEXT: { /* NULL: the default ("" for a text, "cpu" for the device) */
+    case MX_OPTION_TEXT: { /* NULL: the default ("" for a text, "cpu" for the device) */
         const char *t = *(const char *const *)f;
         ok = !t || !s->choices || choice_index(s->choices, t) >= 0;
         snprintf(own, sizeof own, "%.80s", t ? t : "");
@@ -242,15 +244,15 @@ int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, 
     void *f = field(o, s->field);
     int bad = 0;
     switch (s->type) {
-    case MX_OPT_FLAG: *(int *)f = 1; return 0;
-    case MX_OPT_CLI: return 0;
-    case MX_OPT_TEXT: *(const char **)f = value; break;
-    case MX_OPT_INT: bad = mx_parse_int(value, -2147483647L, 2147483647L, f); break;
-    case MX_OPT_U64: bad = mx_parse_u64(value, f); break;
-    case MX_OPT_FLOAT: bad = mx_parse_float(value, f); break;
-    case MX_OPT_FLOAT2: bad = parse_floats(value, f, 2); break;
-    case MX_OPT_FLOAT3: bad = parse_floats(value, f, 3); break;
-    case MX_OPT_CHOICE: {
+    case MX_OPTION_FLAG: *(int *)f = 1; return 0;
+    case MX_OPTION_CLI: return 0;
+    case MX_OPTION_TEXT: *(const char **)f = value; break;
+    case MX_OPTION_INT: bad = mx_parse_int(value, -2147483647L, 2147483647L, f); break;
+    case MX_OPTION_U64: bad = mx_parse_u64(value, f); break;
+    case MX_OPTION_FLOAT: bad = mx_parse_float(value, f); break;
+    case MX_OPTION_FLOAT2: bad = parse_floats(value, f, 2); break;
+    case MX_OPTION_FLOAT3: bad = parse_floats(value, f, 3); break;
+    case MX_OPTION_CHOICE: {
         int i = choice_index(s->choices, value);
         bad = i < 0;
         if (bad) break;
@@ -284,7 +286,7 @@ int mx_option_check(const mx_option_spec *s, const matex_options *o, mx_status *
 int mx_options_check(const matex_options *o, unsigned verb, mx_status *st) {
     for (size_t i = 0; i < sizeof TABLE / sizeof TABLE[0]; i++) {
         const mx_option_spec *s = &TABLE[i];
-        if ((s->verbs & verb) && s->type != MX_OPT_CLI && !s->marks && check_one(s, o, NULL, st)) return -1;
+        if ((s->verbs & verb) && s->type != MX_OPTION_CLI && !s->marks && check_one(s, o, NULL, st)) return -1;
     }
     if (o->through_model_image && check_one(mx_option_find("image-size", MX_VERB_TRANSFER), o, NULL, st)) return -1;
     if (o->fast && verb == MX_VERB_TRANSFER) return mx_fail(st, MX_EUSAGE, "--fast is for texture and enhance");
@@ -316,10 +318,10 @@ static void help_line(FILE *f, const mx_option_spec *s) {
         else col += fputc(*p, f) != EOF;
     }
     const char *def = s->def_help ? s->def_help : s->def;
-    int numeric = s->type == MX_OPT_INT || s->type == MX_OPT_FLOAT || s->type == MX_OPT_FLOAT2 || s->type == MX_OPT_FLOAT3;
+    int numeric = s->type == MX_OPTION_INT || s->type == MX_OPTION_FLOAT || s->type == MX_OPTION_FLOAT2 || s->type == MX_OPTION_FLOAT3;
     char range[160] = "", tail[320];
     if (numeric) describe_range(s, range, sizeof range);
-    const char *quote = s->type == MX_OPT_TEXT && !s->choices && def && *def && !s->def_help ? "\"" : "";
+    const char *quote = s->type == MX_OPTION_TEXT && !s->choices && def && *def && !s->def_help ? "\"" : "";
     int n = def || numeric ? snprintf(tail, sizeof tail, "(%s%s%s%s%s%s)", def ? "default " : "", quote, def ? def : "",
                                       quote, def && numeric ? "; " : "", range)
                            : 0;

@@ -14,16 +14,16 @@
 #include "../../runtime/status.h"
 
 typedef enum {
-    MX_OPT_FLAG,   /* int set to 1 when given; takes no value */
-    MX_OPT_INT,    /* int in lo..hi (and a multiple of `multiple` when set) */
-    MX_OPT_U64,    /* uint64_t in 0..UINT64_MAX */
-    MX_OPT_FLOAT,  /* finite float in lo..hi (bounds open where said) */
-    MX_OPT_FLOAT2, /* float[2], "A" or "A,B" (B = A when absent), each in lo..hi */
-    MX_OPT_FLOAT3, /* float[3], "A,B,C", each in lo..hi */
-    MX_OPT_TEXT,   /* const char * (borrowed) */
-    MX_OPT_CHOICE, /* int: the index of the value among `choices` ("depth|geometric") */
-    MX_OPT_CLI     /* handled by the command line itself (--weights, --json, ...): no field */
-} mx_opt_type;
+    MX_OPTION_FLAG,   /* int set to 1 when given; takes no value */
+    MX_OPTION_INT,    /* int in lo..hi (and a multiple of `multiple` when set) */
+    MX_OPTION_U64,    /* uint64_t in 0..UINT64_MAX */
+    MX_OPTION_FLOAT,  /* finite float in lo..hi (bounds open where said) */
+    MX_OPTION_FLOAT2, /* float[2], "A" or "A,B" (B = A when absent), each in lo..hi */
+    MX_OPTION_FLOAT3, /* float[3], "A,B,C", each in lo..hi */
+    MX_OPTION_TEXT,   /* const char * (borrowed) */
+    MX_OPTION_CHOICE, /* int: the index of the value among `choices` ("depth|geometric") */
+    MX_OPTION_CLI     /* handled by the command line itself (--weights, --json, ...): no field */
+} mx_option_type;
 
 /* The verbs that take an option (a bit set). MX_VERB_BATCH: `matex batch` takes it on its command
  * line, for the model set (scope MODELS) or as the default of every job (scope JOB). */
@@ -39,7 +39,7 @@ typedef struct mx_option_spec {
     const char *name;     /* "image-size": --image-size, manifest key "image-size" or "image_size" */
     char short_name;      /* 'o' for -o, else 0 */
     const char *arg;      /* the value's name in --help ("N", "A[,B]"), NULL for a flag */
-    mx_opt_type type;
+    mx_option_type type;
     size_t field;         /* offset in matex_options (type-checked where the table is written) */
     size_t twin;          /* int field that gets the same value (--size: texture and render size); 0 none */
     size_t marks;         /* int field set to 1 when the option is given; 0 none */

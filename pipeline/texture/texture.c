@@ -28,21 +28,28 @@ static int grid_stage(mx_job *j, mx_status *st) {
         goto done;
     }
     for (int i = 0; i < 2; i++) {
-        snprintf(v[i].prompt, sizeof v[i].prompt, "%s %s", o->pub.front_back_words, o->pub.prompt);
-        mx_view_planes vp = {planes, NULL, NULL, NULL, W, i * S};
+        mx_job_view_prompt(j, &v[i], 1);
+        mx_view_planes vp = {.depth = planes, .plane_w = W, .x0 = i * S};
         if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, NULL, st)) goto done;
     }
     prompts[0] = v[0].prompt;
     mx_job_set_phase(j, "grid");
     mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->pub.grid_depth_weight);
-    mx_gen_batch b = {1, S, W, prompts, planes, NULL, o->pub.grid_depth_weight, 0.0f, NULL, NULL, NULL, NULL, 0.0f, 0,
-                      "grid"};
+    mx_gen_batch b = {.n = 1,
+                      .image_h = S,
+                      .image_w = W,
+                      .prompts = prompts,
+                      .depth_planes = planes,
+                      .w_depth = o->pub.grid_depth_weight,
+                      .first_stream = 0,
+                      .stage = "grid"};
     if (mx_job_generate(j, &b, image, st)) goto done;
     for (int i = 0; i < 2; i++) {
         if (mx_job_backproject(j, &v[i], image, W, i * S, st)) goto done;
         mx_job_report_view(j, &v[i], "grid", 0, o->pub.grid_depth_weight, 0.0f);
     }
-    mx_job_progress(j, "stage grid done: coverage %.4f", mx_job_coverage(j));
+    mx_job_progress(j, "stage grid done: coverage %.4f (candidates %.4f)", mx_job_coverage(j),
+                    mx_job_candidate_coverage(j));
     mx_job_stage_done(j, "grid", mx_now() - t);
     rc = 0;
 done:
@@ -55,14 +62,6 @@ done:
 static float lerp_schedule(const float w[2], int k, int n) {
     float t = n > 1 ? (float)k / (float)(n - 1) : 0.0f;
     return w[0] + t * (w[1] - w[0]);
-}
-
-/* Views of the plan's first group (at most max_batch of them). */
-static int first_group(const mx_view_plan *plan, int max_batch, int *cand) {
-    int n = 0;
-    for (int i = 0; i < plan->n && n < max_batch; i++)
-        if (plan->group[i] == plan->group[0]) cand[n++] = plan->cand[i];
-    return n;
 }
 
 /* Buffers of one batch of n views at model size S. */
@@ -117,19 +116,37 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
     mx_job_set_phase(j, stage);
     for (int i = 0; i < n; i++) {
-        v[i].cam = j->vc.cams[cand[i]];
-        snprintf(v[i].prompt, sizeof v[i].prompt, "%s view of %s", mx_camera_view_word(&v[i].cam), o->pub.prompt);
+        v[i].cam = j->sched.vc.cams[cand[i]];
+        mx_job_view_prompt(j, &v[i], 0);
         bb.prompts[i] = v[i].prompt;
         bb.wd[i] = lerp_schedule(o->pub.depth_weight, k + i, n_later);
         bb.wi[i] = lerp_schedule(o->pub.inpaint_weight, k + i, n_later);
-        mx_view_planes vp = {bb.depth + i * per, bb.inpaint + i * per, bb.init + i * per, bb.paint + i * per / 3, S, 0};
+        mx_view_planes vp = {.depth = bb.depth + i * per,
+                             .inpaint = bb.inpaint + i * per,
+                             .init = bb.init + i * per,
+                             .paint = bb.paint + i * per / 3,
+                             .plane_w = S,
+                             .x0 = 0};
         if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, current, st)) goto done;
         mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->pub.views,
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
                         (long long)v[i].untextured_pixels);
     }
-    mx_gen_batch b = {n, S, S, bb.prompts, bb.depth, bb.inpaint, bb.wd[0], bb.wi[0], bb.wd, bb.wi, bb.init,
-                      bb.paint, 1.0f, (uint64_t)(k + 1), stage};
+    mx_gen_batch b = {.n = n,
+                      .image_h = S,
+                      .image_w = S,
+                      .prompts = bb.prompts,
+                      .depth_planes = bb.depth,
+                      .inpaint_planes = bb.inpaint,
+                      .w_depth = bb.wd[0],
+                      .w_inpaint = bb.wi[0],
+                      .w_depth_items = bb.wd,
+                      .w_inpaint_items = bb.wi,
+                      .init_images = bb.init,
+                      .paint_masks = bb.paint,
+                      .strength = 1.0f,
+                      .first_stream = (uint64_t)(k + 1),
+                      .stage = stage};
     if (mx_job_generate(j, &b, bb.image, st)) goto done;
     for (int i = 0; i < n; i++) {
         if (mx_job_backproject(j, &v[i], bb.image + i * per, S, 0, st)) goto done;
@@ -145,40 +162,36 @@ done:
     return rc;
 }
 
-/* Automatic view selection (paper Alg. 1), re-planned from the real T^B after each batch. */
+/* Stage 1 (paper §3.2, Alg. 1): the views the schedule picks from the real T^B, a batch at a
+ * time (views whose untextured texels do not overlap are generated together). */
 static int view_stage(mx_job *j, mx_status *st) {
     const mx_texture_opts *o = j->o;
     double t = mx_now();
-    int n_later = o->pub.views - 2, k = 0, batch_id = 1;
-    int *cand = malloc(sizeof(int) * (o->pub.batch > 0 ? o->pub.batch : 1));
+    int max_batch = o->pub.batch > 0 ? o->pub.batch : 1, n_later = o->pub.views - 2, k = 0, batch_id = 1, n = 0;
+    int *cand = malloc(sizeof(int) * (size_t)max_batch);
     if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
-    while (k < n_later) {
-        if (mx_job_check_cancel(j, st)) {
-            free(cand);
-            return -1;
-        }
-        mx_view_plan plan;
-        if (mx_view_plan_make(&j->vc, j->bake.known, n_later - k, o->pub.coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
-                              &plan, st)) {
-            free(cand);
-            return -1;
-        }
-        int n = plan.n ? first_group(&plan, o->pub.batch > 0 ? o->pub.batch : 1, cand) : 0;
-        mx_view_plan_free(&plan);
-        if (n == 0) {
-            mx_job_progress(j, "view selection: nothing left to paint after %d views", k + 2);
-            break;
-        }
-        if (view_batch(j, cand, n, k, n_later, batch_id++, st)) {
-            free(cand);
-            return -1;
-        }
+    int rc = mx_job_schedule_begin(j, max_batch, st);
+    while (!rc && !(rc = mx_job_check_cancel(j, st)) && !(rc = mx_job_schedule_next(j, cand, &n, st)) && n > 0) {
+        rc = view_batch(j, cand, n, k, n_later, batch_id++, st);
         k += n;
-        mx_job_progress(j, "coverage after %d views: %.4f", k + 2, mx_job_coverage(j));
+        if (!rc)
+            mx_job_progress(j, "coverage after %d views: %.4f (candidates %.4f)", k + 2, mx_job_coverage(j),
+                            mx_job_candidate_coverage(j));
     }
     free(cand);
+    if (rc) return -1;
     mx_job_stage_done(j, "views", mx_now() - t);
     return 0;
+}
+
+/* Stage 2 (paper §3, post-processing): the texels no view reached are filled in UV space
+ * (mx_job_finish), then the outputs. */
+static int fill_stage(mx_job *j, mx_texture_result *res, mx_status *st) {
+    mx_image tex[j->nlayers];
+    if (mx_job_current_textures(j, tex, st)) return -1;
+    int rc = mx_job_finish(j, tex, res, st);
+    for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
+    return rc;
 }
 
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
@@ -187,14 +200,7 @@ int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->pub.views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
     if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
-    if (!rc) {
-        mx_image tex[j.nlayers];
-        rc = mx_job_current_textures(&j, tex, st);
-        if (!rc) {
-            rc = mx_job_finish(&j, tex, res, st);
-            for (int l = 0; l < j.nlayers; l++) mx_image_free(&tex[l]);
-        }
-    }
+    if (!rc) rc = fill_stage(&j, res, st);
     mx_job_close(&j);
     return rc;
 }

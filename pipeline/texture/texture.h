@@ -35,7 +35,7 @@ typedef struct mx_texture_progress {
     int step, steps;     /* denoising step (1-based) of the stage's diffusion call; 0, 0 outside one */
     int views_done;      /* views backprojected so far (front and back count as two) */
     int views_total;     /* the view budget */
-    double coverage;     /* fraction of candidate-visible texels painted so far */
+    double coverage;     /* fraction of the mesh's texels (inside a face in UV space) painted so far */
     double seconds;      /* since the run started */
     const char *message; /* the progress line (the CLI prints it unless quiet) */
 } mx_texture_progress;
@@ -74,7 +74,8 @@ typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE, MX_TEXTURE_MODE
 int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st);
 
 typedef struct mx_texture_result {
-    double coverage;   /* fraction of candidate-visible texels painted by views */
+    double coverage;   /* fraction of the mesh's texels (inside a face in UV space) painted by views */
+    double candidate_coverage; /* fraction of the texels some candidate view sees painted (coverage_stop's measure) */
     int views;         /* views generated (front and back count as two) */
     double seconds;
     /* with keep_outputs: the mesh as exported (its UVs are the atlas when the input had none) */

@@ -72,44 +72,41 @@ static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, 
     mx_job_view v;
     memset(&v, 0, sizeof v);
     v.cam = *cam;
-    snprintf(v.prompt, sizeof v.prompt, "%s view", mx_camera_view_word(cam));
+    mx_job_view_prompt(j, &v, 0);
     mx_image img = {0};
     int rc = mx_job_view_prepare(j, &v, st) ||
-             mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->ctx->pool, &s->gb, st) ||
-             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->pub.background, j->ctx->pool, &img, st) ||
+             mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->gen.ctx->pool, &s->gb, st) ||
+             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->pub.background, j->gen.ctx->pool, &img, st) ||
              (j->o->pub.through_model_image && through_model_image(j, &v, &img, st));
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) v.vb.mask[i] &= s->gb.face[i] >= 0;
-        rc = mx_backproject(&j->bake, &v.vb.gb, &j->mesh, &img, v.vb.mask, j->write_flags, j->ctx->pool, st);
+        rc = mx_job_backproject_render(j, &v, &img, v.vb.mask, st);
     }
-    if (!rc) {
-        j->views_done++;
-        mx_job_report_view(j, &v, "transfer", index, 0.0f, 0.0f);
-    }
+    if (!rc) mx_job_report_view(j, &v, "transfer", index, 0.0f, 0.0f);
     mx_image_free(&img);
     mx_job_view_free(&v);
     return rc ? -1 : 0;
 }
 
-/* Front and back, then the views Algorithm 1 plans from the real T^B. */
+/* Front and back, then the schedule (views.h) one view at a time from the real T^B. */
 static int transfer_views(mx_job *j, source *s, mx_status *st) {
     double t = mx_now();
     mx_camera cam;
+    int index = 0, cand = 0, n = 0;
     for (int k = 0; k < 2; k++) {
         mx_job_camera(&cam, k ? 180.0f : 0.0f, 0.0f);
-        if (mx_job_check_cancel(j, st) || transfer_view(j, s, &cam, k, st)) return -1;
+        if (mx_job_check_cancel(j, st) || transfer_view(j, s, &cam, index++, st)) return -1;
     }
-    mx_view_plan plan;
-    if (mx_view_plan_make(&j->vc, j->bake.known, j->o->pub.views - 2, j->o->pub.coverage_stop, MX_JOB_MIN_UNTEXTURED_PIXELS,
-                          &plan, st))
-        return -1;
-    int rc = 0;
-    for (int k = 0; k < plan.n && !rc; k++)
-        rc = mx_job_check_cancel(j, st) || transfer_view(j, s, &j->vc.cams[plan.cand[k]], k + 2, st);
-    mx_view_plan_free(&plan);
+    if (mx_job_schedule_begin(j, 1, st)) return -1;
+    while (1) {
+        if (mx_job_check_cancel(j, st) || mx_job_schedule_next(j, &cand, &n, st)) return -1;
+        if (n == 0) break;
+        if (transfer_view(j, s, &j->sched.vc.cams[cand], index++, st)) return -1;
+    }
     mx_job_stage_done(j, "views", mx_now() - t);
-    mx_job_progress(j, "transfer: %d views, coverage %.4f", j->views_done, mx_job_coverage(j));
-    return rc ? -1 : 0;
+    mx_job_progress(j, "transfer: %d views, coverage %.4f (candidates %.4f)", j->rep.views_done, mx_job_coverage(j),
+                    mx_job_candidate_coverage(j));
+    return 0;
 }
 
 /* PSNR of the painted texels against the source's own texture (source and destination are
@@ -142,8 +139,8 @@ static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status 
     int rc = mx_job_current_textures(j, tex, st);
     if (!rc) {
         if (!strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) {
-            j->psnr_db = psnr_against_source(j, s, tex);
-            mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->psnr_db);
+            j->rep.psnr_db = psnr_against_source(j, s, tex);
+            mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->rep.psnr_db);
         }
         rc = mx_job_finish(j, tex, res, st);
         for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);

@@ -1,4 +1,4 @@
-/* Fault injection for a test-only build of matex (tests/faults/matex_faults; the product
+/* Fault injection for a test-only build of matex (build/tests/faults/matex_faults; the product
  * code is unchanged). Linked with -Wl,--wrap for the allocation functions, so every
  * allocation made by matex's own code is counted; the write functions are interposed (defined
  * here), so the writes of the image libraries (PNG via OpenImageIO, EXR via OpenEXR) are

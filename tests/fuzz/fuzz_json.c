@@ -4,7 +4,7 @@
 #include <string.h>
 
 #include "../../pipeline/nn/clip.h"
-#include "../../pipeline/nn/netcfg.h"
+#include "../../pipeline/nn/registry.h"
 #include "../../pipeline/nn/params.h"
 #include "../../pipeline/nn/scheduler.h"
 #include "../../runtime/json.h"

@@ -27,7 +27,7 @@ ci_runs() {
     safetensors) echo 30000 ;;
     gltf | image | obj | weightfile) echo 20000 ;;
     meshio) echo 8000 ;;
-    meshpath) echo 1500 ;;
+    meshpath | ckpt) echo 1500 ;;
     *) echo 10000 ;;
     esac
 }

@@ -1,10 +1,10 @@
 /* No background colour in transferred textures (issue 13, edges): every shared asset gets a
  * procedural texture (an atlas first when it has no UVs) and is written as a textured mesh;
- * `matex transfer` (the binary ./matex, run from the repository root) then moves that texture
- * onto the same mesh twice, the source rendered once over magenta and once over green, each
- * render going through the texture job's model image (--image-size: crop, resize, paste back,
- * which blends background into silhouette pixels). A texel whose colour differs between the
- * two results took colour from the background: there must be none. */
+ * the transfer (mx_transfer_run, the library) then moves that texture onto the same mesh
+ * twice, the source rendered once over magenta and once over green, each render going through
+ * the texture job's model image (through_model_image: crop, resize, paste back, which blends
+ * background into silhouette pixels). A texel whose colour differs between the two results
+ * took colour from the background: there must be none. */
 #include <dirent.h>
 #include <math.h>
 #include <stdio.h>
@@ -16,6 +16,7 @@
 #include "../pipeline/geom/mesh.h"
 #include "../pipeline/geom/uvatlas.h"
 #include "../pipeline/io/io.h"
+#include "../pipeline/texture/texture.h"
 #include "../runtime/log.h"
 #include "util_test.h"
 
@@ -91,22 +92,26 @@ static int64_t differing_texels(const char *a, const char *b, int64_t *total) {
     return diff;
 }
 
-static int transfer(const char *src, const char *out, const char *bg) {
-    char cmd[4096];
-    snprintf(cmd, sizeof cmd,
-             "./matex transfer %s/mesh.obj %s/mesh.obj -o %s --size 256 --image-size 128 --candidates 8 --views 4 "
-             "--background %s > /dev/null 2>&1",
-             src, src, out, bg);
-    int rc = system(cmd);
-    if (rc) fprintf(stderr, "command failed (%d): %s\n", rc, cmd);
-    return rc;
+/* The source's texture moved onto itself, rendered over the background (r, g, b), into out: as
+ * `matex transfer SRC SRC --size 256 --image-size 128 --candidates 8 --views 4 --background r,g,b -o out`. */
+static int transfer(const char *src_dir, float r, float g, float b, const char *out, mx_status *st) {
+    char mesh[512];
+    snprintf(mesh, sizeof mesh, "%s/mesh.obj", src_dir);
+    mx_texture_opts o;
+    mx_texture_opts_default(&o);
+    o.pub.source_path = o.pub.mesh_path = mesh;
+    o.pub.out_dir = out;
+    o.pub.texture_size = o.pub.render_size = 256;
+    o.pub.image_size = 128;
+    o.pub.through_model_image = 1;
+    o.pub.candidates = 8;
+    o.pub.views = 4;
+    o.pub.verbose = 0;
+    o.pub.background[0] = r, o.pub.background[1] = g, o.pub.background[2] = b;
+    return mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, st) || mx_transfer_run(&o, NULL, st);
 }
 
 int main(void) {
-    if (access("./matex", X_OK) != 0) {
-        fprintf(stderr, "./matex not found: run from the repository root after `make`\n");
-        return 1;
-    }
     mx_log_set_level(MX_LOG_ERROR);
     snprintf(tmpdir, sizeof tmpdir, "/tmp/matex_bleed_XXXXXX");
     if (!mkdtemp(tmpdir)) return 1;
@@ -122,7 +127,8 @@ int main(void) {
         int ok = write_source(rel, src, &st) == 0;
         if (!ok) fprintf(stderr, "%s: %s\n", mx_test_assets[k], st.msg);
         CHECK(ok);
-        if (!ok || transfer(src, a, "1,0,1") || transfer(src, b, "0,1,0")) {
+        if (!ok || transfer(src, 1, 0, 1, a, &st) || transfer(src, 0, 1, 0, b, &st)) {
+            if (ok) fprintf(stderr, "%s: transfer: %s\n", mx_test_assets[k], st.msg);
             CHECK(0);
             continue;
         }
@@ -133,5 +139,5 @@ int main(void) {
     char cmd[512];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmpdir);
-    return mx_test_finish("test_geom_bleed");
+    return mx_test_finish("test_texture_bleed");
 }

@@ -1,0 +1,40 @@
+/* The named tensors of one network call as `matex run-net` sees them (a safetensors file in,
+ * one out): a network's run-net adapter (mx_net_run_fn, registry.h) asks for its inputs by name
+ * with the shape it accepts, declares its outputs, and takes an arena of the size its dry run
+ * gave. tools/cmd_run_net.c implements it; every tensor it hands out stays its own (freed after
+ * the call). */
+#ifndef MX_NN_NET_IO_H
+#define MX_NN_NET_IO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../../ops/ops.h"
+#include "../../runtime/status.h"
+
+typedef struct mx_net_io mx_net_io;
+struct mx_net_io {
+    void *impl;
+    const char *source; /* the inputs' file, for messages */
+    /* 1 when the inputs hold `name`. */
+    int (*has)(mx_net_io *io, const char *name);
+    /* HOST fp32 copy of input `name` of ndim dimensions; shape[i] = -1 accepts any size and is
+     * filled in, others must match. NULL with st set when missing, of another shape or too large. */
+    const float *(*host)(mx_net_io *io, const char *name, int ndim, int64_t *shape, mx_status *st);
+    /* HOST fp32 copy of input `name` of any shape, flattened to *numel values (a 0-d tensor is 1). */
+    const float *(*host_flat)(mx_net_io *io, const char *name, size_t *numel, mx_status *st);
+    /* Device copy of n host floats (an input of the call). */
+    const float *(*device)(mx_net_io *io, const float *host, size_t n, mx_status *st);
+    /* Device memory for output `name` of this shape, written to the outputs after the call. */
+    float *(*output)(mx_net_io *io, const char *name, int ndim, const int64_t *shape, mx_status *st);
+    /* The call's arena on the device, `bytes` big (one per call). */
+    mx_arena *(*arena)(mx_net_io *io, size_t bytes, mx_status *st);
+};
+
+/* Device copy of input `name` (shape as io->host). */
+const float *mx_net_io_input(mx_net_io *io, const char *name, int ndim, int64_t *shape, mx_status *st);
+/* Device copy of the timesteps: input "timestep" of 1 or B values (any dtype and shape), one per
+ * batch item. */
+const float *mx_net_io_timesteps(mx_net_io *io, int B, mx_status *st);
+
+#endif

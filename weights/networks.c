@@ -1,0 +1,34 @@
+/* The networks a weight file can hold (networks.h). */
+#include "networks.h"
+
+#include <stdio.h>
+#include <string.h>
+
+const mx_net_kind mx_net_kinds[] = {
+    {.name = "unet", .class_name = "UNet2DConditionModel", .in_model_set = 1, .lora_prefix = "lora_unet_"},
+    {.name = "controlnet", .class_name = "ControlNetModel", .in_model_set = 1, .lora_prefix = NULL},
+    {.name = "vae", .class_name = "AutoencoderKL", .in_model_set = 1, .lora_prefix = NULL},
+    {.name = "text_encoder", .class_name = "CLIPTextModel", .in_model_set = 1, .lora_prefix = "lora_te_"},
+    {.name = "taesd", .class_name = "AutoencoderTiny", .in_model_set = 0, .lora_prefix = NULL},
+};
+const size_t mx_net_kind_count = sizeof mx_net_kinds / sizeof mx_net_kinds[0];
+
+const mx_net_kind *mx_net_kind_named(const char *name) {
+    for (size_t i = 0; name && i < mx_net_kind_count; i++)
+        if (!strcmp(mx_net_kinds[i].name, name)) return &mx_net_kinds[i];
+    return NULL;
+}
+
+const mx_net_kind *mx_net_kind_of_class(const char *class_name) {
+    for (size_t i = 0; class_name && i < mx_net_kind_count; i++)
+        if (!strcmp(mx_net_kinds[i].class_name, class_name)) return &mx_net_kinds[i];
+    return NULL;
+}
+
+void mx_net_kind_classes(char *buf, size_t cap) {
+    size_t len = 0;
+    buf[0] = 0;
+    for (size_t i = 0; i < mx_net_kind_count && len < cap; i++)
+        len += (size_t)snprintf(buf + len, cap - len, "%s%s", i == 0 ? "" : i + 1 < mx_net_kind_count ? ", " : " or ",
+                                mx_net_kinds[i].class_name);
+}
