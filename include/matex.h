@@ -107,37 +107,47 @@ typedef struct matex_progress {
 /* Called from the thread that runs; return non-zero to cancel the run. */
 typedef int (*matex_progress_fn)(void *user, const matex_progress *p);
 
+/* Every field's default and valid range are those of the option of the same name (texture_size:
+ * --texture-size, z_up: --up z, ...) that `matex texture --help` lists: one table
+ * (pipeline/texture/options.c) gives both; matex_options_default sets the defaults, and a run
+ * refuses a value out of range (MATEX_EUSAGE naming the option) before any work. */
 typedef struct matex_options {
     /* the mesh: a file (.obj .ply .off .stl .gltf .glb), or a mesh in memory (copied) */
     const char *mesh_path;
     const matex_mesh *mesh;
     const matex_image *mesh_textures; /* enhance with a mesh in memory: [nmaterials] textures */
     const char *prompt;
-    const char *negative_prompt;  /* "" */
+    const char *negative_prompt;  /* NULL: "" */
     const char *out_dir;          /* write the output folder (texture.png/.exr, mesh.obj/.mtl/.glb,
                                      report.json); NULL: results in memory only */
     int force;                    /* replace an earlier output of matex in out_dir (atomically; a folder
                                      without its marker .matex-output, or holding other files, is refused); 0: refuse */
-    uint64_t seed;                /* 0; the same seed gives the same texture */
-    int steps;                    /* denoising steps: 10 */
-    int views;                    /* view budget, front and back included: 6 */
-    int candidates;               /* candidate cameras: 40 */
-    int texture_size;             /* 1024 */
-    int render_size;              /* 1024 */
-    int image_size;               /* side of a generated image, multiple of 8: 512 */
-    int batch;                    /* most views generated in one batch: 4 */
-    float guidance;               /* 7.5 */
-    float grid_depth_weight;      /* 1.0 */
-    float depth_weight[2];        /* first, last later view: 1.0, 0.7 */
-    float inpaint_weight[2];      /* first, last later view: 0.8, 1.0 */
-    float frontal_threshold;      /* 0.3 */
-    float coverage_stop;          /* 0.995 */
-    float strength;               /* enhance: SDEdit strength in (0, 1]: 0.5 */
+    uint64_t seed;                /* the same seed gives the same texture */
+    int steps;                    /* denoising steps */
+    int views;                    /* view budget, front and back included */
+    int candidates;               /* candidate cameras */
+    int texture_size;             /* texture side in texels */
+    int render_size;              /* side of the renders that are backprojected */
+    int image_size;               /* side of a generated image (a multiple of 64 for SD1.5) */
+    int batch;                    /* most views generated in one batch */
+    float guidance;               /* classifier-free guidance scale */
+    float grid_depth_weight;      /* depth control weight of the grid */
+    float depth_weight[2];        /* depth control weight of the first, last later view */
+    float inpaint_weight[2];      /* inpainting control weight of the first, last later view */
+    float frontal_threshold;      /* min |n.v| of a backprojected pixel */
+    float coverage_stop;          /* stop adding views at this painted fraction */
+    float strength;               /* enhance: SDEdit strength */
     int fast;                     /* few-step path (LCM + TAESD; the weight file must hold both);
                                      set steps 4 and guidance 1 with it, as `matex texture --fast` does */
     int geometric_normals;        /* 0: normals from depth (the paper) */
     int z_up;                     /* 0: the mesh is y-up */
-    const char *front_back_words; /* "front and back view of" */
+    const char *front_back_words; /* prompt prefix of the grid */
+    /* transfer (matex_transfer): the texture of source_path moves onto the mesh */
+    const char *source_path;      /* the textured mesh */
+    float background[3];          /* colour behind the source in its renders */
+    int first_wins;               /* 0: a later view restarts texels it sees more frontally (|n.v| higher by
+                                     0.15); 1: the first writer keeps them */
+    int through_model_image;      /* 1: each render goes through an image_size model image (crop, resize, back) */
     /* read by matex_models_open (a run uses those of its model set): */
     int threads;                  /* 0: all CPUs */
     int precision;                /* MATEX_PRECISION_BF16 (default: used where the CPU has it) or _FP32 */
@@ -167,6 +177,11 @@ typedef struct matex_result {
 int matex_texture(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
 /* Enhances the texture of a textured mesh (SDEdit over views). */
 int matex_enhance(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
+/* Moves the texture of o->source_path (a textured mesh) onto o->mesh_path or o->mesh (its UVs, or an
+ * atlas): the views texture would choose render the source, each render is backprojected onto the
+ * mesh. No networks run: m may be NULL (a context with o's threads is made for the run); prompt,
+ * sampler and weight options are unused. Both meshes share pose and units. */
+int matex_transfer(matex_models *m, const matex_options *o, matex_result **result, matex_error *err);
 /* Writes a result's output folder as out_dir does (force: replace an earlier output of matex). */
 int matex_result_write(const matex_result *r, const char *out_dir, int force, matex_error *err);
 void matex_result_free(matex_result *r);

@@ -36,6 +36,7 @@ check "bad JSON reported with its line" grep -q '"line":6,.*m.jsonl:6: ' "$O/fai
 check "unknown key reported" grep -q '"line":7,.*unknown key \\"frobnicate\\"' "$O/failed.jsonl"
 check "rerun: complete jobs skipped" [ "$(rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --json)" = 1 ]
 check "rerun summary" grep -q '"jobs":6,"done":0,"skipped":3,"failed":3' "$T/out"
+check "rerun: failed.jsonl lists each failure once (no duplicate at resume)" [ "$(wc -l < "$O/failed.jsonl")" = 3 ]
 check "shard from SLURM_ARRAY_TASK_*" [ "$(SLURM_ARRAY_TASK_ID=2 SLURM_ARRAY_TASK_MIN=1 SLURM_ARRAY_TASK_COUNT=2 \
     rc_of "$M" batch "$T/m.jsonl" --weights "$W" -o "$O" --json)" = 1 ]
 check "that is shard 1/2" grep -q '"shard":"1/2"' "$T/out"
@@ -46,6 +47,35 @@ check "matex texture with the same options" [ "$(rc_of "$M" texture "$T/box.obj"
     --depth-weight 1.0,0.5 --steps 1 --image-size 64 --texture-size 128 --render-size 128 --candidates 12 \
     --weights "$W" -o "$T/metal_cli")" = 0 ]
 check "gives the same texture" cmp -s "$T/metal_cli/texture.exr" "$O/metal/texture.exr"
+
+# every texture option of a job is a key (the option table); the model set's and force are not,
+# and say why; a bad value is one message, file:line prefixed, with the valid range (issue 24 item 8)
+{
+    echo '{"mesh": "box.obj", "prompt": "x", "name": "neg", "seed": -1}'
+    echo '{"mesh": "box.obj", "prompt": "x", "name": "stp", "steps": -3}'
+    echo '{"mesh": "box.obj", "prompt": "x", "name": "thr", "threads": 2}'
+    echo '{"mesh": "box.obj", "prompt": "x", "name": "frc", "force": true}'
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"x\", \"name\": \"fst\", \"fast\": true, $SMALL}"
+} > "$T/keys.jsonl"
+check "bad keys: exit 1" [ "$(rc_of "$M" batch "$T/keys.jsonl" --weights "$W" -o "$T/keys")" = 1 ]
+cat "$T/err"
+check "\"seed\": -1: one message" [ "$(grep -c seed "$T/err")" = 1 ]
+check "... file:line and the range" grep -qF "keys.jsonl:1: \"seed\": --seed must be an integer in 0..18446744073709551615, not '-1'" "$T/err"
+check "... no command-line usage message" sh -c "! grep -q 'for usage' '$T/err'"
+check "\"steps\": -3: file:line and the range" grep -qF "keys.jsonl:2: \"steps\": --steps must be an integer in 1..200, not '-3'" "$T/err"
+check "\"threads\": the model set's, given to batch" grep -qF "keys.jsonl:3: \"threads\" is the model set's" "$T/err"
+check "\"force\": not a job key, with why" grep -qF "keys.jsonl:4: \"force\" is not a job key: batch skips" "$T/err"
+check "\"fast\": true is a key (the demo weights then lack LCM)" grep -q "line 5 (fst): failed: .*--fast needs" "$T/err"
+echo '{"mesh": "box.obj", "prompt": "a box", "name": "dflt"}' > "$T/one.jsonl"
+check "batch --fast (a default of every job) is taken" [ "$(rc_of "$M" batch "$T/one.jsonl" --weights "$W" -o "$T/one" --fast)" = 1 ]
+check "... the job says what --fast needs" grep -q "line 1 (dflt): failed: .*--fast needs" "$T/err"
+check "batch --fast=1 exits 2" [ "$(rc_of "$M" batch "$T/one.jsonl" --weights "$W" -o "$T/one" --fast=1)" = 2 ]
+check "... says it takes no value" grep -q -- "--fast takes no value" "$T/err"
+check "batch --bogus exits 2, named unknown" [ "$(rc_of "$M" batch "$T/one.jsonl" --weights "$W" -o "$T/one" --bogus)" = 2 ]
+check "... named unknown" grep -q "unknown option --bogus" "$T/err"
+check "texture options on batch's command line are every job's defaults" [ "$(rc_of "$M" batch "$T/one.jsonl" --weights "$W" \
+    -o "$T/one" --steps 1 --image-size 64 --texture-size 128 --render-size 128 --candidates 12 --seed 7)" = 0 ]
+check "... as the report says" grep -q '"seed":7,"steps":1,' "$T/one/dflt/report.json"
 
 # SIGTERM in the middle of a run (what scancel sends), right after the first job is complete
 for i in 1 2 3; do echo "{\"mesh\": \"box.obj\", \"prompt\": \"box $i\", \"name\": \"b$i\", $SMALL}"; done > "$T/slow.jsonl"

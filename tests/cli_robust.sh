@@ -13,7 +13,7 @@ complete() { # complete DIR: every output file is there and nothing else
     for f in $FILES; do [ -s "$1/$f" ] || return 1; done
     [ "$(ls "$1" | wc -l)" -eq 6 ]
 }
-no_staging() { ! ls -d "$1".partial-* "$1".old-* > /dev/null 2>&1; }
+no_staging() { ! ls -d "$1".partial-* "$1".old-* "$1".matex-lock > /dev/null 2>&1; }
 
 # ---- flat, single-face and degenerate meshes ----
 printf 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n' > "$T/quad.obj"
@@ -93,16 +93,16 @@ bad_option() { # bad_option EXPECTED_TEXT OPTIONS...
     [ "$rc" = 2 ] && grep -qF -- "$want" "$T/err" && grep -qF -- "$want" "$T/out" && grep -q '"ok":false' "$T/out" &&
         [ ! -e "$T/bad" ] && no_staging "$T/bad"
 }
-check "--frontal-threshold 1.5" bad_option "--frontal-threshold must be in [0, 1), not 1.5" --frontal-threshold 1.5
-check "--coverage-stop 2" bad_option "--coverage-stop must be in (0, 1], not 2" --coverage-stop 2
-check "--guidance -3" bad_option "--guidance must be in [0, 50], not -3" --guidance -3
+check "--frontal-threshold 1.5" bad_option "--frontal-threshold must be a number in [0, 1), not '1.5'" --frontal-threshold 1.5
+check "--coverage-stop 2" bad_option "--coverage-stop must be a number in (0, 1], not '2'" --coverage-stop 2
+check "--guidance -3" bad_option "--guidance must be a number in [0, 50], not '-3'" --guidance -3
 check "--guidance nan exits 2" [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" $SMALL --guidance nan)" = 2 ]
-check "--depth-weight 1,-1" bad_option "--depth-weight must be in [0, 2], not -1" --depth-weight 1,-1
-check "--batch 0" bad_option "--batch must be in 1..64, not 0" --batch 0
-check "--texture-size 8" bad_option "--texture-size must be in 16..8192, not 8" --texture-size 8
+check "--depth-weight 1,-1" bad_option "--depth-weight must be one or two numbers (A or A,B) in [0, 2], not '1,-1'" --depth-weight 1,-1
+check "--batch 0" bad_option "--batch must be an integer in 1..64, not '0'" --batch 0
+check "--texture-size 8" bad_option "--texture-size must be an integer in 16..8192, not '8'" --texture-size 8
 check "a bad number with --json: the message in the JSON" \
     [ "$(rc_of "$M" texture "$T/quad.obj" "a tile" --weights "$W" -o "$T/bad" --steps ten --json)" = 2 ]
-check "... names the option and value" grep -q '"error":"bad value for --steps: .ten."' "$T/out"
+check "... names the option and value" grep -q '"error":"--steps must be an integer in 1..200, not .ten."' "$T/out"
 check "empty prompt" [ "$(rc_of "$M" texture "$T/quad.obj" " " --weights "$W" -o "$T/bad" $SMALL)" = 2 ]
 check "empty prompt: message" grep -q "prompt is empty" "$T/err"
 check "enhance --strength 0" [ "$(rc_of "$M" enhance "$T/o_quad/mesh.obj" --strength 0 --weights "$W" -o "$T/bad")" = 2 ]
@@ -235,4 +235,40 @@ for delay in 0 0.3 0.6 1.0 1.4 2.0; do
     check "SIG$sig ${delay}s after staging: no staging folder" no_staging "$out"
 done
 check "the signals sent right after staging interrupted ($interrupted of $i)" [ $interrupted -ge 2 ]
+
+# waits (at most 120 s) for the staging folder of output $1 of the run $2
+wait_staging() {
+    n=0
+    while [ $n -lt 1200 ] && ! ls -d "$1".partial-* > /dev/null 2>&1 && kill -0 $2 2> /dev/null; do
+        sleep 0.1
+        n=$((n + 1))
+    done
+}
+
+# ---- two runs into one output folder at once: the second is refused at once, saying why; the
+# first completes (issue 24 item 12) ----
+"$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/both" $LONG > /dev/null 2> "$T/err1" &
+pid=$!
+wait_staging "$T/both" $pid
+check "a second run into the folder a run is writing: exit 1" \
+    [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/both" $SMALL)" = 1 ]
+check "... says another matex run is writing it" grep -q "another matex run is writing this output folder" "$T/err"
+wait $pid
+check "... the first run completes" [ $? = 0 ] && check "... its folder complete" complete "$T/both"
+check "... no staging or lock left" no_staging "$T/both"
+
+# ---- a second signal ends the run at once, still leaving nothing behind: the run is stopped
+# (SIGSTOP) while both are sent, so both arrive before it can act on the first ----
+"$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/twice" $LONG > /dev/null 2> "$T/err" &
+pid=$!
+wait_staging "$T/twice" $pid
+kill -STOP $pid
+kill -INT $pid
+kill -TERM $pid
+kill -CONT $pid
+wait $pid
+rc=$?
+check "two signals: exit 130" [ $rc = 130 ]
+check "... stopped at the second" grep -q "interrupted again, stopped now" "$T/err"
+check "... no output" [ ! -e "$T/twice" ] && check "... no staging or lock" no_staging "$T/twice"
 exit $fail

@@ -38,6 +38,28 @@ check "--device cuda exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated
 check "--device cuda names the backend it lacks" grep -q "built without that backend" "$T/err"
 check "--device tpu exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --device tpu)" = 2 ]
 check "steps out of range exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --steps 0)" = 2 ]
+# the messages of a bad command line (issue 24 items 5, 7, 12): what is wrong, the valid values
+S="$A/spot/spot_triangulated.obj"
+check "an unknown option given last exits 2" [ "$(rc_of "$M" texture "$S" x --weights "$W" -o "$T/a" --bogus)" = 2 ]
+check "... named as unknown" grep -q "unknown option --bogus" "$T/err"
+check "... not as a missing value" sh -c "! grep -q 'missing value' '$T/err'"
+check "a flag given a value (--fast=1) exits 2" [ "$(rc_of "$M" texture "$S" x --weights "$W" -o "$T/a" --fast=1)" = 2 ]
+check "... says it takes none" grep -q -- "--fast takes no value (not '1')" "$T/err"
+check "--steps=3 is --steps 3" [ "$(rc_of "$M" texture "$S" x --weights "$W" -o "$T/a" --steps=0)" = 2 ]
+check "... checked as such" grep -q -- "--steps must be an integer in 1..200, not '0'" "$T/err"
+check "an option of another verb exits 2" [ "$(rc_of "$M" texture "$S" x --weights "$W" -o "$T/a" --strength 0.3)" = 2 ]
+check "... says whose it is" grep -q -- "--strength is not an option of texture (it is one of enhance)" "$T/err"
+check "--seed -1 exits 2" [ "$(rc_of "$M" texture "$S" x --weights "$W" -o "$T/a" --seed -1)" = 2 ]
+check "... with the valid range" grep -q -- "--seed must be an integer in 0..18446744073709551615, not '-1'" "$T/err"
+check "transfer --background 255,0,0 exits 2" [ "$(rc_of "$M" transfer "$S" "$S" -o "$T/a" --background 255,0,0)" = 2 ]
+check "... says it takes three numbers in [0, 1]" grep -qF -- "--background must be three numbers (R,G,B) in [0, 1], not '255,0,0'" "$T/err"
+for size in 8 24 72 520; do # the demo UNet has 2 levels: image sizes step by 8 x 2^(2-1) = 16
+    check "--image-size $size: refused before any work, exit 2" [ "$(rc_of "$M" texture "$S" x --weights "$W" -o "$T/a" --image-size $size)" = 2 ]
+    check "... with the valid sizes" grep -q -- "--image-size must be a multiple of" "$T/err"
+    check "... no output" [ ! -e "$T/a" ]
+done
+check "--image-size: the networks' step named" grep -q "for these weights" "$T/err"
+check "--help generated from the table: ranges" sh -c "'$M' texture --help | grep -q -- '--steps N .*(default 10; 4 with --fast; an integer in 1..200)'"
 check "bad --precision exits 2" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$W" -o "$T/a" --precision fp16)" = 2 ]
 check "missing weights exits 1" [ "$(rc_of "$M" texture "$A/spot/spot_triangulated.obj" x --weights "$T/none.mxw" -o "$T/a")" = 1 ]
 check "the message names the weights" grep -q "none.mxw" "$T/err"
@@ -63,6 +85,10 @@ WF=${MATEX_DEMO_FAST_WEIGHTS:-build/demo/demo_fast.mxw}
 check "--fast without LCM/TAESD exits 1" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]
 check "--fast says what it needs" grep -q -- "--fast needs .*--lcm-lora.*--taesd" "$T/err"
 check "no output after --fast is refused" [ ! -e "$T/f" ]
+check "--fast refusal names the weight file (not (null))" grep -q "^matex texture: $W: --fast needs" "$T/err"
+check "--fast --json: the same, in the JSON" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" x --weights "$W" -o "$T/f" --fast --json $SMALL)" = 1 ]
+check "... naming the weight file" grep -q "\"error\":\"$W: --fast needs" "$T/out"
+check "... never (null)" sh -c "! grep -q null '$T/out' '$T/err'"
 check "texture --fast runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$WF" -o "$T/fast" --fast --image-size 64 --texture-size 256 --render-size 256 --candidates 12)" = 0 ]
 check "--fast report: 4 steps, guidance 1" grep -q '"steps":4,"fast":true,"guidance":1,' "$T/fast/report.json"
 check "--fast ran the LCM timesteps" grep -q "step 4/4 (t=259)" "$T/err"

@@ -1,7 +1,7 @@
 /* The embedding API (include/matex.h) with the demo weights (MATEX_DEMO_WEIGHTS): one model
  * set reused by several runs, a mesh in memory and the same mesh from a file give the same
  * texture, results in memory written later equal a run's output folder, progress events,
- * cancellation by flag and by callback (nothing written), bad input, enhance in memory. */
+ * cancellation by flag and by callback (nothing written), bad input, enhance in memory, transfer. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -178,6 +178,49 @@ static void test_enhance_in_memory(matex_models *m) {
     matex_result_free(second);
 }
 
+/* matex_transfer: the texture of a textured cube (a run's output) onto the same cube, no model
+ * set; its options are checked like the others'. */
+static void test_transfer(matex_models *m, const char *tmp) {
+    matex_options o;
+    matex_error err;
+    char src_dir[600], src[700];
+    snprintf(src_dir, sizeof src_dir, "%s/transfer_src", tmp);
+    snprintf(src, sizeof src, "%s/mesh.obj", src_dir);
+    small_options(&o);
+    o.mesh = &CUBE;
+    o.out_dir = src_dir;
+    CHECK(matex_texture(m, &o, NULL, &err) == 0);
+    matex_options_default(&o);
+    o.source_path = src;
+    o.mesh_path = src;
+    o.texture_size = o.render_size = 128;
+    o.candidates = 12;
+    o.background[1] = 1.0f; /* green behind the source */
+    matex_result *r = NULL;
+    CHECK(matex_transfer(NULL, &o, &r, &err) == 0 && r);
+    if (r) {
+        printf("transfer in memory: %d views, coverage %.4f\n", r->views, r->coverage);
+        CHECK(r->views >= 2 && r->ntextures == 1 && r->textures[0].width == 128 && r->coverage > 0.5);
+        CHECK(strstr(r->report_json, "psnr") != NULL); /* onto its own UVs: the report measures it */
+    } else {
+        fprintf(stderr, "%s\n", err.message);
+    }
+    matex_result_free(r);
+    o.background[1] = 2.0f;
+    CHECK(matex_transfer(NULL, &o, &r, &err) == -1 && err.code == MATEX_EUSAGE && !r);
+    CHECK(strstr(err.message, "--background must be three numbers (R,G,B) in [0, 1]") != NULL);
+    o.background[1] = 0.0f;
+    o.source_path = NULL;
+    CHECK(matex_transfer(NULL, &o, &r, &err) == -1 && err.code == MATEX_EUSAGE);
+    /* texture and enhance need a model set; their image size must suit its networks */
+    small_options(&o);
+    o.mesh = &CUBE;
+    CHECK(matex_texture(NULL, &o, &r, &err) == -1 && err.code == MATEX_EUSAGE);
+    o.image_size = 72;
+    CHECK(matex_texture(m, &o, &r, &err) == -1 && err.code == MATEX_EUSAGE && strstr(err.message, "--image-size must be a multiple of"));
+    printf("image size 72: %s\n", err.message);
+}
+
 int main(void) {
     const char *weights = getenv("MATEX_DEMO_WEIGHTS");
     if (!weights || access(weights, R_OK)) {
@@ -198,6 +241,7 @@ int main(void) {
         test_cancel(m, tmp);
         test_bad_input(m);
         test_enhance_in_memory(m);
+        test_transfer(m, tmp);
         matex_models_close(m);
     } else {
         fprintf(stderr, "%s\n", err.message);

@@ -99,15 +99,15 @@ static int transfer(const char *src_dir, float r, float g, float b, const char *
     snprintf(mesh, sizeof mesh, "%s/mesh.obj", src_dir);
     mx_texture_opts o;
     mx_texture_opts_default(&o);
-    o.source_path = o.mesh_path = mesh;
-    o.out_dir = out;
-    o.tex_size = o.render_size = 256;
-    o.image_size = 128;
-    o.through_model_image = 1;
-    o.candidates = 8;
-    o.views = 4;
-    o.quiet = 1;
-    o.background[0] = r, o.background[1] = g, o.background[2] = b;
+    o.pub.source_path = o.pub.mesh_path = mesh;
+    o.pub.out_dir = out;
+    o.pub.texture_size = o.pub.render_size = 256;
+    o.pub.image_size = 128;
+    o.pub.through_model_image = 1;
+    o.pub.candidates = 8;
+    o.pub.views = 4;
+    o.pub.verbose = 0;
+    o.pub.background[0] = r, o.pub.background[1] = g, o.pub.background[2] = b;
     return mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, st) || mx_transfer_run(&o, NULL, st);
 }
 

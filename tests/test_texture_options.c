@@ -15,6 +15,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../pipeline/texture/options.h"
 #include "../pipeline/texture/outdir.h"
 #include "../pipeline/texture/texture.h"
 #include "../runtime/log.h"
@@ -22,10 +23,10 @@
 
 static void base_opts(mx_texture_opts *o, const char *weights, const char *out) {
     mx_texture_opts_default(o);
-    o->mesh_path = "mesh.obj";
-    o->prompt = "a chair";
+    o->pub.mesh_path = "mesh.obj";
+    o->pub.prompt = "a chair";
     o->weights_path = weights;
-    o->out_dir = out;
+    o->pub.out_dir = out;
 }
 
 /* One impossible value: refused as a usage error whose message holds `want`. */
@@ -51,50 +52,103 @@ static void test_options(void) {
         o.field = value;                                                                                               \
         expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, want);                                                             \
     } while (0)
-    REFUSE(frontal_threshold, 1.5f, "--frontal-threshold must be in [0, 1), not 1.5");
-    REFUSE(frontal_threshold, -0.1f, "--frontal-threshold must be in [0, 1)");
-    REFUSE(coverage_stop, 2.0f, "--coverage-stop must be in (0, 1], not 2");
-    REFUSE(coverage_stop, 0.0f, "--coverage-stop must be in (0, 1]");
-    REFUSE(guidance, -3.0f, "--guidance must be in [0, 50], not -3");
-    REFUSE(guidance, (float)NAN, "--guidance must be in [0, 50]");
-    REFUSE(guidance, (float)INFINITY, "--guidance must be in [0, 50]");
-    REFUSE(grid_depth_weight, 3.0f, "--grid-depth-weight must be in [0, 2]");
-    REFUSE(depth_weight[1], -1.0f, "--depth-weight must be in [0, 2], not -1");
-    REFUSE(inpaint_weight[0], 2.5f, "--inpaint-weight must be in [0, 2]");
-    REFUSE(strength, 0.0f, "--strength must be in (0, 1]");
-    REFUSE(steps, 0, "--steps must be in 1..200, not 0");
-    REFUSE(views, 1, "--views must be in 2..64, not 1");
-    REFUSE(candidates, 0, "--candidates must be in 1..4096");
-    REFUSE(tex_size, 8, "--texture-size must be in 16..8192, not 8");
-    REFUSE(render_size, 100000, "--render-size must be in 16..8192");
-    REFUSE(image_size, 100, "--image-size must be a multiple of 8");
-    REFUSE(max_batch, 0, "--batch must be in 1..64, not 0");
-    REFUSE(threads, -1, "--threads must be in 0..1024");
-    REFUSE(prompt, "", "the prompt is empty");
-    REFUSE(prompt, " \t ", "the prompt is empty");
-    REFUSE(prompt, NULL, "no prompt");
-    REFUSE(out_dir, "", "no output folder");
+    /* ranges: the option table's (test_table checks every bound) */
+    REFUSE(pub.frontal_threshold, 1.5f, "--frontal-threshold must be a number in [0, 1), not '1.5'");
+    REFUSE(pub.guidance, (float)NAN, "--guidance must be a number in [0, 50]");
+    REFUSE(pub.depth_weight[1], -1.0f, "--depth-weight must be one or two numbers (A or A,B) in [0, 2], not '1,-1'");
+    REFUSE(pub.steps, 0, "--steps must be an integer in 1..200, not '0'");
+    REFUSE(pub.views, 1, "--views must be an integer in 2..64, not '1'");
+    REFUSE(pub.image_size, 100, "--image-size must be a multiple of 8 in 8..2048, not '100'");
+    REFUSE(pub.geometric_normals, 7, "--normals must be one of depth|geometric");
+    REFUSE(pub.precision, 5, "--precision");
+    REFUSE(pub.device, "tpu", "--device");
+    /* what the run is given */
+    REFUSE(pub.prompt, "", "the prompt is empty");
+    REFUSE(pub.prompt, " \t ", "the prompt is empty");
+    REFUSE(pub.prompt, NULL, "no prompt");
+    REFUSE(pub.out_dir, "", "no output folder");
     REFUSE(weights_path, NULL, "--weights");
-    REFUSE(normal_source, 7, "--normals");
-    REFUSE(precision, (mx_precision)5, "--precision");
-    REFUSE(device, (mx_backend_kind)9, "--device");
 #undef REFUSE
     /* enhance: the prompt may be empty and one view is enough */
     base_opts(&o, "w.mxw", "out");
-    o.prompt = "";
-    o.views = 1;
+    o.pub.prompt = "";
+    o.pub.views = 1;
     CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_ENHANCE, &st) == 0);
+    expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "--views must be an integer in 2..64, not '1'");
+    o.pub.views = 2;
     expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "the prompt is empty");
     /* transfer: a source, no weights, no prompt */
     base_opts(&o, NULL, "out");
-    o.prompt = NULL;
+    o.pub.prompt = NULL;
     expect_refused(&o, MX_TEXTURE_MODE_TRANSFER, "no source mesh");
-    o.source_path = "src.glb";
+    o.pub.source_path = "src.glb";
     CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, &st) == 0);
     /* mx_texture_run refuses before touching anything */
     base_opts(&o, "w.mxw", "out_never");
-    o.coverage_stop = 2;
+    o.pub.coverage_stop = 2;
     CHECK(mx_texture_run(&o, NULL, &st) == -1 && st.code == MX_EUSAGE);
+}
+
+/* The option table (options.c) is what every front end and matex_options_default derive from:
+ * each default must parse and pass its own check; each numeric bound must be accepted and the
+ * value just past it refused with a message naming the option, the value and the valid values. */
+static void test_table(void) {
+    int n;
+    const mx_option_spec *t = mx_options_table(&n);
+    matex_options o;
+    mx_status st;
+    matex_options_default(&o);
+    for (unsigned verb = MX_VERB_TEXTURE; verb <= MX_VERB_BATCH; verb <<= 1)
+        CHECK(mx_options_check(&o, verb, &st) == 0);
+    for (int i = 0; i < n; i++) {
+        const mx_option_spec *s = &t[i];
+        if (s->def) CHECK(mx_option_set(s, &o, s->def, &st) == 0);
+        if (s->type != MX_OPTION_INT) continue;
+        char v[64], msg_want[200];
+        int step = s->multiple ? s->multiple : 1;
+        snprintf(v, sizeof v, "%.0f", s->lo);
+        CHECK(mx_option_set(s, &o, v, &st) == 0);
+        snprintf(v, sizeof v, "%.0f", s->hi);
+        CHECK(mx_option_set(s, &o, v, &st) == 0);
+        snprintf(v, sizeof v, "%.0f", s->hi + step);
+        snprintf(msg_want, sizeof msg_want, "--%s must be ", s->name);
+        CHECK(mx_option_set(s, &o, v, &st) == -1 && st.code == MX_EUSAGE && strstr(st.msg, msg_want) && strstr(st.msg, v));
+        snprintf(v, sizeof v, "%.0f", s->lo - step);
+        CHECK(mx_option_set(s, &o, v, &st) == -1 && strstr(st.msg, msg_want));
+        matex_options_default(&o);
+    }
+    /* names: dashes or underscores, short names, per verb */
+    CHECK(mx_option_find("image_size", MX_VERB_TEXTURE) == mx_option_find("--image-size", MX_VERB_TEXTURE));
+    CHECK(mx_option_find("-o", MX_VERB_TRANSFER) != NULL && mx_option_find("-o", MX_VERB_TRANSFER)->short_name == 'o');
+    CHECK(mx_option_find("strength", MX_VERB_TEXTURE) == NULL && mx_option_find("strength", MX_VERB_ENHANCE) != NULL);
+    CHECK(mx_option_find("background", MX_VERB_TEXTURE) == NULL && mx_option_find("bogus", MX_VERB_TEXTURE) == NULL);
+    CHECK(mx_option_find("image-size", MX_VERB_TRANSFER)->marks != 0); /* transfer's: through the model image */
+    /* values: the messages say the valid values (issue 24 item 12) */
+    const mx_option_spec *seed = mx_option_find("seed", MX_VERB_TEXTURE), *bg = mx_option_find("background", MX_VERB_TRANSFER);
+    CHECK(mx_option_set(seed, &o, "-1", &st) == -1 && strstr(st.msg, "--seed must be an integer in 0..18446744073709551615, not '-1'"));
+    CHECK(mx_option_set(seed, &o, "18446744073709551615", &st) == 0 && o.seed == UINT64_MAX);
+    CHECK(mx_option_set(bg, &o, "255,0,0", &st) == -1 && strstr(st.msg, "three numbers (R,G,B) in [0, 1], not '255,0,0'"));
+    CHECK(mx_option_set(bg, &o, "1,0.5,0", &st) == 0 && o.background[0] == 1.0f && o.background[1] == 0.5f);
+    CHECK(mx_option_set(bg, &o, "1,0.5", &st) == -1 && mx_option_set(bg, &o, "1,0.5,0,0", &st) == -1);
+    const mx_option_spec *dw = mx_option_find("depth-weight", MX_VERB_TEXTURE);
+    CHECK(mx_option_set(dw, &o, "0.9", &st) == 0 && o.depth_weight[0] == 0.9f && o.depth_weight[1] == 0.9f);
+    CHECK(mx_option_set(mx_option_find("normals", MX_VERB_TEXTURE), &o, "geometric", &st) == 0 && o.geometric_normals == 1);
+    CHECK(mx_option_set(mx_option_find("normals", MX_VERB_TEXTURE), &o, "flat", &st) == -1 &&
+          strstr(st.msg, "one of depth|geometric"));
+    CHECK(mx_option_set(mx_option_find("size", MX_VERB_TRANSFER), &o, "256", &st) == 0 && o.texture_size == 256 &&
+          o.render_size == 256);
+    /* views: at least front and back, but for enhance */
+    matex_options_default(&o);
+    o.views = 1;
+    CHECK(mx_options_check(&o, MX_VERB_TEXTURE, &st) == -1 && strstr(st.msg, "--views must be an integer in 2..64, not '1'"));
+    CHECK(mx_options_check(&o, MX_VERB_ENHANCE, &st) == 0);
+    o.views = 6;
+    o.device = "tpu";
+    CHECK(mx_options_check(&o, MX_VERB_TEXTURE, &st) == -1 && strstr(st.msg, "--device"));
+    /* the image size against the networks: a multiple of their step, from one step up */
+    CHECK(mx_options_check_image_size(512, 64, &st) == 0 && mx_options_check_image_size(64, 64, &st) == 0);
+    CHECK(mx_options_check_image_size(520, 64, &st) == -1 && strstr(st.msg, "multiple of 64 (64, 128, ..."));
+    CHECK(mx_options_check_image_size(8, 16, &st) == -1 && st.code == MX_EUSAGE);
 }
 
 static int exists(const char *path) {
@@ -212,6 +266,20 @@ static void test_outdir(const char *tmp) {
     CHECK(mx_outdir_commit(&od, &t.m, &t.tex, 1, "{}", &stop, &st) == 0);
     CHECK(!exists(old) && count_entries(full) == 7 && no_staging(full));
     test_outdir_force_refusals(tmp, full);
+    /* two runs into one folder: the second is refused while the first holds it (issue 24 item 12) */
+    mx_outdir first, second;
+    char lock[700];
+    snprintf(lock, sizeof lock, "%s/busy.matex-lock", tmp);
+    snprintf(full, sizeof full, "%s/busy", tmp);
+    CHECK(mx_outdir_open(&first, full, 0, NULL, 0, &st) == 0 && exists(lock));
+    CHECK(mx_outdir_open(&second, full, 0, NULL, 0, &st) == -1 && strstr(st.msg, "another matex run is writing"));
+    CHECK(exists(first.stage)); /* the refused run touched nothing of the first's */
+    mx_outdir_discard(&first);
+    CHECK(!exists(lock) && no_staging(full));
+    CHECK(mx_outdir_open(&second, full, 0, NULL, 0, &st) == 0);
+    CHECK(mx_outdir_commit(&second, &t.m, &t.tex, 1, "{}", NULL, &st) == 0 && !exists(lock) && no_staging(full));
+    char stage[4200], lockname[4200];
+    CHECK(mx_outdir_names(full, stage, lockname) == 0 && !strcmp(lockname, lock) && strstr(stage, ".partial-"));
     mx_image_free(&t.tex);
 }
 
@@ -239,9 +307,9 @@ static void test_cancel(const char *weights, const char *tmp) {
         volatile sig_atomic_t flag = delays_us[i] < 0; /* set before the run */
         mx_texture_opts o;
         base_opts(&o, weights, out);
-        o.mesh_path = mesh;
-        o.steps = 2, o.candidates = 12, o.tex_size = 512, o.render_size = 256, o.image_size = 64;
-        o.quiet = 1, o.cancel = &flag;
+        o.pub.mesh_path = mesh;
+        o.pub.steps = 2, o.pub.candidates = 12, o.pub.texture_size = 512, o.pub.render_size = 256, o.pub.image_size = 64;
+        o.pub.verbose = 0, o.pub.cancel = &flag;
         stopper s = {&flag, delays_us[i]};
         pthread_t th;
         int threaded = delays_us[i] >= 0 && delays_us[i] < LONG_MAX && pthread_create(&th, NULL, stop_later, &s) == 0;
@@ -268,6 +336,7 @@ int main(void) {
     char tmp[] = "/tmp/matex_opts_XXXXXX";
     if (!mkdtemp(tmp)) return 1;
     test_options();
+    test_table();
     test_outdir(tmp);
     const char *weights = getenv("MATEX_DEMO_WEIGHTS");
     if (weights && access(weights, R_OK) == 0) test_cancel(weights, tmp);

@@ -64,19 +64,19 @@ static const asset_case ASSETS[] = {
 
 static void small_opts(mx_texture_opts *o, const char *mesh, const char *weights, const char *out) {
     mx_texture_opts_default(o);
-    o->mesh_path = mesh;
-    o->prompt = "a test object";
+    o->pub.mesh_path = mesh;
+    o->pub.prompt = "a test object";
     o->weights_path = weights;
-    o->out_dir = out;
-    o->steps = 2;
-    o->views = 6;
-    o->candidates = 24;
-    o->tex_size = TEX;
-    o->render_size = 256;
-    o->image_size = 128;
-    o->threads = 2;
-    o->quiet = 1;
-    o->seed = 7;
+    o->pub.out_dir = out;
+    o->pub.steps = 2;
+    o->pub.views = 6;
+    o->pub.candidates = 24;
+    o->pub.texture_size = TEX;
+    o->pub.render_size = 256;
+    o->pub.image_size = 128;
+    o->pub.threads = 2;
+    o->pub.verbose = 0;
+    o->pub.seed = 7;
 }
 
 static int file_exists(const char *dir, const char *name) {
@@ -216,7 +216,7 @@ static void test_large_budget(const char *weights, const char *tmp) {
         snprintf(out, sizeof out, "%s/budget%zu", tmp, i);
         mx_texture_opts o;
         small_opts(&o, mesh, weights, out);
-        o.views = 14;
+        o.pub.views = 14;
         mx_texture_result r;
         mx_status st;
         if (mx_texture_run(&o, &r, &st)) {
@@ -239,8 +239,8 @@ static void test_enhance(const char *weights, const char *tmp) {
     if (mx_test_need(mesh, sizeof mesh, "assets/bob/bob_tri.obj")) {
         snprintf(out, sizeof out, "%s/enhance", tmp);
         small_opts(&o, mesh, weights, out);
-        o.views = 4;
-        o.strength = 0.6f;
+        o.pub.views = 4;
+        o.pub.strength = 0.6f;
         mx_status_clear(&st);
         int rc = mx_enhance_run(&o, &r, &st);
         if (rc) printf("enhance failed: %s\n", st.msg);
@@ -306,7 +306,7 @@ static void test_coverage_of_mesh(const char *weights, const char *tmp) {
     mx_texture_result r;
     mx_status st;
     small_opts(&o, mesh, weights, out);
-    o.candidates = 1;
+    o.pub.candidates = 1;
     if (mx_texture_run(&o, &r, &st)) {
         printf("one candidate: FAIL: %s\n", st.msg);
         mx_test_failures++;
@@ -336,11 +336,11 @@ static void test_thread_determinism(const char *weights, const char *tmp) {
     mx_texture_opts o;
     mx_status st;
     small_opts(&o, mesh, weights, out1);
-    o.threads = 1;
+    o.pub.threads = 1;
     CHECK(mx_texture_run(&o, NULL, &st) == 0);
     small_opts(&o, mesh, weights, out2);
-    o.threads = 3;
-    o.device = MX_BACKEND_CPU_STRICT; /* the whole method through the guarded backend */
+    o.pub.threads = 3;
+    o.pub.device = "cpu-strict"; /* the whole method through the guarded backend */
     CHECK(mx_texture_run(&o, NULL, &st) == 0);
     snprintf(a, sizeof a, "%s/texture.exr", out1);
     snprintf(b, sizeof b, "%s/texture.exr", out2);
@@ -354,7 +354,7 @@ static void expect_failure(const char *what, const mx_texture_opts *o, const cha
     mx_status_clear(&st);
     int rc = mx_texture_run(o, NULL, &st);
     struct stat sb;
-    int wrote = stat(o->out_dir, &sb) == 0;
+    int wrote = stat(o->pub.out_dir, &sb) == 0;
     printf("bad input (%s): %s\n", what, rc ? st.msg : "accepted!");
     CHECK(rc != 0);
     CHECK(strstr(st.msg, needle) != NULL);
@@ -389,8 +389,8 @@ static void test_bad_input(const char *weights, const char *tmp) {
     for (int i = 0; i < 120; i++) strcat(long_prompt, "red ");
     snprintf(out, sizeof out, "%s/longprompt", tmp);
     small_opts(&o, mesh, weights, out);
-    o.prompt = long_prompt;
-    o.views = 2;
+    o.pub.prompt = long_prompt;
+    o.pub.views = 2;
     mx_status st;
     CHECK(mx_texture_run(&o, NULL, &st) == 0);
     CHECK(file_exists(out, "texture.png"));

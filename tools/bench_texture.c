@@ -80,16 +80,16 @@ int main(int argc, char **argv) {
 
     mx_texture_opts o;
     mx_texture_opts_default(&o);
-    o.mesh_path = mesh;
-    o.prompt = "a black-and-white dairy cow";
+    o.pub.mesh_path = mesh;
+    o.pub.prompt = "a black-and-white dairy cow";
     o.weights_path = weights;
-    o.out_dir = "/tmp/matex_bench_texture_out";
-    o.force = 1; /* the previous run's folder */
-    o.steps = STEPS;
-    o.views = VIEWS;
-    o.max_batch = 1;
-    o.threads = threads;
-    o.quiet = 1;
+    o.pub.out_dir = "/tmp/matex_bench_texture_out";
+    o.pub.force = 1; /* the previous run's folder */
+    o.pub.steps = STEPS;
+    o.pub.views = VIEWS;
+    o.pub.batch = 1;
+    o.pub.threads = threads;
+    o.pub.verbose = 0;
     mx_texture_result r;
     if (mx_texture_run(&o, &r, &st)) {
         fprintf(stderr, "bench_texture: %s\n", st.msg);
@@ -103,7 +103,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     printf("matex texture, full SD1.5 architecture (random fp16 weights), %s, %d threads, %d steps, %d views, "
-           "kernels %s\n", mesh, threads, STEPS, r.views, mx_isa_name(mx_cpu_isa_for(o.precision)));
+           "kernels %s\n", mesh, threads, STEPS, r.views, mx_isa_name(mx_cpu_isa_for(mx_texture_opts_precision(&o))));
     printf("FLOPs: grid step (UNet+ControlNet depth, CFG batch 2, 64x128 latent) %.0f GFLOP, decode %.0f GFLOP;\n"
            "       view step (UNet+2 ControlNets, CFG batch 2, 64x64) %.0f GFLOP, decode %.0f GFLOP\n",
            step_gf[0], dec_gf[0], step_gf[1], dec_gf[1]);

@@ -7,10 +7,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
-/* 0 and *out set on success; -1 (out untouched) otherwise. */
-int mx_parse_int(const char *s, long lo, long hi, int *out);
-int mx_parse_float(const char *s, float *out);
-int mx_parse_u64(const char *s, uint64_t *out);
+#include "../runtime/numparse.h"
 
 /* The same, printing "matex VERB: OPT wants an integer in LO..HI, not 'S'" (or "a number",
  * "a non-negative integer") on stderr; return 0, or 2 (the usage-error exit code). */

@@ -9,14 +9,7 @@
 #include "../runtime/json.h"
 
 #define MANIFEST_MAX_BYTES ((size_t)1 << 30)
-#define JOB_MAX_ARGS 64
-
-/* The texture options a manifest line may set (batch-wide ones, such as --threads, it may not). */
-static const char *const JOB_OPTIONS[] = {
-    "seed",   "steps",    "views",         "candidates",     "texture-size", "render-size",
-    "image-size", "batch", "negative",     "guidance",       "grid-depth-weight", "depth-weight",
-    "inpaint-weight", "frontal-threshold", "normals", "coverage-stop", "front-back-words", "up",
-};
+#define JOB_MAX_TEXTS 64
 
 static void job_error(mx_batch_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 static void job_error(mx_batch_job *j, const char *fmt, ...) {
@@ -26,38 +19,46 @@ static void job_error(mx_batch_job *j, const char *fmt, ...) {
     va_end(ap);
 }
 
-static int add_arg(mx_batch_job *j, const char *s) {
-    if (j->nargs == JOB_MAX_ARGS) return -1;
-    if (!(j->args[j->nargs] = strdup(s))) return -1;
-    j->nargs++;
-    return 0;
+/* A copy of s owned by the job (NULL when out of room or memory). */
+static const char *keep(mx_batch_job *j, const char *s) {
+    if (j->ntexts == JOB_MAX_TEXTS || !(j->texts[j->ntexts] = strdup(s))) return NULL;
+    return j->texts[j->ntexts++];
 }
 
-/* "--image-size" from "image_size" / "image-size" when it is a job option, else "". */
-static void option_flag(const char *key, char flag[64]) {
-    char k[48];
-    snprintf(k, sizeof k, "%s", key);
-    for (char *p = k; *p; p++)
-        if (*p == '_') *p = '-';
-    if (!strcmp(k, "negative-prompt")) snprintf(k, sizeof k, "negative");
-    flag[0] = 0;
-    for (size_t i = 0; i < sizeof JOB_OPTIONS / sizeof JOB_OPTIONS[0]; i++)
-        if (!strcmp(k, JOB_OPTIONS[i])) snprintf(flag, 64, "--%s", k);
-}
-
-/* A JSON value as the command line writes it: a number, a string, or [A, B] as "A,B". */
-static int value_text(const mx_json *v, char *out, size_t cap) {
+/* A JSON value as the command line writes it: a number, a string, [A, B] as "A,B", true as a
+ * flag (*text NULL), false as absent (-1 in *absent). */
+static int value_text(const mx_json *v, char *out, size_t cap, const char **text, int *absent) {
+    *text = out;
+    *absent = 0;
     switch (mx_json_kind(v)) {
     case MX_JSON_STR: return (size_t)snprintf(out, cap, "%s", mx_json_str(v)) < cap ? 0 : -1;
     case MX_JSON_NUM: snprintf(out, cap, "%.17g", mx_json_num(v)); return 0;
-    case MX_JSON_ARR:
-        if (mx_json_len(v) != 2 || mx_json_kind(mx_json_at(v, 0)) != MX_JSON_NUM ||
-            mx_json_kind(mx_json_at(v, 1)) != MX_JSON_NUM)
-            return -1;
-        snprintf(out, cap, "%.9g,%.9g", mx_json_num(mx_json_at(v, 0)), mx_json_num(mx_json_at(v, 1)));
+    case MX_JSON_BOOL:
+        if (mx_json_bool(v)) *text = NULL;
+        else *absent = 1;
         return 0;
+    case MX_JSON_ARR: {
+        size_t n = mx_json_len(v), at = 0;
+        if (n < 1 || n > 3) return -1;
+        for (size_t i = 0; i < n; i++) {
+            if (mx_json_kind(mx_json_at(v, i)) != MX_JSON_NUM) return -1;
+            at += (size_t)snprintf(out + at, cap - at, "%s%.9g", i ? "," : "", mx_json_num(mx_json_at(v, i)));
+        }
+        return 0;
+    }
     default: return -1;
     }
+}
+
+/* Why a key that names an option is not a manifest key, in why[] ("" when it is one). */
+static void not_a_key(const mx_option_spec *s, char *why, size_t cap) {
+    if (s->scope == MX_SCOPE_MODELS)
+        snprintf(why, cap, "is the model set's, one for the whole batch: give --%s to matex batch", s->name);
+    else if (!strcmp(s->name, "force"))
+        snprintf(why, cap, "is not a job key: batch skips a job whose folder is complete (remove the folder to run it again)");
+    else if (s->scope == MX_SCOPE_RUN)
+        snprintf(why, cap, "is not a job key: a job writes OUTROOT/NAME with the batch's weights");
+    else why[0] = 0;
 }
 
 /* The default name: the mesh's file name without extension, reduced to [A-Za-z0-9._-]. */
@@ -75,8 +76,8 @@ static int valid_name(const char *s) {
     return strspn(s, "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-") == strlen(s);
 }
 
-/* mesh, prompt, name and the fixed arguments; dir: the manifest's folder ("" when none). */
-static int job_head(mx_batch_job *j, const mx_json *obj, const char *dir, const char *weights, const char *outroot) {
+/* mesh, prompt, name and the output folder; dir: the manifest's folder ("" when none). */
+static int job_head(mx_batch_job *j, const mx_json *obj, const char *dir, const char *outroot) {
     const char *mesh = mx_json_get_str(obj, "mesh", NULL), *prompt = mx_json_get_str(obj, "prompt", NULL);
     const char *name = mx_json_get_str(obj, "name", NULL);
     if (!mesh || !*mesh) return job_error(j, "no \"mesh\" (a string)"), -1;
@@ -90,42 +91,57 @@ static int job_head(mx_batch_job *j, const mx_json *obj, const char *dir, const 
     int n = mesh[0] == '/' || !*dir ? snprintf(path, sizeof path, "%s", mesh) : snprintf(path, sizeof path, "%s/%s", dir, mesh);
     int m = snprintf(out, sizeof out, "%s/%s", outroot, j->name);
     if (n < 0 || (size_t)n >= sizeof path || m < 0 || (size_t)m >= sizeof out) return job_error(j, "path too long"), -1;
-    if (add_arg(j, "batch") || add_arg(j, path) || add_arg(j, prompt) || add_arg(j, "--weights") ||
-        add_arg(j, weights) || add_arg(j, "-o") || add_arg(j, out) || add_arg(j, "--quiet"))
+    mx_cli_texture *c = &j->c;
+    memset(c, 0, sizeof *c);
+    matex_options_default(&c->o);
+    c->verb = MX_VERB_TEXTURE;
+    c->quiet = 1;
+    if (!(c->o.mesh_path = keep(j, path)) || !(c->o.prompt = keep(j, prompt)) || !(c->o.out_dir = keep(j, out)))
         return job_error(j, "out of memory"), -1;
     return 0;
 }
 
-static void parse_usage(FILE *f) { (void)f; }
-
-/* One option through the command-line parser, alone, so that a bad value names its key. */
-static int check_option(const char *flag, const char *value) {
-    char *argv[] = {"batch", "m", "p", "--weights", "w", "-o", "o", (char *)flag, (char *)value};
-    mx_cli_texture scratch;
-    return mx_cli_texture_parse(&scratch, 9, argv, 0, parse_usage) >= 0 ? -1 : 0;
+/* One key of the line into the job's options (the error names the key). */
+static int job_key(mx_batch_job *j, const char *key, const mx_json *v) {
+    char k[64], value[1024];
+    snprintf(k, sizeof k, "%s", !strcmp(key, "negative_prompt") || !strcmp(key, "negative-prompt") ? "negative" : key);
+    const mx_option_spec *s = mx_option_find(k, MX_VERB_TEXTURE);
+    const char *text;
+    int absent;
+    mx_status st;
+    if (!s) return job_error(j, "unknown key \"%s\"", key), -1;
+    char why[160];
+    not_a_key(s, why, sizeof why);
+    if (why[0]) return job_error(j, "\"%s\" %s", key, why), -1;
+    int is_flag = s->type == MX_OPTION_FLAG, is_bool = mx_json_kind(v) == MX_JSON_BOOL;
+    if (is_flag != is_bool)
+        return job_error(j, "\"%s\" takes %s", key, is_flag ? "true or false" : "a number, a text or an array of numbers"), -1;
+    if (value_text(v, value, sizeof value, &text, &absent)) return job_error(j, "bad value for \"%s\"", key), -1;
+    if (absent) return 0;
+    if (text && !(text = keep(j, text))) return job_error(j, "too many options"), -1;
+    if (mx_cli_texture_option(&j->c, k, text, &st)) return job_error(j, "\"%s\": %s", key, st.msg), -1;
+    return 0;
 }
 
 /* The whole line when `options` is set, else only what names the job (for the uniqueness check). */
-static void parse_job(mx_batch_job *j, const char *text, size_t len, const char *dir, const char *weights,
-                      const char *outroot, int options) {
+static void parse_job(mx_batch_job *j, const char *text, size_t len, const char *dir, const char *const *defaults,
+                      int ndefaults, const char *outroot, int options) {
     mx_status st;
     mx_json *obj = mx_json_parse(text, len, "line", &st);
     if (!obj) return job_error(j, "%s", st.msg);
     if (mx_json_kind(obj) != MX_JSON_OBJ) {
         job_error(j, "not a JSON object");
-    } else if (!job_head(j, obj, dir, weights, outroot) && options) {
+    } else if (!job_head(j, obj, dir, outroot) && options) {
+        for (int i = 0; i < 2 * ndefaults && !j->error[0]; i += 2)
+            if (mx_cli_texture_option(&j->c, defaults[i], defaults[i + 1], &st)) job_error(j, "%s", st.msg);
         for (size_t i = 0; i < mx_json_len(obj) && !j->error[0]; i++) {
             const char *key = mx_json_key(obj, i);
-            char flag[64], value[1024];
-            if (!strcmp(key, "mesh") || !strcmp(key, "prompt") || !strcmp(key, "name")) continue;
-            option_flag(key, flag);
-            if (!flag[0]) job_error(j, "unknown key \"%s\"", key);
-            else if (value_text(mx_json_at(obj, i), value, sizeof value)) job_error(j, "bad value for \"%s\"", key);
-            else if (check_option(flag, value)) job_error(j, "bad value for \"%s\": %s", key, value);
-            else if (add_arg(j, flag) || add_arg(j, value)) job_error(j, "too many options");
+            if (strcmp(key, "mesh") && strcmp(key, "prompt") && strcmp(key, "name")) job_key(j, key, mx_json_at(obj, i));
         }
-        if (!j->error[0] && mx_cli_texture_parse(&j->c, j->nargs, j->args, 0, parse_usage) >= 0)
-            job_error(j, "bad options");
+        mx_cli_texture *c = &j->c;
+        if (c->o.fast && !c->steps_given) c->o.steps = 4;
+        if (c->o.fast && !c->guidance_given) c->o.guidance = 1.0f;
+        if (!j->error[0] && mx_options_check(&c->o, MX_VERB_TEXTURE, &st)) job_error(j, "%s", st.msg);
     }
     mx_json_free(obj);
 }
@@ -143,8 +159,8 @@ static void check_unique_names(mx_batch_manifest *m) {
                 job_error(&m->jobs[i], "name \"%s\" is already used by line %d", m->jobs[i].name, m->jobs[k].line);
 }
 
-int mx_batch_manifest_read(mx_batch_manifest *m, const char *path, const char *weights, const char *outroot,
-                           int shard, int nshards, mx_status *st) {
+int mx_batch_manifest_read(mx_batch_manifest *m, const char *path, const char *const *defaults, int ndefaults,
+                           const char *outroot, int shard, int nshards, mx_status *st) {
     memset(m, 0, sizeof *m);
     size_t len;
     char *text = mx_read_file(path, MANIFEST_MAX_BYTES, &len, st);
@@ -170,9 +186,9 @@ int mx_batch_manifest_read(mx_batch_manifest *m, const char *path, const char *w
             mx_batch_job *j = &m->jobs[m->njobs];
             j->line = line;
             j->index = m->njobs++;
-            j->args = calloc(JOB_MAX_ARGS, sizeof *j->args);
-            if (!j->args) job_error(j, "out of memory");
-            else parse_job(j, text + at, end - at, dir, weights, outroot, j->index % nshards == shard);
+            j->texts = calloc(JOB_MAX_TEXTS, sizeof *j->texts);
+            if (!j->texts) job_error(j, "out of memory");
+            else parse_job(j, text + at, end - at, dir, defaults, ndefaults, outroot, j->index % nshards == shard);
         }
         at = end + 1;
     }
@@ -183,8 +199,8 @@ int mx_batch_manifest_read(mx_batch_manifest *m, const char *path, const char *w
 
 void mx_batch_manifest_free(mx_batch_manifest *m) {
     for (int i = 0; i < m->njobs; i++) {
-        for (int k = 0; k < m->jobs[i].nargs; k++) free(m->jobs[i].args[k]);
-        free(m->jobs[i].args);
+        for (int k = 0; k < m->jobs[i].ntexts; k++) free(m->jobs[i].texts[k]);
+        free(m->jobs[i].texts);
     }
     free(m->jobs);
     memset(m, 0, sizeof *m);

@@ -6,19 +6,26 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "../pipeline/texture/api_opts.h"
 #include "../runtime/buf.h"
+#include "../runtime/fileio.h"
+#include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "cli.h"
 #include "cli_batch_manifest.h"
 #include "cli_signals.h"
 
+#define BATCH_MAX_DEFAULTS 64
+
 typedef struct batch_args {
-    const char *manifest, *weights, *outroot, *device;
-    int shard, nshards, threads, precision, json, quiet, verbose;
+    const char *manifest, *weights, *outroot;
+    int shard, nshards, json, quiet, verbose;
+    mx_cli_texture table;  /* the table's options given to batch: the model set's, and the jobs' defaults */
+    const char *defaults[2 * BATCH_MAX_DEFAULTS]; /* the jobs' defaults as given: name, value (NULL: a flag) */
+    int ndefaults;
 } batch_args;
 
 enum { JOB_DONE, JOB_SKIPPED, JOB_FAILED, JOB_INTERRUPTED };
@@ -40,20 +47,22 @@ static void batch_usage(FILE *f) {
     fprintf(f,
             "usage: matex batch MANIFEST.jsonl --weights W.mxw -o OUTROOT [--shard I/N] [options]\n\n"
             "Textures a catalogue: one JSON object per line, {\"mesh\": ..., \"prompt\": ...} and optionally\n"
-            "\"name\" (output folder, default the mesh's file name), \"seed\", \"negative\" and any texture option\n"
-            "(\"steps\": 20, \"image-size\": 512, \"depth-weight\": [1.0, 0.7], ...). The model set is loaded\n"
-            "once; jobs of the shard run in order into OUTROOT/NAME. A job whose output folder is complete is\n"
-            "skipped (rerun to resume); a failed job goes to OUTROOT/failed.jsonl and the run goes on.\n\n"
+            "\"name\" (output folder, default the mesh's file name) and any option of a job below without its\n"
+            "dashes (\"seed\": 3, \"image-size\": 512, \"depth-weight\": [1.0, 0.7], \"fast\": true, ...). The model\n"
+            "set is loaded once; jobs of the shard run in order into OUTROOT/NAME. A job whose output folder is\n"
+            "complete is skipped (rerun to resume); a failed job goes to OUTROOT/failed.jsonl, which lists the\n"
+            "failures of the latest run of each job, and the run goes on.\n\n"
             "options:\n"
-            "  --shard I/N    run the jobs whose index (0-based, manifest order) mod N is I (default\n"
-            "                 SLURM_ARRAY_TASK_ID-SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT, else 0/1)\n"
-            "  --threads N    CPU threads (default: all)\n"
-            "  --precision fp32|bf16, --device cpu|cuda   as for matex texture (default bf16, cpu)\n"
-            "  --json         print the summary as JSON on stdout\n"
-            "  --verbose      the progress lines of every job on stderr\n"
-            "  --quiet        no per-job lines on stderr\n"
-            "  -h, --help     this help\n"
-            "exit: 0 all jobs done or skipped, 1 a job failed or a line is bad, 2 usage, 130 interrupted\n");
+            "  --shard I/N               run the jobs whose index (0-based, manifest order) mod N is I (default\n"
+            "                            SLURM_ARRAY_TASK_ID-SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT, else 0/1)\n"
+            "  --json                    print the summary as JSON on stdout\n"
+            "  --verbose                 the progress lines of every job on stderr\n"
+            "  --quiet                   no per-job lines on stderr\n"
+            "  -h, --help                this help\n"
+            "the model set's options (threads, precision, device) and the default of every job (a line's key\n"
+            "overrides it):\n");
+    mx_options_help(f, MX_VERB_BATCH);
+    fprintf(f, "exit: 0 all jobs done or skipped, 1 a job failed or a line is bad, 2 usage, 130 interrupted\n");
 }
 
 static int usage_error(const char *msg, const char *arg) {
@@ -76,10 +85,24 @@ static int shard_from_slurm(int *i, int *n) {
     return parse_shard(buf, i, n);
 }
 
+/* An option of the table: the model set's, or a default of every job (checked here, applied per job). */
+static int table_option(batch_args *a, const char *opt, const char *value) {
+    mx_status st;
+    if (mx_cli_texture_option(&a->table, opt, value, &st)) return usage_error(st.msg, NULL);
+    const mx_option_spec *s = mx_option_find(opt, MX_VERB_BATCH);
+    if (s->scope == MX_SCOPE_JOB) {
+        if (a->ndefaults == BATCH_MAX_DEFAULTS) return usage_error("too many options", NULL);
+        a->defaults[2 * a->ndefaults] = s->name;
+        a->defaults[2 * a->ndefaults++ + 1] = value;
+    }
+    return -1;
+}
+
 static int parse_args(batch_args *a, int argc, char **argv) {
     memset(a, 0, sizeof *a);
     a->nshards = 1;
-    a->precision = MATEX_PRECISION_BF16;
+    matex_options_default(&a->table.o);
+    a->table.verb = MX_VERB_BATCH;
     int have_shard = 0;
     for (int i = 1; i < argc; i++) {
         const char *arg = argv[i], *val = i + 1 < argc ? argv[i + 1] : NULL;
@@ -87,27 +110,23 @@ static int parse_args(batch_args *a, int argc, char **argv) {
         if (!strcmp(arg, "--json")) a->json = 1;
         else if (!strcmp(arg, "--quiet")) a->quiet = 1;
         else if (!strcmp(arg, "--verbose")) a->verbose = 1;
-        else if (arg[0] == '-' && arg[1]) {
+        else if (!strcmp(arg, "--weights") || !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--shard")) {
             if (!val) return usage_error("missing value after", arg);
             i++;
             if (!strcmp(arg, "--weights")) a->weights = val;
-            else if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) a->outroot = val;
             else if (!strcmp(arg, "--shard")) {
                 if (parse_shard(val, &a->shard, &a->nshards)) return usage_error("--shard must be I/N with 0 <= I < N, not", val);
                 have_shard = 1;
-            } else if (!strcmp(arg, "--precision")) {
-                if (strcmp(val, "fp32") && strcmp(val, "bf16")) return usage_error("--precision must be fp32 or bf16, not", val);
-                a->precision = !strcmp(val, "fp32") ? MATEX_PRECISION_FP32 : MATEX_PRECISION_BF16;
-            } else if (!strcmp(arg, "--device")) {
-                a->device = val; /* checked when the model set opens */
-            } else if (!strcmp(arg, "--threads")) {
-                char *end;
-                long t = strtol(val, &end, 10);
-                if (*end || end == val || t < 0 || t > 1024) return usage_error("--threads must be in 0..1024, not", val);
-                a->threads = (int)t;
-            } else {
-                return usage_error("unknown option", arg);
-            }
+            } else a->outroot = val;
+        } else if (arg[0] == '-' && arg[1]) { /* --name value, --name=value or a flag */
+            char opt[128];
+            const char *eq = arg[1] == '-' ? strchr(arg, '=') : NULL;
+            snprintf(opt, sizeof opt, "%.*s", eq ? (int)(eq - arg) : (int)strlen(arg), arg);
+            const mx_option_spec *s = mx_option_find(opt, MX_VERB_BATCH);
+            const char *value = eq ? eq + 1 : s && s->arg ? val : NULL;
+            i += !eq && s && s->arg && val;
+            int rc = table_option(a, opt, value);
+            if (rc >= 0) return rc;
         } else if (!a->manifest) {
             a->manifest = arg;
         } else {
@@ -144,7 +163,11 @@ static int job_complete(const mx_batch_job *j) {
     return stat(p, &sb) == 0 && S_ISREG(sb.st_mode);
 }
 
-/* One line of OUTROOT/failed.jsonl, appended with a single write (shards share the file). */
+static void failures_path(const batch_run *r, char *path, size_t cap) {
+    snprintf(path, cap, "%s/failed.jsonl", r->a->outroot);
+}
+
+/* One line of OUTROOT/failed.jsonl, appended with a single write under the file's lock (shards share it). */
 static void record_failure(const batch_run *r, const mx_batch_job *j, const char *error) {
     mx_buf b = {0};
     mx_buf_printf(&b, "{\"line\":%d,\"name\":", j->line);
@@ -153,18 +176,53 @@ static void record_failure(const batch_run *r, const mx_batch_job *j, const char
     mx_buf_json_str(&b, error);
     mx_buf_printf(&b, "}\n");
     char path[4200];
-    snprintf(path, sizeof path, "%s/failed.jsonl", r->a->outroot);
+    failures_path(r, path, sizeof path);
     int fd = b.oom ? -1 : open(path, O_WRONLY | O_CREAT | O_APPEND, 0666);
-    if (fd < 0 || write(fd, b.p, b.len) != (ssize_t)b.len) mx_error("%s: cannot record the failure of line %d", path, j->line);
+    if (fd < 0 || flock(fd, LOCK_EX) || write(fd, b.p, b.len) != (ssize_t)b.len)
+        mx_error("%s: cannot record the failure of line %d", path, j->line);
     if (fd >= 0) close(fd);
     mx_buf_free(&b);
+}
+
+/* Does a line of failed.jsonl name a job of this run's shard? */
+static int names_own_job(const char *text, size_t len, const mx_batch_manifest *m, int shard, int nshards) {
+    mx_status st;
+    mx_json *e = mx_json_parse(text, len, "failed.jsonl", &st);
+    int line = e ? (int)mx_json_get_num(e, "line", -1) : -1, own = 0;
+    mx_json_free(e);
+    for (int i = 0; i < m->njobs && !own; i++) own = m->jobs[i].line == line && m->jobs[i].index % nshards == shard;
+    return own;
+}
+
+/* failed.jsonl lists the failures of the latest run of each job: this shard's jobs are run again,
+ * so their earlier entries go (rewritten in place under the lock; other shards' lines stay). */
+static void forget_own_failures(const batch_run *r, const mx_batch_manifest *m) {
+    char path[4200];
+    failures_path(r, path, sizeof path);
+    int fd = open(path, O_RDWR);
+    if (fd < 0) return; /* none yet */
+    mx_status st;
+    size_t len = 0;
+    char *text = flock(fd, LOCK_EX) ? NULL : mx_read_file(path, (size_t)1 << 30, &len, &st);
+    mx_buf kept = {0};
+    for (size_t at = 0; text && at < len;) {
+        size_t end = at;
+        while (end < len && text[end] != '\n') end++;
+        if (end > at && !names_own_job(text + at, end - at, m, r->a->shard, r->a->nshards))
+            mx_buf_printf(&kept, "%.*s\n", (int)(end - at), text + at);
+        at = end + 1;
+    }
+    if (!text || kept.oom || ftruncate(fd, 0) || (kept.len && pwrite(fd, kept.p, kept.len, 0) != (ssize_t)kept.len))
+        mx_error("%s: cannot update the list of failures", path);
+    free(text);
+    mx_buf_free(&kept);
+    close(fd);
 }
 
 /* 0 done, 1 interrupted, -1 failed (error set). */
 static int run_job(batch_run *r, const mx_batch_job *j, double *coverage, char *error, size_t cap) {
     matex_error err;
-    matex_options o;
-    mx_api_options_from_internal(&j->c.o, &o);
+    matex_options o = j->c.o;
     o.verbose = r->a->verbose;
     o.cancel = r->stop;
     matex_result *res = NULL;
@@ -203,19 +261,16 @@ static void batch_job(batch_run *r, const mx_batch_job *j) {
         return;
     }
     matex_error err;
-    matex_options mo;
-    matex_options_default(&mo);
-    mo.threads = r->a->threads;
-    mo.precision = r->a->precision;
-    mo.device = r->a->device;
-    if (!r->models && !(r->models = matex_models_open(r->a->weights, &mo, &err))) {
+    if (!r->models && !(r->models = matex_models_open(r->a->weights, &r->a->table.o, &err))) {
         fprintf(stderr, "matex batch: %s\n", err.message);
         r->fatal = 1;
         return;
     }
     double t = mx_now(), coverage = 0.0;
     char error[1024];
+    mx_cli_signals_output(j->c.o.out_dir);
     int rc = run_job(r, j, &coverage, error, sizeof error);
+    mx_cli_signals_output(NULL); /* the job's folder and lock are its own no more */
     if (rc < 0) record_failure(r, j, error);
     add_result(r, j, rc == 0 ? JOB_DONE : rc > 0 ? JOB_INTERRUPTED : JOB_FAILED, mx_now() - t, coverage,
                rc < 0 ? error : NULL);
@@ -249,11 +304,12 @@ int cmd_batch(int argc, char **argv) {
     mx_status st;
     mx_status_clear(&st);
     mx_batch_manifest m;
-    if (make_folders(a.outroot, &st) || mx_batch_manifest_read(&m, a.manifest, a.weights, a.outroot, a.shard, a.nshards, &st)) {
+    if (make_folders(a.outroot, &st) || mx_batch_manifest_read(&m, a.manifest, a.defaults, a.ndefaults, a.outroot, a.shard, a.nshards, &st)) {
         fprintf(stderr, "matex batch: %s\n", st.msg);
         return 1;
     }
     batch_run r = {&a, NULL, 0, {0}, 0.0, {0}, mx_cli_signals_catch()};
+    forget_own_failures(&r, &m);
     double t0 = mx_now();
     int jobs = 0;
     for (int i = 0; i < m.njobs; i++) jobs += m.jobs[i].index % a.nshards == a.shard;

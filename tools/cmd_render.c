@@ -154,6 +154,7 @@ int cmd_render(int argc, char **argv) {
     int tile = a.size / 2;
     mx_outdir od = {0};
     volatile sig_atomic_t *stop = mx_cli_signals_catch();
+    mx_cli_signals_output(a.out);
     int rc = mx_mesh_load(a.mesh, &m, &st) || mx_mesh_normalized(&m, a.up, &pos, NULL, NULL, &st) ||
              load_textures(&a, &m, &tex, &ntex, &st) || mx_outdir_open(&od, a.out, a.force, (const char *[]){a.mesh, a.texture}, 2, &st);
     rc = rc || !(pool = mx_pool_create(0, &st)) || mx_image_alloc(&sheet, cols * tile, rows * tile, 3, &st);

@@ -2,7 +2,6 @@
 #include <stdio.h>
 
 #include "cli.h"
-#include "cli_api.h"
 #include "cli_texture_opts.h"
 
 static void texture_usage(FILE *f) {
@@ -11,12 +10,12 @@ static void texture_usage(FILE *f) {
                "ControlNet depth and inpaint: front+back grid, automatic view selection, backprojection, UV fill.\n"
                "A mesh without UVs gets a UV atlas; a mesh with UVs keeps them (one texture per material).\n\n"
                "options:\n");
-    mx_cli_texture_options_help(f);
+    mx_options_help(f, MX_VERB_TEXTURE);
 }
 
 int cmd_texture(int argc, char **argv) {
     mx_cli_texture c;
-    int rc = mx_cli_texture_parse(&c, argc, argv, 0, texture_usage);
+    int rc = mx_cli_texture_parse(&c, argc, argv, MX_VERB_TEXTURE, texture_usage);
     if (rc >= 0) return rc;
-    return mx_cli_texture_run(&c, "texture", mx_cli_api_texture);
+    return mx_cli_texture_run(&c, "texture", matex_texture);
 }

@@ -8,8 +8,6 @@
 #include "raster.h"
 
 enum { MX_NORMAL_GEOMETRIC = 0, MX_NORMAL_FROM_DEPTH = 1 };
-/* The |n . v| a pixel needs to be backprojected, by default (texture, enhance, transfer). */
-#define MX_FRONTAL_THRESHOLD_DEFAULT 0.3f
 
 /* 1 where a face is visible. */
 void mx_mask_foreground(const mx_gbuffer *gb, uint8_t *mask);

@@ -1,5 +1,6 @@
 /* The embedding API (include/matex.h) over the texturing pipeline: model sets opened once
- * (mx_models), public options translated into mx_texture_opts, meshes in memory viewed as an
+ * (mx_models), public options checked against the option table (options.c) and translated into
+ * mx_texture_opts, meshes in memory viewed as an
  * mx_mesh (the job copies them), results moved out of the job (mx_texture_result). */
 #include "../../include/matex.h"
 
@@ -10,9 +11,9 @@
 
 #include "../../runtime/version.h"
 #include "../geom/masks.h"
-#include "api_opts.h"
 #include "job.h"
 #include "models.h"
+#include "options.h"
 #include "outdir.h"
 
 /* Errors pass through unchanged: the public codes are the status codes. */
@@ -50,6 +51,25 @@ static void set_error(matex_error *err, int code, const char *msg) {
     snprintf(err->message, sizeof err->message, "%s", msg);
 }
 
+/* The public options as a run's (pointers borrowed; negative prompt and grid words NULL: the defaults). */
+static void run_options(const matex_options *o, mx_texture_opts *t) {
+    memset(t, 0, sizeof *t);
+    t->pub = *o;
+    matex_options d;
+    matex_options_default(&d);
+    if (!t->pub.negative_prompt) t->pub.negative_prompt = d.negative_prompt;
+    if (!t->pub.front_back_words) t->pub.front_back_words = d.front_back_words;
+}
+
+/* A model set's own options: the device, threads and precision its context computes with. */
+static int check_model_options(const matex_options *o, mx_status *st) {
+    static const char *const names[] = {"device", "threads", "precision"};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (mx_option_check(mx_option_find(names[i], MX_VERB_TEXTURE), o, st)) return -1;
+    mx_backend_kind kind;
+    return o->device ? mx_backend_parse(o->device, &kind, st) : 0;
+}
+
 matex_models *matex_models_open(const char *weights_path, const matex_options *o, matex_error *err) {
     clear_error(err);
     mx_status st;
@@ -67,9 +87,10 @@ matex_models *matex_models_open(const char *weights_path, const matex_options *o
     }
     if (!weights_path) {
         mx_fail(&st, MX_EUSAGE, "no weight file given");
-    } else if (!mx_api_options_to_internal(o, &t, &st) && !mx_job_ctx_create(&m->ctx, &t, &st)) {
-        m->ctx_ready = 1;
-        if (!mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) return m;
+    } else if (!check_model_options(o, &st)) {
+        run_options(o, &t);
+        m->ctx_ready = !mx_job_ctx_create(&m->ctx, &t, &st);
+        if (m->ctx_ready && !mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) return m;
     }
     set_error(err, st.code, st.msg);
     matex_models_close(m);
@@ -81,69 +102,6 @@ void matex_models_close(matex_models *m) {
     if (m->m.wf) mx_models_free(&m->m);
     if (m->ctx_ready) mx_ctx_destroy(&m->ctx);
     free(m);
-}
-
-/* Fields of the same type in both option structs: one table for both directions. */
-#define SAME_FIELD(pub, in)                                                                                 \
-    { offsetof(matex_options, pub), offsetof(mx_texture_opts, in), sizeof(((matex_options *)0)->pub) }
-static const struct {
-    size_t pub, in, size;
-} SAME_FIELDS[] = {
-    SAME_FIELD(mesh_path, mesh_path),
-    SAME_FIELD(prompt, prompt),
-    SAME_FIELD(negative_prompt, negative_prompt),
-    SAME_FIELD(out_dir, out_dir),
-    SAME_FIELD(force, force),
-    SAME_FIELD(seed, seed),
-    SAME_FIELD(steps, steps),
-    SAME_FIELD(views, views),
-    SAME_FIELD(candidates, candidates),
-    SAME_FIELD(texture_size, tex_size),
-    SAME_FIELD(render_size, render_size),
-    SAME_FIELD(image_size, image_size),
-    SAME_FIELD(batch, max_batch),
-    SAME_FIELD(guidance, guidance),
-    SAME_FIELD(grid_depth_weight, grid_depth_weight),
-    SAME_FIELD(depth_weight, depth_weight),
-    SAME_FIELD(inpaint_weight, inpaint_weight),
-    SAME_FIELD(frontal_threshold, frontal_threshold),
-    SAME_FIELD(coverage_stop, coverage_stop),
-    SAME_FIELD(strength, strength),
-    SAME_FIELD(front_back_words, grid_word),
-    SAME_FIELD(threads, threads),
-    SAME_FIELD(cancel, cancel),
-    SAME_FIELD(fast, fast),
-};
-
-int mx_api_options_to_internal(const matex_options *o, mx_texture_opts *t, mx_status *st) {
-    mx_texture_opts_default(t);
-    for (size_t i = 0; i < sizeof SAME_FIELDS / sizeof SAME_FIELDS[0]; i++)
-        memcpy((char *)t + SAME_FIELDS[i].in, (const char *)o + SAME_FIELDS[i].pub, SAME_FIELDS[i].size);
-    if (!t->negative_prompt) t->negative_prompt = "";
-    if (!t->grid_word) t->grid_word = "front and back view of";
-    t->normal_source = o->geometric_normals ? MX_NORMAL_GEOMETRIC : MX_NORMAL_FROM_DEPTH;
-    t->up = o->z_up ? MX_UP_Z : MX_UP_Y;
-    t->quiet = !o->verbose;
-    t->precision = o->precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16;
-    return o->device ? mx_backend_parse(o->device, &t->device, st) : 0;
-}
-
-void mx_api_options_from_internal(const mx_texture_opts *t, matex_options *o) {
-    memset(o, 0, sizeof *o);
-    for (size_t i = 0; i < sizeof SAME_FIELDS / sizeof SAME_FIELDS[0]; i++)
-        memcpy((char *)o + SAME_FIELDS[i].pub, (const char *)t + SAME_FIELDS[i].in, SAME_FIELDS[i].size);
-    o->geometric_normals = t->normal_source == MX_NORMAL_GEOMETRIC;
-    o->z_up = t->up == MX_UP_Z;
-    o->verbose = !t->quiet;
-    o->precision = t->precision == MX_PREC_FP32 ? MATEX_PRECISION_FP32 : MATEX_PRECISION_BF16;
-    o->device = mx_backend_name(t->device);
-}
-
-void matex_options_default(matex_options *o) {
-    mx_texture_opts d;
-    mx_texture_opts_default(&d);
-    mx_api_options_from_internal(&d, o);
-    o->verbose = 0;
 }
 
 /* An mx_mesh that views the caller's arrays (never freed, never written: the job copies it). */
@@ -206,21 +164,39 @@ static int forward_progress(void *user, const mx_texture_progress *p) {
 
 typedef int (*pipeline_fn)(const mx_texture_opts *, mx_texture_result *, mx_status *);
 
-static int run(pipeline_fn fn, matex_models *m, const matex_options *o, matex_result **result, matex_error *err) {
+/* The side a generated image must be a multiple of for these networks: the decoder's factor
+ * (image -> latent) times 2^(levels-1) (the UNet halves the latent at each level but the last). */
+static int image_step(const mx_models *m, int fast) {
+    int factor = fast && m->taesd ? mx_taesd_factor(m->taesd) : mx_vae_factor(m->vae);
+    return factor << (mx_unet_cfg(m->unet)->nlevels - 1);
+}
+
+/* The options against the table and, for runs with networks, the image size against the
+ * networks: before any work. */
+static int check_options(const matex_models *m, const matex_options *o, unsigned verb, mx_status *st) {
+    if (mx_options_check(o, verb, st)) return -1;
+    if (verb == MX_VERB_TRANSFER) return 0;
+    if (!m) return mx_fail(st, MX_EUSAGE, "no model set given");
+    return mx_options_check_image_size(o->image_size, image_step(&m->m, o->fast), st);
+}
+
+static int run(pipeline_fn fn, unsigned verb, matex_models *m, const matex_options *o, matex_result **result,
+               matex_error *err) {
     clear_error(err);
     if (result) *result = NULL;
-    if (!m || !o) {
-        set_error(err, MATEX_EUSAGE, "no model set or no options given");
+    if (!o) {
+        set_error(err, MATEX_EUSAGE, "no options given");
         return -1;
     }
     mx_status st;
     mx_status_clear(&st);
     mx_texture_opts t;
-    if (mx_api_options_to_internal(o, &t, &st)) {
+    if (check_options(m, o, verb, &st)) {
         set_error(err, st.code, st.msg);
         return -1;
     }
-    t.models = &m->m;
+    run_options(o, &t);
+    t.models = m ? &m->m : NULL;
     if (o->progress) {
         t.progress = forward_progress;
         t.progress_user = (void *)o;
@@ -256,11 +232,15 @@ static int run(pipeline_fn fn, matex_models *m, const matex_options *o, matex_re
 }
 
 int matex_texture(matex_models *m, const matex_options *o, matex_result **result, matex_error *err) {
-    return run(mx_texture_run, m, o, result, err);
+    return run(mx_texture_run, MX_VERB_TEXTURE, m, o, result, err);
 }
 
 int matex_enhance(matex_models *m, const matex_options *o, matex_result **result, matex_error *err) {
-    return run(mx_enhance_run, m, o, result, err);
+    return run(mx_enhance_run, MX_VERB_ENHANCE, m, o, result, err);
+}
+
+int matex_transfer(matex_models *m, const matex_options *o, matex_result **result, matex_error *err) {
+    return run(mx_transfer_run, MX_VERB_TRANSFER, m, o, result, err);
 }
 
 int matex_result_write(const matex_result *r, const char *out_dir, int force, matex_error *err) {

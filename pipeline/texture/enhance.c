@@ -31,7 +31,7 @@ static int copy_textures(const mx_image *in, mx_image *out, int n, mx_status *st
 
 /* The original textures resampled to the bake's size, one per layer (grey where missing). */
 static int original_textures(mx_job *j, mx_image *out, mx_status *st) {
-    int T = j->o->tex_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
+    int T = j->o->pub.texture_size, nm = j->mesh.nmat > 0 ? j->mesh.nmat : 1;
     mx_image *src = calloc((size_t)nm, sizeof *src);
     if (!src) return mx_fail(st, MX_ENOMEM, "textures: out of memory");
     int rc = j->o->mesh_textures ? copy_textures(j->o->mesh_textures, src, nm, st)
@@ -62,7 +62,7 @@ static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_sta
  * pixels kept (latent blending), backprojected into the texels not enhanced yet. */
 static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int index, mx_status *st) {
     const mx_texture_opts *o = j->o;
-    int S = o->image_size, rc = -1, merged = 0;
+    int S = o->pub.image_size, rc = -1, merged = 0;
     size_t per = (size_t)3 * S * S;
     float *buf = malloc(sizeof(float) * (4 * per + (size_t)S * S));
     mx_image *current = calloc((size_t)j->nlayers, sizeof *current);
@@ -84,14 +84,14 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
                       .image_w = S,
                       .prompts = prompts,
                       .depth_planes = depth,
-                      .w_depth = o->depth_weight[0],
+                      .w_depth = o->pub.depth_weight[0],
                       .init_images = init,
                       .paint_masks = paint,
-                      .strength = o->strength,
+                      .strength = o->pub.strength,
                       .first_stream = (uint64_t)index,
                       .stage = stage};
     if (mx_job_generate(j, &b, image, st) || mx_job_backproject(j, v, image, S, 0, st)) goto done;
-    mx_job_report_view(j, v, "enhance", index, j->gen.models->cn_depth ? o->depth_weight[0] : 0.0f, 0.0f);
+    mx_job_report_view(j, v, "enhance", index, j->gen.models->cn_depth ? o->pub.depth_weight[0] : 0.0f, 0.0f);
     rc = 0;
 done:
     for (int l = 0; merged && l < j->nlayers; l++) mx_image_free(&current[l]);
@@ -103,7 +103,7 @@ done:
 /* Final textures: enhanced texels where a view reached them, the original elsewhere. */
 static int merge_textures(mx_job *j, const mx_image *orig, mx_image *out, mx_status *st) {
     if (mx_job_current_textures(j, out, st)) return -1;
-    size_t T2 = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t T2 = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
         for (size_t i = 0; i < T2; i++)
             if (!j->bake.known[l * T2 + i]) memcpy(out[l].data + 3 * i, orig[l].data + 3 * i, 3 * sizeof(float));
@@ -126,7 +126,7 @@ static int enhance_views(mx_job *j, const mx_image *orig, mx_status *st) {
     double t = mx_now();
     mx_camera cam;
     int index = 0, cand = 0, n = 0;
-    for (int k = 0; k < 2 && k < j->o->views; k++) {
+    for (int k = 0; k < 2 && k < j->o->pub.views; k++) {
         mx_job_camera(&cam, k ? 180.0f : 0.0f, 0.0f);
         if (enhance_camera(j, orig, &cam, index++, st)) return -1;
     }

@@ -45,7 +45,7 @@ static void emit_progress(mx_job *j, int step, int steps, const char *message) {
                              .step = step,
                              .steps = steps,
                              .views_done = j->rep.views_done,
-                             .views_total = o->views,
+                             .views_total = o->pub.views,
                              .coverage = j->sched.chart ? mx_job_coverage(j) : 0.0,
                              .seconds = mx_now() - j->rep.t0,
                              .message = message};
@@ -53,20 +53,20 @@ static void emit_progress(mx_job *j, int step, int steps, const char *message) {
 }
 
 void mx_job_progress(mx_job *j, const char *fmt, ...) {
-    if (j->o->quiet && !j->o->progress) return;
+    if (!j->o->pub.verbose && !j->o->progress) return;
     char line[512];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(line, sizeof line, fmt, ap);
     va_end(ap);
-    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->rep.t0, line);
+    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->rep.t0, line);
     emit_progress(j, 0, 0, line);
 }
 
 void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->rep.phase, sizeof j->rep.phase, "%s", stage); }
 
 int mx_job_check_cancel(const mx_job *j, mx_status *st) {
-    if (j->rep.stop || (j->o->cancel && *j->o->cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
+    if (j->rep.stop || (j->o->pub.cancel && *j->o->pub.cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
     return 0;
 }
 
@@ -75,7 +75,7 @@ int mx_job_check_cancel(const mx_job *j, mx_status *st) {
 static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
     mx_mesh *m = &j->mesh;
     mx_uvatlas_opts ao = mx_uvatlas_defaults();
-    ao.texture_size = j->o->tex_size;
+    ao.texture_size = j->o->pub.texture_size;
     if (m->nuv > 0 && m->face_uv) {
         int atlas_faces = 0;
         if (mx_uvatlas_complete(m, &ao, &j->atlas, &atlas_faces, st)) return -1;
@@ -97,7 +97,7 @@ static int prepare_uvs(mx_job *j, int need_uvs, mx_status *st) {
 }
 
 int mx_job_ctx_create(mx_ctx *c, const mx_texture_opts *o, mx_status *st) {
-    return mx_ctx_create_on(c, o->device, o->threads, mx_cpu_isa_for(o->precision), SCRATCH_BYTES, st);
+    return mx_ctx_create_on(c, mx_texture_opts_device(o), o->pub.threads, mx_cpu_isa_for(mx_texture_opts_precision(o)), SCRATCH_BYTES, st);
 }
 
 void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
@@ -105,27 +105,27 @@ void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
 }
 
 static int build_candidates(mx_job *j, mx_status *st) {
-    int n = j->o->candidates;
+    int n = j->o->pub.candidates;
     mx_camera tmpl, *cams = calloc((size_t)n, sizeof *cams);
     if (!cams) return mx_fail(st, MX_ENOMEM, "candidate cameras: out of memory");
     mx_job_camera(&tmpl, 0.0f, 0.0f);
     mx_camera_fibonacci(cams, n, &tmpl);
-    int rc = mx_view_cache_build(&j->sched.vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->tex_size,
-                                 j->o->tex_size, j->nlayers, j->o->normal_source, j->o->frontal_threshold,
-                                 mx_view_scale_radius(mx_view_erode_radius(j->o->render_size, j->o->image_size),
-                                                      j->o->render_size, CANDIDATE_RENDER_SIZE),
+    int rc = mx_view_cache_build(&j->sched.vc, &j->mesh, j->pos, cams, n, CANDIDATE_RENDER_SIZE, j->o->pub.texture_size,
+                                 j->o->pub.texture_size, j->nlayers, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold,
+                                 mx_view_scale_radius(mx_view_erode_radius(j->o->pub.render_size, j->o->pub.image_size),
+                                                      j->o->pub.render_size, CANDIDATE_RENDER_SIZE),
                                  j->gen.ctx->pool, st);
     free(cams);
     if (rc) return -1;
     j->sched.vc_ready = 1;
-    size_t texels = (size_t)j->nlayers * j->o->tex_size * j->o->tex_size;
+    size_t texels = (size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size;
     j->sched.visible = calloc(texels, 1);
     if (!j->sched.visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
     mx_view_cache_visible(&j->sched.vc, j->sched.visible);
     j->sched.n_visible = mx_mask_count(j->sched.visible, (int64_t)texels);
     if (j->sched.n_visible == 0)
         return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
-                       j->o->mesh_path);
+                       j->o->pub.mesh_path);
     return 0;
 }
 
@@ -144,11 +144,11 @@ static int warn_if_truncated(mx_job *j, const char *what, const char *text, mx_s
 
 /* The texels of the mesh (inside a face in UV space), what coverage is measured against. */
 static int build_chart(mx_job *j, mx_status *st) {
-    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     j->sched.chart = malloc(plane * (size_t)j->nlayers);
     if (!j->sched.chart) return mx_fail(st, MX_ENOMEM, "chart mask: out of memory");
     for (int l = 0; l < j->nlayers; l++)
-        if (mx_uv_chart_mask(&j->mesh, l, j->nlayers, j->o->tex_size, j->o->tex_size, j->sched.chart + l * plane, st))
+        if (mx_uv_chart_mask(&j->mesh, l, j->nlayers, j->o->pub.texture_size, j->o->pub.texture_size, j->sched.chart + l * plane, st))
             return -1;
     j->sched.n_chart = mx_mask_count(j->sched.chart, (int64_t)(plane * (size_t)j->nlayers));
     return 0;
@@ -157,10 +157,10 @@ static int build_chart(mx_job *j, mx_status *st) {
 /* A render coarser than the texture leaves texels between a view's pixels: they are filled from
  * their neighbours (backproject.h), and texels no view reaches are filled, not painted. */
 static void warn_render_size(const mx_texture_opts *o) {
-    if (o->render_size < o->tex_size)
+    if (o->pub.render_size < o->pub.texture_size)
         mx_warn("render size %d is below the texture size %d: a view's pixels are sparser than the texels, so "
                 "texels between them are interpolated and fine ones may stay unseen (--render-size %d matches)",
-                o->render_size, o->tex_size, o->tex_size);
+                o->pub.render_size, o->pub.texture_size, o->pub.texture_size);
 }
 
 static int encode_negative(mx_job *j, mx_status *st) {
@@ -168,7 +168,7 @@ static int encode_negative(mx_job *j, mx_status *st) {
     j->gen.uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
     if (!j->gen.uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
-    if (mx_models_encode_text(j->gen.models, j->gen.ctx, j->o->negative_prompt, j->gen.uncond, &dropped, st)) return -1;
+    if (mx_models_encode_text(j->gen.models, j->gen.ctx, j->o->pub.negative_prompt, j->gen.uncond, &dropped, st)) return -1;
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
@@ -189,18 +189,18 @@ static void report_header(mx_job *j) {
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", MX_VERSION);
     mx_jw_str(w, "mesh", j->mesh.source_path);
-    if (o->source_path) mx_jw_str(w, "source", o->source_path);
+    if (o->pub.source_path) mx_jw_str(w, "source", o->pub.source_path);
     if (j->gen.models) {
-        mx_jw_str(w, "prompt", o->prompt);
-        mx_jw_str(w, "negative_prompt", o->negative_prompt);
-        mx_jw_int(w, "seed", (long long)o->seed);
-        mx_jw_int(w, "steps", o->steps);
-        mx_jw_bool(w, "fast", o->fast);
-        mx_jw_num(w, "guidance", o->guidance);
-        mx_jw_int(w, "image_size", o->image_size);
+        mx_jw_str(w, "prompt", o->pub.prompt);
+        mx_jw_str(w, "negative_prompt", o->pub.negative_prompt);
+        mx_jw_int(w, "seed", (long long)o->pub.seed);
+        mx_jw_int(w, "steps", o->pub.steps);
+        mx_jw_bool(w, "fast", o->pub.fast);
+        mx_jw_num(w, "guidance", o->pub.guidance);
+        mx_jw_int(w, "image_size", o->pub.image_size);
     }
-    mx_jw_int(w, "texture_size", o->tex_size);
-    mx_jw_int(w, "render_size", o->render_size);
+    mx_jw_int(w, "texture_size", o->pub.texture_size);
+    mx_jw_int(w, "render_size", o->pub.render_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->gen.ctx->pool));
     if (j->gen.models) {
         mx_jw_str(w, "precision", ctx_precision_name(j->gen.ctx));
@@ -220,7 +220,7 @@ static void report_header(mx_job *j) {
         mx_jw_num(w, "seconds", j->atlas.seconds);
         mx_jw_end_obj(w);
     }
-    mx_jw_int(w, "candidate_views", o->candidates);
+    mx_jw_int(w, "candidate_views", o->pub.candidates);
     mx_jw_num(w, "candidate_visible_texels", (double)j->sched.n_visible);
     mx_jw_num(w, "mesh_texels", (double)j->sched.n_chart);
     mx_jw_begin_arr(w, "views");
@@ -235,7 +235,7 @@ static int check_fast_models(const mx_job *j, mx_status *st) {
                    "%s: --fast needs a weight file with the LCM-LoRA merged into the UNet and TAESD; this one has %s. "
                    "Make one with: matex convert SD15_DIR --controlnet depth=DIR --controlnet inpaint=DIR "
                    "--lcm-lora lcm-lora-sdv1-5.safetensors --taesd TAESD_DIR -o W.mxw",
-                   j->o->weights_path, !m->lcm && !m->taesd ? "neither" : !m->lcm ? "no LCM-LoRA (metadata unet.lcm_lora)"
+                   mx_models_path(m), !m->lcm && !m->taesd ? "neither" : !m->lcm ? "no LCM-LoRA (metadata unet.lcm_lora)"
                                                                                 : "no TAESD (taesd.*)");
 }
 
@@ -245,9 +245,9 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->rep.t0 = mx_now();
     mx_job_set_phase(j, "load");
     j->rep.psnr_db = NAN;
-    j->write_flags = o->first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
-    const char *inputs[] = {o->mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->source_path};
-    if (o->out_dir && mx_outdir_open(&j->out, o->out_dir, o->force, inputs, 3, st)) return -1;
+    j->write_flags = o->pub.first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
+    const char *inputs[] = {o->pub.mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->pub.source_path};
+    if (o->pub.out_dir && mx_outdir_open(&j->out, o->pub.out_dir, o->pub.force, inputs, 3, st)) return -1;
     if (o->models) { /* an opened model set computes on its own context */
         j->gen.models = o->models;
         j->gen.ctx = o->models->c;
@@ -257,32 +257,32 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
         j->gen.ctx = &j->gen.own_ctx;
     }
     if (model_needs != MX_JOB_NO_MODELS && !j->gen.models) {
-        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_backend_name(o->device),
+        mx_job_progress(j, "networks on %s in %s arithmetic (kernels %s)%s", mx_texture_opts_device_name(o),
                         ctx_precision_name(j->gen.ctx), ctx_kernels_name(j->gen.ctx),
-                        !on_cuda(j->gen.ctx) && mx_isa_precision(j->gen.ctx->k->isa) != o->precision
+                        !on_cuda(j->gen.ctx) && mx_isa_precision(j->gen.ctx->k->isa) != mx_texture_opts_precision(o)
                             ? ": bf16 is not available on this CPU"
                             : "");
         if (mx_models_load(&j->gen.own_models, j->gen.ctx, o->weights_path, model_needs, st)) return -1;
         j->gen.own_models_ready = 1;
         j->gen.models = &j->gen.own_models;
-        mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->fast ? " (fast: LCM + TAESD)" : "");
+        mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->pub.fast ? " (fast: LCM + TAESD)" : "");
     }
     if (model_needs == MX_JOB_NO_MODELS) j->gen.models = NULL;
-    else if (mx_models_check(j->gen.models, model_needs, st) || (o->fast && check_fast_models(j, st))) return -1;
+    else if (mx_models_check(j->gen.models, model_needs, st) || (o->pub.fast && check_fast_models(j, st))) return -1;
     if (mx_job_check_cancel(j, st)) return -1;
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
-                : mx_mesh_load(o->mesh_path, &j->mesh, st))
+                : mx_mesh_load(o->pub.mesh_path, &j->mesh, st))
         return -1;
     if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
-    if (mx_mesh_normalized(&j->mesh, o->up, &j->pos, j->center, &j->scale, st)) return -1;
-    if (mx_bake_init(&j->bake, o->tex_size, o->tex_size, j->nlayers, st)) return -1;
+    if (mx_mesh_normalized(&j->mesh, mx_texture_opts_up(o), &j->pos, j->center, &j->scale, st)) return -1;
+    if (mx_bake_init(&j->bake, o->pub.texture_size, o->pub.texture_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;
     warn_render_size(o);
     if (build_candidates(j, st) || build_chart(j, st) || mx_job_check_cancel(j, st) ||
-        (j->gen.models && (encode_negative(j, st) || (j->o->prompt && warn_if_truncated(j, "prompt", j->o->prompt, st)))))
+        (j->gen.models && (encode_negative(j, st) || (j->o->pub.prompt && warn_if_truncated(j, "prompt", j->o->pub.prompt, st)))))
         return -1;
     mx_job_progress(j, "mesh %s: %d faces, %d texture(s), %d candidate views", j->mesh.source_path, j->mesh.nfaces,
-                    j->nlayers, o->candidates);
+                    j->nlayers, o->pub.candidates);
     report_header(j);
     mx_job_stage_done(j, "load", mx_now() - j->rep.t0);
     return 0;
@@ -347,9 +347,9 @@ static int report_step(void *user, int step, int n_steps, int64_t timestep, cons
     mx_job *j = user;
     char line[160];
     snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->rep.phase, step + 1, n_steps, (long long)timestep);
-    if (!j->o->quiet) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->rep.t0, line);
+    if (!!j->o->pub.verbose) fprintf(stderr, "matex: [%7.2fs] %s\n", mx_now() - j->rep.t0, line);
     emit_progress(j, step + 1, n_steps, line);
-    return j->rep.stop || (j->o->cancel && *j->o->cancel);
+    return j->rep.stop || (j->o->pub.cancel && *j->o->pub.cancel);
 }
 
 /* Embeddings of every item, cond and uncond, [n][77][C]. */
@@ -369,7 +369,7 @@ static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float
 static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, float *lat, float *noise,
                          size_t per_item, int h, int w, mx_status *st) {
     for (int i = 0; i < b->n; i++)
-        mx_rng_fill_normal(noise + i * per_item, per_item, j->o->seed, b->first_stream + (uint64_t)i, 0);
+        mx_rng_fill_normal(noise + i * per_item, per_item, j->o->pub.seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
         memcpy(lat, noise, per_item * b->n * sizeof *lat);
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
@@ -380,7 +380,7 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
                     .mask = b->paint_masks,
                     .noise = noise,
                     .strength = b->strength,
-                    .taesd = j->o->fast ? j->gen.models->taesd : NULL};
+                    .taesd = j->o->pub.fast ? j->gen.models->taesd : NULL};
     return mx_sd_edit_run(rq, &e, j->gen.ctx, b->n, h, w, lat, st);
 }
 
@@ -402,12 +402,12 @@ static int fill_lcm_noise(void *user, int step, float *noise, size_t numel) {
 }
 
 static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float *images, mx_status *st) {
-    if (j->o->fast) return mx_taesd_decode_image(j->gen.ctx, j->gen.models->taesd, lat, n, h, w, images, st);
+    if (j->o->pub.fast) return mx_taesd_decode_image(j->gen.ctx, j->gen.models->taesd, lat, n, h, w, images, st);
     return mx_vae_decode_image_tiled(j->gen.ctx, j->gen.models->vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
-    int f = j->o->fast ? mx_taesd_factor(j->gen.models->taesd) : mx_vae_factor(j->gen.models->vae);
+    int f = j->o->pub.fast ? mx_taesd_factor(j->gen.models->taesd) : mx_vae_factor(j->gen.models->vae);
     if (b->image_h % f || b->image_w % f)
         return mx_fail(st, MX_EINPUT, "image size %dx%d is not a multiple of the VAE factor %d", b->image_w,
                        b->image_h, f);
@@ -417,16 +417,16 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
     mx_sched_config scfg = j->gen.models->sched;
-    lcm_noise lcm = {.seed = j->o->seed, .first_stream = b->first_stream, .n = b->n, .per_item = per_item};
+    lcm_noise lcm = {.seed = j->o->pub.seed, .first_stream = b->first_stream, .n = b->n, .per_item = per_item};
     memset(&s, 0, sizeof s);
     int rc = -1, sched_ready = 0;
-    if (j->o->fast) mx_sched_config_lcm(&scfg, &j->gen.models->sched);
+    if (j->o->pub.fast) mx_sched_config_lcm(&scfg, &j->gen.models->sched);
     if (!lat || !cond || !uncond) {
         mx_fail(st, MX_ENOMEM, "generation buffers: out of memory");
         goto done;
     }
     if (batch_embeddings(j, b, cond, uncond, st)) goto done;
-    if (mx_sched_init(&s, j->gen.ctx, &scfg, j->o->steps, per_item * b->n, st)) goto done;
+    if (mx_sched_init(&s, j->gen.ctx, &scfg, j->o->pub.steps, per_item * b->n, st)) goto done;
     sched_ready = 1;
     s.noise_fn = fill_lcm_noise;
     s.noise_user = &lcm;
@@ -443,7 +443,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                         .cond_text = cond,
                         .uncond_text = uncond,
                         .T = MX_CLIP_CONTEXT,
-                        .guidance = j->o->guidance,
+                        .guidance = j->o->pub.guidance,
                         .sched = &s,
                         .progress = report_step,
                         .progress_user = j};
@@ -467,12 +467,12 @@ done:
 }
 
 int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
-    int R = j->o->render_size;
+    int R = j->o->pub.render_size;
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
-    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, j->o->normal_source, j->o->frontal_threshold, j->gen.ctx->pool,
+    if (mx_view_prepare(&v->vb, &j->mesh, j->pos, &v->cam, mx_texture_opts_normals(j->o), j->o->pub.frontal_threshold, j->gen.ctx->pool,
                         st) ||
-        mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->image_size), st))
+        mx_view_erode_edges(&v->vb, mx_view_erode_radius(R, j->o->pub.image_size), st))
         return -1;
     uint8_t *fg = malloc((size_t)R * R);
     if (!fg) return mx_fail(st, MX_ENOMEM, "view mask: out of memory");
@@ -489,7 +489,7 @@ void mx_job_view_free(mx_job_view *v) {
 }
 
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
-    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
         if (mx_bake_texture(&j->bake, l, GREY, &tex[l], st) ||
             mx_uv_dilate(&tex[l], j->bake.known + l * plane, CURRENT_DILATE_TEXELS, st)) {
@@ -513,20 +513,20 @@ static int place_control(const mx_image *full, mx_crop crop, int S, float *plane
  * the paint mask (untextured pixels, grown to whole latent cells) and the inpaint control (I′
  * with the painted pixels at -1). */
 static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const mx_view_planes *p, mx_status *st) {
-    int R = j->o->render_size, S = j->o->image_size, rc = -1;
+    int R = j->o->pub.render_size, S = j->o->pub.image_size, rc = -1;
     mx_image rgb = {0}, mask_img = {0}, rgb_s = {0}, mask_s = {0}, paint = {0}, ctl = {0};
     uint8_t *mask = malloc((size_t)R * R), *open = NULL;
     if (!mask) return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
     const uint8_t *known = j->bake.known;
     if (j->write_flags & MX_BACKPROJECT_OVERWRITE) { /* texels this view will take over are repainted */
-        if (!(open = malloc((size_t)j->nlayers * j->o->tex_size * j->o->tex_size))) {
+        if (!(open = malloc((size_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size))) {
             free(mask);
             return mx_fail(st, MX_ENOMEM, "inpainting mask: out of memory");
         }
         mx_bake_open_texels(&j->bake, &v->vb.gb, &j->mesh, v->vb.mask, open);
         known = open;
     }
-    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->tex_size, j->o->tex_size, mask);
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, mask);
     free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, GREY, j->gen.ctx->pool, &rgb, st) &&
@@ -553,14 +553,14 @@ int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, con
                          mx_status *st) {
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
-    int rc = place_control(&depth, v->crop, j->o->image_size, p->depth, p->plane_w, p->x0, st);
+    int rc = place_control(&depth, v->crop, j->o->pub.image_size, p->depth, p->plane_w, p->x0, st);
     mx_image_free(&depth);
     if (rc || !p->inpaint) return rc;
     return inpaint_inputs(j, v, current, p, st);
 }
 
 int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane_w, int x0, mx_status *st) {
-    int R = j->o->render_size, S = j->o->image_size;
+    int R = j->o->pub.render_size, S = j->o->pub.image_size;
     double t = mx_now();
     mx_image gen, canvas;
     if (mx_planes_to_image(planes, 3, S, plane_w, x0, S, &gen, st)) return -1;
@@ -595,7 +595,7 @@ void mx_job_stage_done(mx_job *j, const char *name, double seconds) {
 /* Fraction of the texels in `of` (n_of of them) that are in T^B. */
 static double painted_fraction(const mx_job *j, const uint8_t *of, int64_t n_of) {
     if (n_of == 0) return 1.0;
-    int64_t n = (int64_t)j->nlayers * j->o->tex_size * j->o->tex_size, hit = 0;
+    int64_t n = (int64_t)j->nlayers * j->o->pub.texture_size * j->o->pub.texture_size, hit = 0;
     for (int64_t i = 0; i < n; i++) hit += of[i] && j->bake.known[i];
     return (double)hit / (double)n_of;
 }
@@ -607,9 +607,9 @@ double mx_job_candidate_coverage(const mx_job *j) {
 }
 
 int mx_job_schedule_begin(mx_job *j, int max_batch, mx_status *st) {
-    mx_view_schedule_params p = {.budget = j->o->views - 2,
+    mx_view_schedule_params p = {.budget = j->o->pub.views - 2,
                                  .max_batch = max_batch,
-                                 .coverage_stop = j->o->coverage_stop,
+                                 .coverage_stop = j->o->pub.coverage_stop,
                                  .min_gain = MX_JOB_MIN_UNTEXTURED_PIXELS};
     if (mx_view_schedule_init(&j->sched.schedule, &j->sched.vc, &p, st)) return -1;
     j->sched.schedule_ready = 1;
@@ -625,9 +625,9 @@ int mx_job_schedule_next(mx_job *j, int *cand, int *n, mx_status *st) {
 }
 
 void mx_job_view_prompt(const mx_job *j, mx_job_view *v, int grid) {
-    const char *prompt = j->o->prompt ? j->o->prompt : "";
+    const char *prompt = j->o->pub.prompt ? j->o->pub.prompt : "";
     if (grid)
-        snprintf(v->prompt, sizeof v->prompt, "%s %s", j->o->grid_word, prompt);
+        snprintf(v->prompt, sizeof v->prompt, "%s %s", j->o->pub.front_back_words, prompt);
     else if (j->gen.models)
         snprintf(v->prompt, sizeof v->prompt, "%s view of %s", mx_camera_view_word(&v->cam), prompt);
     else /* transfer: no prompt, the view word names the view in the report */
@@ -670,18 +670,19 @@ static int fill_tick(void *user, double done) {
         mx_job_progress(f->j, "uv fill: texture %d/%d, solve %.0f%%", f->layer + 1, f->j->nlayers, 100 * done);
         f->last = mx_now();
     }
-    return f->j->o->cancel && *f->j->o->cancel;
+    mx_status ignored;
+    return mx_job_check_cancel(f->j, &ignored) != 0;
 }
 
 /* Harmonic fill across UV seams of every layer's unreached chart texels, gutter dilation. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
-    size_t plane = (size_t)j->o->tex_size * j->o->tex_size;
+    size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++) {
         double t = mx_now();
         int64_t open = 0;
         for (size_t i = 0; i < plane; i++) open += j->sched.chart[l * plane + i] && !j->bake.known[l * plane + i];
         mx_job_progress(j, "uv fill: texture %d/%d, %lld texels to fill (%dx%d)", l + 1, j->nlayers, (long long)open,
-                        j->o->tex_size, j->o->tex_size);
+                        j->o->pub.texture_size, j->o->pub.texture_size);
         fill_ticks ticks = {.j = j, .layer = l, .last = t};
         mx_uv_fill_ticker ticker = {.tick = fill_tick, .user = &ticks};
         if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, &ticker, st))
@@ -748,13 +749,13 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *s
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
     if (mx_job_check_cancel(j, st) || (res && result_reserve(j, text, res, st))) return -1;
-    if (j->o->out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->cancel, st)) {
+    if (j->o->pub.out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->pub.cancel, st)) {
         if (res) mx_texture_result_free(res);
         return -1;
     }
-    if (j->o->out_dir)
+    if (j->o->pub.out_dir)
         mx_job_progress(j, "wrote %s (coverage %.4f of the mesh's texels, %.4f of the candidates', %d views)",
-                        j->o->out_dir, mx_job_coverage(j), mx_job_candidate_coverage(j), j->rep.views_done);
+                        j->o->pub.out_dir, mx_job_coverage(j), mx_job_candidate_coverage(j), j->rep.views_done);
     if (res) result_fill(j, tex, res);
     return 0;
 }

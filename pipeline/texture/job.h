@@ -79,7 +79,7 @@ typedef struct mx_job {
     int atlas_built;
     mx_uvatlas_report atlas;
     int keep_unreached; /* enhance: texels no view reached keep their colour (mx_job_finish does not fill) */
-    int write_flags;    /* backprojection policy: MX_BACKPROJECT_OVERWRITE (angle-aware) or 0 (first wins), from o->first_wins */
+    int write_flags;    /* backprojection policy: MX_BACKPROJECT_OVERWRITE (angle-aware) or 0 (first wins), from o->pub.first_wins */
     mx_bake bake;
     int bake_ready;
     mx_job_sched sched;
@@ -115,9 +115,9 @@ typedef struct mx_gen_batch {
     const char *stage;     /* for progress lines */
 } mx_gen_batch;
 
-/* Output folder when o->out_dir is set (checked, staging folder created), context and models
+/* Output folder when o->pub.out_dir is set (checked, staging folder created), context and models
  * (o->models with its context, else loaded from o->weights_path; needs: MX_MODELS_NEED_*, or
- * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->mesh_path) and its normalised
+ * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->pub.mesh_path) and its normalised
  * copy, bake sized tex_size with nlayers layers, candidate cache and the report's header.
  * mx_job_close removes the staging folder of a run that did not finish. */
 int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
@@ -162,7 +162,7 @@ int mx_job_backproject_render(mx_job *j, mx_job_view *v, const mx_image *img, co
  * problem), a transfer view's "<word> view" (no prompt; the report names the view). */
 void mx_job_view_prompt(const mx_job *j, mx_job_view *v, int grid);
 /* The view schedule after front and back (mx_view_schedule, views.h) over the job's candidates,
- * o->views - 2 views, o->coverage_stop and the MX_JOB_MIN_UNTEXTURED_PIXELS gain floor; max_batch:
+ * o->pub.views - 2 views, o->pub.coverage_stop and the MX_JOB_MIN_UNTEXTURED_PIXELS gain floor; max_batch:
  * the most views one step returns. mx_job_schedule_next plans the next step from T^B as it is
  * now: candidates into cand[max_batch], *n = 0 when the schedule has ended. */
 int mx_job_schedule_begin(mx_job *j, int max_batch, mx_status *st);
@@ -179,7 +179,7 @@ double mx_job_candidate_coverage(const mx_job *j);
  * gutter dilation) of every layer. */
 int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st);
 /* Fills unreached texels, writes the output folder (staged, then moved into place) when
- * o->out_dir is set, and fills res (may be NULL): with o->keep_outputs it takes the textures
+ * o->pub.out_dir is set, and fills res (may be NULL): with o->keep_outputs it takes the textures
  * (their data is moved: textures[l] is left empty), the mesh and the report. Fails without writing
  * anything once the run is cancelled; nothing can fail after the folder is published. */
 int mx_job_finish(mx_job *j, mx_image *textures, mx_texture_result *res, mx_status *st);

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -182,11 +183,60 @@ static int check_written_by_matex(const char *dir, const char *given, mx_status 
     return rc;
 }
 
-int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const *inputs, int ninputs, mx_status *st) {
-    memset(od, 0, sizeof *od);
-    if (!dir || !*dir) return mx_fail(st, MX_EUSAGE, "no output folder given");
-    if (resolve_dir(od, dir, st)) return -1;
-    if (od->exists && check_holds_nothing_needed(od, dir, inputs, ninputs, st)) return -1;
+/* od->stage and od->lock from the resolved od->dir. */
+static int name_stage_and_lock(mx_outdir *od, const char *given, mx_status *st) {
+    int n = snprintf(od->stage, sizeof od->stage, "%s.partial-%ld", od->dir, (long)getpid());
+    int k = snprintf(od->lock, sizeof od->lock, "%s.matex-lock", od->dir);
+    if (n < 0 || (size_t)n >= sizeof od->stage || k < 0 || (size_t)k >= sizeof od->lock)
+        return mx_fail(st, MX_EINPUT, "%s: path too long", given);
+    return 0;
+}
+
+int mx_outdir_names(const char *dir, char stage[4200], char lock[4200]) {
+    mx_outdir od;
+    memset(&od, 0, sizeof od);
+    if (!dir || resolve_dir(&od, dir, NULL) || name_stage_and_lock(&od, dir, NULL)) return -1;
+    memcpy(stage, od.stage, sizeof od.stage);
+    memcpy(lock, od.lock, sizeof od.lock);
+    return 0;
+}
+
+/* The lock of the folder (flock: the kernel drops it when the process ends, whatever the way). A
+ * lock file unlinked by its last holder between our open and our flock is not the lock: retry. */
+static int take_lock(mx_outdir *od, const char *given, mx_status *st) {
+    for (int attempt = 0; attempt < 8; attempt++) {
+        int fd = open(od->lock, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+        if (fd < 0) return mx_fail(st, MX_EIO, "%s: cannot create the lock %s: %s", given, od->lock, strerror(errno));
+        if (flock(fd, LOCK_EX | LOCK_NB)) {
+            int busy = errno == EWOULDBLOCK;
+            close(fd);
+            if (busy)
+                return mx_fail(st, MX_EINPUT,
+                               "%s: another matex run is writing this output folder now (it holds %s); wait for it to "
+                               "end or give another folder",
+                               given, od->lock);
+            return mx_fail(st, MX_EIO, "%s: cannot lock %s: %s", given, od->lock, strerror(errno));
+        }
+        struct stat a, b;
+        if (fstat(fd, &a) == 0 && stat(od->lock, &b) == 0 && a.st_ino == b.st_ino && a.st_dev == b.st_dev) {
+            od->lock_fd = fd;
+            od->locked = 1;
+            return 0;
+        }
+        close(fd);
+    }
+    return mx_fail(st, MX_EIO, "%s: cannot lock %s: it keeps changing", given, od->lock);
+}
+
+static void release_lock(mx_outdir *od) {
+    if (!od->locked) return;
+    unlink(od->lock); /* before the close: no one can hold it while it is unlinked but us */
+    close(od->lock_fd);
+    od->locked = 0;
+}
+
+/* Past the lock: the content (force), then the staging folder. */
+static int open_checked(mx_outdir *od, const char *dir, int force, mx_status *st) {
     int content = od->exists ? folder_content(od->dir, st) : 0;
     if (content < 0) return -1;
     if (content && !force)
@@ -196,14 +246,20 @@ int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const 
         return mx_fail(st, MX_EINPUT, "%s: holds sub-folders; --force replaces only a folder of files (an earlier output)",
                        dir);
     if (content && check_written_by_matex(od->dir, dir, st)) return -1;
-    int n = snprintf(od->stage, sizeof od->stage, "%s.partial-%ld", od->dir, (long)getpid());
-    if (n < 0 || (size_t)n >= sizeof od->stage) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
-    if (make_parents(od->dir, st)) return -1;
     remove_tree(od->stage); /* a stale one of an earlier process with the same id */
     if (mkdir(od->stage, 0777))
         return mx_fail(st, MX_EIO, "%s: cannot create the staging folder %s: %s", dir, od->stage, strerror(errno));
     od->staged = 1;
-    if (od->exists && check_same_device(od, dir, st)) {
+    return od->exists ? check_same_device(od, dir, st) : 0;
+}
+
+int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const *inputs, int ninputs, mx_status *st) {
+    memset(od, 0, sizeof *od);
+    if (!dir || !*dir) return mx_fail(st, MX_EUSAGE, "no output folder given");
+    if (resolve_dir(od, dir, st) || name_stage_and_lock(od, dir, st)) return -1;
+    if (od->exists && check_holds_nothing_needed(od, dir, inputs, ninputs, st)) return -1;
+    if (make_parents(od->dir, st) || take_lock(od, dir, st)) return -1;
+    if (open_checked(od, dir, force, st)) {
         mx_outdir_discard(od);
         return -1;
     }
@@ -232,6 +288,7 @@ static int write_marker(const mx_outdir *od, mx_status *st) {
 void mx_outdir_discard(mx_outdir *od) {
     if (od->staged) remove_tree(od->stage);
     od->staged = 0;
+    release_lock(od);
 }
 
 /* Swaps the staging folder with the existing dir (atomic where the kernel can), then removes the
@@ -281,12 +338,17 @@ int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_sta
         mx_outdir_discard(od);
         return -1;
     }
-    if (od->exists) return replace_existing(od, st);
+    if (od->exists) {
+        int rc = replace_existing(od, st);
+        mx_outdir_discard(od); /* the lock (and a staging folder left by a failure) */
+        return rc;
+    }
     if (rename(od->stage, od->dir)) {
         int e = errno;
         mx_outdir_discard(od);
         return mx_fail(st, MX_EIO, "%s: cannot write: %s", od->dir, strerror(e));
     }
     od->staged = 0;
+    release_lock(od);
     return 0;
 }

@@ -13,7 +13,10 @@
  *     content is then removed);
  *   mx_outdir_publish: the same move for a staging folder filled by the caller (files written
  *     into od->stage, e.g. by matex render); both write the marker, listing the staged files, last;
- *   mx_outdir_discard: removes the staging folder (after a failure or an interrupt). */
+ *   mx_outdir_discard: removes the staging folder (after a failure or an interrupt).
+ * Two runs into one folder: mx_outdir_open holds a lock (flock on "DIR.matex-lock" beside DIR,
+ * released by the kernel if the process dies) until mx_outdir_discard; a second run is refused at
+ * once, saying another matex run is writing there. */
 #ifndef MX_OUTDIR_H
 #define MX_OUTDIR_H
 
@@ -26,8 +29,11 @@
 typedef struct mx_outdir {
     char dir[4096];   /* the output folder, links resolved when it exists */
     char stage[4200]; /* dir + ".partial-PID" */
+    char lock[4200];  /* dir + ".matex-lock" */
     int exists;       /* dir existed at open (empty, or non-empty with force) */
     int staged;       /* the staging folder exists */
+    int locked;       /* lock_fd holds the lock */
+    int lock_fd;
 } mx_outdir;
 
 /* The file that marks a folder as matex's output: a first line saying so, then the names of the
@@ -37,6 +43,9 @@ typedef struct mx_outdir {
 /* inputs[0..ninputs-1]: the files the run reads (mesh, weights, textures; NULL entries skipped):
  * a folder holding one of them is never an output folder. */
 int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const *inputs, int ninputs, mx_status *st);
+/* The staging folder and the lock file mx_outdir_open would use for `dir` in this process (for a
+ * signal handler that must remove them: tools/cli_signals.c). */
+int mx_outdir_names(const char *dir, char stage[4200], char lock[4200]);
 /* cancel (may be NULL) is checked once more after the files are written, before the move. */
 int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
                      const volatile sig_atomic_t *cancel, mx_status *st);

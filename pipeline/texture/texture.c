@@ -8,31 +8,6 @@
 #include "../geom/masks.h"
 #include "job.h"
 
-void mx_texture_opts_default(mx_texture_opts *o) {
-    memset(o, 0, sizeof *o);
-    o->negative_prompt = "";
-    o->steps = 10;
-    o->precision = MX_PREC_BF16;
-    o->views = 6;
-    o->candidates = 40;
-    o->tex_size = 1024;
-    o->render_size = 1024;
-    o->image_size = 512;
-    o->max_batch = 4;
-    o->guidance = 7.5f;
-    o->grid_depth_weight = 1.0f;
-    o->depth_weight[0] = 1.0f;
-    o->depth_weight[1] = 0.7f;
-    o->inpaint_weight[0] = 0.8f;
-    o->inpaint_weight[1] = 1.0f;
-    o->frontal_threshold = MX_FRONTAL_THRESHOLD_DEFAULT;
-    o->normal_source = MX_NORMAL_FROM_DEPTH;
-    o->coverage_stop = 0.995f;
-    o->up = MX_UP_Y;
-    o->strength = 0.5f;
-    o->grid_word = "front and back view of";
-}
-
 static void free_views(mx_job_view *v, int n) {
     for (int i = 0; i < n; i++) mx_job_view_free(&v[i]);
 }
@@ -41,7 +16,7 @@ static void free_views(mx_job_view *v, int n) {
 static int grid_stage(mx_job *j, mx_status *st) {
     const mx_texture_opts *o = j->o;
     double t = mx_now();
-    int S = o->image_size, W = 2 * S, rc = -1;
+    int S = o->pub.image_size, W = 2 * S, rc = -1;
     mx_job_view v[2];
     memset(v, 0, sizeof v);
     mx_job_camera(&v[0].cam, 0.0f, 0.0f);
@@ -59,19 +34,19 @@ static int grid_stage(mx_job *j, mx_status *st) {
     }
     prompts[0] = v[0].prompt;
     mx_job_set_phase(j, "grid");
-    mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->grid_depth_weight);
+    mx_job_progress(j, "stage grid: front+back, %dx%d, depth weight %.2f", W, S, o->pub.grid_depth_weight);
     mx_gen_batch b = {.n = 1,
                       .image_h = S,
                       .image_w = W,
                       .prompts = prompts,
                       .depth_planes = planes,
-                      .w_depth = o->grid_depth_weight,
+                      .w_depth = o->pub.grid_depth_weight,
                       .first_stream = 0,
                       .stage = "grid"};
     if (mx_job_generate(j, &b, image, st)) goto done;
     for (int i = 0; i < 2; i++) {
         if (mx_job_backproject(j, &v[i], image, W, i * S, st)) goto done;
-        mx_job_report_view(j, &v[i], "grid", 0, o->grid_depth_weight, 0.0f);
+        mx_job_report_view(j, &v[i], "grid", 0, o->pub.grid_depth_weight, 0.0f);
     }
     mx_job_progress(j, "stage grid done: coverage %.4f (candidates %.4f)", mx_job_coverage(j),
                     mx_job_candidate_coverage(j));
@@ -122,7 +97,7 @@ static int batch_alloc(batch_buffers *bb, int n, int S, mx_status *st) {
  * its own weights, by its order k + i among the later views), then backprojection. */
 static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int batch_id, mx_status *st) {
     const mx_texture_opts *o = j->o;
-    int S = o->image_size, rc = -1;
+    int S = o->pub.image_size, rc = -1;
     size_t per = (size_t)3 * S * S;
     batch_buffers bb;
     mx_job_view *v = calloc((size_t)n, sizeof *v);
@@ -144,8 +119,8 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
         v[i].cam = j->sched.vc.cams[cand[i]];
         mx_job_view_prompt(j, &v[i], 0);
         bb.prompts[i] = v[i].prompt;
-        bb.wd[i] = lerp_schedule(o->depth_weight, k + i, n_later);
-        bb.wi[i] = lerp_schedule(o->inpaint_weight, k + i, n_later);
+        bb.wd[i] = lerp_schedule(o->pub.depth_weight, k + i, n_later);
+        bb.wi[i] = lerp_schedule(o->pub.inpaint_weight, k + i, n_later);
         mx_view_planes vp = {.depth = bb.depth + i * per,
                              .inpaint = bb.inpaint + i * per,
                              .init = bb.init + i * per,
@@ -153,7 +128,7 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
                              .plane_w = S,
                              .x0 = 0};
         if (mx_job_view_prepare(j, &v[i], st) || mx_job_view_controls(j, &v[i], &vp, current, st)) goto done;
-        mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->views,
+        mx_job_progress(j, "view %d/%d: azimuth %.0f, elevation %.0f (%s), %lld untextured pixels", k + i + 3, o->pub.views,
                         v[i].cam.azimuth, v[i].cam.elevation, mx_camera_view_word(&v[i].cam),
                         (long long)v[i].untextured_pixels);
     }
@@ -192,7 +167,7 @@ done:
 static int view_stage(mx_job *j, mx_status *st) {
     const mx_texture_opts *o = j->o;
     double t = mx_now();
-    int max_batch = o->max_batch > 0 ? o->max_batch : 1, n_later = o->views - 2, k = 0, batch_id = 1, n = 0;
+    int max_batch = o->pub.batch > 0 ? o->pub.batch : 1, n_later = o->pub.views - 2, k = 0, batch_id = 1, n = 0;
     int *cand = malloc(sizeof(int) * (size_t)max_batch);
     if (!cand) return mx_fail(st, MX_ENOMEM, "views: out of memory");
     int rc = mx_job_schedule_begin(j, max_batch, st);
@@ -222,7 +197,7 @@ static int fill_stage(mx_job *j, mx_texture_result *res, mx_status *st) {
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_TEXTURE_MODE_TEXTURE, st)) return -1;
     mx_job j;
-    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
+    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->pub.views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
     if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
     if (!rc) rc = fill_stage(&j, res, st);

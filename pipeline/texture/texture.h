@@ -8,10 +8,10 @@
  * enhance: the same views over an already textured mesh; each view's render is VAE-encoded,
  * noised to `strength` (SDEdit), denoised under the prompt and backprojected.
  *
- * Control-weight schedule (overridable): the grid uses w_D = grid_depth_weight (1.0) and no
+ * Control-weight schedule (overridable): the grid uses w_D = grid_depth_weight and no
  * inpainting; the k-th of the n later views (k = 0..n-1, t = k/(n-1), t = 0 when n = 1) uses
- * w_D = depth_weight[0] + t (depth_weight[1] - depth_weight[0])   (default 1.0 -> 0.7)
- * w_I = inpaint_weight[0] + t (inpaint_weight[1] - inpaint_weight[0]) (default 0.8 -> 1.0):
+ * w_D = depth_weight[0] + t (depth_weight[1] - depth_weight[0])   (by default decreasing)
+ * w_I = inpaint_weight[0] + t (inpaint_weight[1] - inpaint_weight[0]) (by default increasing):
  * early views paint large new regions and follow the shape; late views fill small gaps and
  * must match what is already painted. */
 #ifndef MX_TEXTURE_H
@@ -20,6 +20,7 @@
 #include <signal.h>
 #include <stdint.h>
 
+#include "../../include/matex.h"
 #include "../../runtime/backend.h"
 
 #include "../../runtime/status.h"
@@ -41,62 +42,35 @@ typedef struct mx_texture_progress {
 /* Returns non-zero to cancel the run. */
 typedef int (*mx_texture_progress_fn)(void *user, const mx_texture_progress *p);
 
+/* A run's options: the public options (include/matex.h: every option a user sets, with the
+ * defaults and ranges of the option table, pipeline/texture/options.h) and what only the library
+ * gives a run. */
 typedef struct mx_texture_opts {
-    const char *mesh_path;       /* the mesh file, or NULL when `mesh` is given */
-    const mx_mesh *mesh;         /* a mesh in memory (validated, then copied), or NULL */
-    const mx_image *mesh_textures; /* enhance, mesh in memory: one texture per material, or NULL */
-    const char *prompt;
-    const char *negative_prompt; /* "" by default */
+    matex_options pub;           /* pub.mesh and pub.progress are the API's: the run reads `mesh`, `progress` */
     const char *weights_path;    /* loaded for this run when `models` is NULL */
     const struct mx_models *models; /* a model set opened once (mx_models_load), reused by many runs */
-    const char *out_dir;         /* the output folder; NULL: results only in memory (keep_outputs) */
+    const mx_mesh *mesh;         /* a mesh in memory (validated, then copied), or NULL: pub.mesh_path */
+    const mx_image *mesh_textures; /* enhance, mesh in memory: one texture per material, or NULL */
     int keep_outputs;            /* the result takes the textured mesh, textures and report */
     mx_texture_progress_fn progress; /* NULL: none */
     void *progress_user;
-    uint64_t seed;           /* 0 */
-    int steps;               /* 10 */
-    int views;               /* view budget, front and back included: 6 */
-    int candidates;          /* candidate cameras on the Fibonacci lattice: 40 */
-    int tex_size;            /* texture side: 1024 */
-    int render_size;         /* side of the renders that are backprojected: 1024 */
-    int image_size;          /* side of one model image: 512 (latent 64) */
-    int max_batch;           /* most views generated in one batch: 4 */
-    float guidance;          /* 7.5 */
-    float grid_depth_weight; /* 1.0 */
-    float depth_weight[2];   /* first, last later view: 1.0, 0.7 */
-    float inpaint_weight[2]; /* first, last later view: 0.8, 1.0 */
-    float frontal_threshold; /* |n.v| needed to backproject a pixel: 0.3 */
-    int normal_source;       /* MX_NORMAL_FROM_DEPTH (paper) or MX_NORMAL_GEOMETRIC */
-    float coverage_stop;     /* stop when this fraction of candidate-visible texels is painted (the
-                                candidate coverage): 0.995 */
-    mx_up_axis up;
-    int threads;             /* 0: all CPUs */
-    mx_backend_kind device;  /* where the networks run: cpu (default), cpu-strict, cuda */
-    mx_precision precision;  /* of the networks' matrix products: bf16 (used where the CPU has it) */
-    int quiet;
-    float strength;          /* enhance: SDEdit strength in (0, 1]: 0.5 */
-    const char *grid_word;   /* "front and back view of" */
-    /* NULL, or a flag another context (a signal handler) sets to non-zero to stop the run: it is
-     * checked between stages and between denoising steps; the run then fails with MX_ECANCEL
-     * ("interrupted") and leaves no output folder and no staging folder behind. */
-    volatile sig_atomic_t *cancel;
-    int force;               /* replace an existing non-empty output folder (atomically) */
-    const char *source_path; /* transfer: the textured mesh whose texture moves onto mesh_path */
-    int fast;                /* few-step path: LCM scheduler + TAESD encoder/decoder; the weight file must
-                                hold a merged LCM-LoRA (unet.lcm_lora) and taesd.* (texture, enhance) */
-    int first_wins;          /* texture, transfer: 0 = angle-aware writes (default; a later view repaints
-                                texels it sees with |n.v| higher by 0.15), 1 = the first writer keeps them */
-    float background[3];     /* transfer: colour behind the source in its renders (0, 0, 0) */
-    int through_model_image; /* transfer: each render goes through the model image (crop, image_size, back) */
 } mx_texture_opts;
+
+/* pub's choices in the pipeline's terms. */
+int mx_texture_opts_normals(const mx_texture_opts *o);           /* MX_NORMAL_GEOMETRIC or _FROM_DEPTH */
+mx_up_axis mx_texture_opts_up(const mx_texture_opts *o);
+mx_precision mx_texture_opts_precision(const mx_texture_opts *o);
+mx_backend_kind mx_texture_opts_device(const mx_texture_opts *o); /* a checked name (cpu when NULL) */
+const char *mx_texture_opts_device_name(const mx_texture_opts *o);
 
 void mx_texture_opts_default(mx_texture_opts *o);
 
 typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE, MX_TEXTURE_MODE_TRANSFER } mx_texture_mode;
 
 /* Checks every option before any work (MX_EUSAGE, the message names the option, its value and
- * the valid range). mx_texture_run and mx_enhance_run call it first; front ends (the CLI, the
- * public API) call it too, to refuse bad options at once. */
+ * the valid range): pub against the option table (mx_options_check), then what the run is given
+ * (mesh, weights or model set, prompt, output). mx_texture_run, mx_enhance_run and mx_transfer_run
+ * call it first. */
 int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st);
 
 typedef struct mx_texture_result {

@@ -33,7 +33,7 @@ static void source_free(source *s) {
 
 /* The source mesh and its textures (before the job: bad input fails at once). */
 static int source_load(const mx_texture_opts *o, source *s, mx_status *st) {
-    const char *path = o->source_path;
+    const char *path = o->pub.source_path;
     if (mx_mesh_load(path, &s->mesh, st)) return -1;
     if (!s->mesh.face_uv || s->mesh.nmat < 1)
         return mx_fail(st, MX_EINPUT, "%s: the source has no UVs or no material to take a texture from", path);
@@ -49,8 +49,8 @@ static int source_load(const mx_texture_opts *o, source *s, mx_status *st) {
 
 /* The source in the job's frame, and its render buffer. */
 static int source_place(mx_job *j, source *s, mx_status *st) {
-    if (mx_mesh_placed(&s->mesh, j->o->up, j->center, j->scale, &s->pos, st)) return -1;
-    if (mx_gbuffer_init(&s->gb, j->o->render_size, j->o->render_size, st)) return -1;
+    if (mx_mesh_placed(&s->mesh, mx_texture_opts_up(j->o), j->center, j->scale, &s->pos, st)) return -1;
+    if (mx_gbuffer_init(&s->gb, j->o->pub.render_size, j->o->pub.render_size, st)) return -1;
     s->gb_ready = 1;
     return 0;
 }
@@ -61,7 +61,7 @@ static int source_place(mx_job *j, source *s, mx_status *st) {
  * to the destination's object, resized to image_size, pasted back bilinearly. */
 static int through_model_image(const mx_job *j, const mx_job_view *v, mx_image *img, mx_status *st) {
     mx_image small = {0};
-    if (mx_crop_resize(img, v->crop, j->o->image_size, &small, st)) return -1;
+    if (mx_crop_resize(img, v->crop, j->o->pub.image_size, &small, st)) return -1;
     memset(img->data, 0, (size_t)img->w * img->h * (size_t)img->c * sizeof *img->data);
     mx_crop_paste(&small, v->crop, img);
     mx_image_free(&small);
@@ -76,8 +76,8 @@ static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, 
     mx_image img = {0};
     int rc = mx_job_view_prepare(j, &v, st) ||
              mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->gen.ctx->pool, &s->gb, st) ||
-             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->background, j->gen.ctx->pool, &img, st) ||
-             (j->o->through_model_image && through_model_image(j, &v, &img, st));
+             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->pub.background, j->gen.ctx->pool, &img, st) ||
+             (j->o->pub.through_model_image && through_model_image(j, &v, &img, st));
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) v.vb.mask[i] &= s->gb.face[i] >= 0;
         rc = mx_job_backproject_render(j, &v, &img, v.vb.mask, st);
@@ -133,16 +133,16 @@ static double psnr_against_source(const mx_job *j, const source *s, const mx_ima
     return n ? 10 * log10(1.0 / (se / (double)n + 1e-20)) : 0;
 }
 
-static int finish(mx_job *j, const source *s, mx_status *st) {
+static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status *st) {
     mx_image *tex = calloc((size_t)j->nlayers, sizeof *tex);
     if (!tex) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
     int rc = mx_job_current_textures(j, tex, st);
     if (!rc) {
-        if (!strcmp(j->o->source_path, j->o->mesh_path)) {
+        if (!strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) {
             j->rep.psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->rep.psnr_db);
         }
-        rc = mx_job_finish(j, tex, NULL, st);
+        rc = mx_job_finish(j, tex, res, st);
         for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
     }
     free(tex);
@@ -159,14 +159,7 @@ int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status 
     if (!rc) rc = mx_job_open(&j, o, MX_JOB_NO_MODELS, 0, st);
     if (!rc) rc = source_place(&j, &s, st);
     if (!rc) rc = transfer_views(&j, &s, st);
-    if (!rc) rc = finish(&j, &s, st);
-    if (!rc && res) {
-        memset(res, 0, sizeof *res);
-        res->coverage = mx_job_coverage(&j);
-        res->candidate_coverage = mx_job_candidate_coverage(&j);
-        res->views = j.rep.views_done;
-        res->seconds = mx_now() - j.rep.t0;
-    }
+    if (!rc) rc = finish(&j, &s, res, st); /* res filled as texture's, in memory too with keep_outputs */
     source_free(&s);
     mx_job_close(&j);
     return rc;

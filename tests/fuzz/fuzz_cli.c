@@ -1,7 +1,6 @@
-/* The command-line parser of `matex texture` / `matex enhance` (tools/cli_texture_opts.c)
- * and the option check that follows it (mx_texture_opts_check): the input is argv,
- * NUL-separated, after the verb; the first byte picks the verb (bit 0: enhance, prompt optional)
- * and the check's mode. */
+/* The command-line parser of `matex texture` / `enhance` / `transfer` (tools/cli_texture_opts.c,
+ * driven by the option table) and the option check that follows it (mx_options_check): the input
+ * is argv, NUL-separated, after the verb; the first byte picks the verb (mod 3). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,11 +22,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     int argc = 1;
     for (char *p = text; p < text + size && argc <= FUZZ_MAX_ARGS; p += strlen(p) + 1) argv[argc++] = p;
     argv[argc] = NULL;
+    static const unsigned verbs[3] = {MX_VERB_TEXTURE, MX_VERB_ENHANCE, MX_VERB_TRANSFER};
+    unsigned verb = verbs[data[0] % 3];
     mx_cli_texture c;
-    int rc = mx_cli_texture_parse(&c, argc, argv, data[0] & 1, no_usage);
-    if (rc == -1 && (!c.o.mesh_path || !c.o.prompt || !c.o.weights_path || !c.o.out_dir)) abort();
+    int rc = mx_cli_texture_parse(&c, argc, argv, verb, no_usage);
+    int complete = c.o.mesh_path && c.o.out_dir &&
+                   (verb == MX_VERB_TRANSFER ? c.o.source_path != NULL : c.o.prompt && c.weights_path);
+    if (rc == -1 && !complete) abort();
     mx_status st;
-    if (rc == -1) mx_texture_opts_check(&c.o, (mx_texture_mode)(data[0] % 3), &st);
+    if (rc == -1) mx_options_check(&c.o, verb, &st);
     free(text);
     return 0;
 }
