@@ -243,6 +243,13 @@ static int splat_texels(const splat_rec *sp, int w, int h, int r0, int r1, size_
 #define FEATHER_TEXELS 2
 #define HOLE_TEXELS 3
 
+/* A band task's layer and texture rows [r0, r1). */
+static void task_rows(const bp_job *j, int task, int *layer, int *r0, int *r1) {
+    *layer = task / j->nbands;
+    *r0 = (task % j->nbands) * BAND_ROWS;
+    *r1 = *r0 + BAND_ROWS < j->b->h ? *r0 + BAND_ROWS : j->b->h;
+}
+
 /* Pass 1, one bin: the view's splats of its rows, in pixel order; reach[t] = the view reaches
  * texel t with a full share (weight > eps). */
 static void splat_view_task(void *ctx, int task, int thread) {
@@ -250,8 +257,8 @@ static void splat_view_task(void *ctx, int task, int thread) {
     bp_job *j = ctx;
     mx_bake *b = j->b;
     bp_scratch *s = j->s;
-    int layer = task / j->nbands, band = task % j->nbands;
-    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    int layer, r0, r1;
+    task_rows(j, task, &layer, &r0, &r1);
     size_t plane = (size_t)layer * b->w * b->h, t0 = plane + (size_t)r0 * b->w, t1 = plane + (size_t)r1 * b->w;
     int32_t k0 = s->bin_start[task], k1 = s->bin_start[task + 1];
     if (k0 == k1) { /* the accumulators of an empty bin are never read (reach is 0, bin_empty) */
@@ -290,8 +297,8 @@ static void mark_near_task(void *ctx, int task, int thread) {
     bp_job *j = ctx;
     const mx_bake *b = j->b;
     bp_scratch *s = j->s;
-    int layer = task / j->nbands, band = task % j->nbands;
-    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    int layer, r0, r1;
+    task_rows(j, task, &layer, &r0, &r1);
     const uint8_t *reach = s->reach + (size_t)layer * b->w * b->h;
     for (int y = r0; y < r1; y++)
         for (int x = 0; x < b->w; x++) {
@@ -323,8 +330,8 @@ static void mark_holes_task(void *ctx, int task, int thread) {
     bp_job *j = ctx;
     const mx_bake *b = j->b;
     const bp_scratch *s = j->s;
-    int layer = task / j->nbands, band = task % j->nbands;
-    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    int layer, r0, r1;
+    task_rows(j, task, &layer, &r0, &r1);
     size_t plane = (size_t)layer * b->w * b->h;
     const uint8_t *reach = s->reach + plane, *row = s->near_row + plane, *col = s->near_col + plane;
     uint8_t *hole = s->hole + plane;
@@ -403,8 +410,8 @@ static void fill_holes_task(void *ctx, int task, int thread) {
     (void)thread;
     bp_job *j = ctx;
     const mx_bake *b = j->b;
-    int layer = task / j->nbands, band = task % j->nbands;
-    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    int layer, r0, r1;
+    task_rows(j, task, &layer, &r0, &r1);
     if (bin_empty(j, layer, r0)) return;
     size_t plane = (size_t)layer * b->w * b->h;
     for (int y = r0; y < r1; y++)
@@ -457,8 +464,8 @@ static void merge_view_task(void *ctx, int task, int thread) {
     bp_job *j = ctx;
     mx_bake *b = j->b;
     const bp_scratch *s = j->s;
-    int layer = task / j->nbands, band = task % j->nbands;
-    int r0 = band * BAND_ROWS, r1 = r0 + BAND_ROWS < b->h ? r0 + BAND_ROWS : b->h;
+    int layer, r0, r1;
+    task_rows(j, task, &layer, &r0, &r1);
     if (bin_empty(j, layer, r0)) return;
     size_t plane = (size_t)layer * b->w * b->h;
     for (int y = r0; y < r1; y++)
