@@ -4,7 +4,10 @@
  * cpu-strict: the same kernels, but every allocation is its own anonymous mapping that is
  * PROT_NONE except while one of the backend's kernels (or an upload/download) runs, so any
  * read or write of an activation from outside the op layer ends in SIGSEGV. Made for tests:
- * each op pays two mprotect calls per live allocation. */
+ * each op pays two mprotect calls per live allocation. It is a device context, as CUDA is:
+ * weights are device copies (mx_dev_weight, mapped read-only, outside the per-op mprotect), and
+ * an op handed a weight that is not one (a host pointer, bound through a host binder) is refused
+ * without running, its message kept and reported by the next download, as a CUDA kernel fault is. */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -46,17 +49,22 @@ static void plain_destroy(mx_backend *be) { free(be); }
 typedef struct strict_map {
     void *p;
     size_t bytes;
+    int weight; /* a weight's copy: read-only, never opened by enter */
 } strict_map;
 
 typedef struct strict_state {
     strict_map *maps;
     size_t n, cap;
-    int depth; /* nesting of enter/leave: the memory is open while depth > 0 */
+    int depth;                    /* nesting of enter/leave: the memory is open while depth > 0 */
+    const mx_kernels *inner[2];   /* the CPU kernels of the chosen level and of its fp32 level */
+    mx_kernels checked[2];        /* the same with the weight check before every weight op */
+    mx_status fault;              /* the first refused op (code 0: none), sticky */
 } strict_state;
 
 static void strict_protect(strict_state *s, int prot) {
     for (size_t i = 0; i < s->n; i++)
-        if (mprotect(s->maps[i].p, s->maps[i].bytes, prot) != 0) abort(); /* cannot keep the guarantee */
+        if (!s->maps[i].weight && mprotect(s->maps[i].p, s->maps[i].bytes, prot) != 0)
+            abort(); /* cannot keep the guarantee */
 }
 
 static void strict_enter(mx_backend *be) {
@@ -69,7 +77,7 @@ static void strict_leave(mx_backend *be) {
     if (--s->depth == 0) strict_protect(s, PROT_NONE);
 }
 
-static void *strict_alloc(mx_backend *be, size_t bytes, mx_status *st) {
+static void *strict_map_new(mx_backend *be, size_t bytes, int prot, int weight, mx_status *st) {
     strict_state *s = be->impl;
     if (s->n == s->cap) {
         size_t cap = s->cap ? 2 * s->cap : 64;
@@ -82,13 +90,25 @@ static void *strict_alloc(mx_backend *be, size_t bytes, mx_status *st) {
         s->cap = cap;
     }
     size_t n = bytes ? bytes : 1;
-    void *p = mmap(NULL, n, s->depth > 0 ? PROT_READ | PROT_WRITE : PROT_NONE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    void *p = mmap(NULL, n, prot, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (p == MAP_FAILED) {
         mx_fail(st, MX_ENOMEM, "cpu-strict: cannot map %zu bytes", bytes);
         return NULL;
     }
-    s->maps[s->n].p = p;
-    s->maps[s->n++].bytes = n;
+    s->maps[s->n++] = (strict_map){.p = p, .bytes = n, .weight = weight};
+    return p;
+}
+
+static void *strict_alloc(mx_backend *be, size_t bytes, mx_status *st) {
+    strict_state *s = be->impl;
+    return strict_map_new(be, bytes, s->depth > 0 ? PROT_READ | PROT_WRITE : PROT_NONE, 0, st);
+}
+
+static void *strict_weight(mx_backend *be, const void *src, size_t bytes, mx_status *st) {
+    void *p = strict_map_new(be, bytes, PROT_READ | PROT_WRITE, 1, st);
+    if (!p) return NULL;
+    if (bytes) memcpy(p, src, bytes);
+    if (mprotect(p, bytes ? bytes : 1, PROT_READ) != 0) abort();
     return p;
 }
 
@@ -109,12 +129,126 @@ static int strict_copy(mx_backend *be, void *dst, const void *src, size_t bytes,
     return 0;
 }
 
+/* A download reports the first refused op, as CUDA reports a fault at the next wait. */
+static int strict_to_host(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st) {
+    strict_state *s = be->impl;
+    if (s->fault.code) {
+        if (st) *st = s->fault;
+        return -1;
+    }
+    return strict_copy(be, dst, src, bytes, st);
+}
+
 static void strict_destroy(mx_backend *be) {
     strict_state *s = be->impl;
     for (size_t i = 0; i < s->n; i++) munmap(s->maps[i].p, s->maps[i].bytes);
     free(s->maps);
     free(s);
     free(be);
+}
+
+/* 1 when w is absent or lies in one weight copy of this backend, where `numel` elements fit;
+ * else 0, and the first such refusal is kept: the op, the argument and its shape name the tensor. */
+static int strict_weight_ok(const mx_ctx *c, mx_wptr w, size_t numel, const char *op, const char *arg,
+                            const char *shape) {
+    strict_state *s = c->be->impl;
+    if (!w.data) return 1;
+    uintptr_t a = (uintptr_t)w.data, end = a + numel * mx_dtype_size(w.dtype);
+    for (size_t i = 0; i < s->n; i++) {
+        uintptr_t m = (uintptr_t)s->maps[i].p;
+        if (s->maps[i].weight && a >= m && end <= m + s->maps[i].bytes) return 1;
+    }
+    if (!s->fault.code)
+        mx_fail(&s->fault, MX_EINTERNAL,
+                "cpu-strict: op %s: weight %s %s (%s) at %p is not device memory: on a device context every "
+                "weight is bound through mx_binder_device (or copied with mx_dev_weight), never a host binder",
+                op, arg, shape, mx_dtype_name(w.dtype), w.data);
+    return 0;
+}
+
+/* The CPU kernels c's table wraps (the chosen level's, or its fp32 level's under mx_ctx_fp32). */
+static const mx_kernels *strict_inner(const mx_ctx *c) {
+    strict_state *s = c->be->impl;
+    return s->inner[c->k == &s->checked[1]];
+}
+
+#define SHAPE_(buf, ...) (snprintf(buf, sizeof buf, __VA_ARGS__), buf)
+
+static void strict_linear(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
+    char sw[48], sb[48];
+    if (strict_weight_ok(c, w, (size_t)N * (size_t)K, "linear", "w", SHAPE_(sw, "[%d, %d]", N, K)) &&
+        strict_weight_ok(c, bias, (size_t)N, "linear", "bias", SHAPE_(sb, "[%d]", N)))
+        strict_inner(c)->linear(c, y, x, w, bias, M, N, K);
+}
+
+static void strict_conv2d(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                          mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    char sw[64], sb[48];
+    if (strict_weight_ok(c, w, (size_t)Cout * (size_t)Cin * (size_t)(kh * kw), "conv2d", "w",
+                         SHAPE_(sw, "[%d, %d, %d, %d]", Cout, Cin, kh, kw)) &&
+        strict_weight_ok(c, bias, (size_t)Cout, "conv2d", "bias", SHAPE_(sb, "[%d]", Cout)))
+        strict_inner(c)->conv2d(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+}
+
+/* gamma and beta of a norm over C channels. */
+static int strict_norm_ok(const mx_ctx *c, mx_wptr gamma, mx_wptr beta, int C, const char *op) {
+    char sc[48];
+    SHAPE_(sc, "[%d]", C);
+    return strict_weight_ok(c, gamma, (size_t)C, op, "gamma", sc) && strict_weight_ok(c, beta, (size_t)C, op, "beta", sc);
+}
+
+static void strict_group_norm(const mx_ctx *c, float *y, const float *x, int B, int C, int HW, int groups,
+                              mx_wptr gamma, mx_wptr beta, float eps, int fuse_silu) {
+    if (strict_norm_ok(c, gamma, beta, C, "group_norm"))
+        strict_inner(c)->group_norm(c, y, x, B, C, HW, groups, gamma, beta, eps, fuse_silu);
+}
+
+static void strict_layer_norm(const mx_ctx *c, float *y, const float *x, int M, int C, mx_wptr gamma, mx_wptr beta,
+                              float eps) {
+    if (strict_norm_ok(c, gamma, beta, C, "layer_norm")) strict_inner(c)->layer_norm(c, y, x, M, C, gamma, beta, eps);
+}
+
+/* The token table's rows are not known here (the caller checked the ids): its first row is. */
+static void strict_embed_tokens(const mx_ctx *c, float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens,
+                                mx_wptr positions) {
+    char st_[48], sp[48];
+    if (strict_weight_ok(c, tokens, (size_t)C, "embed_tokens", "tokens", SHAPE_(st_, "[vocabulary, %d]", C)) &&
+        strict_weight_ok(c, positions, (size_t)T * (size_t)C, "embed_tokens", "positions", SHAPE_(sp, "[%d, %d]", T, C)))
+        strict_inner(c)->embed_tokens(c, y, ids, B, T, C, tokens, positions);
+}
+
+#undef SHAPE_
+
+/* The CPU table with the ops that take weights checked first. */
+static void strict_table(mx_kernels *t, const mx_kernels *inner) {
+    *t = *inner;
+    t->linear = strict_linear;
+    t->conv2d = strict_conv2d;
+    t->group_norm = strict_group_norm;
+    t->layer_norm = strict_layer_norm;
+    t->embed_tokens = strict_embed_tokens;
+}
+
+static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
+    strict_state *s = calloc(1, sizeof *s);
+    if (!s) return mx_fail(st, MX_ENOMEM, "backend: out of memory");
+    s->inner[0] = mx_kernels_for(isa);
+    s->inner[1] = mx_kernels_for(mx_isa_fp32_level(s->inner[0]->isa));
+    strict_table(&s->checked[0], s->inner[0]);
+    strict_table(&s->checked[1], s->inner[1]);
+    be->impl = s;
+    be->k = &s->checked[0];
+    be->k_fp32 = &s->checked[1];
+    be->host_visible = 0;
+    be->alloc = strict_alloc;
+    be->weight = strict_weight;
+    be->release = strict_release;
+    be->to_device = strict_copy;
+    be->to_host = strict_to_host;
+    be->enter = strict_enter;
+    be->leave = strict_leave;
+    be->destroy = strict_destroy;
+    return 0;
 }
 
 /* ---- factory ---- */
@@ -130,18 +264,9 @@ static int cpu_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa
     be->to_device = host_copy;
     be->to_host = host_copy;
     be->destroy = plain_destroy;
-    if (kind == MX_BACKEND_CPU_STRICT) {
-        if (!(be->impl = calloc(1, sizeof(strict_state)))) {
-            free(be);
-            return mx_fail(st, MX_ENOMEM, "backend: out of memory");
-        }
-        be->alloc = strict_alloc;
-        be->release = strict_release;
-        be->to_device = strict_copy;
-        be->to_host = strict_copy;
-        be->enter = strict_enter;
-        be->leave = strict_leave;
-        be->destroy = strict_destroy;
+    if (kind == MX_BACKEND_CPU_STRICT && strict_setup(be, isa, st)) {
+        free(be);
+        return -1;
     }
     *out = be;
     return 0;

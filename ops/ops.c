@@ -136,6 +136,20 @@ float *mx_dev_from_host(const mx_ctx *c, const float *src, size_t n, mx_status *
     return p;
 }
 
+void *mx_dev_weight(const mx_ctx *c, const void *src, size_t bytes, mx_status *st) {
+    mx_backend *be = c ? c->be : NULL;
+    if (be && be->weight) return be->weight(be, src, bytes, st);
+    void *p = mx_dev_alloc(c, bytes / sizeof(float) + 1, st);
+    if (!p) return NULL;
+    if (!be) {
+        memcpy(p, src, bytes);
+    } else if (be->to_device(be, p, src, bytes, st)) {
+        mx_dev_free(c, p);
+        return NULL;
+    }
+    return p;
+}
+
 /* ---- the dry run ---- */
 
 static const mx_ctx measuring_ctx = {.measuring = 1};
@@ -159,7 +173,8 @@ mx_ctx mx_ctx_fp32(const mx_ctx *c) {
     memset(&f, 0, sizeof f);
     if (!c) return f;
     f = *c;
-    if (c->k && mx_isa_precision(c->k->isa) == MX_PREC_BF16) f.k = mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32));
+    if (c->k && mx_isa_precision(c->k->isa) == MX_PREC_BF16)
+        f.k = c->be && c->be->k_fp32 ? c->be->k_fp32 : mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32));
     return f;
 }
 

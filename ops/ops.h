@@ -111,6 +111,10 @@ int mx_upload(const mx_ctx *c, float *dst, const float *src, size_t n, mx_status
 int mx_download(const mx_ctx *c, float *dst, const float *src, size_t n, mx_status *st);
 /* Backend memory holding a copy of n host floats (mx_dev_alloc + mx_upload). */
 float *mx_dev_from_host(const mx_ctx *c, const float *src, size_t n, mx_status *st);
+/* A weight's device copy: `bytes` of fp32/fp16/bf16 data as stored, which ops only read (what
+ * mx_binder_device binds on a device context; cpu-strict refuses any other weight pointer).
+ * NULL with a message when out of memory. Free with mx_dev_free. */
+void *mx_dev_weight(const mx_ctx *c, const void *src, size_t bytes, mx_status *st);
 
 /* ---- the dry run ---- */
 

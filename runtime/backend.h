@@ -8,7 +8,8 @@
  * inaccessible (PROT_NONE) except while one of the backend's kernels runs.
  *
  *   cpu         host memory, the cpuid-chosen SIMD kernels (ops/cpu)
- *   cpu-strict  the same kernels; memory readable only inside them (tests prove the seam)
+ *   cpu-strict  the same kernels; memory readable only inside them, and a device context:
+ *               weights must be device copies (mx_binder_device), as on CUDA (tests prove the seam)
  *   cuda        device memory, the kernels of ops/cuda (in binaries built by `make cuda`)
  *
  * Backends are made by mx_backend_create (ops/backend.c); ops reach them through mx_ctx.be. */
@@ -71,6 +72,9 @@ struct mx_backend {
     mx_backend_kind kind;
     const struct mx_kernels *k; /* the kernels that run every op */
     int host_visible;           /* 1: weights in host memory serve as they are (no upload) */
+    /* The kernels of the fp32 level below k when k computes in bf16 (mx_ctx_fp32); NULL: the
+     * CPU table mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32)). */
+    const struct mx_kernels *k_fp32;
     /* Device memory, 64-byte aligned; NULL with a message in st when out of memory. */
     void *(*alloc)(mx_backend *be, size_t bytes, mx_status *st);
     void (*release)(mx_backend *be, void *p);
@@ -78,6 +82,9 @@ struct mx_backend {
      * reports any error it raised. */
     int (*to_device)(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st);
     int (*to_host)(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st);
+    /* A device copy of a weight's bytes, only read by kernels (mx_dev_weight; NULL: alloc and
+     * to_device); freed with release. */
+    void *(*weight)(mx_backend *be, const void *src, size_t bytes, mx_status *st);
     /* Around every kernel call (NULL: nothing to do); calls nest. */
     void (*enter)(mx_backend *be);
     void (*leave)(mx_backend *be);

@@ -51,6 +51,35 @@ static inline int golden_open(mx_safetensors *f, const char *net, const char *fi
     return 0;
 }
 
+/* A golden network's weights bound for context c: the file, its host binder and the device binder
+ * over it that the network is loaded through, so the weights are device copies on a device
+ * context (CUDA, and cpu-strict, which refuses host weights) as models.c binds them. */
+typedef struct golden_weights {
+    mx_safetensors wf; /* unused (map NULL) by the rule binder */
+    mx_binder host, dev;
+} golden_weights;
+
+/* net/file of the goldens. */
+static inline int golden_weights_open(golden_weights *g, const mx_ctx *c, const char *net, const char *file,
+                                      mx_status *st) {
+    memset(g, 0, sizeof *g);
+    if (golden_open(&g->wf, net, file)) return mx_fail(st, MX_EINPUT, "%s/%s: cannot open", net, file);
+    return mx_binder_st(&g->host, &g->wf, "", st) || mx_binder_device(&g->dev, &g->host, c, st) ? -1 : 0;
+}
+
+/* Random weights by the golden-v1 rule (mx_binder_rule). */
+static inline int golden_weights_rule(golden_weights *g, const mx_ctx *c, uint64_t seed, mx_dtype dtype, mx_status *st) {
+    memset(g, 0, sizeof *g);
+    return mx_binder_rule(&g->host, seed, dtype, st) || mx_binder_device(&g->dev, &g->host, c, st) ? -1 : 0;
+}
+
+static inline void golden_weights_close(golden_weights *g) {
+    mx_binder_free(&g->dev);
+    mx_binder_free(&g->host);
+    if (g->wf.map) mx_st_close(&g->wf);
+    memset(g, 0, sizeof *g);
+}
+
 /* fp32 copy of a tensor (malloc'ed), with its element count; NULL when absent. */
 static inline float *golden_f32(const mx_safetensors *f, const char *name, size_t *n) {
     mx_status st;

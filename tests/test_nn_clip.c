@@ -122,14 +122,14 @@ static void test_tiny(const char *weights_file, const char *outputs_file, const 
     CHECK(cfg.eos_token_id == 999 && cfg.num_hidden_layers == 2);
     mx_safetensors sf;
     mx_status st = {0};
-    mx_binder b;
+    mx_binder b, db = {0};
     mx_clip m;
-    if (mx_st_open(&sf, path, &st) || mx_binder_st(&b, &sf, "", &st)) {
+    if (mx_st_open(&sf, path, &st) || mx_binder_st(&b, &sf, "", &st) || mx_binder_device(&db, &b, c, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         CHECK(0);
         return;
     }
-    int ok = mx_clip_load(&m, &cfg, &b, &st) == 0;
+    int ok = mx_clip_load(&m, &cfg, &db, &st) == 0;
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
     mx_st_close(&sf); /* the safetensors binder keeps its own copies */
@@ -143,6 +143,7 @@ static void test_tiny(const char *weights_file, const char *outputs_file, const 
         mx_arena_destroy(&a);
     }
     mx_clip_free(&m);
+    mx_binder_free(&db);
     mx_binder_free(&b);
 }
 
@@ -159,18 +160,20 @@ static void test_converted(const mx_ctx *c) {
     mx_convert_result res;
     mx_status st = {0};
     mx_weightfile *wf = NULL;
-    mx_binder b = {0};
+    mx_binder b = {0}, db = {0};
     mx_clip m = {0};
     mx_clip_config cfg;
     const char *cfg_text = NULL;
     int ok = mx_convert(&opts, &res, &st) == 0 && mx_wf_open(&wf, path, &st) == 0;
     if (ok) cfg_text = mx_wf_meta(wf, "text_encoder.config");
     ok = ok && cfg_text && mx_clip_config_parse(&cfg, cfg_text, strlen(cfg_text), "text_encoder.config", &st) == 0 &&
-         mx_binder_wf(&b, wf, "text_encoder.", &st) == 0 && mx_clip_load(&m, &cfg, &b, &st) == 0;
+         mx_binder_wf(&b, wf, "text_encoder.", &st) == 0 && mx_binder_device(&db, &b, c, &st) == 0 &&
+         mx_clip_load(&m, &cfg, &db, &st) == 0;
     if (!ok) fprintf(stderr, "converted clip_tiny: %s\n", cfg_text || !wf ? st.msg : "no text_encoder.config");
     CHECK(ok);
     if (ok) run_and_compare(&m, c, "clip_tiny", "outputs.safetensors", "converted");
     mx_clip_free(&m);
+    mx_binder_free(&db);
     mx_binder_free(&b);
     if (wf) mx_wf_close(wf);
     remove(path);
@@ -255,12 +258,12 @@ static void test_sd15(const mx_ctx *c) {
     mx_clip_config cfg;
     CHECK(load_config(net, &cfg) == 0);
     golden_binder g = {0};
-    mx_binder b = {0};
+    mx_binder b = {0}, db = {0};
     b.bind = bind_golden;
     b.impl = &g;
     mx_clip m;
     mx_status st = {0};
-    int ok = mx_clip_load(&m, &cfg, &b, &st) == 0;
+    int ok = mx_binder_device(&db, &b, c, &st) == 0 && mx_clip_load(&m, &cfg, &db, &st) == 0;
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
     char label[32];
@@ -268,6 +271,7 @@ static void test_sd15(const mx_ctx *c) {
     if (ok) run_and_compare(&m, c, net, "outputs.safetensors", label);
     if (ok) check_prompt_path(&m, c, net);
     mx_clip_free(&m);
+    mx_binder_free(&db);
     for (size_t i = 0; i < g.n; i++) free(g.bufs[i]);
     free(g.bufs);
 }

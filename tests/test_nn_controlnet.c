@@ -12,12 +12,11 @@
 
 typedef struct cn_case {
     mx_controlnet *m;
-    mx_binder b;
-    mx_safetensors wf;
+    golden_weights g;
     mx_unet_config cfg;
 } cn_case;
 
-static int load_cn(cn_case *k, const char *net, const char *wfile) {
+static int load_cn(cn_case *k, const mx_ctx *c, const char *net, const char *wfile) {
     mx_status st;
     size_t len;
     memset(k, 0, sizeof *k);
@@ -25,8 +24,8 @@ static int load_cn(cn_case *k, const char *net, const char *wfile) {
     if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
     int rc = mx_unet_config_parse(&k->cfg, cfg, len, net, &st);
     free(cfg);
-    if (rc || golden_open(&k->wf, net, wfile) || mx_binder_st(&k->b, &k->wf, "", &st) ||
-        mx_controlnet_load(&k->m, &k->cfg, &k->b, &st)) {
+    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
+        mx_controlnet_load(&k->m, &k->cfg, &k->g.dev, &st)) {
         fprintf(stderr, "%s: %s\n", net, st.msg);
         return -1;
     }
@@ -35,8 +34,7 @@ static int load_cn(cn_case *k, const char *net, const char *wfile) {
 
 static void free_cn(cn_case *k) {
     mx_controlnet_free(k->m);
-    mx_binder_free(&k->b);
-    mx_st_close(&k->wf);
+    golden_weights_close(&k->g);
 }
 
 typedef struct cn_inputs {
@@ -90,7 +88,7 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
     cn_case k;
     cn_inputs x;
     mx_safetensors out;
-    CHECK(load_cn(&k, net, wfile) == 0);
+    CHECK(load_cn(&k, c, net, wfile) == 0);
     CHECK(read_inputs(&x, net) == 0);
     CHECK(golden_open(&out, net, outfile) == 0);
     if (!k.m || !x.sample) return;
@@ -140,19 +138,19 @@ static void check_unet_fp16w_chain(const mx_ctx *c, const char *cn_net, const ch
     cn_case k;
     cn_inputs x;
     size_t len;
-    CHECK(load_cn(&k, cn_net, "diffusion_pytorch_model.fp16.safetensors") == 0);
+    CHECK(load_cn(&k, c, cn_net, "diffusion_pytorch_model.fp16.safetensors") == 0);
     CHECK(read_inputs(&x, cn_net) == 0);
     if (!k.m || !x.sample) return;
     char *cfgtext = golden_text(unet_net, "config.json", &len);
     mx_unet_config ucfg;
-    mx_safetensors uwf, uout;
-    mx_binder ub;
+    mx_safetensors uout;
+    golden_weights ug;
     mx_unet *u = NULL;
     CHECK(cfgtext && mx_unet_config_parse(&ucfg, cfgtext, len, unet_net, &st) == 0);
     free(cfgtext);
-    CHECK(golden_open(&uwf, unet_net, "diffusion_pytorch_model.fp16.safetensors") == 0);
     CHECK(golden_open(&uout, unet_net, "outputs_fp16w.safetensors") == 0);
-    CHECK(mx_binder_st(&ub, &uwf, "", &st) == 0 && mx_unet_load(&u, &ucfg, &ub, &st) == 0);
+    CHECK(golden_weights_open(&ug, c, unet_net, "diffusion_pytorch_model.fp16.safetensors", &st) == 0 &&
+          mx_unet_load(&u, &ucfg, &ug.dev, &st) == 0);
     if (!u) return;
     int n = mx_unet_num_residuals(&k.cfg);
     float **res = alloc_residuals(&k.cfg, x.in.B, x.in.H, x.in.W);
@@ -175,8 +173,7 @@ static void check_unet_fp16w_chain(const mx_ctx *c, const char *cn_net, const ch
     free(got);
     free_residuals(res, &k.cfg);
     mx_unet_free(u);
-    mx_binder_free(&ub);
-    mx_st_close(&uwf);
+    golden_weights_close(&ug);
     mx_st_close(&uout);
     free_inputs(&x);
     free_cn(&k);

@@ -27,7 +27,7 @@ static void compare(const mx_ctx *c, const mx_safetensors *out, const char *labe
 static void sd15_unet(const mx_ctx *c) {
     mx_status st;
     mx_unet_config cfg;
-    mx_binder b;
+    golden_weights b;
     mx_unet *u = NULL;
     mx_safetensors in, out;
     size_t len, bytes = 0;
@@ -35,7 +35,7 @@ static void sd15_unet(const mx_ctx *c) {
     CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_unet", &st) == 0);
     free(text);
     double t0 = mx_now();
-    CHECK(mx_binder_rule(&b, 1, MX_F32, &st) == 0 && mx_unet_load(&u, &cfg, &b, &st) == 0);
+    CHECK(golden_weights_rule(&b, c, 1, MX_F32, &st) == 0 && mx_unet_load(&u, &cfg, &b.dev, &st) == 0);
     printf("sd15_unet: weights generated in %.1f s\n", mx_now() - t0);
     CHECK(golden_open(&in, "sd15_unet", "inputs.safetensors") == 0 && golden_open(&out, "sd15_unet", "outputs.safetensors") == 0);
     if (!u) return;
@@ -79,20 +79,20 @@ static void sd15_unet(const mx_ctx *c) {
     mx_st_close(&in);
     mx_st_close(&out);
     mx_unet_free(u);
-    mx_binder_free(&b);
+    golden_weights_close(&b);
 }
 
 static void sd15_controlnet(const mx_ctx *c) {
     mx_status st;
     mx_unet_config cfg;
-    mx_binder b;
+    golden_weights b;
     mx_controlnet *m = NULL;
     mx_safetensors in, out;
     size_t len;
     char *text = golden_text("sd15_controlnet", "config.json", &len);
     CHECK(text && mx_unet_config_parse(&cfg, text, len, "sd15_controlnet", &st) == 0);
     free(text);
-    CHECK(mx_binder_rule(&b, 2, MX_F32, &st) == 0 && mx_controlnet_load(&m, &cfg, &b, &st) == 0);
+    CHECK(golden_weights_rule(&b, c, 2, MX_F32, &st) == 0 && mx_controlnet_load(&m, &cfg, &b.dev, &st) == 0);
     CHECK(golden_open(&in, "sd15_controlnet", "inputs.safetensors") == 0 &&
           golden_open(&out, "sd15_controlnet", "outputs.safetensors") == 0);
     if (!m) return;
@@ -130,20 +130,20 @@ static void sd15_controlnet(const mx_ctx *c) {
     mx_st_close(&in);
     mx_st_close(&out);
     mx_controlnet_free(m);
-    mx_binder_free(&b);
+    golden_weights_close(&b);
 }
 
 static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     mx_status st;
     mx_vae_config cfg;
-    mx_binder b;
+    golden_weights b;
     mx_vae *v = NULL;
     mx_safetensors in, out;
     size_t len;
     char *text = golden_text("sd15_vae", "config.json", &len);
     CHECK(text && mx_vae_config_parse(&cfg, text, len, "sd15_vae", &st) == 0);
     free(text);
-    CHECK(mx_binder_rule(&b, 1, dt, &st) == 0 && mx_vae_load(&v, &cfg, &b, &st) == 0);
+    CHECK(golden_weights_rule(&b, c, 1, dt, &st) == 0 && mx_vae_load(&v, &cfg, &b.dev, &st) == 0);
     CHECK(golden_open(&in, "sd15_vae", "inputs.safetensors") == 0 && golden_open(&out, "sd15_vae", outfile) == 0);
     if (!v) return;
     const mx_st_tensor *ti = mx_st_find(&in, "image");
@@ -172,7 +172,7 @@ static void sd15_vae(const mx_ctx *c, mx_dtype dt, const char *outfile) {
     mx_st_close(&in);
     mx_st_close(&out);
     mx_vae_free(v);
-    mx_binder_free(&b);
+    golden_weights_close(&b);
 }
 
 int main(void) {

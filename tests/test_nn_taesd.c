@@ -11,12 +11,11 @@
 
 typedef struct taesd_case {
     mx_taesd *t;
-    mx_binder b;
-    mx_safetensors wf;
+    golden_weights g;
     mx_taesd_config cfg;
 } taesd_case;
 
-static int load_taesd(taesd_case *k, const char *net, const char *wfile) {
+static int load_taesd(taesd_case *k, const mx_ctx *c, const char *net, const char *wfile) {
     mx_status st;
     size_t len;
     memset(k, 0, sizeof *k);
@@ -24,8 +23,8 @@ static int load_taesd(taesd_case *k, const char *net, const char *wfile) {
     if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
     int rc = mx_taesd_config_parse(&k->cfg, cfg, len, net, &st);
     free(cfg);
-    if (rc || golden_open(&k->wf, net, wfile) || mx_binder_st(&k->b, &k->wf, "", &st) ||
-        mx_taesd_load(&k->t, &k->cfg, &k->b, &st)) {
+    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
+        mx_taesd_load(&k->t, &k->cfg, &k->g.dev, &st)) {
         fprintf(stderr, "%s: %s\n", net, st.msg);
         return -1;
     }
@@ -34,8 +33,7 @@ static int load_taesd(taesd_case *k, const char *net, const char *wfile) {
 
 static void free_taesd(taesd_case *k) {
     mx_taesd_free(k->t);
-    mx_binder_free(&k->b);
-    mx_st_close(&k->wf);
+    golden_weights_close(&k->g);
 }
 
 /* One network call on the test device: input uploaded, arena on the backend, output fetched. */
@@ -70,7 +68,7 @@ static void check_golden(const mx_ctx *c, const char *wfile, double bound) {
     taesd_case k;
     mx_safetensors in, out;
     if (!golden_have("taesd", wfile) || !golden_have("taesd", "outputs.safetensors")) return; /* outside data */
-    CHECK(load_taesd(&k, "taesd", wfile) == 0);
+    CHECK(load_taesd(&k, c, "taesd", wfile) == 0);
     CHECK(golden_open(&in, "taesd", "inputs.safetensors") == 0);
     CHECK(golden_open(&out, "taesd", "outputs.safetensors") == 0);
     if (!k.t) return;
@@ -103,7 +101,7 @@ static void check_golden(const mx_ctx *c, const char *wfile, double bound) {
 /* Item 1 of a batch of 2 (non-square, 24×40) equals that item alone, for encode and decode. */
 static void check_batch_independence(const mx_ctx *c) {
     taesd_case k;
-    CHECK(load_taesd(&k, "taesd_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(load_taesd(&k, c, "taesd_tiny", "diffusion_pytorch_model.safetensors") == 0);
     if (!k.t) return;
     int f = mx_taesd_factor(k.t), H = 3 * f, W = 5 * f;
     CHECK(f == 8);

@@ -100,14 +100,14 @@ static void ref_layer(float *x, const char *path, int causal, float eps) {
 /* The layers under test on c: x0 through LAYERS layers with the given mask, into got. */
 static int run_layers(const mx_ctx *c, const mx_tf_shape *s, const float *x0, float *got) {
     mx_status st;
-    mx_binder b;
+    golden_weights b;
     mx_tf_layer l[LAYERS];
     char path[64];
-    if (mx_binder_rule(&b, SEED, MX_F32, &st)) return fprintf(stderr, "%s\n", st.msg), -1;
+    if (golden_weights_rule(&b, c, SEED, MX_F32, &st)) return fprintf(stderr, "%s\n", st.msg), -1;
     int rc = 0;
     for (int i = 0; !rc && i < LAYERS; i++) {
         snprintf(path, sizeof path, "vision_model.encoder.layers.%d", i);
-        rc = mx_tf_layer_bind(&b, path, s, &l[i], &st);
+        rc = mx_tf_layer_bind(&b.dev, path, s, &l[i], &st);
     }
     mx_arena a;
     mx_tf_buffers bf;
@@ -122,7 +122,7 @@ static int run_layers(const mx_ctx *c, const mx_tf_shape *s, const float *x0, fl
     }
     if (golden_fetch(c, got, x, B * T * C)) rc = -1;
     mx_arena_destroy(&a);
-    mx_binder_free(&b);
+    golden_weights_close(&b);
     return rc;
 }
 

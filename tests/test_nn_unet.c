@@ -11,12 +11,11 @@
 
 typedef struct unet_case {
     mx_unet *u;
-    mx_binder b;
-    mx_safetensors wf;
+    golden_weights g;
     mx_unet_config cfg;
 } unet_case;
 
-static int load_unet(unet_case *k, const char *net, const char *wfile) {
+static int load_unet(unet_case *k, const mx_ctx *c, const char *net, const char *wfile) {
     mx_status st;
     size_t len;
     memset(k, 0, sizeof *k);
@@ -24,8 +23,8 @@ static int load_unet(unet_case *k, const char *net, const char *wfile) {
     if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
     int rc = mx_unet_config_parse(&k->cfg, cfg, len, net, &st);
     free(cfg);
-    if (rc || golden_open(&k->wf, net, wfile) || mx_binder_st(&k->b, &k->wf, "", &st) ||
-        mx_unet_load(&k->u, &k->cfg, &k->b, &st)) {
+    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
+        mx_unet_load(&k->u, &k->cfg, &k->g.dev, &st)) {
         fprintf(stderr, "%s: %s\n", net, st.msg);
         return -1;
     }
@@ -34,8 +33,7 @@ static int load_unet(unet_case *k, const char *net, const char *wfile) {
 
 static void free_unet(unet_case *k) {
     mx_unet_free(k->u);
-    mx_binder_free(&k->b);
-    mx_st_close(&k->wf);
+    golden_weights_close(&k->g);
 }
 
 /* The golden outputs of one weight variant: out_plain, and with residuals the
@@ -45,7 +43,7 @@ static void free_unet(unet_case *k) {
 static void check_golden(const mx_ctx *c, const char *net, const char *wfile, const char *outfile, int residuals) {
     unet_case k;
     mx_safetensors in, out;
-    CHECK(load_unet(&k, net, wfile) == 0);
+    CHECK(load_unet(&k, c, net, wfile) == 0);
     if (!k.u) return;
     CHECK(golden_open(&in, net, "inputs.safetensors") == 0);
     CHECK(golden_open(&out, net, outfile) == 0);
@@ -104,7 +102,7 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
  * (8×16); and the result does not depend on the thread count. */
 static void check_batch_independence(const mx_ctx *c) {
     unet_case k;
-    CHECK(load_unet(&k, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(load_unet(&k, c, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
     if (!k.u) return;
     int H = 8, W = 16, T = 5, C = k.cfg.in_channels, D = k.cfg.cross_attention_dim;
     size_t ns = (size_t)C * H * W, ne = (size_t)T * D, no = (size_t)k.cfg.out_channels * H * W;
@@ -158,11 +156,11 @@ static int bind_linear_view(mx_binder *b, const char *name, int ndim, const int6
 static void check_linear_projection(const mx_ctx *c) {
     unet_case k;
     mx_status st;
-    CHECK(load_unet(&k, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(load_unet(&k, c, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
     if (!k.u) return;
     mx_unet_config lcfg = k.cfg;
     lcfg.use_linear_projection = 1;
-    linear_view lv = {&k.b};
+    linear_view lv = {&k.g.dev}; /* binds through the device binder */
     mx_binder view = {bind_linear_view, &lv, "", 0};
     mx_unet *ul = NULL;
     CHECK(mx_unet_load(&ul, &lcfg, &view, &st) == 0);
@@ -184,8 +182,50 @@ static void check_linear_projection(const mx_ctx *c) {
     free_unet(&k);
 }
 
+/* The class of bug of weights bound through a host binder and run on a device context (on CUDA:
+ * host pointers in GPU kernels) fails here on any machine: cpu-strict refuses the first op's host
+ * weight, the op does not run, and the download reports it, naming the op, the argument and the
+ * tensor's shape (time_embedding.linear_1.weight, [128, 32] in unet_tiny, is the first). */
+static void check_host_weights_refused(void) {
+    mx_ctx c;
+    mx_status st = {0};
+    mx_safetensors wf;
+    mx_binder b;
+    mx_unet_config cfg;
+    mx_unet *u = NULL;
+    size_t len, bytes = 0;
+    char *text = golden_text("unet_tiny", "config.json", &len);
+    CHECK(mx_ctx_create_on(&c, MX_BACKEND_CPU_STRICT, 1, mx_cpu_isa_for(MX_PREC_FP32), (size_t)16 << 20, &st) == 0);
+    CHECK(text && mx_unet_config_parse(&cfg, text, len, "unet_tiny", &st) == 0);
+    free(text);
+    CHECK(golden_open(&wf, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(mx_binder_st(&b, &wf, "", &st) == 0 && mx_unet_load(&u, &cfg, &b, &st) == 0); /* no device binder */
+    if (!u) return;
+    int H = 8, W = 8, T = 7;
+    size_t ns = (size_t)cfg.in_channels * H * W, ne = (size_t)T * cfg.cross_attention_dim;
+    size_t no = (size_t)cfg.out_channels * H * W;
+    float *host = calloc(ns + ne + no + 1, sizeof(float));
+    host[ns + ne + no] = 500.0f;
+    float *dev = mx_dev_from_host(&c, host, ns + ne + no + 1, &st);
+    mx_unet_input in = {dev, dev + ns + ne + no, dev + ns, 1, H, W, T, NULL, NULL};
+    mx_arena a;
+    CHECK(mx_unet_arena_bytes(u, 1, H, W, T, &bytes, &st) == 0 && mx_arena_create_on(&a, c.be, bytes, &st) == 0);
+    CHECK(mx_unet_forward(&c, u, &in, dev + ns + ne, &a, &st) == 0); /* ops queue; the fault shows at the download */
+    CHECK(mx_download(&c, host, dev + ns + ne, no, &st) != 0);
+    printf("host-bound unet_tiny on cpu-strict: %s\n", st.msg);
+    CHECK(strstr(st.msg, "op linear: weight w [128, 32] (f32)") && strstr(st.msg, "mx_binder_device"));
+    mx_arena_destroy(&a);
+    mx_dev_free(&c, dev);
+    free(host);
+    mx_unet_free(u);
+    mx_binder_free(&b);
+    mx_st_close(&wf);
+    mx_ctx_destroy(&c);
+}
+
 int main(void) {
     mx_ctx c;
+    check_host_weights_refused();
     if (golden_ctx(&c)) return 1;
     check_golden(&c, "unet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors", 1);
     check_golden(&c, "unet_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors", 0);

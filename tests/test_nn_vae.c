@@ -11,12 +11,11 @@
 
 typedef struct vae_case {
     mx_vae *v;
-    mx_binder b;
-    mx_safetensors wf;
+    golden_weights g;
     mx_vae_config cfg;
 } vae_case;
 
-static int load_vae(vae_case *k, const char *net, const char *wfile) {
+static int load_vae(vae_case *k, const mx_ctx *c, const char *net, const char *wfile) {
     mx_status st;
     size_t len;
     memset(k, 0, sizeof *k);
@@ -24,8 +23,8 @@ static int load_vae(vae_case *k, const char *net, const char *wfile) {
     if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
     int rc = mx_vae_config_parse(&k->cfg, cfg, len, net, &st);
     free(cfg);
-    if (rc || golden_open(&k->wf, net, wfile) || mx_binder_st(&k->b, &k->wf, "", &st) ||
-        mx_vae_load(&k->v, &k->cfg, &k->b, &st)) {
+    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
+        mx_vae_load(&k->v, &k->cfg, &k->g.dev, &st)) {
         fprintf(stderr, "%s: %s\n", net, st.msg);
         return -1;
     }
@@ -34,8 +33,7 @@ static int load_vae(vae_case *k, const char *net, const char *wfile) {
 
 static void free_vae(vae_case *k) {
     mx_vae_free(k->v);
-    mx_binder_free(&k->b);
-    mx_st_close(&k->wf);
+    golden_weights_close(&k->g);
 }
 
 static void compare(const mx_ctx *c, const mx_safetensors *out, const char *net, const char *outfile, const char *name,
@@ -54,7 +52,7 @@ static void compare(const mx_ctx *c, const mx_safetensors *out, const char *net,
 static void check_golden(const mx_ctx *c, const char *net, const char *wfile, const char *outfile) {
     vae_case k;
     mx_safetensors in, out;
-    CHECK(load_vae(&k, net, wfile) == 0);
+    CHECK(load_vae(&k, c, net, wfile) == 0);
     CHECK(golden_open(&in, net, "inputs.safetensors") == 0);
     CHECK(golden_open(&out, net, outfile) == 0);
     if (!k.v) return;
@@ -99,7 +97,7 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
 /* Non-square: item 1 of a batch of 2 (image 32×64) equals that item alone, for encode and decode. */
 static void check_batch_independence(const mx_ctx *c) {
     vae_case k;
-    CHECK(load_vae(&k, "vae_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(load_vae(&k, c, "vae_tiny", "diffusion_pytorch_model.safetensors") == 0);
     if (!k.v) return;
     int f = mx_vae_factor(k.v), H = 4 * f, W = 8 * f, lc = k.cfg.latent_channels;
     size_t ni = (size_t)k.cfg.in_channels * H * W, nl = (size_t)lc * (H / f) * (W / f);

@@ -18,14 +18,14 @@
 
 static mx_vae *vae;
 
-static int load(mx_binder *b, mx_safetensors *wf) {
+static int load(golden_weights *g, const mx_ctx *c) {
     mx_status st;
     size_t len;
     mx_vae_config cfg;
     char *text = golden_text("vae_tiny", "config.json", &len);
     int rc = !text || mx_vae_config_parse(&cfg, text, len, "vae_tiny", &st) ||
-             golden_open(wf, "vae_tiny", "diffusion_pytorch_model.safetensors") || mx_binder_st(b, wf, "", &st) ||
-             mx_vae_load(&vae, &cfg, b, &st);
+             golden_weights_open(g, c, "vae_tiny", "diffusion_pytorch_model.safetensors", &st) ||
+             mx_vae_load(&vae, &cfg, &g->dev, &st);
     free(text);
     if (rc) fprintf(stderr, "vae_tiny: %s\n", st.msg);
     return rc ? -1 : 0;
@@ -166,17 +166,15 @@ static void check_small_and_errors(const mx_ctx *c) {
 
 int main(void) {
     mx_ctx c;
-    mx_binder b;
-    mx_safetensors wf;
+    golden_weights g;
     if (golden_ctx(&c)) return 1;
-    CHECK(load(&b, &wf) == 0);
+    CHECK(load(&g, &c) == 0);
     if (vae) {
         check_against_reference(&c);
         check_small_and_errors(&c);
     }
     mx_vae_free(vae);
-    mx_binder_free(&b);
-    mx_st_close(&wf);
+    golden_weights_close(&g);
     mx_ctx_destroy(&c);
     return mx_test_finish("test_nn_vae_tiled");
 }

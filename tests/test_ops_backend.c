@@ -110,6 +110,38 @@ static void test_strict_guard(void) {
     mx_ctx_destroy(&c);
 }
 
+/* cpu-strict is a device context: a weight must be a device copy (mx_dev_weight, what
+ * mx_binder_device binds); a host pointer is refused, the op does not run, and the next download
+ * fails with a message naming the op, the argument and its shape. The weight copy itself is
+ * read-only for the host. */
+static void test_strict_weights(void) {
+    mx_ctx c;
+    mx_status st = {0};
+    CHECK(mx_ctx_create_on(&c, MX_BACKEND_CPU_STRICT, 2, mx_cpu_best_isa(), 1 << 20, &st) == 0);
+    const float x[3] = {1, 2, 3}, w[6] = {1, 0, 0, 0, 1, 1}, want[2] = {1, 5};
+    float got[2] = {0, 0};
+    float *dx = mx_dev_from_host(&c, x, 3, &st), *dy = mx_dev_alloc(&c, 2, &st);
+    void *dw = mx_dev_weight(&c, w, sizeof w, &st);
+    CHECK(dx && dy && dw);
+    if (!dx || !dy || !dw) return;
+    mx_linear(&c, dy, dx, mx_w_f32(dw), mx_w_none(), 1, 2, 3);
+    CHECK(mx_download(&c, got, dy, 2, &st) == 0);
+    mx_check_close("cpu-strict: linear with a device weight", got, want, 2, 0);
+    CHECK(child_signal(read_one, dw) == 0 && child_signal(write_one, dw) == SIGSEGV);
+    mx_fill(&c, dy, 7.0f, 2);
+    mx_linear(&c, dy, dx, mx_w_f32(w), mx_w_none(), 1, 2, 3); /* a host weight: refused */
+    CHECK(mx_download(&c, got, dy, 2, &st) != 0);
+    printf("refused: %s\n", st.msg);
+    CHECK(strstr(st.msg, "op linear: weight w [2, 3] (f32)") && strstr(st.msg, "not device memory") &&
+          strstr(st.msg, "mx_binder_device"));
+    /* sticky, like a CUDA fault: later downloads fail too */
+    CHECK(mx_download(&c, got, dx, 2, &st) != 0 && strstr(st.msg, "op linear"));
+    mx_dev_free(&c, dw);
+    mx_dev_free(&c, dx);
+    mx_dev_free(&c, dy);
+    mx_ctx_destroy(&c);
+}
+
 static void test_measuring(void) {
     const mx_ctx *m = mx_ctx_measuring();
     mx_arena a;
@@ -158,9 +190,13 @@ static void test_small_ops(const mx_ctx *c) {
     const float tok[6] = {0, 1, 10, 11, 20, 21}, pos[4] = {100, 200, 300, 400};
     const int32_t ids[4] = {2, 0, 1, 1};
     const float emb_want[8] = {120, 221, 300, 401, 110, 211, 310, 411};
-    mx_embed_tokens(c, dy, ids, 2, 2, 2, mx_w_f32(tok), mx_w_f32(pos));
+    void *dtok = mx_dev_weight(c, tok, sizeof tok, &st), *dpos = mx_dev_weight(c, pos, sizeof pos, &st);
+    CHECK(dtok && dpos);
+    mx_embed_tokens(c, dy, ids, 2, 2, 2, mx_w_f32(dtok), mx_w_f32(dpos));
     CHECK(mx_download(c, got, dy, 8, &st) == 0);
     mx_check_close("embed_tokens", got, emb_want, 8, 0);
+    mx_dev_free(c, dtok);
+    mx_dev_free(c, dpos);
     mx_dev_free(c, dx);
     mx_dev_free(c, dy);
 }
@@ -169,6 +205,7 @@ int main(void) {
     test_names();
     test_tables_full();
     test_strict_guard();
+    test_strict_weights();
     test_measuring();
     mx_ctx c;
     mx_status st = {0};

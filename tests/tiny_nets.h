@@ -19,8 +19,7 @@
 enum { TINY_UNET = 1, TINY_CONTROLNET = 2, TINY_VAE = 4, TINY_CLIP = 8, TINY_TAESD = 16 };
 
 typedef struct tiny_nets {
-    mx_safetensors wf[5]; /* one slot per network, in the order of the flags */
-    mx_binder b[5];
+    golden_weights w[5]; /* one slot per network, in the order of the flags */
     mx_unet_config ucfg, ccfg;
     mx_vae_config vcfg;
     mx_clip_config clip_cfg;
@@ -33,45 +32,43 @@ typedef struct tiny_nets {
     int clip_loaded;
 } tiny_nets;
 
-/* Reads golden/<net>/config.json into text and binds slot i to its weights file. */
-static inline char *tiny_open(tiny_nets *n, int i, const char *net, const char *file, size_t *len, mx_status *st) {
+/* Reads golden/<net>/config.json into text and binds slot i to its weights file, through the
+ * device binder of c. */
+static inline char *tiny_open(tiny_nets *n, int i, const mx_ctx *c, const char *net, const char *file, size_t *len,
+                              mx_status *st) {
     char *text = golden_text(net, "config.json", len);
     if (!text) return mx_fail(st, MX_EINPUT, "%s/config.json is missing", net), NULL;
-    if (golden_open(&n->wf[i], net, file)) {
-        free(text);
-        return mx_fail(st, MX_EINPUT, "%s/%s: cannot open", net, file), NULL;
-    }
-    if (mx_binder_st(&n->b[i], &n->wf[i], "", st)) {
+    if (golden_weights_open(&n->w[i], c, net, file, st)) {
         free(text);
         return NULL;
     }
     return text;
 }
 
-/* Loads the networks named by `which` (TINY_* flags); on failure st says why and tiny_nets_free
- * still frees what was loaded. */
-static inline int tiny_nets_load(tiny_nets *n, int which, mx_status *st) {
+/* Loads the networks named by `which` (TINY_* flags) for context c (weights on its device); on
+ * failure st says why and tiny_nets_free still frees what was loaded. */
+static inline int tiny_nets_load(tiny_nets *n, const mx_ctx *c, int which, mx_status *st) {
     static const char *const names[5] = {"unet_tiny", "controlnet_tiny", "vae_tiny", "clip_tiny", "taesd_tiny"};
     memset(n, 0, sizeof *n);
     for (int i = 0; i < 5; i++) {
         if (!(which & (1 << i))) continue;
         size_t len;
-        char *t = tiny_open(n, i, names[i], i == 3 ? "model.safetensors" : "diffusion_pytorch_model.safetensors", &len, st);
+        char *t = tiny_open(n, i, c, names[i], i == 3 ? "model.safetensors" : "diffusion_pytorch_model.safetensors", &len, st);
         int rc = !t;
         if (!rc && i == 0)
-            rc = mx_unet_config_parse(&n->ucfg, t, len, names[i], st) || mx_unet_load(&n->unet, &n->ucfg, &n->b[i], st);
+            rc = mx_unet_config_parse(&n->ucfg, t, len, names[i], st) || mx_unet_load(&n->unet, &n->ucfg, &n->w[i].dev, st);
         if (!rc && i == 1)
             rc = mx_unet_config_parse(&n->ccfg, t, len, names[i], st) ||
-                 mx_controlnet_load(&n->cnet, &n->ccfg, &n->b[i], st);
+                 mx_controlnet_load(&n->cnet, &n->ccfg, &n->w[i].dev, st);
         if (!rc && i == 2)
-            rc = mx_vae_config_parse(&n->vcfg, t, len, names[i], st) || mx_vae_load(&n->vae, &n->vcfg, &n->b[i], st);
+            rc = mx_vae_config_parse(&n->vcfg, t, len, names[i], st) || mx_vae_load(&n->vae, &n->vcfg, &n->w[i].dev, st);
         if (!rc && i == 3) {
             rc = mx_clip_config_parse(&n->clip_cfg, t, len, names[i], st) ||
-                 mx_clip_load(&n->clip, &n->clip_cfg, &n->b[i], st);
+                 mx_clip_load(&n->clip, &n->clip_cfg, &n->w[i].dev, st);
             n->clip_loaded = !rc;
         }
         if (!rc && i == 4)
-            rc = mx_taesd_config_parse(&n->tcfg, t, len, names[i], st) || mx_taesd_load(&n->taesd, &n->tcfg, &n->b[i], st);
+            rc = mx_taesd_config_parse(&n->tcfg, t, len, names[i], st) || mx_taesd_load(&n->taesd, &n->tcfg, &n->w[i].dev, st);
         free(t);
         if (rc) return -1;
     }
@@ -84,10 +81,7 @@ static inline void tiny_nets_free(tiny_nets *n) {
     mx_vae_free(n->vae);
     if (n->clip_loaded) mx_clip_free(&n->clip);
     mx_taesd_free(n->taesd);
-    for (int i = 0; i < 5; i++) {
-        mx_binder_free(&n->b[i]);
-        if (n->wf[i].map) mx_st_close(&n->wf[i]);
-    }
+    for (int i = 0; i < 5; i++) golden_weights_close(&n->w[i]);
 }
 
 /* The whole main of a pipeline test named `name`. */
@@ -96,7 +90,7 @@ static inline int tiny_nets_main(const char *name, int which, void (*test)(const
     mx_status st = {0};
     tiny_nets n;
     if (golden_ctx(&c)) return 1;
-    int ok = tiny_nets_load(&n, which, &st) == 0;
+    int ok = tiny_nets_load(&n, &c, which, &st) == 0;
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
     if (ok) test(&n, &c);

@@ -258,12 +258,11 @@ static int bind_device(mx_binder *b, const char *name, int ndim, const int64_t *
     if (d->inner->bind(d->inner, name, ndim, shape, out, st)) return -1;
     if (!out->data || !be || be->host_visible) return 0;
     size_t bytes = (size_t)mx_shape_numel(ndim, shape) * mx_dtype_size(out->dtype);
-    void *p = be->alloc(be, bytes, st);
+    void *p = mx_dev_weight(d->c, out->data, bytes, st);
     if (!p || keep_device_buffer(d, p, st)) {
         if (p) be->release(be, p);
         return mx_fail_prefix(st, "weight %s%s", d->inner->prefix, name);
     }
-    if (be->to_device(be, p, out->data, bytes, st)) return mx_fail_prefix(st, "weight %s%s", d->inner->prefix, name);
     out->data = p;
     return 0;
 }
