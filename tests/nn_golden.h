@@ -217,7 +217,8 @@ static inline void golden_arena(const mx_ctx *c, mx_arena *a, size_t bytes) {
 
 /* Runs one call on the context's device in an arena of exactly the measured size: the host
  * inputs are copied to the device, the output back. */
-static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out) {
+static inline int golden_run_unet_cached(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in,
+                                         mx_step_cache *cache, float *out) {
     mx_status st;
     size_t bytes;
     mx_arena a;
@@ -242,7 +243,7 @@ static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_un
     size_t no = (size_t)in->B * cfg->out_channels * in->H * in->W;
     float *dout = golden_dev_alloc(c, no);
     golden_half_reset(c);
-    int rc = mx_unet_forward(c, u, &d, dout, &a, &st);
+    int rc = mx_unet_forward_cached(c, u, &d, cache, dout, &a, &st);
     if (rc) fprintf(stderr, "%s\n", st.msg);
     if (golden_fetch(c, out, dout, no)) rc = -1;
     mx_dev_free(c, (void *)d.sample);
@@ -253,9 +254,13 @@ static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_un
     return rc;
 }
 
+static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out) {
+    return golden_run_unet_cached(c, u, in, NULL, out);
+}
+
 /* The same for a ControlNet: down[0..n) and mid are host buffers (read too when accumulating). */
-static inline int golden_run_controlnet(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
-                                        float **down, float *mid, int accumulate) {
+static inline int golden_run_controlnet_cached(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
+                                               mx_step_cache *cache, float **down, float *mid, int accumulate) {
     mx_status st;
     size_t bytes;
     mx_arena a;
@@ -279,7 +284,7 @@ static inline int golden_run_controlnet(const mx_ctx *c, const mx_controlnet *m,
         res[i] = golden_dev(c, i < n ? down[i] : mid, cnt[i]);
     }
     golden_half_reset(c);
-    int rc = mx_controlnet_forward(c, m, &d, res, res[n], accumulate, &a, &st);
+    int rc = mx_controlnet_forward_cached(c, m, &d, cache, res, res[n], accumulate, &a, &st);
     if (rc) fprintf(stderr, "%s\n", st.msg);
     for (int i = 0; i <= n; i++)
         if (golden_fetch(c, i < n ? down[i] : mid, res[i], cnt[i])) rc = -1;
@@ -289,6 +294,11 @@ static inline int golden_run_controlnet(const mx_ctx *c, const mx_controlnet *m,
     mx_dev_free(c, (void *)d.cond);
     mx_arena_destroy(&a);
     return rc;
+}
+
+static inline int golden_run_controlnet(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
+                                        float **down, float *mid, int accumulate) {
+    return golden_run_controlnet_cached(c, m, in, NULL, down, mid, accumulate);
 }
 
 /* Encode / decode on the context's device: host in, host out. */

@@ -179,12 +179,64 @@ static void check_unet_fp16w_chain(const mx_ctx *c, const char *cn_net, const ch
     free_cn(&k);
 }
 
+/* All residuals of run i (res[i]) equal those of run j, byte for byte. */
+static int same_residuals(float ***res, int i, int j, const cn_inputs *x, const mx_unet_config *cfg) {
+    int n = mx_unet_num_residuals(cfg), C, h, w;
+    for (int r = 0; r <= n; r++) {
+        mx_unet_residual_shape(cfg, r, x->in.H, x->in.W, &C, &h, &w);
+        if (memcmp(res[i][r], res[j][r], (size_t)x->in.B * C * h * w * sizeof(float))) return 0;
+    }
+    return 1;
+}
+
+/* The step cache (step_cache.h): cached forwards give the uncached residuals bit for bit; the
+ * later ones replay the first one's hint embedding and cross-attention K/V (another control
+ * image on the recorded cache gives the recorded image's residuals). */
+static void check_step_cache(const mx_ctx *c) {
+    cn_case k;
+    cn_inputs x;
+    mx_status st;
+    CHECK(load_cn(&k, c, "controlnet_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(read_inputs(&x, "controlnet_tiny") == 0);
+    if (!k.m || !x.sample) return;
+    int n = mx_unet_num_residuals(&k.cfg), f = 1 << (k.cfg.n_cond_emb - 1);
+    size_t ns = (size_t)x.in.B * k.cfg.in_channels * x.in.H * x.in.W, floats = 0;
+    size_t nc = (size_t)x.in.B * k.cfg.conditioning_channels * x.in.H * f * x.in.W * f;
+    float *sample2 = malloc(ns * sizeof(float)), *cond2 = malloc(nc * sizeof(float));
+    mx_fill_random(sample2, ns, 51, -1.5f, 1.5f);
+    mx_fill_random(cond2, nc, 52, 0.0f, 1.0f);
+    /* the golden call, another latent (step 2 of a view), then another control image */
+    mx_controlnet_input in[3] = {x.in, x.in, x.in};
+    in[1].sample = in[2].sample = sample2;
+    in[2].cond = cond2;
+    float **res[5];
+    for (int i = 0; i < 5; i++) res[i] = alloc_residuals(&k.cfg, x.in.B, x.in.H, x.in.W);
+    for (int i = 0; i < 3; i++) CHECK(golden_run_controlnet(c, k.m, &in[i], res[i], res[i][n], 0) == 0);
+    CHECK(mx_controlnet_cache_floats(k.m, x.in.B, x.in.H, x.in.W, x.in.T, &floats, &st) == 0);
+    CHECK(floats >= (size_t)x.in.B * k.cfg.block_out_channels[0] * x.in.H * x.in.W); /* the hint embedding */
+    mx_step_cache cache = {.mem = golden_dev_alloc(c, floats), .cap = floats};
+    CHECK(golden_run_controlnet_cached(c, k.m, &in[0], &cache, res[3], res[3][n], 0) == 0 && cache.recorded);
+    CHECK(same_residuals(res, 3, 0, &x, &k.cfg));
+    CHECK(golden_run_controlnet_cached(c, k.m, &in[1], &cache, res[3], res[3][n], 0) == 0);
+    CHECK(same_residuals(res, 3, 1, &x, &k.cfg));
+    CHECK(golden_run_controlnet_cached(c, k.m, &in[2], &cache, res[4], res[4][n], 0) == 0); /* replays */
+    CHECK(same_residuals(res, 4, 1, &x, &k.cfg) && !same_residuals(res, 4, 2, &x, &k.cfg));
+    printf("controlnet_tiny step cache: %zu floats, bit-identical, replayed\n", floats);
+    mx_dev_free(c, cache.mem);
+    for (int i = 0; i < 5; i++) free_residuals(res[i], &k.cfg);
+    free(sample2);
+    free(cond2);
+    free_inputs(&x);
+    free_cn(&k);
+}
+
 int main(void) {
     mx_ctx c;
     if (golden_ctx(&c)) return 1;
     check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
     check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
     check_unet_fp16w_chain(&c, "controlnet_tiny", "unet_tiny");
+    check_step_cache(&c);
     int mini = golden_have("controlnet_mini", "inputs.safetensors"); /* outside the repository */
     if (mini) {
         check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");

@@ -24,6 +24,11 @@ void mx_run_init_net(mx_run *r, const char *net, const mx_ctx *c, mx_arena *a, m
 
 float *mx_run_alloc(mx_run *r, size_t n) { return mx_act_alloc(r->a, n, r->st); }
 
+int mx_run_cached(mx_run *r, size_t n, float **slot) {
+    *slot = NULL;
+    return r->cache ? mx_step_cache_slot(r->cache, n, mx_act_placeholder(), slot, r->st) : 0;
+}
+
 /* ---- parameter groups ---- */
 
 static int path_join(char *buf, size_t cap, const char *path, const char *leaf, mx_status *st) {
@@ -204,6 +209,24 @@ static int tblock_load(mx_tblock *p, mx_binder *b, const char *path, int dim, in
     return 0;
 }
 
+/* K and V of the cross-attention over context[M, ctx_dim]: into kbuf, vbuf, or with a step
+ * cache into its slot, computed at a view's first forward and read back at the next ones. */
+static int cross_kv(mx_run *r, const mx_tblock *p, const float *context, int M, float *kbuf, float *vbuf,
+                    const float **k, const float **v) {
+    size_t n = (size_t)M * p->dim, n64 = (n + 15) & ~(size_t)15; /* V 64-byte aligned after K */
+    float *slot;
+    int have = mx_run_cached(r, n64 + n, &slot);
+    if (have < 0) return -1;
+    float *kd = slot ? slot : kbuf, *vd = slot ? slot + n64 : vbuf;
+    if (!have) {
+        mx_lin_run(r, &p->k2, kd, context, M);
+        mx_lin_run(r, &p->v2, vd, context, M);
+    }
+    *k = kd;
+    *v = vd;
+    return 0;
+}
+
 /* hs[B*HW, dim] is updated in place: self-attention, cross-attention, feed-forward, each
  * pre-normed and added back (diffusers BasicTransformerBlock, norm_type "layer_norm"). */
 static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, const float *context, int T) {
@@ -224,9 +247,9 @@ static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, c
 
     mx_ln_run(r, &p->norm2, n, hs, N);
     mx_lin_run(r, &p->q2, q, n, N);
-    mx_lin_run(r, &p->k2, k, context, B * T);
-    mx_lin_run(r, &p->v2, v, context, B * T);
-    run_attention(r, a, q, k, v, B, p->heads, HW, T, D, dim, dim, dim);
+    const float *kc = k, *vc = v;
+    if (cross_kv(r, p, context, B * T, k, v, &kc, &vc)) return -1;
+    run_attention(r, a, q, kc, vc, B, p->heads, HW, T, D, dim, dim, dim);
     mx_lin_run(r, &p->o2, n, a, N);
     run_add(r, hs, hs, n, nd);
 

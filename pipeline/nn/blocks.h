@@ -12,6 +12,7 @@
 
 #include "../../ops/ops.h"
 #include "params.h"
+#include "step_cache.h"
 
 /* One forward pass: ops context (the measuring one in a dry run), activation arena, error
  * sink, FLOP counter. */
@@ -21,6 +22,7 @@ typedef struct mx_run {
     mx_arena *a;
     mx_status *st;
     double flops;
+    mx_step_cache *cache; /* NULL, or where results constant over the steps are kept (step_cache.h) */
 } mx_run;
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
@@ -28,6 +30,10 @@ void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
 void mx_run_init_net(mx_run *r, const char *net, const mx_ctx *c, mx_arena *a, mx_status *st);
 /* Activation floats from the run's arena (mx_act_alloc). NULL only on failure (st filled). */
 float *mx_run_alloc(mx_run *r, size_t n);
+/* The run's next step-cache slot of n floats: 1 when *slot holds the result already, 0 when the
+ * caller computes it into *slot; *slot is NULL without a cache (compute into your own buffer);
+ * -1 on error (st). */
+int mx_run_cached(mx_run *r, size_t n, float **slot);
 
 typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad, fp32; } mx_conv; /* fp32: precision.h */
 typedef struct { mx_wptr w, b; int in, out; } mx_lin;

@@ -118,10 +118,12 @@ static int controlnet_run(mx_run *r, const mx_controlnet *m, const mx_controlnet
     const mx_unet_config *c = &m->enc.cfg;
     int B = in->B, n = mx_unet_num_residuals(c), C, h, w;
     float *res[MX_UNET_MAX_RES];
-    float *temb = mx_run_alloc(r, (size_t)B * c->time_embed_dim);
-    float *emb = mx_run_alloc(r, (size_t)B * c->block_out_channels[0] * in->H * in->W);
-    if (!temb || !emb || mx_time_embed_run(r, &m->enc.time, temb, in->timesteps, B)) return -1;
-    if (cond_embed_run(r, &m->ce, c, emb, in->cond, B, in->H, in->W)) return -1;
+    size_t nemb = (size_t)B * c->block_out_channels[0] * in->H * in->W;
+    float *temb = mx_run_alloc(r, (size_t)B * c->time_embed_dim), *emb;
+    if (!temb || mx_time_embed_run(r, &m->enc.time, temb, in->timesteps, B)) return -1;
+    int have = mx_run_cached(r, nemb, &emb); /* the hint embedding: the same at every step */
+    if (have < 0 || (!emb && !(emb = mx_run_alloc(r, nemb)))) return -1;
+    if (!have && cond_embed_run(r, &m->ce, c, emb, in->cond, B, in->H, in->W)) return -1;
     for (int i = 0; i <= n; i++) {
         mx_unet_residual_shape(c, i, in->H, in->W, &C, &h, &w);
         if (!(res[i] = mx_run_alloc(r, (size_t)B * C * h * w))) return -1;
@@ -160,15 +162,24 @@ static int check_cond_sizes(const mx_unet_config *c, const mx_controlnet_input *
     return 0;
 }
 
-int mx_controlnet_forward(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in, float *const *down,
-                          float *mid, int accumulate, mx_arena *a, mx_status *st) {
+int mx_controlnet_forward_cached(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
+                                 mx_step_cache *cache, float *const *down, float *mid, int accumulate, mx_arena *a,
+                                 mx_status *st) {
     if (check_cond_sizes(&m->enc.cfg, in, st)) return -1;
     mx_run r;
     mx_run_init(&r, c, a, st);
+    r.cache = cache;
+    mx_step_cache_begin(cache);
     size_t mark = mx_arena_mark(a);
     int rc = controlnet_run(&r, m, in, down, mid, accumulate);
     mx_arena_reset(a, mark);
+    mx_step_cache_end(cache, rc == 0 && !a->measuring);
     return rc ? mx_fail_prefix(st, "ControlNet forward") : 0;
+}
+
+int mx_controlnet_forward(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in, float *const *down,
+                          float *mid, int accumulate, mx_arena *a, mx_status *st) {
+    return mx_controlnet_forward_cached(c, m, in, NULL, down, mid, accumulate, a, st);
 }
 
 /* Output handles of a dry run. */
@@ -176,14 +187,28 @@ static void dry_outputs(float **out, int n) {
     for (int i = 0; i < n; i++) out[i] = mx_act_placeholder();
 }
 
-int mx_controlnet_arena_bytes(const mx_controlnet *m, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+/* A dry run of these sizes: its arena peak, and the floats of `cache` when not NULL. */
+static int controlnet_dry_run(const mx_controlnet *m, int B, int H, int W, int T, mx_step_cache *cache, size_t *bytes,
+                              mx_status *st) {
     mx_arena a;
     float *out[MX_UNET_MAX_RES + 1];
     dry_outputs(out, MX_UNET_MAX_RES + 1);
     mx_arena_measure(&a);
     mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f};
-    if (mx_controlnet_forward(NULL, m, &in, out, out[MX_UNET_MAX_RES], 0, &a, st)) return -1;
+    if (mx_controlnet_forward_cached(NULL, m, &in, cache, out, out[MX_UNET_MAX_RES], 0, &a, st)) return -1;
     *bytes = a.peak + 4 * MX_ARENA_ALIGN;
+    return 0;
+}
+
+int mx_controlnet_arena_bytes(const mx_controlnet *m, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+    return controlnet_dry_run(m, B, H, W, T, NULL, bytes, st);
+}
+
+int mx_controlnet_cache_floats(const mx_controlnet *m, int B, int H, int W, int T, size_t *floats, mx_status *st) {
+    mx_step_cache sizing = {0};
+    size_t bytes;
+    if (controlnet_dry_run(m, B, H, W, T, &sizing, &bytes, st)) return -1;
+    *floats = sizing.cursor;
     return 0;
 }
 

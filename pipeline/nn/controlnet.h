@@ -28,11 +28,19 @@ void mx_controlnet_free(mx_controlnet *m);
 const mx_unet_config *mx_controlnet_cfg(const mx_controlnet *m);
 
 int mx_controlnet_arena_bytes(const mx_controlnet *m, int B, int H, int W, int T, size_t *bytes, mx_status *st);
+/* Floats of a step cache for forwards of these sizes (dry run). */
+int mx_controlnet_cache_floats(const mx_controlnet *m, int B, int H, int W, int T, size_t *floats, mx_status *st);
 /* down[i] (i < mx_unet_num_residuals(cfg)) and mid are caller buffers of the shapes given by
  * mx_unet_residual_shape (times B). When `accumulate` is 1 the scaled residuals are ADDED to
  * the buffers (summing several ControlNets); 0 overwrites them. */
 int mx_controlnet_forward(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in, float *const *down,
                           float *mid, int accumulate, mx_arena *a, mx_status *st);
+/* The same with a step cache (step_cache.h) for in's cond and encoder_hidden_states: the hint
+ * embedding and the cross-attention K/V are computed by its first forward and reused by the next
+ * (NULL: mx_controlnet_forward). */
+int mx_controlnet_forward_cached(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
+                                 mx_step_cache *cache, float *const *down, float *mid, int accumulate, mx_arena *a,
+                                 mx_status *st);
 double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T);
 
 /* The registry's entry points (registry.h): config parse + load, the run-net adapter. */

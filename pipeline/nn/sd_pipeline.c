@@ -28,6 +28,10 @@ typedef struct sd_work {
     float *res[MX_UNET_MAX_RES + 1];
     float *cond[MX_SD_MAX_CONTROLNETS];
     mx_arena arena;
+    /* Step caches (step_cache.h) of latent i: caches[i * (1 + n_controls) + j], j = 0 the UNet's,
+     * 1 + k ControlNet k's; recorded at the first step, replayed at the others. */
+    mx_step_cache *caches;
+    float *cache_mem;
 } sd_work;
 
 static size_t control_numel(const mx_controlnet *net, int h, int w) {
@@ -88,7 +92,29 @@ static int loop_arena_bytes(const mx_sd_request *rq, const sd_dims *d, size_t *b
 
 static void work_free(const mx_ctx *c, sd_work *wk) {
     mx_dev_free(c, wk->block);
+    mx_dev_free(c, wk->cache_mem);
+    free(wk->caches);
     mx_arena_destroy(&wk->arena);
+}
+
+/* The step caches of every latent and network, in one block of backend memory. */
+static int caches_alloc(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, mx_status *st) {
+    int per = 1 + rq->n_controls;
+    size_t floats[1 + MX_SD_MAX_CONTROLNETS], total = 0;
+    if (mx_unet_cache_floats(rq->unet, d->B, d->h, d->w, d->T, &floats[0], st)) return -1;
+    for (int k = 0; k < rq->n_controls; k++)
+        if (mx_controlnet_cache_floats(rq->controls[k].net, d->B, d->h, d->w, d->T, &floats[1 + k], st)) return -1;
+    for (int j = 0; j < per; j++) total += floats[j] * (size_t)d->n;
+    wk->caches = calloc((size_t)d->n * (size_t)per, sizeof *wk->caches);
+    if (!wk->caches) return mx_fail(st, MX_ENOMEM, "sd pipeline: out of memory");
+    if (!(wk->cache_mem = mx_dev_alloc(c, total, st))) return mx_fail_prefix(st, "sd pipeline step caches");
+    float *p = wk->cache_mem;
+    for (int i = 0; i < d->n; i++)
+        for (int j = 0; j < per; j++) {
+            wk->caches[i * per + j] = (mx_step_cache){.mem = p, .cap = floats[j]};
+            p += floats[j]; /* a multiple of 16 floats: slots keep 64-byte alignment */
+        }
+    return 0;
 }
 
 static int work_alloc(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, mx_status *st) {
@@ -115,9 +141,9 @@ static int work_alloc(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d
     }
     wk->timesteps = p;
     size_t bytes;
-    if (loop_arena_bytes(rq, d, &bytes, st) || mx_arena_create_on(&wk->arena, c->be, bytes, st)) {
-        mx_dev_free(c, wk->block);
-        wk->block = NULL;
+    if (loop_arena_bytes(rq, d, &bytes, st) || mx_arena_create_on(&wk->arena, c->be, bytes, st) ||
+        caches_alloc(rq, c, d, wk, st)) {
+        work_free(c, wk);
         return -1;
     }
     return 0;
@@ -157,7 +183,8 @@ static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_di
         float *cond = wk->cond[k] + (size_t)i * d->B * control_numel(ctl->net, d->h, d->w);
         mx_controlnet_input in = {wk->x_in, wk->timesteps, wk->text + (size_t)i * d->B * d->text, cond, d->B, d->h,
                                   d->w, d->T, weight};
-        if (mx_controlnet_forward(c, ctl->net, &in, wk->res, wk->res[d->n_res], ran, &wk->arena, st))
+        mx_step_cache *cache = &wk->caches[i * (1 + rq->n_controls) + 1 + k];
+        if (mx_controlnet_forward_cached(c, ctl->net, &in, cache, wk->res, wk->res[d->n_res], ran, &wk->arena, st))
             return mx_fail_prefix(st, "ControlNet %d: ", k), -1;
         ran = 1;
     }
@@ -184,7 +211,8 @@ static int predict_one(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *
     if (with_res < 0) return -1;
     mx_unet_input in = {wk->x_in, wk->timesteps, wk->text + (size_t)i * d->B * d->text, d->B, d->h, d->w, d->T,
                         with_res ? (const float *const *)wk->res : NULL, with_res ? wk->res[d->n_res] : NULL};
-    if (mx_unet_forward(c, rq->unet, &in, wk->eps, &wk->arena, st)) return mx_fail_prefix(st, "UNet: ");
+    mx_step_cache *cache = &wk->caches[i * (1 + rq->n_controls)];
+    if (mx_unet_forward_cached(c, rq->unet, &in, cache, wk->eps, &wk->arena, st)) return mx_fail_prefix(st, "UNet: ");
     if (d->B == 2) cfg_combine(c, wk->guided + (size_t)i * per, wk->eps, rq->guidance, per);
     else mx_copy(c, wk->guided + (size_t)i * per, wk->eps, per);
     return 0;

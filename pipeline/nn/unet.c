@@ -173,23 +173,45 @@ static int unet_run(mx_run *r, const mx_unet *u, const mx_unet_input *in, float 
     return 0;
 }
 
-int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,
-                    mx_status *st) {
+int mx_unet_forward_cached(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, mx_step_cache *cache,
+                           float *out, mx_arena *a, mx_status *st) {
     if (mx_unet_check_sizes(&u->enc.cfg, in->B, in->H, in->W, in->T, st)) return -1;
     mx_run r;
     mx_run_init(&r, c, a, st);
+    r.cache = cache;
+    mx_step_cache_begin(cache);
     size_t mark = mx_arena_mark(a);
     int rc = unet_run(&r, u, in, out);
     mx_arena_reset(a, mark);
+    mx_step_cache_end(cache, rc == 0 && !a->measuring);
     return rc ? mx_fail_prefix(st, "UNet forward") : 0;
 }
 
-int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,
+                    mx_status *st) {
+    return mx_unet_forward_cached(c, u, in, NULL, out, a, st);
+}
+
+/* A dry run of these sizes: its arena peak, and the floats of `cache` when not NULL. */
+static int unet_dry_run(const mx_unet *u, int B, int H, int W, int T, mx_step_cache *cache, size_t *bytes,
+                        mx_status *st) {
     mx_arena a;
     mx_arena_measure(&a);
     mx_unet_input in = {NULL, NULL, NULL, B, H, W, T, NULL, NULL};
-    if (mx_unet_forward(NULL, u, &in, NULL, &a, st)) return -1;
+    if (mx_unet_forward_cached(NULL, u, &in, cache, NULL, &a, st)) return -1;
     *bytes = a.peak + 4 * MX_ARENA_ALIGN;
+    return 0;
+}
+
+int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+    return unet_dry_run(u, B, H, W, T, NULL, bytes, st);
+}
+
+int mx_unet_cache_floats(const mx_unet *u, int B, int H, int W, int T, size_t *floats, mx_status *st) {
+    mx_step_cache sizing = {0};
+    size_t bytes;
+    if (unet_dry_run(u, B, H, W, T, &sizing, &bytes, st)) return -1;
+    *floats = sizing.cursor;
     return 0;
 }
 

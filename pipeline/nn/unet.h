@@ -17,6 +17,7 @@
 #include "net_io.h"
 #include "netcfg.h"
 #include "params.h"
+#include "step_cache.h"
 
 /* Enough for layers_per_block <= 7 over 8 levels. */
 #define MX_UNET_MAX_RES 64
@@ -54,10 +55,16 @@ int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, m
 
 /* Arena bytes a forward with these sizes needs (dry run). */
 int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st);
+/* Floats of a step cache for forwards of these sizes (dry run). */
+int mx_unet_cache_floats(const mx_unet *u, int B, int H, int W, int T, size_t *floats, mx_status *st);
 /* out: [B, out_channels, H, W] (caller's buffer). Fails with a message on bad sizes or when
  * the arena is too small. With a measuring arena (mx_arena_measure) nothing is computed. */
 int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,
                     mx_status *st);
+/* The same with a step cache (step_cache.h) for in's encoder_hidden_states: the cross-attention
+ * K/V are computed by its first forward and reused by the next (NULL: mx_unet_forward). */
+int mx_unet_forward_cached(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, mx_step_cache *cache,
+                           float *out, mx_arena *a, mx_status *st);
 /* Multiply-add count ×2 of one forward (for benchmarks). */
 double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T);
 
