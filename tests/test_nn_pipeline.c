@@ -43,22 +43,71 @@ static void check_embeddings(const tiny_nets *n, const mx_ctx *c, const mx_safet
     }
 }
 
-/* Progress callback: compares the latents after each step with the golden ones. */
+/* The steps seen by the progress callback (which cancels at cancel_at) and the latents after
+ * each step (after_step: downloaded here, as the loop itself never does) against the golden ones. */
 typedef struct step_check {
     const float *want; /* [steps, numel] */
-    int steps_seen;
+    size_t numel;
+    int steps_seen, latents_checked;
     int cancel_at;     /* -1: never */
 } step_check;
 
-static int on_step(void *user, int step, int n_steps, int64_t t, const float *latents, size_t numel) {
+static int on_step(void *user, int step, int n_steps, int64_t t) {
+    step_check *sc = user;
+    (void)n_steps;
+    (void)t;
+    sc->steps_seen++;
+    return step == sc->cancel_at;
+}
+
+static int check_step_latents(void *user, const mx_ctx *c, int step, int n_steps, float *latents, mx_status *st) {
     step_check *sc = user;
     char name[64];
-    sc->steps_seen++;
-    if (sc->want) {
-        snprintf(name, sizeof name, "latents after step %d/%d (t=%lld)", step + 1, n_steps, (long long)t);
-        mx_check_close(name, latents, sc->want + (size_t)step * numel, numel, 1e-4);
-    }
-    return step == sc->cancel_at;
+    float *got = malloc(sc->numel * sizeof *got);
+    if (!got || mx_download(c, got, latents, sc->numel, st)) return free(got), mx_fail(st, MX_EINTERNAL, "step latents");
+    snprintf(name, sizeof name, "latents after step %d/%d", step + 1, n_steps);
+    mx_check_close(name, got, sc->want + (size_t)step * sc->numel, sc->numel, 1e-4);
+    sc->latents_checked++;
+    free(got);
+    return 0;
+}
+
+/* Downloads through a backend wrapped by the test (count_downloads). */
+static mx_backend *counted_be;
+static int downloads;
+
+static int counting_to_host(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st) {
+    (void)be;
+    downloads++;
+    return counted_be->to_host(counted_be, dst, src, bytes, st);
+}
+
+/* The loop never waits for the device: with a progress callback, 6 steps make one download (the
+ * final latents), not one per step. */
+static void check_one_download(mx_sd_request rq, const mx_ctx *c, const mx_sched_config *scfg, const float *start,
+                               size_t nlat) {
+    mx_status st = {0};
+    mx_backend wrap = *c->be;
+    mx_ctx cc = *c;
+    mx_sched s;
+    counted_be = c->be;
+    wrap.to_host = counting_to_host;
+    cc.be = &wrap;
+    step_check sc = {NULL, 0, 0, 0, -1};
+    float *lat = malloc(nlat * sizeof *lat);
+    CHECK(lat && mx_sched_init(&s, &cc, scfg, 6, nlat, &st) == 0);
+    if (!lat) return;
+    memcpy(lat, start, nlat * sizeof *lat);
+    rq.sched = &s;
+    rq.progress = on_step;
+    rq.progress_user = &sc;
+    rq.after_step = NULL;
+    downloads = 0;
+    CHECK(mx_sd_denoise(&rq, &cc, lat, 1, 8, 8, &st) == 0);
+    printf("denoise, 6 steps with progress: %d download(s)\n", downloads);
+    CHECK(sc.steps_seen == 6 && downloads == 1);
+    mx_sched_free(&s);
+    free(lat);
 }
 
 /* Per-item ControlNet weights: a batch of two copies of the golden start at weights 0.8 and
@@ -131,10 +180,11 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         for (size_t i = 0; ts_equal && i < nts; i++) ts_equal = (float)mx_sched_timestep(&s, (int)i) == ts[i];
         CHECK(ts_equal);
         mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
-        step_check sc = {after, 0, -1};
-        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc, NULL, NULL};
+        step_check sc = {after, nlat, 0, 0, -1};
+        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc, check_step_latents, &sc};
         CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) == 0);
-        CHECK(sc.steps_seen == 6);
+        CHECK(sc.steps_seen == 6 && sc.latents_checked == 6);
+        rq.after_step = NULL;
         float *img = malloc(sizeof(float) * nimg);
         int dec = img && mx_sd_decode_latents(c, n->vae, lat, 1, 8, 8, img, &st) == 0;
         if (!dec) fprintf(stderr, "decode: %s\n", st.msg);
@@ -152,6 +202,9 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         CHECK(lat2 && mx_sd_denoise(&rq, c, lat2, 1, 8, 8, &st) == 0);
         if (lat2) mx_check_close("two ControlNets, 0.5 + 0.3", lat2, after + 5 * nlat, nlat, 1e-4);
         free(lat2);
+        lat2 = golden_f32(&in, "latents", NULL);
+        if (lat2) check_one_download(rq, c, &scfg, lat2, nlat);
+        free(lat2);
         check_item_weights(&rq, c, &scfg, &in, ctl, cond, unc, after + 5 * nlat, nlat, n->cnet);
         rq.controls = &control;
         rq.n_controls = 1;
@@ -159,7 +212,7 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         mx_sched_free(&s);
         /* a progress callback that returns non-zero stops the loop with an error */
         CHECK(mx_sched_init(&s, c, &scfg, 6, nlat, &st) == 0);
-        step_check cancel = {NULL, 0, 1};
+        step_check cancel = {NULL, 0, 0, 0, 1};
         rq.sched = &s;
         rq.progress_user = &cancel;
         CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) != 0 && cancel.steps_seen == 2);

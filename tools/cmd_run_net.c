@@ -223,14 +223,21 @@ typedef struct pipe_opts {
 typedef struct step_record {
     float *after; /* [steps, numel] */
     int64_t *timesteps;
+    size_t numel;
 } step_record;
 
-static int record_step(void *user, int step, int n_steps, int64_t t, const float *lat, size_t numel) {
+static int record_timestep(void *user, int step, int n_steps, int64_t t) {
     (void)n_steps;
     step_record *r = user;
-    memcpy(r->after + (size_t)step * numel, lat, numel * sizeof *lat);
     r->timesteps[step] = t;
     return 0;
+}
+
+/* The latents after each step: a download per step, which only this parity output asks for. */
+static int record_latents(void *user, const mx_ctx *c, int step, int n_steps, float *lat, mx_status *st) {
+    (void)n_steps;
+    step_record *r = user;
+    return mx_download(c, r->after + (size_t)step * r->numel, lat, r->numel, st);
 }
 
 /* The pipeline's tensors, shapes checked against each other and the networks. */
@@ -275,9 +282,10 @@ static int pipe_denoise(run_io *io, const mx_models *m, const pipe_opts *po, con
     mx_sd_control ctl[2] = {{m->cn_depth, p->depth, p->scales ? p->scales[0] : 1.0f, NULL},
                             {m->cn_inpaint, p->inpaint, po->inpaint ? p->scales[1] : 0.0f, NULL}};
     float *lat = new_floats(io, numel, st), *image = new_floats(io, (size_t)p->B * 3 * p->H * p->W, st);
-    step_record r = {new_floats(io, (size_t)po->steps * numel, st), (int64_t *)new_floats(io, 2 * (size_t)po->steps, st)};
+    step_record r = {new_floats(io, (size_t)po->steps * numel, st), (int64_t *)new_floats(io, 2 * (size_t)po->steps, st),
+                     numel};
     mx_sd_request rq = {m->unet, ctl, po->inpaint ? 2 : 1, p->cond, p->uncond, p->T, po->guidance, &s,
-                        record_step, &r, NULL, NULL};
+                        record_timestep, &r, record_latents, &r};
     mx_sd_edit e = {m->vae, p->image, p->mask, p->noise, po->inpaint ? 1.0f : p->strength[0], NULL};
     if (lat && image && r.after && r.timesteps && mx_sd_edit_run(&rq, &e, &io->ctx, p->B, h, w, lat, st) == 0 &&
         mx_sd_decode_latents(&io->ctx, m->vae, lat, p->B, h, w, image, st) == 0) {

@@ -11,6 +11,8 @@ typedef struct edit_state {
     float *block, *image_latents, *noise, *known, *paint, *keep;
     int64_t lat_shape[4], mask_shape[4];
     size_t numel;
+    mx_sd_after_step then; /* the request's own hook, after the blending (may be NULL) */
+    void *then_user;
 } edit_state;
 
 /* paint = nearest-resize of (mask >= 0.5) to h×w (PyTorch's "nearest": source pixel f·i for
@@ -29,7 +31,6 @@ static void latent_masks(const float *mask, int n, int h, int w, int f, float *p
 /* x = (1 − paint) · known + paint · x, known = the image latents noised to the next timestep
  * (a · image + b · noise, as add_noise), exactly the image latents after the last step. */
 static int blend_known(void *user, const mx_ctx *c, int step, int n_steps, float *x, mx_status *st) {
-    (void)st;
     edit_state *e = user;
     const float *known = e->image_latents;
     if (step < n_steps - 1) {
@@ -42,13 +43,12 @@ static int blend_known(void *user, const mx_ctx *c, int step, int n_steps, float
     mx_binary(c, MX_BIN_MUL, e->known, known, e->lat_shape, e->keep, e->mask_shape, 4);
     mx_binary(c, MX_BIN_MUL, x, x, e->lat_shape, e->paint, e->mask_shape, 4);
     mx_add(c, x, x, e->known, e->numel);
-    return 0;
+    return e->then ? e->then(e->then_user, c, step, n_steps, x, st) : 0;
 }
 
 static int check_edit(const mx_sd_request *rq, const mx_sd_edit *e, int n, int h, int w, mx_status *st) {
     if ((!e->vae && !e->taesd) || !e->image || !e->noise || !rq->sched || n < 1 || h < 1 || w < 1)
         return mx_fail(st, MX_EUSAGE, "sd edit: missing VAE, image, noise or scheduler, or bad sizes");
-    if (rq->after_step) return mx_fail(st, MX_EUSAGE, "sd edit: the request already has an after-step hook");
     if (!(e->strength > 0.0f && e->strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "sd edit: strength must be in (0, 1], not %g", (double)e->strength);
     int latent_channels = e->taesd ? mx_taesd_cfg(e->taesd)->latent_channels : mx_vae_cfg(e->vae)->latent_channels;
@@ -77,7 +77,12 @@ int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c
                    float *latents, mx_status *st) {
     if (check_edit(rq, e, n, h, w, st)) return -1;
     int f = e->taesd ? mx_taesd_factor(e->taesd) : mx_vae_factor(e->vae);
-    edit_state es = {rq->sched, NULL, NULL, NULL, NULL, NULL, NULL, {n, 4, h, w}, {n, 1, h, w}, (size_t)n * 4 * h * w};
+    edit_state es = {.sched = rq->sched,
+                     .lat_shape = {n, 4, h, w},
+                     .mask_shape = {n, 1, h, w},
+                     .numel = (size_t)n * 4 * h * w,
+                     .then = rq->after_step,
+                     .then_user = rq->after_step_user};
     size_t plane = (size_t)n * h * w;
     float *host = malloc((2 * es.numel + 2 * plane) * sizeof(float)); /* image latents, noise, paint, keep */
     if (!host) return mx_fail(st, MX_ENOMEM, "sd edit: out of memory");

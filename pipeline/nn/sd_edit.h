@@ -30,8 +30,8 @@ typedef struct mx_sd_edit {
 } mx_sd_edit;
 
 /* Runs the pipeline up to the final latents [n, 4, h, w] (decode with mx_sd_decode_latents).
- * rq->sched must be freshly initialised for n·4·h·w values; rq->after_step must be NULL (the
- * blending uses it); rq->progress sees the latents after the blending of each step. */
+ * rq->sched must be freshly initialised for n·4·h·w values; rq->after_step (may be NULL) sees
+ * the latents after the blending of each step. */
 int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
                    float *latents, mx_status *st);
 

@@ -236,8 +236,7 @@ int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int 
         int64_t t = mx_sched_timestep(rq->sched, i);
         rc = denoise_step(rq, c, &d, &wk, t, st);
         if (rc == 0 && rq->after_step) rc = rq->after_step(rq->after_step_user, c, i, steps, wk.lat, st);
-        if (rc == 0 && rq->progress && (rc = mx_download(c, latents, wk.lat, d.lat, st)) == 0 &&
-            rq->progress(rq->progress_user, i, steps, t, latents, d.lat))
+        if (rc == 0 && rq->progress && rq->progress(rq->progress_user, i, steps, t))
             rc = mx_fail(st, MX_EUSAGE, "sd pipeline: cancelled at step %d of %d", i + 1, steps);
     }
     if (rc == 0) rc = mx_download(c, latents, wk.lat, d.lat, st);

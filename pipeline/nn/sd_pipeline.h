@@ -34,11 +34,11 @@ typedef struct mx_sd_control {
     const float *item_weights; /* [n] one scale per latent (both CFG halves), or NULL: weight for all */
 } mx_sd_control;
 
-/* Called after each step with the step index (0-based), the number of steps, the timestep
- * and the latents [n, 4, h, w]; returning non-zero cancels the loop (mx_sd_denoise then
- * fails with "cancelled"). */
-typedef int (*mx_sd_progress)(void *user, int step, int n_steps, int64_t timestep, const float *latents,
-                              size_t numel);
+/* Called after each step with the step index (0-based), the number of steps and the timestep;
+ * returning non-zero cancels the loop (mx_sd_denoise then fails with "cancelled"). A host-side
+ * count: the loop never waits for the device inside (on CUDA the step may still be running when
+ * it is reported) and downloads the latents once, after the last step. */
+typedef int (*mx_sd_progress)(void *user, int step, int n_steps, int64_t timestep);
 /* Called after each scheduler step (before progress) and may change the latents [n, 4, h, w]
  * (memory of c's backend) in place through ops (the inpaint pipeline puts the known region
  * back here); non-zero is an error already recorded in st. */

@@ -341,9 +341,7 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
 }
 
 /* After each denoising step: the progress line and event; non-zero stops the loop. */
-static int report_step(void *user, int step, int n_steps, int64_t timestep, const float *latents, size_t numel) {
-    (void)latents;
-    (void)numel;
+static int report_step(void *user, int step, int n_steps, int64_t timestep) {
     mx_job *j = user;
     char line[160];
     snprintf(line, sizeof line, "%s: step %d/%d (t=%lld)", j->rep.phase, step + 1, n_steps, (long long)timestep);
