@@ -9,7 +9,11 @@
  *
  * Shared memory: Q tile [QPW*4][D], K tile [32][D+1] (the +1 keeps the lanes' rows on different
  * banks for the even D of SD: 40, 64, 80, 160, 512), V tile [32][D].
- * Tensor cores (mma.sync on fp16 tiles) are the next step; this kernel is the fp32 baseline. */
+ * This fp32 kernel is the fallback; the default path is on tensor cores (below, attention_tc):
+ * q, k, v rounded to fp16 and packed per head, S = Q·Kᵀ and O = P·V as strided-batched cuBLASLt
+ * products over the heads (fp32 accumulation, O written straight into `out`), and between them a
+ * softmax kernel with fp32 statistics (max, sum) that writes P in fp16. Queries go in chunks whose
+ * score rows fit the scratch; when not even 16 fit, the fp32 kernel runs. */
 #include "cuda_common.cuh"
 
 #define ATTN_WARPS 4
@@ -114,6 +118,101 @@ template <int QPW, int DPL> static int attn_launch(mx_cuda_ctx *c, const attn_ar
     return mx_cuda_launched("cuda attention", st);
 }
 
+/* ---- tensor cores: cuBLASLt products around a softmax ---- */
+
+#define TC_MIN_ROWS 16 /* fewer query rows per chunk than this: the fp32 kernel instead */
+
+/* dst[h][r][d] (fp16, contiguous per head) = src[(r0 + r) * stride + h * D + d] for r < rows.
+ * Grid: x over rows·D, y over heads (32-bit indices: the caller keeps rows·D < 2^31). */
+__global__ void pack_heads_kernel(__half *dst, const float *src, int rows, int D, long long stride) {
+    unsigned n = (unsigned)rows * (unsigned)D, h = blockIdx.y;
+    for (unsigned i = blockIdx.x * blockDim.x + threadIdx.x; i < n; i += gridDim.x * blockDim.x) {
+        unsigned r = i / (unsigned)D, d = i - r * (unsigned)D;
+        dst[(size_t)h * n + i] = __float2half_rn(src[(long long)r * stride + (long long)h * D + d]);
+    }
+}
+
+static int pack_heads(mx_cuda_ctx *c, __half *dst, const float *src, int rows, int H, int D, long long stride,
+                      mx_status *st) {
+    dim3 grid(mx_cuda_blocks((size_t)rows * D, 256), (unsigned)H);
+    pack_heads_kernel<<<grid, 256, 0, c->stream>>>(dst, src, rows, D, stride);
+    return mx_cuda_launched("cuda attention: pack", st);
+}
+
+/* One block per score row (head h, query q0 + r of the chunk): P = softmax(scale · S) over the Tk
+ * keys with max and sum in fp32, causal keys (j > query) 0; rows are ld apart (S fp32, P fp16). */
+__global__ void softmax_rows_kernel(__half *P, const float *S, int rows_per_head, int Tk, int ld, int q0, int causal,
+                                    float scale) {
+    __shared__ float shm[32];
+    unsigned row = blockIdx.x;
+    const float *s = S + (size_t)row * ld;
+    __half *p = P + (size_t)row * ld;
+    int q = q0 + (int)(row % (unsigned)rows_per_head), keys = causal && q + 1 < Tk ? q + 1 : Tk;
+    float m = -INFINITY;
+    for (int j = threadIdx.x; j < keys; j += blockDim.x) m = fmaxf(m, s[j]);
+    m = mx_cuda_block_max(m, shm);
+    float sum = 0.0f;
+    for (int j = threadIdx.x; j < keys; j += blockDim.x) sum += expf(scale * (s[j] - m));
+    float inv = 1.0f / mx_cuda_block_sum(sum, shm);
+    for (int j = threadIdx.x; j < Tk; j += blockDim.x) p[j] = __float2half_rn(j < keys ? expf(scale * (s[j] - m)) * inv : 0.0f);
+}
+
+/* Query rows per chunk whose packed queries and scores (fp32 S and fp16 P, H rows of Tkp each)
+ * fit `bytes`. */
+static int tc_chunk_rows(size_t bytes, int H, int D, int Tkp, int Tq) {
+    size_t per_row = (size_t)H * Tkp * (sizeof(float) + sizeof(__half)) + (size_t)H * D * sizeof(__half);
+    size_t rows = bytes / per_row;
+    return rows >= (size_t)Tq ? Tq : (int)rows;
+}
+
+/* Batch item b on tensor cores; 1 when the scratch cannot hold a chunk of TC_MIN_ROWS queries. */
+static int attention_tc_item(mx_cuda_ctx *c, const attn_args &a, int b, mx_status *st) {
+    const int H = a.H, D = a.D, Tkp = (a.Tk + 7) & ~7; /* score rows 16-byte aligned for the fp16 kernels */
+    size_t kv = (size_t)H * a.Tk * D;
+    __half *Kh = (__half *)mx_cuda_scratch(c, kv * sizeof(__half), "cuda attention", st);
+    __half *Vh = Kh ? (__half *)mx_cuda_scratch(c, kv * sizeof(__half), "cuda attention", st) : NULL;
+    if (!Vh) return 1;
+    size_t left = c->scratch_cap - c->scratch_used;
+    int rows = tc_chunk_rows(left > 4096 ? left - 4096 : 0, H, D, Tkp, a.Tq); /* 4096: alignment slack */
+    if (rows < TC_MIN_ROWS && rows < a.Tq) return 1;
+    __half *Qh = (__half *)mx_cuda_scratch(c, (size_t)H * rows * D * sizeof(__half), "cuda attention", st);
+    float *S = Qh ? (float *)mx_cuda_scratch(c, (size_t)H * rows * Tkp * sizeof(float), "cuda attention", st) : NULL;
+    __half *P = S ? (__half *)mx_cuda_scratch(c, (size_t)H * rows * Tkp * sizeof(__half), "cuda attention", st) : NULL;
+    if (!P) return 1;
+    const float *kb = a.k + (long long)b * a.Tk * a.kv_stride, *vb = a.v + (long long)b * a.Tk * a.kv_stride;
+    if (pack_heads(c, Kh, kb, a.Tk, H, D, a.kv_stride, st) || pack_heads(c, Vh, vb, a.Tk, H, D, a.kv_stride, st))
+        return -1;
+    for (int q0 = 0; q0 < a.Tq; q0 += rows) {
+        int n = a.Tq - q0 < rows ? a.Tq - q0 : rows;
+        const float *qb = a.q + ((long long)b * a.Tq + q0) * a.q_stride;
+        float *ob = a.out + ((long long)b * a.Tq + q0) * a.out_stride;
+        /* column-major: Sᵀ[Tk x n] = K_h (D x Tk, transposed) · Q_hᵀ (D x n), per head */
+        if (pack_heads(c, Qh, qb, n, H, D, a.q_stride, st) ||
+            mx_cuda_gemm_batched(c, MX_F16, 1, 0, a.Tk, n, D, Kh, D, (long long)a.Tk * D, Qh, D, (long long)n * D, S,
+                                 Tkp, (long long)n * Tkp, H, "cuda attention: Q·K", st))
+            return -1;
+        softmax_rows_kernel<<<(unsigned)(H * n), 128, 0, c->stream>>>(P, S, n, a.Tk, Tkp, q0, a.causal, a.scale);
+        if (mx_cuda_launched("cuda attention: softmax", st)) return -1;
+        /* Oᵀ[D x n] = V_h (D x Tk) · Pᵀ (Tk x n), into out's rows (ld out_stride, head h at h·D) */
+        if (mx_cuda_gemm_batched(c, MX_F16, 0, 0, D, n, a.Tk, Vh, D, (long long)a.Tk * D, P, Tkp, (long long)n * Tkp, ob,
+                                 a.out_stride, D, H, "cuda attention: P·V", st))
+            return -1;
+    }
+    return 0;
+}
+
+/* Every batch item on tensor cores; 1 (nothing queued) when the scratch is too small. */
+static int attention_tc(mx_cuda_ctx *c, const attn_args &a, int B, mx_status *st) {
+    size_t mark = c->scratch_used;
+    int rc = 0;
+    for (int b = 0; b < B && rc == 0; b++) {
+        rc = attention_tc_item(c, a, b, st);
+        c->scratch_used = mark;
+        if (rc == 1 && b > 0) rc = -1; /* cannot happen: every item needs the same */
+    }
+    return rc;
+}
+
 int mx_cuda_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k, const float *v, int B, int H,
                       int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal, float scale,
                       mx_status *st) {
@@ -125,6 +224,10 @@ int mx_cuda_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k
     if (q_stride < H * D || kv_stride < H * D || out_stride < H * D)
         return mx_fail(st, MX_EINPUT, "cuda attention: a row stride is below heads x head size (%d)", H * D);
     attn_args a = {out, q, k, v, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal, scale};
+    if ((long long)Tk * D < (1LL << 31) && (long long)Tq * D < (1LL << 31)) {
+        int rc = attention_tc(c, a, B, st);
+        if (rc <= 0) return rc;
+    }
     int dpl = (D + 31) / 32;
     if (dpl <= 1) return attn_launch<4, 1>(c, a, B, st);
     if (dpl <= 2) return attn_launch<4, 2>(c, a, B, st);

@@ -79,6 +79,9 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st);
  * (fp16/bf16 weights on tensor cores) since the last call with reset=1. The network parity tests
  * apply the half-precision bound exactly where this is non-zero (tests/nn_golden.h). */
 unsigned long long mx_cuda_half_products(mx_backend *be, int reset);
+/* The same count of one context (never reset): what the op test reads around one op. Attention
+ * counts too: it runs on tensor cores in fp16 (cuda_attention.cu) unless the scratch is too small. */
+unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

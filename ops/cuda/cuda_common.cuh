@@ -29,6 +29,7 @@ struct mx_cuda_ctx {
     size_t staging_bytes;        /* of each half; 0: no staging, plain copies */
     int staging_next;
     unsigned long long half_products; /* GEMMs run on fp16/bf16 inputs (mx_cuda_half_products) */
+    struct mx_cuda_gemm_plans *gemm_plans; /* cuBLASLt plans by shape (cuda_gemm.cu), made on first use */
 };
 
 /* 0 when e is cudaSuccess, else -1 with "what: CUDA error name: text". */
@@ -135,6 +136,14 @@ static inline int mx_cuda_check_dims(const char *what, mx_status *st, int ndim, 
 int mx_cuda_gemm(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
                  long long lda, const void *B, long long ldb, float *D, long long ldd, const char *what,
                  mx_status *st);
+/* The same over `batch` products, item i at A + i·sa, B + i·sb, D + i·sd (elements): one
+ * strided-batched cuBLASLt call. */
+int mx_cuda_gemm_batched(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
+                         long long lda, long long sa, const void *B, long long ldb, long long sb, float *D,
+                         long long ldd, long long sd, int batch, const char *what, mx_status *st);
+/* Destroys the cached GEMM plans (at context destruction). */
+typedef struct mx_cuda_gemm_plans mx_cuda_gemm_plans;
+void mx_cuda_gemm_plans_free(mx_cuda_ctx *c);
 /* dst[i] = src[i] rounded (nearest even) to dt (MX_F32: a copy). */
 int mx_cuda_convert_from_f32(mx_cuda_ctx *c, void *dst, mx_dtype dt, const float *src, size_t n, const char *what,
                              mx_status *st);

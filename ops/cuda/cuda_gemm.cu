@@ -3,6 +3,7 @@
 #include "cuda_common.cuh"
 
 #include <stdint.h>
+#include <string.h>
 
 static cudaDataType_t cuda_type(mx_dtype dt) {
     if (dt == MX_F16) return CUDA_R_16F;
@@ -18,19 +19,44 @@ static uint32_t pointer_alignment(const void *p) {
     return al;
 }
 
-/* Everything one cuBLASLt call needs; destroyed by gemm_plan_free whatever happened. */
+/* One matrix product's shape: what a plan depends on (the pointers only through their alignment). */
+typedef struct gemm_key {
+    int ab, transa, transb, m, n, k, batch;
+    long long lda, ldb, ldd, sa, sb, sd; /* leading dimensions, batch strides (elements) */
+    uint32_t al_a, al_b, al_d;
+} gemm_key;
+
+/* Everything one cuBLASLt call needs: descriptors, layouts and the heuristic's algorithm, made
+ * once per shape and kept in the context's plan table (cublasLt descriptors and heuristics cost
+ * 10-30 us of host time each; a guided SD1.5 step makes ~800 GEMM calls of ~100 shapes). */
 typedef struct gemm_plan {
+    gemm_key key;
     cublasLtMatmulDesc_t op;
     cublasLtMatrixLayout_t a, b, d;
-    cublasLtMatmulPreference_t pref;
+    cublasLtMatmulAlgo_t algo;
+    int ready;
 } gemm_plan;
 
+#define GEMM_PLANS 512 /* open addressing; a full neighbourhood evicts (rebuilt when needed again) */
+#define GEMM_PROBES 8
+
+struct mx_cuda_gemm_plans {
+    gemm_plan slot[GEMM_PLANS];
+};
+
 static void gemm_plan_free(gemm_plan *p) {
-    if (p->pref) cublasLtMatmulPreferenceDestroy(p->pref);
     if (p->d) cublasLtMatrixLayoutDestroy(p->d);
     if (p->b) cublasLtMatrixLayoutDestroy(p->b);
     if (p->a) cublasLtMatrixLayoutDestroy(p->a);
     if (p->op) cublasLtMatmulDescDestroy(p->op);
+    memset(p, 0, sizeof *p);
+}
+
+void mx_cuda_gemm_plans_free(mx_cuda_ctx *c) {
+    if (!c->gemm_plans) return;
+    for (int i = 0; i < GEMM_PLANS; i++) gemm_plan_free(&c->gemm_plans->slot[i]);
+    free(c->gemm_plans);
+    c->gemm_plans = NULL;
 }
 
 static int lt_ok(cublasStatus_t s, const char *what, const char *step, mx_status *st) {
@@ -38,60 +64,139 @@ static int lt_ok(cublasStatus_t s, const char *what, const char *step, mx_status
     return mx_fail(st, MX_EINTERNAL, "%s: cuBLASLt %s failed (status %d)", what, step, (int)s);
 }
 
-static int gemm_plan_make(gemm_plan *p, mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k,
-                          const void *A, long long lda, const void *B, long long ldb, float *D, long long ldd,
-                          const char *what, mx_status *st) {
-    cudaDataType_t t = cuda_type(ab);
-    cublasOperation_t ta = transa ? CUBLAS_OP_T : CUBLAS_OP_N, tb = transb ? CUBLAS_OP_T : CUBLAS_OP_N;
+/* A layout of rows x cols (column-major, leading dimension ld), batched when key->batch > 1. */
+static int layout_make(cublasLtMatrixLayout_t *l, cudaDataType_t t, int rows, int cols, long long ld, int batch,
+                       long long stride, const char *what, const char *name, mx_status *st) {
+    int64_t off = stride;
+    if (lt_ok(cublasLtMatrixLayoutCreate(l, t, (uint64_t)rows, (uint64_t)cols, ld), what, name, st)) return -1;
+    if (batch <= 1) return 0;
+    return lt_ok(cublasLtMatrixLayoutSetAttribute(*l, CUBLASLT_MATRIX_LAYOUT_BATCH_COUNT, &batch, sizeof batch), what,
+                 name, st) ||
+                   lt_ok(cublasLtMatrixLayoutSetAttribute(*l, CUBLASLT_MATRIX_LAYOUT_STRIDED_BATCH_OFFSET, &off,
+                                                          sizeof off),
+                         what, name, st)
+               ? -1
+               : 0;
+}
+
+/* The heuristic's best algorithm for the plan's shape, within the context's workspace. */
+static int plan_algo(gemm_plan *p, mx_cuda_ctx *c, const char *what, mx_status *st) {
+    const gemm_key *k = &p->key;
+    cublasLtMatmulPreference_t pref = NULL;
+    cublasLtMatmulHeuristicResult_t h = {};
     uint64_t ws = c->workspace_bytes;
-    uint32_t al_a = pointer_alignment(A), al_b = pointer_alignment(B), al_d = pointer_alignment(D);
+    int found = 0;
+    int rc = lt_ok(cublasLtMatmulPreferenceCreate(&pref), what, "preference", st) ||
+             lt_ok(cublasLtMatmulPreferenceSetAttribute(pref, CUBLASLT_MATMUL_PREF_MAX_WORKSPACE_BYTES, &ws, sizeof ws),
+                   what, "workspace preference", st) ||
+             lt_ok(cublasLtMatmulPreferenceSetAttribute(pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_A_BYTES, &k->al_a,
+                                                        sizeof k->al_a), what, "alignment A", st) ||
+             lt_ok(cublasLtMatmulPreferenceSetAttribute(pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_B_BYTES, &k->al_b,
+                                                        sizeof k->al_b), what, "alignment B", st) ||
+             lt_ok(cublasLtMatmulPreferenceSetAttribute(pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_C_BYTES, &k->al_d,
+                                                        sizeof k->al_d), what, "alignment C", st) ||
+             lt_ok(cublasLtMatmulPreferenceSetAttribute(pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_D_BYTES, &k->al_d,
+                                                        sizeof k->al_d), what, "alignment D", st) ||
+             lt_ok(cublasLtMatmulAlgoGetHeuristic(c->lt, p->op, p->a, p->b, p->d, p->d, pref, 1, &h, &found), what,
+                   "heuristic", st)
+                 ? -1
+                 : 0;
+    if (pref) cublasLtMatmulPreferenceDestroy(pref);
+    if (rc == 0 && found < 1)
+        rc = mx_fail(st, MX_EINTERNAL, "%s: cuBLASLt has no kernel for %s %dx%dx%d", what,
+                     mx_dtype_name((mx_dtype)k->ab), k->m, k->n, k->k);
+    if (rc == 0) p->algo = h.algo;
+    return rc;
+}
+
+static int plan_make(gemm_plan *p, mx_cuda_ctx *c, const gemm_key *k, const char *what, mx_status *st) {
+    cudaDataType_t t = cuda_type((mx_dtype)k->ab);
+    cublasOperation_t ta = k->transa ? CUBLAS_OP_T : CUBLAS_OP_N, tb = k->transb ? CUBLAS_OP_T : CUBLAS_OP_N;
+    memset(p, 0, sizeof *p);
+    p->key = *k;
     /* CUBLAS_COMPUTE_32F: fp32 accumulation, and for fp32 inputs no TF32 rounding. */
     if (lt_ok(cublasLtMatmulDescCreate(&p->op, CUBLAS_COMPUTE_32F, CUDA_R_32F), what, "desc", st) ||
         lt_ok(cublasLtMatmulDescSetAttribute(p->op, CUBLASLT_MATMUL_DESC_TRANSA, &ta, sizeof ta), what, "transa", st) ||
         lt_ok(cublasLtMatmulDescSetAttribute(p->op, CUBLASLT_MATMUL_DESC_TRANSB, &tb, sizeof tb), what, "transb", st) ||
-        lt_ok(cublasLtMatrixLayoutCreate(&p->a, t, transa ? k : m, transa ? m : k, lda), what, "layout A", st) ||
-        lt_ok(cublasLtMatrixLayoutCreate(&p->b, t, transb ? n : k, transb ? k : n, ldb), what, "layout B", st) ||
-        lt_ok(cublasLtMatrixLayoutCreate(&p->d, CUDA_R_32F, m, n, ldd), what, "layout D", st) ||
-        lt_ok(cublasLtMatmulPreferenceCreate(&p->pref), what, "preference", st) ||
-        lt_ok(cublasLtMatmulPreferenceSetAttribute(p->pref, CUBLASLT_MATMUL_PREF_MAX_WORKSPACE_BYTES, &ws, sizeof ws),
-              what, "workspace preference", st) ||
-        lt_ok(cublasLtMatmulPreferenceSetAttribute(p->pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_A_BYTES, &al_a,
-                                                   sizeof al_a), what, "alignment A", st) ||
-        lt_ok(cublasLtMatmulPreferenceSetAttribute(p->pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_B_BYTES, &al_b,
-                                                   sizeof al_b), what, "alignment B", st) ||
-        lt_ok(cublasLtMatmulPreferenceSetAttribute(p->pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_C_BYTES, &al_d,
-                                                   sizeof al_d), what, "alignment C", st) ||
-        lt_ok(cublasLtMatmulPreferenceSetAttribute(p->pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_D_BYTES, &al_d,
-                                                   sizeof al_d), what, "alignment D", st))
+        layout_make(&p->a, t, k->transa ? k->k : k->m, k->transa ? k->m : k->k, k->lda, k->batch, k->sa, what,
+                    "layout A", st) ||
+        layout_make(&p->b, t, k->transb ? k->n : k->k, k->transb ? k->k : k->n, k->ldb, k->batch, k->sb, what,
+                    "layout B", st) ||
+        layout_make(&p->d, CUDA_R_32F, k->m, k->n, k->ldd, k->batch, k->sd, what, "layout D", st) ||
+        plan_algo(p, c, what, st)) {
+        gemm_plan_free(p);
         return -1;
+    }
+    p->ready = 1;
+    return 0;
+}
+
+static uint32_t key_hash(const gemm_key *k) {
+    const unsigned char *b = (const unsigned char *)k;
+    uint32_t h = 2166136261u; /* FNV-1a over the key's bytes (memset first, so padding is 0) */
+    for (size_t i = 0; i < sizeof *k; i++) h = (h ^ b[i]) * 16777619u;
+    return h;
+}
+
+/* The cached plan of k, made on first use. */
+static gemm_plan *plan_for(mx_cuda_ctx *c, const gemm_key *k, const char *what, mx_status *st) {
+    if (!c->gemm_plans && !(c->gemm_plans = (mx_cuda_gemm_plans *)calloc(1, sizeof *c->gemm_plans))) {
+        mx_fail(st, MX_ENOMEM, "%s: out of memory for GEMM plans", what);
+        return NULL;
+    }
+    uint32_t h = key_hash(k);
+    gemm_plan *slot = c->gemm_plans->slot, *free_slot = NULL;
+    for (int i = 0; i < GEMM_PROBES; i++) {
+        gemm_plan *p = &slot[(h + (uint32_t)i) % GEMM_PLANS];
+        if (p->ready && memcmp(&p->key, k, sizeof *k) == 0) return p;
+        if (!p->ready && !free_slot) free_slot = p;
+    }
+    if (!free_slot) { /* neighbourhood full: evict the home slot */
+        free_slot = &slot[h % GEMM_PLANS];
+        gemm_plan_free(free_slot);
+    }
+    return plan_make(free_slot, c, k, what, st) ? NULL : free_slot;
+}
+
+/* Alignment of every batch item's pointer: of the base and of the stride in bytes. */
+static uint32_t batch_alignment(const void *p, long long stride, size_t elem, int batch) {
+    uint32_t al = pointer_alignment(p);
+    if (batch > 1) {
+        uint32_t as = pointer_alignment((const void *)(uintptr_t)((unsigned long long)stride * elem));
+        if (as < al) al = as;
+    }
+    return al;
+}
+
+int mx_cuda_gemm_batched(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
+                         long long lda, long long sa, const void *B, long long ldb, long long sb, float *D,
+                         long long ldd, long long sd, int batch, const char *what, mx_status *st) {
+    gemm_key key;
+    memset(&key, 0, sizeof key);
+    size_t es = ab == MX_F32 ? 4 : 2;
+    key.ab = (int)ab, key.transa = transa, key.transb = transb, key.m = m, key.n = n, key.k = k;
+    key.batch = batch > 1 ? batch : 1;
+    key.lda = lda, key.ldb = ldb, key.ldd = ldd;
+    if (key.batch > 1) key.sa = sa, key.sb = sb, key.sd = sd;
+    key.al_a = batch_alignment(A, key.sa, es, key.batch);
+    key.al_b = batch_alignment(B, key.sb, es, key.batch);
+    key.al_d = batch_alignment(D, key.sd, sizeof(float), key.batch);
+    gemm_plan *p = plan_for(c, &key, what, st);
+    if (!p) return -1;
+    const float one = 1.0f, zero = 0.0f;
+    /* beta = 0: C is not read, D is written. */
+    if (lt_ok(cublasLtMatmul(c->lt, p->op, &one, A, p->a, B, p->b, &zero, D, p->d, D, p->d, &p->algo, c->workspace,
+                             c->workspace_bytes, c->stream),
+              what, "matmul", st))
+        return -1;
+    if (ab != MX_F32) c->half_products++;
     return 0;
 }
 
 int mx_cuda_gemm(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
                  long long lda, const void *B, long long ldb, float *D, long long ldd, const char *what,
                  mx_status *st) {
-    gemm_plan p = {};
-    cublasLtMatmulHeuristicResult_t h = {};
-    int found = 0, rc = -1;
-    const float one = 1.0f, zero = 0.0f;
-    if (gemm_plan_make(&p, c, ab, transa, transb, m, n, k, A, lda, B, ldb, D, ldd, what, st)) goto done;
-    if (lt_ok(cublasLtMatmulAlgoGetHeuristic(c->lt, p.op, p.a, p.b, p.d, p.d, p.pref, 1, &h, &found), what,
-              "heuristic", st))
-        goto done;
-    if (found < 1) {
-        mx_fail(st, MX_EINTERNAL, "%s: cuBLASLt has no kernel for %s %dx%dx%d", what, mx_dtype_name(ab), m, n, k);
-        goto done;
-    }
-    /* beta = 0: C is not read, D is written. */
-    if (lt_ok(cublasLtMatmul(c->lt, p.op, &one, A, p.a, B, p.b, &zero, D, p.d, D, p.d, &h.algo, c->workspace,
-                             c->workspace_bytes, c->stream),
-              what, "matmul", st))
-        goto done;
-    if (ab != MX_F32) c->half_products++;
-    rc = 0;
-done:
-    gemm_plan_free(&p);
-    return rc;
+    return mx_cuda_gemm_batched(c, ab, transa, transb, m, n, k, A, lda, 0, B, ldb, 0, D, ldd, 0, 1, what, st);
 }
 
 template <typename T> __device__ __forceinline__ T from_f32(float v);

@@ -79,6 +79,7 @@ void mx_cuda_ctx_destroy(mx_cuda_ctx *c) {
     if (!c) return;
     if (c->stream) cudaStreamSynchronize(c->stream);
     staging_destroy(c);
+    mx_cuda_gemm_plans_free(c);
     mx_cuda_free(c->scratch);
     mx_cuda_free(c->workspace);
     if (c->lt) cublasLtDestroy(c->lt);

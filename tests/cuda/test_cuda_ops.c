@@ -190,10 +190,15 @@ static void test_attention(env *e, int B, int H, int Tq, int Tk, int D, int caus
     e->cpu.k->attention(&e->cpu, want, q, k, v, B, H, Tq, Tk, D, qs, kvs, os, causal, scale);
     float *dq = dev_copy(e, q, nq * sizeof *q), *dk = dev_copy(e, k, nkv * sizeof *k);
     float *dv = dev_copy(e, v, nkv * sizeof *v), *dout = dev_zero(e, no * sizeof *dout);
+    unsigned long long half = mx_cuda_ctx_half_products(e->gpu);
     if (dq && dk && dv && dout &&
         !gpu_ok(e, mx_cuda_attention(e->gpu, dout, dq, dk, dv, B, H, Tq, Tk, D, qs, kvs, os, causal, scale, &e->st),
-                name))
-        compare_dev(e, name, dout, want, no, FP32_BOUND); /* the padding columns stay 0 on both sides */
+                name)) {
+        /* tensor cores (fp16 inputs) when the scratch holds the scores, else the fp32 kernel */
+        int tc = mx_cuda_ctx_half_products(e->gpu) > half;
+        snprintf(name + strlen(name), sizeof name - strlen(name), tc ? " [fp16 tensor cores]" : " [fp32]");
+        compare_dev(e, name, dout, want, no, tc ? HALF_BOUND : FP32_BOUND); /* the padding columns stay 0 on both sides */
+    }
     mx_cuda_free(dq);
     mx_cuda_free(dk);
     mx_cuda_free(dv);
@@ -354,13 +359,16 @@ static void test_gemm_ops(env *e) {
     test_conv2d(e, MX_F16, 2, 9, 7, 5, 6, 1, 1, 0);
 }
 
-/* A context with a 32 KiB scratch: linear and conv2d must split their work into several chunks/tiles. */
+/* A context with a 32 KiB scratch: linear and conv2d must split their work into several chunks/tiles,
+ * attention falls back to its fp32 kernel. */
 static void test_small_scratch(env *e) {
     mx_cuda_ctx *big = e->gpu, *small = NULL;
     if (gpu_ok(e, mx_cuda_ctx_create(&small, 0, (size_t)32 << 10, &e->st), "small scratch context")) return;
     e->gpu = small;
     test_linear(e, MX_F16, 300, 40, 130);         /* 78 KB of converted rows: 3 chunks */
     test_conv2d(e, MX_F16, 1, 8, 33, 33, 5, 3, 1, 1); /* 1089 pixels x 144 bytes: 6 tiles */
+    test_attention(e, 2, 3, 37, 45, 40, 0);           /* scores do not fit: the fp32 kernel */
+    test_attention(e, 1, 2, 29, 29, 64, 1);
     e->gpu = big;
     mx_cuda_ctx_destroy(small);
 }
@@ -377,6 +385,7 @@ static void test_attention_ops(env *e) {
     test_attention(e, 1, 2, 33, 77, 80, 0);
     test_attention(e, 2, 1, 19, 50, 160, 0);
     test_attention(e, 1, 1, 21, 35, 512, 0);
+    test_attention(e, 1, 8, 2048, 2048, 40, 1); /* level-2-like: query chunks of ~640 rows, causal offsets */
 }
 
 /* The small layout, vector and embedding ops (pad, fill, axpy, lincomb, clamp, affine, timestep and
