@@ -1,6 +1,7 @@
 /* 2-D convolution (NCHW, zero padding) as GEMM over im2col tiles, on cuBLASLt.
  * For batch item b, with P = Ho*Wo output pixels and Kc = Cin*kh*kw:
  *   y_b[Cout, P] = w[Cout, Kc] · col_b[Kc, P]
+ * computed for all items at once (one strided-batched GEMM per tile of pixels, w shared).
  * Row-major y_b is column-major P x Cout, so D = col (stored P x Kc) · w (stored Kc x Cout), no
  * transposes. col is built one tile of pc output pixels at a time in the scratch buffer (never the
  * whole im2col matrix: the memory complaint of ggml's conv), already rounded to the weight's type.
@@ -18,64 +19,73 @@ template <> __device__ __forceinline__ __nv_bfloat16 conv_store<__nv_bfloat16>(f
     return __float2bfloat16_rn(v);
 }
 
-/* col[kk, pl] (row-major, width pc) = x_b[ci, oy*stride - pad + ky, ox*stride - pad + kx] or 0,
- * for kk = (ci, ky, kx) and output pixel p0 + pl = (oy, ox). */
+/* col_b[kk, pl] (row-major, width pc; item b at col + b·kc·pc) = x_b[ci, oy*stride - pad + ky,
+ * ox*stride - pad + kx] or 0, for kk = (ci, ky, kx) and output pixel p0 + pl = (oy, ox).
+ * Grid: x over the tile's pixels, y over kk (< 65536: Cin·kh·kw of SD is at most 11,520), z over
+ * the batch: every index is 32-bit, (ci, ky, kx) is computed once per block row. */
 template <typename T>
-__global__ void im2col_tile_kernel(T *col, const float *xb, conv_shape s, long long p0, int pc) {
-    long long kc = (long long)s.Cin * s.kh * s.kw;
-    long long n = kc * pc;
-    for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x; i < n;
-         i += (long long)gridDim.x * blockDim.x) {
-        long long kk = i / pc, p = p0 + i % pc;
-        int kx = (int)(kk % s.kw), ky = (int)(kk / s.kw % s.kh), ci = (int)(kk / ((long long)s.kw * s.kh));
-        int oy = (int)(p / s.Wo), ox = (int)(p % s.Wo);
-        int iy = oy * s.stride - s.pad + ky, ix = ox * s.stride - s.pad + kx;
-        float v = 0.0f;
-        if (iy >= 0 && iy < s.H && ix >= 0 && ix < s.W) v = xb[((long long)ci * s.H + iy) * s.W + ix];
-        col[i] = conv_store<T>(v);
+__global__ void im2col_tile_kernel(T *col, const float *x, conv_shape s, unsigned p0, unsigned pc) {
+    unsigned kk = blockIdx.y, b = blockIdx.z, khw = (unsigned)(s.kh * s.kw);
+    unsigned ci = kk / khw, r = kk - ci * khw, ky = r / (unsigned)s.kw, kx = r - ky * (unsigned)s.kw;
+    const float *plane = x + ((size_t)b * s.Cin + ci) * (size_t)s.H * s.W;
+    T *row = col + ((size_t)b * gridDim.y + kk) * pc;
+    for (unsigned pl = blockIdx.x * blockDim.x + threadIdx.x; pl < pc; pl += gridDim.x * blockDim.x) {
+        unsigned p = p0 + pl, oy = p / (unsigned)s.Wo, ox = p - oy * (unsigned)s.Wo;
+        int iy = (int)(oy * s.stride + ky) - s.pad, ix = (int)(ox * s.stride + kx) - s.pad;
+        float v = iy >= 0 && iy < s.H && ix >= 0 && ix < s.W ? plane[(size_t)iy * s.W + ix] : 0.0f;
+        row[pl] = conv_store<T>(v);
     }
 }
 
-static int im2col_tile(mx_cuda_ctx *c, void *col, mx_dtype dt, const float *xb, const conv_shape *s, long long p0,
-                       int pc, mx_status *st) {
-    size_t n = (size_t)s->Cin * s->kh * s->kw * pc;
-    unsigned blocks = mx_cuda_blocks(n, 256);
+/* The tiles of every batch item for output pixels [p0, p0 + pc). */
+static int im2col_tile(mx_cuda_ctx *c, void *col, mx_dtype dt, const float *x, int B, const conv_shape *s,
+                       long long p0, int pc, mx_status *st) {
+    unsigned kc = (unsigned)(s->Cin * s->kh * s->kw), bx = (unsigned)((pc + 255) / 256);
+    dim3 grid(bx < 1024 ? bx : 1024, kc, (unsigned)B);
     if (dt == MX_F16)
-        im2col_tile_kernel<__half><<<blocks, 256, 0, c->stream>>>((__half *)col, xb, *s, p0, pc);
+        im2col_tile_kernel<__half><<<grid, 256, 0, c->stream>>>((__half *)col, x, *s, (unsigned)p0, (unsigned)pc);
     else if (dt == MX_BF16)
-        im2col_tile_kernel<__nv_bfloat16><<<blocks, 256, 0, c->stream>>>((__nv_bfloat16 *)col, xb, *s, p0, pc);
+        im2col_tile_kernel<__nv_bfloat16><<<grid, 256, 0, c->stream>>>((__nv_bfloat16 *)col, x, *s, (unsigned)p0,
+                                                                      (unsigned)pc);
     else
-        im2col_tile_kernel<float><<<blocks, 256, 0, c->stream>>>((float *)col, xb, *s, p0, pc);
+        im2col_tile_kernel<float><<<grid, 256, 0, c->stream>>>((float *)col, x, *s, (unsigned)p0, (unsigned)pc);
     return mx_cuda_launched("cuda conv2d im2col", st);
 }
 
-/* Output pixels per im2col tile: what the free scratch holds, a multiple of 64 (aligned GEMM rows). */
-static long long tile_pixels(const mx_cuda_ctx *c, long long kc, size_t esize, long long P) {
+/* Output pixels per im2col tile of all B items: what the free scratch holds, a multiple of 64
+ * (aligned GEMM rows). */
+static long long tile_pixels(const mx_cuda_ctx *c, long long kc, size_t esize, int B, long long P) {
     size_t free_bytes = c->scratch_cap > c->scratch_used + 256 ? c->scratch_cap - c->scratch_used - 256 : 0;
-    long long pc = (long long)(free_bytes / (kc * esize));
+    long long pc = (long long)(free_bytes / ((size_t)kc * esize * (size_t)B));
     if (pc >= P) return P;
     return pc >= 64 ? pc / 64 * 64 : pc;
 }
 
-static int conv_batch_item(mx_cuda_ctx *c, float *yb, const float *xb, mx_wptr w, int Cout, const conv_shape *s,
-                           mx_status *st) {
+/* The whole batch: per tile of output pixels, one im2col launch over every item and one
+ * strided-batched GEMM whose weight operand has batch stride 0 (the same w for every item, read
+ * once from DRAM: the SD weights of one conv fit the L2). */
+static int conv_batched(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr w, int Cout, const conv_shape *s,
+                        mx_status *st) {
     long long P = (long long)s->Ho * s->Wo, kc = (long long)s->Cin * s->kh * s->kw;
+    long long in_plane = (long long)s->Cin * s->H * s->W, out_plane = (long long)Cout * P;
     size_t esize = mx_dtype_size(w.dtype);
     int direct = s->kh == 1 && s->kw == 1 && s->stride == 1 && s->pad == 0;
     if (direct && w.dtype == MX_F32) /* x_b is already the [Cin, P] matrix */
-        return mx_cuda_gemm(c, w.dtype, 0, 0, (int)P, Cout, (int)kc, xb, P, w.data, kc, yb, P, "cuda conv2d", st);
-    long long pc = tile_pixels(c, kc, esize, P);
+        return mx_cuda_gemm_batched(c, w.dtype, 0, 0, (int)P, Cout, (int)kc, x, P, in_plane, w.data, kc, 0, y, P,
+                                    out_plane, B, "cuda conv2d", st);
+    long long pc = tile_pixels(c, kc, esize, B, P);
     if (pc < 1)
         return mx_fail(st, MX_ENOMEM, "cuda conv2d: scratch too small for one im2col column (%lld bytes)",
-                       (long long)(kc * esize));
+                       (long long)(kc * esize * B));
     size_t mark = c->scratch_used;
-    void *col = mx_cuda_scratch(c, (size_t)(kc * pc) * esize, "cuda conv2d im2col tile", st);
+    void *col = mx_cuda_scratch(c, (size_t)(kc * pc * B) * esize, "cuda conv2d im2col tile", st);
     int rc = col ? 0 : -1;
     for (long long p0 = 0; rc == 0 && p0 < P; p0 += pc) {
         int n = (int)(P - p0 < pc ? P - p0 : pc);
-        rc = im2col_tile(c, col, w.dtype, xb, s, p0, n, st);
-        if (rc == 0) rc = mx_cuda_gemm(c, w.dtype, 0, 0, n, Cout, (int)kc, col, n, w.data, kc, yb + p0, P,
-                                       "cuda conv2d", st);
+        rc = im2col_tile(c, col, w.dtype, x, B, s, p0, n, st);
+        if (rc == 0)
+            rc = mx_cuda_gemm_batched(c, w.dtype, 0, 0, n, Cout, (int)kc, col, n, kc * n, w.data, kc, 0, y + p0, P,
+                                      out_plane, B, "cuda conv2d", st);
     }
     c->scratch_used = mark;
     return rc;
@@ -93,8 +103,9 @@ int mx_cuda_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int
     if (H + 2 * pad < kh || W + 2 * pad < kw) return 0; /* no output (op_list.h), as on the CPU */
     s.Ho = (H + 2 * pad - kh) / stride + 1;
     s.Wo = (W + 2 * pad - kw) / stride + 1;
-    long long in_plane = (long long)Cin * H * W, out_plane = (long long)Cout * s.Ho * s.Wo;
-    for (int b = 0; b < B; b++)
-        if (conv_batch_item(c, y + b * out_plane, x + b * in_plane, w, Cout, &s, st)) return -1;
+    if ((long long)s.Ho * s.Wo > 0x7fffffffLL || (long long)Cin * kh * kw > 65535)
+        return mx_fail(st, MX_EINPUT, "cuda conv2d: %d x %d output pixels or %d x %d x %d taps out of range", s.Ho, s.Wo,
+                       Cin, kh, kw);
+    if (conv_batched(c, y, x, B, w, Cout, &s, st)) return -1;
     return mx_cuda_add_bias(c, y, bias, B, Cout, (long long)s.Ho * s.Wo, "cuda conv2d bias", st);
 }

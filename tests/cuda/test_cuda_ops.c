@@ -367,6 +367,7 @@ static void test_small_scratch(env *e) {
     e->gpu = small;
     test_linear(e, MX_F16, 300, 40, 130);         /* 78 KB of converted rows: 3 chunks */
     test_conv2d(e, MX_F16, 1, 8, 33, 33, 5, 3, 1, 1); /* 1089 pixels x 144 bytes: 6 tiles */
+    test_conv2d(e, MX_F16, 2, 8, 33, 33, 5, 3, 1, 1); /* both items per tile: 18 tiles of 64 pixels */
     test_attention(e, 2, 3, 37, 45, 40, 0);           /* scores do not fit: the fp32 kernel */
     test_attention(e, 1, 2, 29, 29, 64, 1);
     e->gpu = big;
