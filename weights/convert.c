@@ -98,7 +98,7 @@ static int own_buffer(converter *cv, void *p, mx_status *st) {
 /* ---- network type from config.json ---- */
 
 /* The network a config names: diffusers' "_class_name", else a known class among transformers'
- * "architectures" or, for CLIP, its "model_type". NULL when none is known. */
+ * "architectures" or, for the CLIP towers, its "model_type". NULL when none is known. */
 static const mx_net_kind *network_kind(const mx_json *cfg) {
     const char *cls = mx_json_get_str(cfg, "_class_name", NULL);
     if (cls) return mx_net_kind_of_class(cls);
@@ -107,8 +107,7 @@ static const mx_net_kind *network_kind(const mx_json *cfg) {
         const mx_net_kind *k = mx_net_kind_of_class(mx_json_str(mx_json_at(arch, i)));
         if (k) return k;
     }
-    return !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model") ? mx_net_kind_of_class("CLIPTextModel")
-                                                                              : NULL;
+    return mx_net_kind_of_model_type(mx_json_get_str(cfg, "model_type", NULL));
 }
 
 /* ---- locating weight files ---- */
@@ -452,6 +451,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
     if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
                                  : add_network(cv, o->taesd, "taesd", "taesd", st)))
         return -1;
+    if (o->image_encoder && add_network(cv, o->image_encoder, "image_encoder", "image_encoder", st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "clip.h"
+#include "clip_vision.h"
 #include "controlnet.h"
 #include "taesd.h"
 #include "unet.h"
@@ -36,6 +37,10 @@ const mx_net_def mx_nets[] = {
      .verbs = {{"taesd-encode", "image [B,3,H,W] in [-1,1] -> latents (SD latents, scaling factor 1)",
                 mx_taesd_run_encode_io},
                {"taesd-decode", "latents [B,4,h,w] -> image (in about [-1,1], unclamped)", mx_taesd_run_decode_io}}},
+    {.kind = "image_encoder", .load = mx_clip_vision_load_config, .free = mx_clip_vision_destroy,
+     .verbs = {{"clip-vision", "pixel_values [B,3,S,S] (clip-preprocess) -> image_embeds [B,P],\n"
+                               "               last_hidden_state, penultimate_hidden_state [B,1+(S/patch)^2,D]",
+                mx_clip_vision_run_io}}},
 };
 const size_t mx_net_count = sizeof mx_nets / sizeof mx_nets[0];
 
