@@ -90,11 +90,14 @@ static const char *storage_type(mx_st_dtype d) {
     case MX_ST_I64: return "LongStorage";
     case MX_ST_I32: return "IntStorage";
     case MX_ST_F64: return "DoubleStorage";
+    case MX_ST_U8: return "ByteStorage";
     }
     return "?";
 }
 
-static size_t elem_size(mx_st_dtype d) { return d == MX_ST_F16 || d == MX_ST_BF16 ? 2 : d == MX_ST_I64 || d == MX_ST_F64 ? 8 : 4; }
+static size_t elem_size(mx_st_dtype d) {
+    return d == MX_ST_U8 ? 1 : d == MX_ST_F16 || d == MX_ST_BF16 ? 2 : d == MX_ST_I64 || d == MX_ST_F64 ? 8 : 4;
+}
 
 /* _rebuild_tensor_v2(('storage', torch.XStorage, 'key', 'cpu', numel), 0, size, stride, False, OrderedDict()) */
 static void pk_tensor(mx_buf *b, const mx_st_tensor *t, size_t key) {

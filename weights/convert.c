@@ -183,7 +183,7 @@ static int lora_targets(const converter *cv, const char *kind) {
 
 static int add_integer_tensor(converter *cv, const char *name, const mx_safetensors *f, const mx_st_tensor *t,
                               int ndim, const int64_t *shape, mx_status *st) {
-    size_t n = t->nbytes / (t->dtype == MX_ST_I64 ? 8 : 4);
+    size_t es = t->dtype == MX_ST_I64 ? 8 : t->dtype == MX_ST_U8 ? 1 : 4, n = t->nbytes / es;
     int32_t *out = malloc((n ? n : 1) * sizeof *out);
     if (!out) return mx_fail(st, MX_ENOMEM, "%s: tensor '%s': out of memory", f->path, t->name);
     if (own_buffer(cv, out, st)) return -1;
@@ -192,6 +192,8 @@ static int add_integer_tensor(converter *cv, const char *name, const mx_safetens
         int64_t v;
         if (t->dtype == MX_ST_I64) {
             memcpy(&v, p + 8 * i, 8);
+        } else if (t->dtype == MX_ST_U8) {
+            v = p[i];
         } else {
             int32_t v32;
             memcpy(&v32, p + 4 * i, 4);
@@ -233,7 +235,7 @@ static int add_tensor(converter *cv, const char *prefix, const char *kind, const
     const int64_t *shape = t->ndim ? t->shape : &one;
     if (ndim > MX_MAX_DIMS)
         return mx_fail(st, MX_EINPUT, "%s: tensor '%s': %d dimensions (at most %d)", f->path, t->name, ndim, MX_MAX_DIMS);
-    if (t->dtype == MX_ST_I64 || t->dtype == MX_ST_I32) return add_integer_tensor(cv, name, f, t, ndim, shape, st);
+    if (t->dtype == MX_ST_I64 || t->dtype == MX_ST_I32 || t->dtype == MX_ST_U8) return add_integer_tensor(cv, name, f, t, ndim, shape, st);
     mx_dtype out = ndim >= 2 ? cv->o->dtype : MX_F32;
     if (t->dtype == MX_ST_F64 || needs_lora(cv, kind, t->name)) {
         float *w = mx_st_to_f32(f, t, st);
