@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "../ops/ops.h"
+#include "../pipeline/nn/clip_image.h"
 #include "../pipeline/nn/registry.h"
 #include "../pipeline/nn/sd_edit.h"
 #include "../pipeline/nn/unet.h"
@@ -15,6 +16,7 @@
 #include "../weights/weights.h"
 #include "cli.h"
 #include "cli_args.h"
+#include "cli_clip_preprocess.h"
 
 #define MAX_OUTS (MX_UNET_MAX_RES + 4)
 #define SCRATCH_BYTES ((size_t)256 << 20)
@@ -35,6 +37,8 @@ static void usage(FILE *f) {
             "  img2img-pipeline  (W: a model set with a depth ControlNet; --steps N [--guidance G])\n"
             "              prompt_embeds, negative_prompt_embeds, image, control_depth, noise, strength [1],\n"
             "              optional conditioning_scales [1] (default 1)  -> timesteps, latents_after_step, image\n"
+            "  clip-preprocess  (no --weights; --size N, default 224) image_u8_hwc [H,W,C] (C 1..4, 0..255)\n"
+            "              -> pixel_values [1,3,N,N]: CLIP's resize (PIL bicubic), centre crop, mean/std\n"
             "\n"
             "options:\n"
             "  --prefix P      network prefix in the weight file (default: the network's, unet., controlnet., vae.,\n"
@@ -42,6 +46,7 @@ static void usage(FILE *f) {
             "  --threads N     worker threads (default: all CPUs)\n"
             "  --steps N       pipelines: scheduler steps before strength (required)\n"
             "  --guidance G    pipelines: classifier-free guidance scale (default 7.5)\n"
+            "  --size N        clip-preprocess: the image side N (default 224)\n"
             "  --device D      cpu (default), cpu-strict (activations guarded: tests) or cuda (`make cuda` builds)\n"
             "  --precision P   fp32 (default) or bf16: bf16 products with fp32 sums where the CPU has\n"
             "                  AVX512_BF16 (linear, conv, attention); elsewhere fp32 with a warning\n"
@@ -316,13 +321,13 @@ static void io_free(run_io *io) {
 
 static int is_pipeline(const char *net) { return !strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline"); }
 
-/* "unet, controlnet, ..., inpaint-pipeline or img2img-pipeline": the NETs, for the usage error. */
+/* "unet, controlnet, ..., img2img-pipeline or clip-preprocess": the NETs, for the usage error. */
 static void net_names(char *buf, size_t cap) {
     size_t len = 0;
     for (size_t i = 0; i < mx_net_count && len < cap; i++)
         for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name && len < cap; v++)
             len += (size_t)snprintf(buf + len, cap - len, "%s, ", mx_nets[i].verbs[v].name);
-    if (len < cap) snprintf(buf + len, cap - len, "inpaint-pipeline or img2img-pipeline");
+    if (len < cap) snprintf(buf + len, cap - len, "inpaint-pipeline, img2img-pipeline or clip-preprocess");
 }
 
 static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
@@ -343,9 +348,24 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
     return mx_st_write(io->out_path, io->outs, (size_t)io->nout, st);
 }
 
+/* run-net clip-preprocess: no weights, no device. */
+static int clip_preprocess(const char *in_path, const char *out_path, int size) {
+    mx_status st;
+    mx_status_clear(&st);
+    if (!in_path || !out_path) {
+        fprintf(stderr, "matex run-net: clip-preprocess needs --inputs and --out\n");
+        return 2;
+    }
+    if (mx_cli_clip_preprocess(in_path, out_path, size, &st)) {
+        fprintf(stderr, "matex run-net: %s\n", st.msg);
+        return st.code == MX_EUSAGE ? 2 : 1;
+    }
+    return 0;
+}
+
 int cmd_run_net(int argc, char **argv) {
     const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu", *precision = "fp32";
-    int threads = 0;
+    int threads = 0, size = 224;
     pipe_opts po = {0, 0, 7.5f};
     mx_precision prec = MX_PREC_FP32;
     const mx_net_def *def = NULL;
@@ -361,6 +381,7 @@ int cmd_run_net(int argc, char **argv) {
         {"--guidance", NULL, MX_OPT_FLOAT, &po.guidance, 0, 0},
         {"--device", NULL, MX_OPT_STR, &device, 0, 0},
         {"--precision", NULL, MX_OPT_STR, &precision, 0, 0},
+        {"--size", NULL, MX_OPT_INT, &size, 1, MX_CLIP_IMAGE_MAX_SIZE},
     };
     int parsed = mx_args_parse("run-net", argc, argv, opts, sizeof opts / sizeof opts[0], &net, usage);
     if (parsed) return parsed == 1 ? 0 : 2;
@@ -368,6 +389,7 @@ int cmd_run_net(int argc, char **argv) {
         fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", precision);
         return 2;
     }
+    if (net && !strcmp(net, "clip-preprocess")) return clip_preprocess(io.in_path, io.out_path, size);
     int known = net && (mx_net_verb_named(net, &def) || is_pipeline(net));
     if (!net || !weights || !io.in_path || !io.out_path || !known) {
         char names[256];
