@@ -13,6 +13,11 @@ check "info names the network" sh -c "\"$M\" info '$T/cv.mxw' | grep -q '^image_
 check "the config is stored" sh -c "\"$M\" info '$T/cv.mxw' | grep -q 'image_encoder.config'"
 check "convert of the folder alone" [ "$(rc_of "$M" convert "$CV" -o "$T/cv2.mxw" --quiet)" = 0 ]
 check "... holds the same network" sh -c "\"$M\" info '$T/cv2.mxw' | grep -q '^image_encoder  *40 '"
+mkdir -p "$T/ie"
+cp "$CV/config.json" "$CV/model.safetensors" "$T/ie/"
+cp "$G/clip_image_preprocess_tiny/processor_config.json" "$T/ie/preprocessor_config.json"
+check "convert --image-encoder with a preprocessor_config.json" [ "$(rc_of "$M" convert --image-encoder "$T/ie" -o "$T/ie.mxw" --quiet)" = 0 ]
+check "... stores it as image_encoder.processor" sh -c "\"$M\" info '$T/ie.mxw' | grep -q 'image_encoder.processor'"
 check "--image-encoder of a UNet folder exits 1" [ "$(rc_of "$M" convert --image-encoder "$G/unet_tiny" -o "$T/bad.mxw")" = 1 ]
 check "... naming what it holds" grep -q "holds a unet, expected a image_encoder" "$T/err"
 check "... and writes nothing" [ ! -e "$T/bad.mxw" ]

@@ -1,13 +1,14 @@
 /* CLIP vision tower (CLIPVisionModelWithProjection) against transformers 4.39:
  * golden/clip_vision_tiny with fp32 weights, image_embeds, last_hidden_state and
  * penultimate_hidden_state ≤ 1e-4 rel L2 (scalar and best kernels, and the tower converted into a
- * weight file and loaded through the registry); the fp16 weights file against the same fp32
+ * weight file and loaded through the registry, also from a pytorch_model.bin); the fp16 weights file against the same fp32
  * outputs at the half-precision bound 1e-2 (the case has no outputs_fp16w); bf16 arithmetic at
  * 1e-2 where the CPU has it; the ViT-H/14 parameter list of the published image encoder; config
  * errors. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../pipeline/nn/clip_vision.h"
@@ -15,6 +16,7 @@
 #include "../weights/convert.h"
 #include "../weights/weights.h"
 #include "nn_golden.h"
+#include "util_ckpt.h"
 
 #define NET "clip_vision_tiny"
 
@@ -150,6 +152,51 @@ static void test_converted(const mx_ctx *c) {
     remove(path);
 }
 
+/* A folder holding pytorch_model.bin (the PyTorch zip of the golden weights, as torch.save
+ * writes it) instead of model.safetensors converts through the safe checkpoint reader to the
+ * same network. */
+static void test_converted_bin(const mx_ctx *c) {
+    char src[1024], dir[256], path[512], cfg_src[1100];
+    golden_path(src, sizeof src, NET, "model.safetensors");
+    golden_path(cfg_src, sizeof cfg_src, NET, "config.json");
+    snprintf(dir, sizeof dir, "/tmp/matex_test_cv_bin_%d", (int)getpid());
+    mx_safetensors sf;
+    mx_status st = {0};
+    size_t len;
+    char *cfg = golden_text(NET, "config.json", &len);
+    CHECK(cfg && mkdir(dir, 0700) == 0 && mx_st_open(&sf, src, &st) == 0);
+    snprintf(path, sizeof path, "%s/config.json", dir);
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(cfg, 1, len, f) == len);
+    if (f) fclose(f);
+    snprintf(path, sizeof path, "%s/pytorch_model.bin", dir);
+    CHECK(mx_test_write_torchzip(path, sf.tensors, sf.count, 0) == 0);
+    mx_st_close(&sf);
+    char out[300];
+    snprintf(out, sizeof out, "%s.mxw", dir);
+    mx_convert_opts opts = {.image_encoder = dir, .output = out, .dtype = MX_F32};
+    mx_convert_result res;
+    mx_weightfile *wf = NULL;
+    mx_binder b = {0};
+    mx_clip_vision_config vc;
+    mx_clip_vision m = {0};
+    int ok = mx_convert(&opts, &res, &st) == 0 && res.tensors == 40 && mx_wf_open(&wf, out, &st) == 0 &&
+             mx_clip_vision_config_parse(&vc, cfg, len, "config.json", &st) == 0 &&
+             mx_binder_wf(&b, wf, "image_encoder.", &st) == 0 && mx_clip_vision_load(&m, &vc, &b, &st) == 0;
+    if (!ok) fprintf(stderr, "pytorch_model.bin: %s\n", st.msg);
+    CHECK(ok);
+    if (ok) run_and_compare(&m, c, "from pytorch_model.bin", 1e-4);
+    mx_clip_vision_free(&m);
+    mx_binder_free(&b);
+    if (wf) mx_wf_close(wf);
+    remove(out);
+    remove(path);
+    snprintf(path, sizeof path, "%s/config.json", dir);
+    remove(path);
+    rmdir(dir);
+    free(cfg);
+}
+
 /* The published SD1.5 IP-Adapter's encoder (h94/IP-Adapter models/image_encoder, ViT-H/14): its
  * parameter list, enumerated from the config alone. 632,076,800 parameters = its 2.53 GB fp32
  * model.safetensors. */
@@ -202,6 +249,7 @@ int main(void) {
     test_tiny("model.safetensors", &best, "fp32 best", golden_bound(&best, GOLDEN_BF16));
     test_tiny("model.fp16.safetensors", &best, "fp16w best", GOLDEN_HALF);
     test_converted(&best);
+    test_converted_bin(&best);
     test_vit_h_parameters();
     test_config();
     mx_ctx_destroy(&scalar);

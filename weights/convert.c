@@ -148,7 +148,7 @@ static int read_shard_index(const char *dir, const char *index_path, weight_file
 }
 
 /* The weights of a network folder: single files first, then sharded indexes; the fp16
- * variants first when asked for, and as a fallback when only they exist. */
+ * variants first when asked for, and as a fallback when only they exist; a .bin last. */
 static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs, mx_status *st) {
     static const char *bases[2] = {"diffusion_pytorch_model", "model"};
     wfs->n = 0;
@@ -168,9 +168,19 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
             if (is_file(path)) return read_shard_index(dir, path, wfs, st);
         }
     }
+    /* the PyTorch pickles of older folders (transformers' pytorch_model.bin), through the safe
+     * checkpoint reader (torchzip.h, pickle.h: tensors only, no code run) */
+    static const char *bins[2] = {"diffusion_pytorch_model.bin", "pytorch_model.bin"};
+    for (int b = 0; b < 2; b++) {
+        if (mx_path_join(wfs->paths[0], PATH_MAX, dir, bins[b], st)) return -1;
+        if (is_file(wfs->paths[0])) {
+            wfs->n = 1;
+            return 0;
+        }
+    }
     return mx_fail(st, MX_EINPUT,
                    "%s: no weights found: expected diffusion_pytorch_model.safetensors or model.safetensors "
-                   "(or their .fp16 variants, or a sharded .safetensors.index.json); .bin files are not read",
+                   "(or their .fp16 variants, a sharded .safetensors.index.json, or a single .bin)",
                    dir);
 }
 
@@ -252,7 +262,8 @@ static int add_weight_file(converter *cv, const char *prefix, const char *kind, 
         return mx_fail(st, MX_EINPUT, "%s: too many weight files", path);
     mx_safetensors *f = calloc(1, sizeof *f);
     if (!f) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
-    if (mx_st_open(f, path, st)) {
+    const char *container;
+    if (mx_sf_open_tensors(f, path, &container, NULL, st)) { /* safetensors or a PyTorch zip */
         free(f);
         return -1;
     }
@@ -427,6 +438,16 @@ static int valid_controlnet_name(const char *s) {
     return 1;
 }
 
+/* The IP-Adapter's CLIP vision tower, and its preprocessor_config.json (image size, mean, std)
+ * as the metadata "image_encoder.processor" when the folder has one. */
+static int add_image_encoder(converter *cv, const char *dir, mx_status *st) {
+    char path[PATH_MAX];
+    if (add_network(cv, dir, "image_encoder", "image_encoder", st) ||
+        mx_path_join(path, sizeof path, dir, "preprocessor_config.json", st))
+        return -1;
+    return is_file(path) ? add_text_meta(cv, dir, "preprocessor_config.json", "image_encoder.processor", 1, st) : 0;
+}
+
 static int convert_inputs(converter *cv, mx_status *st) {
     const mx_convert_opts *o = cv->o;
     if (o->input && mx_sf_is_file(o->input)) {
@@ -453,7 +474,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
     if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
                                  : add_network(cv, o->taesd, "taesd", "taesd", st)))
         return -1;
-    if (o->image_encoder && add_network(cv, o->image_encoder, "image_encoder", "image_encoder", st)) return -1;
+    if (o->image_encoder && add_image_encoder(cv, o->image_encoder, st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }

@@ -25,7 +25,8 @@ typedef struct mx_convert_opts {
         const char *dir; /* a diffusers folder or a single file (single_file.h) */
     } controlnets[MX_CONVERT_MAX_EXTRA];
     const char *taesd;  /* AutoencoderTiny folder -> taesd.*, or NULL */
-    const char *image_encoder; /* CLIPVisionModelWithProjection folder -> image_encoder.*, or NULL */
+    const char *image_encoder; /* CLIPVisionModelWithProjection folder -> image_encoder.* (and its
+                                  preprocessor_config.json -> metadata image_encoder.processor), or NULL */
     int ema;            /* single-file checkpoints: take the EMA copy of the UNet */
     const char *vae;    /* a VAE replacing the model's: a single file (single_file.h) or an AutoencoderKL folder */
     const char *tokenizer; /* folder with vocab.json + merges.txt for single files (no tokenizer/), or NULL */
