@@ -145,7 +145,7 @@ static void test_converted(const mx_ctx *c) {
          mx_net_load_config(&def, &net, cfg_text, strlen(cfg_text), "image_encoder.config", &b, &st) == 0;
     if (!ok) fprintf(stderr, "converted %s: %s\n", NET, st.msg);
     CHECK(ok && def == mx_net_named("image_encoder") && def->free == mx_clip_vision_destroy);
-    if (ok) run_and_compare(net, c, "converted", 1e-4);
+    if (ok) run_and_compare(net, c, "converted", golden_bound(c, GOLDEN_BF16));
     if (def) def->free(net);
     mx_binder_free(&b);
     if (wf) mx_wf_close(wf);
@@ -185,7 +185,7 @@ static void test_converted_bin(const mx_ctx *c) {
              mx_binder_wf(&b, wf, "image_encoder.", &st) == 0 && mx_clip_vision_load(&m, &vc, &b, &st) == 0;
     if (!ok) fprintf(stderr, "pytorch_model.bin: %s\n", st.msg);
     CHECK(ok);
-    if (ok) run_and_compare(&m, c, "from pytorch_model.bin", 1e-4);
+    if (ok) run_and_compare(&m, c, "from pytorch_model.bin", golden_bound(c, GOLDEN_BF16));
     mx_clip_vision_free(&m);
     mx_binder_free(&b);
     if (wf) mx_wf_close(wf);
