@@ -10,6 +10,8 @@ const mx_net_kind mx_net_kinds[] = {
     {.name = "vae", .class_name = "AutoencoderKL", .in_model_set = 1, .lora_prefix = NULL},
     {.name = "text_encoder", .class_name = "CLIPTextModel", .in_model_set = 1, .lora_prefix = "lora_te_"},
     {.name = "taesd", .class_name = "AutoencoderTiny", .in_model_set = 0, .lora_prefix = NULL},
+    /* matex's own config of the published adapter file (weights/ip_adapter_file.h) */
+    {.name = "ip_adapter", .class_name = "IPAdapter", .in_model_set = 0, .lora_prefix = NULL},
 };
 const size_t mx_net_kind_count = sizeof mx_net_kinds / sizeof mx_net_kinds[0];
 
