@@ -97,7 +97,7 @@ static mx_unet_input unet_call(const mx_sd_request *rq, const sd_dims *d, const 
     mx_unet_input in = {.B = d->B, .H = d->h, .W = d->w, .T = d->T};
     if (d->ip_sets)
         in = (mx_unet_input){.B = d->B, .H = d->h, .W = d->w, .T = d->T, .ip = rq->image->adapter,
-                             .ip_tokens = wk->ip ? wk->ip + (size_t)(d->ip_sets > 1 ? i : 0) * d->B * d->ip : NULL,
+                             .ip_tokens = wk ? wk->ip + (size_t)(d->ip_sets > 1 ? i : 0) * d->B * d->ip : NULL,
                              .ip_n = rq->image->n_tokens, .ip_scale = rq->image->scale};
     return in;
 }
