@@ -116,6 +116,10 @@ static int adapter_tensors(const mx_safetensors *f, mx_sf_net *n, mx_status *st)
     return 0;
 }
 
+void mx_ip_adapter_published_name(const char *name, char *buf, size_t cap) {
+    snprintf(buf, cap, "%s%s", *name >= '0' && *name <= '9' ? LAYER_PREFIX : "", name);
+}
+
 int mx_ip_adapter_file_open(mx_single_file *sf, const char *path, mx_status *st) {
     memset(sf, 0, sizeof *sf);
     adapter_parts p;

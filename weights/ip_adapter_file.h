@@ -11,6 +11,11 @@
 
 #include "single_file.h"
 
+/* The published name of the network's parameter `name` ("1.to_k_ip.weight" ->
+ * "ip_adapter.1.to_k_ip.weight"; image_proj.* as it is): what gen-weights writes for an IPAdapter
+ * config, so that its file converts like the published one. */
+void mx_ip_adapter_published_name(const char *name, char *buf, size_t cap);
+
 /* Opens the file into sf: one network "ip_adapter". */
 int mx_ip_adapter_file_open(mx_single_file *sf, const char *path, mx_status *st);
 
