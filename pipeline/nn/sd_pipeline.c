@@ -95,10 +95,12 @@ static int check_request(const mx_sd_request *rq, const mx_ctx *c, int n, int h,
 /* The UNet call of latent i (its image tokens in wk->ip, when it has some). */
 static mx_unet_input unet_call(const mx_sd_request *rq, const sd_dims *d, const sd_work *wk, int i) {
     mx_unet_input in = {.B = d->B, .H = d->h, .W = d->w, .T = d->T};
-    if (d->ip_sets)
-        in = (mx_unet_input){.B = d->B, .H = d->h, .W = d->w, .T = d->T, .ip = rq->image->adapter,
-                             .ip_tokens = wk ? wk->ip + (size_t)(d->ip_sets > 1 ? i : 0) * d->B * d->ip : NULL,
-                             .ip_n = rq->image->n_tokens, .ip_scale = rq->image->scale};
+    if (d->ip_sets) {
+        in.ip = rq->image->adapter;
+        in.ip_n = rq->image->n_tokens;
+        in.ip_scale = rq->image->scale;
+        in.ip_tokens = wk ? wk->ip + (size_t)(d->ip_sets > 1 ? i : 0) * d->B * d->ip : NULL;
+    }
     return in;
 }
 
