@@ -274,6 +274,9 @@ static int pipe_read_image_guidance(run_io *io, const mx_models *m, pipe_inputs 
                        io->in_path, mx_models_path(m));
     int64_t es[3] = {p->B, -1, m->ip_adapter->embed_dim}, one[1] = {1};
     if (!(p->embeds = input(io, "image_embeds", 3, es, 1, st))) return -1;
+    if (es[1] > MX_IP_MAX_TOKENS / m->ip_adapter->num_tokens)
+        return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->in_path,
+                       (long long)es[1], m->ip_adapter->num_tokens, MX_IP_MAX_TOKENS);
     p->n_images = (int)es[1];
     return mx_st_find(&io->in, "ip_adapter_scale") && !(p->ip_scale = input(io, "ip_adapter_scale", 1, one, 1, st)) ? -1
                                                                                                                    : 0;

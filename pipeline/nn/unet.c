@@ -294,6 +294,9 @@ static int read_image_guidance(mx_net_io *io, const mx_unet *u, mx_unet_input *i
     if (!(*ad = io->network(io, "ip_adapter", st)) || mx_unet_check_ip(u, *ad, st)) return -1;
     int64_t es[3] = {in->B, -1, (*ad)->embed_dim};
     if (!(*embeds = mx_net_io_input(io, "image_embeds", 3, es, st))) return -1;
+    if (es[1] > MX_IP_MAX_TOKENS / (*ad)->num_tokens)
+        return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->source,
+                       (long long)es[1], (*ad)->num_tokens, MX_IP_MAX_TOKENS);
     in->ip = *ad;
     in->ip_n = (int)es[1] * (*ad)->num_tokens;
     in->ip_scale = 1.0f;
