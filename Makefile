@@ -222,6 +222,9 @@ TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS
            MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
            MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
 TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+# Everything the suite needs, built without running it (CI builds it before two suites run side by side).
+.PHONY: test-deps
+test-deps: $(TEST_DEPS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
