@@ -22,7 +22,8 @@ static void convert_usage(FILE *f) {
             "scheduler/; each one present is converted) or a single network folder whose config.json\n"
             "names a UNet2DConditionModel, ControlNetModel, AutoencoderKL, AutoencoderTiny, CLIPTextModel or\n"
             "CLIPVisionModelWithProjection.\n"
-            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, taesd.*, text_encoder.*, image_encoder.*\n"
+            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, taesd.*, text_encoder.*, image_encoder.*,\n"
+            "ip_adapter.*\n"
             "\n"
             "options:\n"
             "  -o, --output FILE        weight file to write (written to a temporary name, then renamed)\n"
@@ -42,6 +43,8 @@ static void convert_usage(FILE *f) {
             "                           original taesd_encoder + taesd_decoder files (one of them, or their folder)\n"
             "  --image-encoder DIR      add the IP-Adapter's CLIP vision tower as image_encoder.*: a transformers\n"
             "                           CLIPVisionModelWithProjection folder (config.json + model.safetensors)\n"
+            "  --ip-adapter FILE        add the SD1.5 IP-Adapter (image guidance) as ip_adapter.*: h94/IP-Adapter's\n"
+            "                           ip-adapter_sd15.safetensors or .bin, checked against the UNet converted with it\n"
             "  --json                   print a JSON summary on stdout\n"
             "  --quiet                  no progress lines\n"
             "  -h, --help               this help\n"
@@ -79,7 +82,8 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         int takes = !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--dtype") ||
                     !strcmp(arg, "--variant") || !strcmp(arg, "--controlnet") || !strcmp(arg, "--lora") ||
                     !strcmp(arg, "--lora-scale") || !strcmp(arg, "--lcm-lora") || !strcmp(arg, "--taesd") ||
-                    !strcmp(arg, "--tokenizer") || !strcmp(arg, "--vae") || !strcmp(arg, "--image-encoder");
+                    !strcmp(arg, "--tokenizer") || !strcmp(arg, "--vae") || !strcmp(arg, "--image-encoder") ||
+                    !strcmp(arg, "--ip-adapter");
         if (takes && !val) return usage_error("missing value after", arg);
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
             convert_usage(stdout);
@@ -110,6 +114,8 @@ static int parse_args(int argc, char **argv, convert_args *a) {
             a->o.image_encoder = val;
         } else if (!strcmp(arg, "--vae")) {
             a->o.vae = val;
+        } else if (!strcmp(arg, "--ip-adapter")) {
+            a->o.ip_adapter = val;
         } else if (!strcmp(arg, "--tokenizer")) {
             a->o.tokenizer = val;
         } else if (!strcmp(arg, "--ema")) {

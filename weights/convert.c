@@ -14,6 +14,7 @@
 #include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
+#include "ip_adapter_file.h"
 #include "lora.h"
 #include "networks.h"
 #include "safetensors.h"
@@ -38,6 +39,7 @@ typedef struct {
     mx_single_file *singles[MX_CONVERT_MAX_EXTRA + 1]; /* single-file inputs, mapped until the end */
     size_t n_singles;
     text_buf sources; /* provenance: JSON array items */
+    char *unet_config; /* of the UNet converted, for the IP-Adapter's check */
     mx_convert_result res;
 } converter;
 
@@ -305,6 +307,8 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
         snprintf(key, sizeof key, "%s.config", resolved_prefix);
         rc = mx_wf_writer_meta(cv->w, key, cfg_text, st);
     }
+    if (!rc && !strcmp(kind, "unet") && !cv->unet_config && !(cv->unet_config = strdup(cfg_text)))
+        rc = mx_fail(st, MX_ENOMEM, "convert: out of memory");
     size_t before = cv->res.tensors;
     if (!rc) {
         mx_buf_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
@@ -391,6 +395,11 @@ static int add_single_net(converter *cv, const mx_single_file *sf, const mx_sf_n
     char key[128];
     snprintf(key, sizeof key, "%s.config", prefix);
     if (mx_wf_writer_meta(cv->w, key, n->config, st)) return -1;
+    if (!strcmp(n->kind, "unet") && !cv->unet_config && !(cv->unet_config = strdup(n->config)))
+        return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    if (!strcmp(n->kind, "ip_adapter") && cv->unet_config &&
+        mx_ip_adapter_file_check_unet(n->config, cv->unet_config, sf->src.path, st))
+        return -1;
     for (size_t i = 0; i < n->count; i++) {
         if (add_tensor(cv, prefix, n->kind, &sf->src, &n->tensors[i], st)) return -1;
         cv->res.tensors++;
@@ -412,7 +421,9 @@ static int add_single_file(converter *cv, const char *path, int only, const char
     mx_single_file *sf = calloc(1, sizeof *sf);
     if (!sf) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
     int flags = (cv->o->ema && !only ? MX_SF_EMA : 0) | only;
-    if (only == MX_SF_TAESD ? mx_taesd_files_open(sf, path, st) : mx_sf_open(sf, path, flags, st)) {
+    if (only == MX_SF_TAESD        ? mx_taesd_files_open(sf, path, st)
+        : only == MX_SF_IP_ADAPTER ? mx_ip_adapter_file_open(sf, path, st)
+                                   : mx_sf_open(sf, path, flags, st)) {
         free(sf);
         return -1;
     }
@@ -475,6 +486,7 @@ static int convert_inputs(converter *cv, mx_status *st) {
                                  : add_network(cv, o->taesd, "taesd", "taesd", st)))
         return -1;
     if (o->image_encoder && add_image_encoder(cv, o->image_encoder, st)) return -1;
+    if (o->ip_adapter && add_single_file(cv, o->ip_adapter, MX_SF_IP_ADAPTER, "ip_adapter", st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -539,6 +551,7 @@ static void converter_free(converter *cv) {
         free(cv->singles[k]);
     }
     free(cv->sources.p);
+    free(cv->unet_config);
 }
 
 int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) {

@@ -13,6 +13,8 @@ const mx_net_kind mx_net_kinds[] = {
     {.name = "taesd", .class_name = "AutoencoderTiny", .in_model_set = 0, .lora_prefix = NULL},
     {.name = "image_encoder", .class_name = "CLIPVisionModelWithProjection", .in_model_set = 0, .lora_prefix = NULL,
      .model_type = "clip_vision_model"},
+    /* matex's own config of the published adapter file (weights/ip_adapter_file.h) */
+    {.name = "ip_adapter", .class_name = "IPAdapter", .in_model_set = 0, .lora_prefix = NULL},
 };
 const size_t mx_net_kind_count = sizeof mx_net_kinds / sizeof mx_net_kinds[0];
 
