@@ -273,7 +273,7 @@ asan:
 # demo weights made by the native matex. ----
 ARM64_CC    ?= aarch64-linux-gnu-gcc
 ARM64_BUILD ?= build-arm64
-ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip \
+ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip test_nn_clip_vision \
                test_nn_transformer test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline \
                test_texture_threads_core
 # also run on the CPU model without FEAT_BF16 (tests/arm64.sh)
@@ -345,7 +345,7 @@ LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
 CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
 CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
-                test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast
+                test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast test_nn_clip_vision
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu

@@ -54,7 +54,8 @@ static void test_edit_keep(const tiny_nets *n, const mx_ctx *c, const mx_sched_c
     CHECK(ok);
     if (ok) {
         mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
-        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, NULL, NULL, NULL, NULL};
+        mx_sd_request rq = {.unet = n->unet, .controls = &control, .n_controls = 1, .cond_text = cond, .T = 77,
+                            .guidance = 1.0f, .sched = &s};
         step_io io = {noises + nlat, NULL, nlat, 0};
         s.noise_fn = give_noise;
         s.noise_user = &io;
@@ -98,7 +99,8 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
         step_io io = {noises, after, nlat, 0};
         /* no negative embeddings: guidance 1 must not need them */
-        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, NULL, NULL, on_step, &io};
+        mx_sd_request rq = {.unet = n->unet, .controls = &control, .n_controls = 1, .cond_text = cond, .T = 77,
+                            .guidance = 1.0f, .sched = &s, .after_step = on_step, .after_step_user = &io};
         s.noise_fn = give_noise;
         s.noise_user = &io;
         CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) == 0);
