@@ -21,6 +21,8 @@ typedef enum {
     MX_OPTION_FLOAT2, /* float[2], "A" or "A,B" (B = A when absent), each in lo..hi */
     MX_OPTION_FLOAT3, /* float[3], "A,B,C", each in lo..hi */
     MX_OPTION_TEXT,   /* const char * (borrowed) */
+    MX_OPTION_PATHS,  /* const char *[MATEX_MAX_STYLE_IMAGES] (borrowed): each value goes into the first
+                         free (NULL) slot, so the option may be given several times */
     MX_OPTION_CHOICE, /* int: the index of the value among `choices` ("depth|geometric") */
     MX_OPTION_CLI     /* handled by the command line itself (--weights, --json, ...): no field */
 } mx_option_type;
