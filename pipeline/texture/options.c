@@ -299,6 +299,10 @@ int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, 
     return 0;
 }
 
+void mx_option_clear_paths(const mx_option_spec *s, matex_options *o) {
+    if (s->type == MX_OPTION_PATHS) memset(field(o, s->field), 0, sizeof(paths));
+}
+
 void matex_options_default(matex_options *o) {
     memset(o, 0, sizeof *o);
     for (size_t i = 0; i < sizeof TABLE / sizeof TABLE[0]; i++)
