@@ -152,6 +152,38 @@ static void test_bad_input(matex_models *m) {
     CHECK(matex_texture(m, &o, NULL, &err) != 0 && err.code == MATEX_EUSAGE); /* neither folder nor result */
 }
 
+/* Style images refused before any work: nothing is written. */
+static void test_style_refused(matex_models *m, const char *tmp) {
+    matex_options o;
+    matex_error err;
+    char out[1200], text[1200];
+    small_options(&o);
+    o.mesh = &CUBE;
+    snprintf(out, sizeof out, "%s/style_out", tmp);
+    o.out_dir = out;
+    snprintf(text, sizeof text, "%s/style.png", tmp);
+    FILE *f = fopen(text, "w");
+    if (f) {
+        fputs("not a picture\n", f);
+        fclose(f);
+    }
+    o.style_images[0] = text;
+    CHECK(matex_texture(m, &o, NULL, &err) != 0 && err.code == MATEX_EINPUT && strstr(err.message, text) &&
+          strstr(err.message, "not an image"));
+    CHECK(!exists(out, NULL));
+    o.style_images[0] = NULL;
+    float px[3] = {1, 0, 0};
+    matex_image red = {1, 1, 3, px};
+    o.style_pixels = &red;
+    o.n_style_pixels = 1;
+    o.style_scale = 3.0f;
+    CHECK(matex_texture(m, &o, NULL, &err) != 0 && err.code == MATEX_EUSAGE && strstr(err.message, "--style-scale"));
+    o.style_scale = 0.6f;
+    red.channels = 2;
+    CHECK(matex_enhance(m, &o, NULL, &err) != 0 && err.code == MATEX_EUSAGE && strstr(err.message, "style image 0 in memory"));
+    CHECK(!exists(out, NULL));
+}
+
 /* Enhance of the cube textured in memory, its texture passed in memory. */
 static void test_enhance_in_memory(matex_models *m) {
     matex_options o;
@@ -240,6 +272,7 @@ int main(void) {
         test_memory_and_file(m, tmp);
         test_cancel(m, tmp);
         test_bad_input(m);
+        test_style_refused(m, tmp);
         test_enhance_in_memory(m);
         test_transfer(m, tmp);
         matex_models_close(m);
