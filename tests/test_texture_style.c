@@ -48,7 +48,7 @@ static void test_option(void) {
     const mx_option_spec *s = mx_option_find("style_image", MX_VERB_TEXTURE);
     CHECK(s && s == mx_option_find("--style-image", MX_VERB_TEXTURE) && s->type == MX_OPTION_PATHS);
     CHECK(mx_option_find("style-image", MX_VERB_ENHANCE) == s && mx_option_find("style-image", MX_VERB_TRANSFER) == NULL);
-    char names[MATEX_MAX_STYLE_IMAGES + 1][16];
+    char names[MATEX_MAX_STYLE_IMAGES + 1][24];
     for (int i = 0; i <= MATEX_MAX_STYLE_IMAGES; i++) snprintf(names[i], sizeof names[i], "s%d.png", i);
     for (int i = 0; i < MATEX_MAX_STYLE_IMAGES; i++) CHECK(mx_option_set(s, &o, names[i], &st) == 0);
     for (int i = 0; i < MATEX_MAX_STYLE_IMAGES; i++) CHECK(o.style_images[i] == names[i]); /* in order */
