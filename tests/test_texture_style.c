@@ -21,7 +21,7 @@ static const char *tmp_file(const char *name, const void *bytes, size_t n) {
     snprintf(p, 256, "%s/%s", tmp, name);
     FILE *f = fopen(p, "wb");
     if (f) {
-        fwrite(bytes, 1, n, f);
+        if (n) fwrite(bytes, 1, n, f);
         fclose(f);
     }
     return p;
