@@ -1,7 +1,8 @@
 #!/bin/sh
 # Style images on the command line (issue 26): a bad --style-image (missing, empty, not an image, too
-# large) or --style-scale fails before any work with a message naming it and leaves no output folder;
-# --front-render writes front.png as matex's own file.
+# large) or --style-scale fails before any work with a message naming it and leaves no output folder
+# (weights without the networks: test_texture_style, as every demo file now holds them); with the demo weights a style image changes the texture, scale 0
+# gives the same bytes as none, report.json records it; --front-render writes front.png as matex's own.
 NAME=style
 . "$(dirname "$0")/lib_cli.sh"
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
@@ -34,6 +35,24 @@ check "nine --style-image: exit 2" [ "$(rc_of "$M" texture "$S" "a cow" --weight
 check "... at most 8" grep -qF -- "--style-image may be given at most 8 times" "$T/err"
 check "--help lists --style-image and --style-scale" sh -c "'$M' texture --help | grep -q -- '--style-image FILE' && '$M' enhance --help | grep -q -- '--style-scale S'"
 check "transfer has no --style-image" [ "$(rc_of "$M" transfer "$S" "$S" -o "$O" --style-image "$T/notes.png")" = 2 ]
+
+# with the demo weights (a tiny image encoder and IP-Adapter): the style image changes the texture,
+# scale 0 gives the same bytes as no style image, the report records it
+check "no style image" [ "$(rc_of "$M" texture "$S" "a cow" --weights "$W" -o "$T/plain" $SMALL --front-render)" = 0 ]
+cp "$T/plain/texture.png" "$T/style.png" # the style image: the plain run's texture
+ST=$T/style.png
+check "--style-image" [ "$(rc_of "$M" texture "$S" "a cow" --weights "$W" -o "$T/styled" $SMALL --style-image "$ST")" = 0 ]
+check "... changes the texture" sh -c "! cmp -s '$T/plain/texture.png' '$T/styled/texture.png'"
+check "... report: the image and its digest" grep -q '"style_images":\[{"source":"[^"]*style.png","digest":"[0-9a-f]\{16\}","width":128,"height":128}\]' "$T/styled/report.json"
+check "... report: the scale" grep -q '"style_scale":0.6,' "$T/styled/report.json"
+check "--style-scale 0" [ "$(rc_of "$M" texture "$S" "a cow" --weights "$W" -o "$T/zero" $SMALL --style-image "$ST" --style-scale 0)" = 0 ]
+check "... the same texture as no style image (PNG bytes)" cmp -s "$T/plain/texture.png" "$T/zero/texture.png"
+check "... (EXR bytes)" cmp -s "$T/plain/texture.exr" "$T/zero/texture.exr"
+check "two style images (tokens concatenated)" [ "$(rc_of "$M" texture "$S" "a cow" --weights "$W" -o "$T/two" $SMALL --style-image "$ST" --style-image "$T/plain/front.png")" = 0 ]
+check "... differ from one" sh -c "! cmp -s '$T/styled/texture.png' '$T/two/texture.png'"
+check "... both in the report" [ "$(grep -o '"digest"' "$T/two/report.json" | wc -l)" = 2 ]
+check "enhance --style-image" [ "$(rc_of "$M" enhance "$T/plain/mesh.obj" "a cow" --weights "$W" -o "$T/enh" $SMALL --style-image "$ST")" = 0 ]
+check "... report" grep -q '"style_scale":0.6,' "$T/enh/report.json"
 
 check "--front-render" [ "$(rc_of "$M" texture "$S" "a cow" --weights "$W" -o "$O" $SMALL --front-render)" = 0 ]
 check "... front.png of the image size" sh -c "'$M' info '$O/front.png' | grep -q '^size: *64 x 64'"

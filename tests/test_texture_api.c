@@ -1,7 +1,8 @@
 /* The embedding API (include/matex.h) with the demo weights (MATEX_DEMO_WEIGHTS): one model
  * set reused by several runs, a mesh in memory and the same mesh from a file give the same
  * texture, results in memory written later equal a run's output folder, progress events,
- * cancellation by flag and by callback (nothing written), bad input, enhance in memory, transfer. */
+ * cancellation by flag and by callback (nothing written), bad input, style images (refused ones,
+ * one in memory), enhance in memory, transfer. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -184,6 +185,38 @@ static void test_style_refused(matex_models *m, const char *tmp) {
     CHECK(!exists(out, NULL));
 }
 
+/* A style image in memory (the demo weights hold a tiny encoder and adapter): it changes the texture,
+ * at scale 0 the texture is the one without it, bit for bit; the report records it. */
+static void test_style_in_memory(matex_models *m) {
+    float px[8 * 8 * 3];
+    for (int i = 0; i < 8 * 8 * 3; i++) px[i] = (float)((i * 37) % 11) / 10.0f; /* a coloured pattern */
+    matex_image pattern = {8, 8, 3, px};
+    matex_options o;
+    matex_error err;
+    matex_result *plain = NULL, *styled = NULL, *zero = NULL;
+    small_options(&o);
+    o.mesh = &CUBE;
+    CHECK(matex_texture(m, &o, &plain, &err) == 0);
+    o.style_pixels = &pattern;
+    o.n_style_pixels = 1;
+    CHECK(matex_texture(m, &o, &styled, &err) == 0);
+    o.style_scale = 0.0f;
+    CHECK(matex_texture(m, &o, &zero, &err) == 0);
+    if (plain && styled && zero) {
+        const matex_image *a = &plain->textures[0], *b = &styled->textures[0], *c = &zero->textures[0];
+        size_t bytes = sizeof(float) * (size_t)a->width * a->height * a->channels;
+        CHECK(b->width == a->width && c->width == a->width);
+        CHECK(memcmp(a->pixels, b->pixels, bytes) != 0);
+        CHECK(memcmp(a->pixels, c->pixels, bytes) == 0);
+        CHECK(strstr(styled->report_json, "\"style_images\":[{\"source\":\"memory\"") != NULL &&
+              strstr(styled->report_json, "\"style_scale\":0.6,") != NULL && strstr(zero->report_json, "\"style_scale\":0,"));
+        CHECK(!strstr(plain->report_json, "style_images"));
+    }
+    matex_result_free(plain);
+    matex_result_free(styled);
+    matex_result_free(zero);
+}
+
 /* Enhance of the cube textured in memory, its texture passed in memory. */
 static void test_enhance_in_memory(matex_models *m) {
     matex_options o;
@@ -273,6 +306,7 @@ int main(void) {
         test_cancel(m, tmp);
         test_bad_input(m);
         test_style_refused(m, tmp);
+        test_style_in_memory(m);
         test_enhance_in_memory(m);
         test_transfer(m, tmp);
         matex_models_close(m);

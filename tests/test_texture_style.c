@@ -1,13 +1,15 @@
 /* Style images without networks (issue 26, pipeline/texture/style.h): the path-list option
  * (--style-image given several times, at most MATEX_MAX_STYLE_IMAGES, no empty name), the checks
  * before any work (missing, empty, not an image, too many bytes or pixels by the PNG or JPEG header,
- * images in memory), the read with its digests, and what report.json gets. */
+ * images in memory), the read with its digests, what report.json gets, and a model set without the
+ * image encoder or the adapter. */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
+#include "../pipeline/texture/models.h"
 #include "../pipeline/texture/options.h"
 #include "../pipeline/texture/style.h"
 #include "util_test.h"
@@ -185,12 +187,41 @@ static void test_load_and_report(void) {
     mx_style_free(&s);
 }
 
+/* A model set without the image encoder or the adapter: the message names what is missing and the
+ * convert options that add it (the networks are not touched, only whether they are there). */
+static void test_missing_networks(void) {
+    const char *path = getenv("MATEX_UNET_ONLY_WEIGHTS");
+    mx_models m;
+    mx_status st;
+    memset(&m, 0, sizeof m);
+    if (!path || mx_wf_open(&m.wf, path, &st)) {
+        fprintf(stderr, "no weight file in MATEX_UNET_ONLY_WEIGHTS (make test builds build/demo/demo_unet_only.mxw)\n");
+        mx_test_failures++;
+        return;
+    }
+    const char *convert = "Add them with: matex convert SD15_DIR --controlnet depth=DIR --controlnet inpaint=DIR "
+                          "--image-encoder IMAGE_ENCODER_DIR --ip-adapter ip-adapter_sd15.safetensors -o W.mxw";
+    CHECK(mx_style_check_models(&m, &st) == -1 && st.code == MX_EINPUT && strstr(st.msg, path) &&
+          strstr(st.msg, "this one has neither") && strstr(st.msg, convert));
+    printf("refused: %s\n", st.msg);
+    mx_clip_vision encoder;
+    m.image_encoder = &encoder;
+    CHECK(mx_style_check_models(&m, &st) == -1 && strstr(st.msg, "this one has no ip_adapter.*"));
+    m.image_encoder = NULL;
+    m.ip_adapter = (mx_ip_adapter *)&encoder;
+    CHECK(mx_style_check_models(&m, &st) == -1 && strstr(st.msg, "this one has no image_encoder.*"));
+    m.image_encoder = &encoder;
+    CHECK(mx_style_check_models(&m, &st) == 0);
+    mx_wf_close(m.wf);
+}
+
 int main(void) {
     if (!mkdtemp(tmp)) return 1;
     test_option();
     test_files();
     test_memory();
     test_load_and_report();
+    test_missing_networks();
     char cmd[600];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmp);
     if (system(cmd)) fprintf(stderr, "could not remove %s\n", tmp);

@@ -425,6 +425,19 @@ static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float
     return mx_vae_decode_image_tiled(j->gen.ctx, j->gen.models->vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
+/* The run's style tokens for a diffusion call, the same for every item (NULL without style images). */
+static const mx_sd_image_guide *style_guide(const mx_job *j, mx_sd_image_guide *g) {
+    const mx_style *s = &j->gen.style;
+    if (!s->n) return NULL;
+    *g = (mx_sd_image_guide){.adapter = j->gen.models->ip_adapter,
+                             .cond = s->tokens,
+                             .uncond = s->zero_tokens,
+                             .n_tokens = s->ntokens,
+                             .per_latent = 0,
+                             .scale = s->scale};
+    return g;
+}
+
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
     int f = j->o->pub.fast ? mx_taesd_factor(j->gen.models->taesd) : mx_vae_factor(j->gen.models->vae);
     if (b->image_h % f || b->image_w % f)
@@ -456,6 +469,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     if (b->inpaint_planes && j->gen.models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
         controls[nc++] = (mx_sd_control){j->gen.models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
     mx_job_set_phase(j, b->stage);
+    mx_sd_image_guide guide;
     mx_sd_request rq = {.unet = j->gen.models->unet,
                         .controls = controls,
                         .n_controls = nc,
@@ -465,7 +479,8 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                         .guidance = j->o->pub.guidance,
                         .sched = &s,
                         .progress = report_step,
-                        .progress_user = j};
+                        .progress_user = j,
+                        .image = style_guide(j, &guide)};
     double t = mx_now();
     if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */

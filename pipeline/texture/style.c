@@ -2,12 +2,14 @@
 #include "style.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
 #include "../io/io.h"
+#include "../nn/clip_image.h"
 #include "digest.h"
 #include "models.h"
 
@@ -147,7 +149,7 @@ void mx_style_report(const mx_style *s, mx_jw *w) {
         mx_jw_end_obj(w);
     }
     mx_jw_end_arr(w);
-    mx_jw_num(w, "style_scale", s->scale);
+    mx_jw_num(w, "style_scale", round(s->scale * 1e6) / 1e6); /* as given, not its float's digits (0.600000024) */
 }
 
 void mx_style_free(mx_style *s) {
@@ -158,17 +160,63 @@ void mx_style_free(mx_style *s) {
 }
 
 int mx_style_check_models(const mx_models *m, mx_status *st) {
-    int encoder = mx_wf_meta(m->wf, "image_encoder.config") != NULL, adapter = mx_wf_meta(m->wf, "ip_adapter.config") != NULL;
-    if (encoder && adapter) return 0;
+    if (m->image_encoder && m->ip_adapter) return 0;
     return mx_fail(st, MX_EINPUT,
                    "%s: a style image needs the image encoder and the IP-Adapter in the weight file; this one has %s. "
                    "Add them with: matex convert SD15_DIR --controlnet depth=DIR --controlnet inpaint=DIR "
                    "--image-encoder IMAGE_ENCODER_DIR --ip-adapter ip-adapter_sd15.safetensors -o W.mxw (README, Style images)",
-                   mx_models_path(m), !encoder && !adapter ? "neither" : !encoder ? "no image_encoder.*" : "no ip_adapter.*");
+                   mx_models_path(m), !m->image_encoder && !m->ip_adapter ? "neither"
+                                      : !m->image_encoder            ? "no image_encoder.*"
+                                                                     : "no ip_adapter.*");
+}
+
+/* 8-bit code values of an image as read ([0, 1] = code / 255, io.h), what PIL holds. */
+static uint8_t *code_values(const mx_image *im, mx_status *st) {
+    size_t n = (size_t)im->w * im->h * im->c;
+    uint8_t *u = malloc(n);
+    if (!u) return mx_fail(st, MX_ENOMEM, "style image: out of memory"), NULL;
+    for (size_t i = 0; i < n; i++) {
+        float v = im->data[i] * 255.0f + 0.5f;
+        u[i] = (uint8_t)(v < 0.0f ? 0.0f : v > 255.0f ? 255.0f : v);
+    }
+    return u;
+}
+
+/* pixel_values [n, 3, S, S] of the images: CLIP's preprocessing (the model set's, S its size). */
+static int preprocess(const mx_style *s, const mx_clip_image_config *pc, float *pixels, mx_status *st) {
+    size_t per = (size_t)3 * pc->size * pc->size;
+    for (int i = 0; i < s->n; i++) {
+        const mx_image *im = &s->img[i];
+        uint8_t *u = code_values(im, st);
+        int rc = !u || mx_clip_image_preprocess(u, im->w, im->h, im->c, pc->size, pc->mean, pc->std, pixels + i * per, st);
+        free(u);
+        if (rc) return mx_fail_prefix(st, "%s", s->path[i] ? s->path[i] : "style image in memory");
+    }
+    return 0;
 }
 
 int mx_style_encode(mx_style *s, const mx_models *m, const mx_ctx *c, mx_status *st) {
-    (void)s;
-    (void)c;
-    return mx_fail(st, MX_EINTERNAL, "%s: this build cannot encode style images yet", mx_models_path(m));
+    const mx_clip_vision_config *vc = &m->image_encoder->cfg;
+    const mx_clip_image_config *pc = &m->image_processor;
+    const mx_ip_adapter *ad = m->ip_adapter;
+    if (ad->embed_dim != vc->projection_dim)
+        return mx_fail(st, MX_EINPUT, "%s: the IP-Adapter takes image embeddings of %d values, the image encoder gives %d",
+                       mx_models_path(m), ad->embed_dim, vc->projection_dim);
+    if (pc->size != vc->image_size)
+        return mx_fail(st, MX_EINPUT, "%s: the image encoder's preprocessing makes %dx%d images, the tower takes %dx%d",
+                       mx_models_path(m), pc->size, pc->size, vc->image_size, vc->image_size);
+    float *pixels = malloc(sizeof(float) * 3 * pc->size * pc->size * (size_t)s->n);
+    float *embeds = malloc(sizeof(float) * (size_t)vc->projection_dim * s->n);
+    s->ntokens = s->n * ad->num_tokens;
+    s->dim = ad->cross_dim;
+    s->tokens = malloc(sizeof(float) * (size_t)s->ntokens * s->dim);
+    s->zero_tokens = malloc(sizeof(float) * (size_t)s->ntokens * s->dim);
+    int rc = !pixels || !embeds || !s->tokens || !s->zero_tokens ? mx_fail(st, MX_ENOMEM, "style images: out of memory")
+             : preprocess(s, pc, pixels, st) || mx_clip_vision_embed_images(c, m->image_encoder, pixels, s->n, embeds, st) ||
+                     mx_ip_adapter_guidance_tokens(c, ad, embeds, s->n, s->tokens, s->zero_tokens, st)
+                 ? -1
+                 : 0;
+    free(pixels);
+    free(embeds);
+    return rc;
 }

@@ -328,7 +328,8 @@ def test_bad_weights(s, obj):
 
 def test_style_image(s, obj):
     """The style image field goes to matex as --style-image: a file that is not an image ends in
-    matex's message naming it, before any work, and the object stays as it was."""
+    matex's message naming it, before any work, and the object stays as it was; a real image
+    textures the object."""
     before = snapshot(obj)
     notes = os.path.join(TMP, "notes.png")
     with open(notes, "w") as f:
@@ -340,6 +341,17 @@ def test_style_image(s, obj):
     check("style image: matex's message naming it (%s)" % (err or "").strip(),
           err is not None and "notes.png: style image is not an image" in err)
     check("style image: object as it was", snapshot(obj) == before and not obj.material_slots)
+    # a real image: the demo weights hold a tiny image encoder and IP-Adapter, so the run finishes
+    image = bpy.data.images.new("matex_style_test", 8, 8)
+    image.pixels.foreach_set([(i % 7) / 6.0 for i in range(8 * 8 * 4)])
+    image.filepath_raw, image.file_format = os.path.join(TMP, "style.png"), "PNG"
+    image.save()
+    bpy.data.images.remove(image)
+    s.style_image, s.style_scale = os.path.join(TMP, "style.png"), 0.8
+    res, err = run_operator(bpy.ops.matex.texture_selected, obj)
+    s.style_image = ""
+    check("style image: a real one, finished: %s" % err, res == {"FINISHED"})
+    check("style image: the object textured", len(obj.material_slots) > 0)
 
 
 def test_saved_beside_blend(s):
