@@ -18,6 +18,11 @@ cp "$CV/config.json" "$CV/model.safetensors" "$T/ie/"
 cp "$G/clip_image_preprocess_tiny/processor_config.json" "$T/ie/preprocessor_config.json"
 check "convert --image-encoder with a preprocessor_config.json" [ "$(rc_of "$M" convert --image-encoder "$T/ie" -o "$T/ie.mxw" --quiet)" = 0 ]
 check "... stores it as image_encoder.processor" sh -c "\"$M\" info '$T/ie.mxw' | grep -q 'image_encoder.processor'"
+mkdir -p "$T/legacy"
+cp "$CV/config.json" "$T/legacy/"
+printf '\200\002garbage' > "$T/legacy/pytorch_model.bin"
+check "a folder with a legacy pickle .bin exits 1" [ "$(rc_of "$M" convert --image-encoder "$T/legacy" -o "$T/bad.mxw")" = 1 ]
+check "... naming the file and the format" grep -q "legacy/pytorch_model.bin: a PyTorch checkpoint in the legacy format" "$T/err"
 check "--image-encoder of a UNet folder exits 1" [ "$(rc_of "$M" convert --image-encoder "$G/unet_tiny" -o "$T/bad.mxw")" = 1 ]
 check "... naming what it holds" grep -q "holds a unet, expected a image_encoder" "$T/err"
 check "... and writes nothing" [ ! -e "$T/bad.mxw" ]
