@@ -79,6 +79,9 @@ typedef struct matex_image {
     float *pixels;               /* [height][width][channels], values in [0, 1], row 0 at the top */
 } matex_image;
 
+/* Style images a run may take (files and images in memory together). */
+#define MATEX_MAX_STYLE_IMAGES 8
+
 typedef struct matex_mesh {
     int nverts, nfaces;
     const float *positions;  /* [nverts][3] */
@@ -142,6 +145,16 @@ typedef struct matex_options {
     int geometric_normals;        /* 0: normals from depth (the paper) */
     int z_up;                     /* 0: the mesh is y-up */
     const char *front_back_words; /* prompt prefix of the grid */
+    /* image guidance (IP-Adapter; the weight file must hold image_encoder.* and ip_adapter.*, made by
+       `matex convert ... --image-encoder DIR --ip-adapter FILE`): every style image is encoded once per
+       run, and its image tokens (concatenated over the images) steer every view at style_scale */
+    const char *style_images[MATEX_MAX_STYLE_IMAGES]; /* files (PNG, JPEG, TIFF); the first NULL ends the list */
+    const matex_image *style_pixels; /* [n_style_pixels] images in memory (1, 3 or 4 channels; alpha
+                                        ignored), after the files */
+    int n_style_pixels;
+    float style_scale;            /* weight of the image tokens (0: the same texture as without them) */
+    int front_render;             /* also write front.png: the textured mesh from the front, image_size
+                                     pixels (what `matex batch --theme-from-first` passes on) */
     /* transfer (matex_transfer): the texture of source_path moves onto the mesh */
     const char *source_path;      /* the textured mesh */
     float background[3];          /* colour behind the source in its renders */

@@ -77,6 +77,44 @@ check "texture options on batch's command line are every job's defaults" [ "$(rc
     -o "$T/one" --steps 1 --image-size 64 --texture-size 128 --render-size 128 --candidates 12 --seed 7)" = 0 ]
 check "... as the report says" grep -q '"seed":7,"steps":1,' "$T/one/dflt/report.json"
 
+# style images (issue 26): a line's style_image (relative to the manifest's folder, like mesh), --theme
+# for every job, --theme-from-first (the first job's front.png is the style image of the others)
+mkdir -p "$T/st"
+cp "$(dirname "$0")/data/box.obj" "$T/st/box.obj"
+echo "not a picture" > "$T/st/notes.png"
+{
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"a box\", \"name\": \"missing\", \"style_image\": \"nope.png\", $SMALL}"
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"a box\", \"name\": \"notes\", \"style_image\": [\"notes.png\"], $SMALL}"
+    echo "{\"mesh\": \"box.obj\", \"prompt\": \"a box\", \"name\": \"num\", \"style_image\": 3, $SMALL}"
+} > "$T/st/bad.jsonl"
+check "bad style_image lines: exit 1" [ "$(rc_of "$M" batch "$T/st/bad.jsonl" --weights "$W" -o "$T/st/bad")" = 1 ]
+check "... a missing one named relative to the manifest" grep -q "line 1 (missing): failed: .*$T/st/nope.png: cannot open style image" "$T/err"
+check "... one that is not an image" grep -q "line 2 (notes): failed: .*$T/st/notes.png: style image is not an image" "$T/err"
+check "... a number" grep -q 'line 3 (num): failed: .*"style_image" takes a file name or an array of them' "$T/err"
+check "... nothing written for them" [ -z "$(ls "$T/st/bad" | grep -v failed.jsonl)" ]
+echo "{\"mesh\": \"box.obj\", \"prompt\": \"a box\", \"name\": \"t\", $SMALL}" > "$T/st/one.jsonl"
+check "--theme FILE that is not an image: the job fails" [ "$(rc_of "$M" batch "$T/st/one.jsonl" --weights "$W" -o "$T/st/th" --theme "$T/st/notes.png")" = 1 ]
+check "... naming it" grep -q "line 1 (t): failed: .*notes.png: style image is not an image" "$T/err"
+check "--theme with --theme-from-first exits 2" [ "$(rc_of "$M" batch "$T/st/one.jsonl" --weights "$W" -o "$T/st/th" --theme "$T/st/notes.png" --theme-from-first)" = 2 ]
+check "... saying why" grep -q "theme-from-first takes the style image from the first job" "$T/err"
+for i in 1 2 3; do echo "{\"mesh\": \"box.obj\", \"prompt\": \"box $i\", \"name\": \"f$i\", $SMALL}"; done > "$T/st/theme.jsonl"
+check "--theme-from-first, shard 1/2 first: its job waits for the theme" [ "$(rc_of "$M" batch "$T/st/theme.jsonl" --weights "$W" -o "$T/st/tf" --theme-from-first --shard 1/2)" = 1 ]
+check "... and says where it comes from" grep -q "line 2 (f2): failed: $T/st/tf/f1/front.png: the theme image is not there" "$T/err"
+check "--theme-from-first, shard 0/2" [ "$(rc_of "$M" batch "$T/st/theme.jsonl" --weights "$W" -o "$T/st/tf" --theme-from-first --shard 0/2)" = 0 ]
+check "... the first job wrote front.png" [ -s "$T/st/tf/f1/front.png" ]
+check "... listed as matex's own" grep -q "^front.png\$" "$T/st/tf/f1/.matex-output"
+check "... the first job has no style image" sh -c "! grep -q style_images '$T/st/tf/f1/report.json'"
+check "... the other jobs without front.png" [ ! -e "$T/st/tf/f3/front.png" ]
+check "... f3 styled by f1's front.png" grep -q "\"style_images\":\[{\"source\":\"$T/st/tf/f1/front.png\"" "$T/st/tf/f3/report.json"
+check "--theme-from-first, shard 1/2 again: done now" [ "$(rc_of "$M" batch "$T/st/theme.jsonl" --weights "$W" -o "$T/st/tf" --theme-from-first --shard 1/2)" = 0 ]
+check "... f2 styled by it too" grep -q "\"source\":\"$T/st/tf/f1/front.png\"" "$T/st/tf/f2/report.json"
+ST=$T/st/tf/f1/texture.png # a style image made by the test itself
+check "--theme FILE" [ "$(rc_of "$M" batch "$T/st/theme.jsonl" --weights "$W" -o "$T/st/th2" --theme "$ST")" = 0 ]
+check "... every job styled by it" [ "$(grep -l "$ST" "$T/st/th2"/f*/report.json | wc -l)" = 3 ]
+cp "$ST" "$T/st/own.png"
+echo "{\"mesh\": \"box.obj\", \"prompt\": \"box\", \"name\": \"own\", \"style_image\": \"own.png\", $SMALL}" > "$T/st/own.jsonl"
+check "a line's style_image replaces --theme" [ "$(rc_of "$M" batch "$T/st/own.jsonl" --weights "$W" -o "$T/st/th3" --theme "$T/st/tf/f1/front.png")" = 0 ]
+check "... (only its own in the report)" sh -c "grep -q '\"source\":\"$T/st/own.png\"' '$T/st/th3/own/report.json' && ! grep -q front.png '$T/st/th3/own/report.json'"
 # SIGTERM in the middle of a run (what scancel sends), right after the first job is complete
 for i in 1 2 3; do echo "{\"mesh\": \"box.obj\", \"prompt\": \"box $i\", \"name\": \"b$i\", $SMALL}"; done > "$T/slow.jsonl"
 "$M" batch "$T/slow.jsonl" --weights "$W" -o "$T/slow" --threads 1 --json > "$T/int.json" 2> "$T/int.err" &

@@ -1,7 +1,8 @@
 /* The embedding API (include/matex.h) with the demo weights (MATEX_DEMO_WEIGHTS): one model
  * set reused by several runs, a mesh in memory and the same mesh from a file give the same
  * texture, results in memory written later equal a run's output folder, progress events,
- * cancellation by flag and by callback (nothing written), bad input, enhance in memory, transfer. */
+ * cancellation by flag and by callback (nothing written), bad input, style images (refused ones,
+ * one in memory), enhance in memory, transfer. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -152,6 +153,70 @@ static void test_bad_input(matex_models *m) {
     CHECK(matex_texture(m, &o, NULL, &err) != 0 && err.code == MATEX_EUSAGE); /* neither folder nor result */
 }
 
+/* Style images refused before any work: nothing is written. */
+static void test_style_refused(matex_models *m, const char *tmp) {
+    matex_options o;
+    matex_error err;
+    char out[1200], text[1200];
+    small_options(&o);
+    o.mesh = &CUBE;
+    snprintf(out, sizeof out, "%s/style_out", tmp);
+    o.out_dir = out;
+    snprintf(text, sizeof text, "%s/style.png", tmp);
+    FILE *f = fopen(text, "w");
+    if (f) {
+        fputs("not a picture\n", f);
+        fclose(f);
+    }
+    o.style_images[0] = text;
+    CHECK(matex_texture(m, &o, NULL, &err) != 0 && err.code == MATEX_EINPUT && strstr(err.message, text) &&
+          strstr(err.message, "not an image"));
+    CHECK(!exists(out, NULL));
+    o.style_images[0] = NULL;
+    float px[3] = {1, 0, 0};
+    matex_image red = {1, 1, 3, px};
+    o.style_pixels = &red;
+    o.n_style_pixels = 1;
+    o.style_scale = 3.0f;
+    CHECK(matex_texture(m, &o, NULL, &err) != 0 && err.code == MATEX_EUSAGE && strstr(err.message, "--style-scale"));
+    o.style_scale = 0.6f;
+    red.channels = 2;
+    CHECK(matex_enhance(m, &o, NULL, &err) != 0 && err.code == MATEX_EUSAGE && strstr(err.message, "style image 0 in memory"));
+    CHECK(!exists(out, NULL));
+}
+
+/* A style image in memory (the demo weights hold a tiny encoder and adapter): it changes the texture,
+ * at scale 0 the texture is the one without it, bit for bit; the report records it. */
+static void test_style_in_memory(matex_models *m) {
+    float px[8 * 8 * 3];
+    for (int i = 0; i < 8 * 8 * 3; i++) px[i] = (float)((i * 37) % 11) / 10.0f; /* a coloured pattern */
+    matex_image pattern = {8, 8, 3, px};
+    matex_options o;
+    matex_error err;
+    matex_result *plain = NULL, *styled = NULL, *zero = NULL;
+    small_options(&o);
+    o.mesh = &CUBE;
+    CHECK(matex_texture(m, &o, &plain, &err) == 0);
+    o.style_pixels = &pattern;
+    o.n_style_pixels = 1;
+    CHECK(matex_texture(m, &o, &styled, &err) == 0);
+    o.style_scale = 0.0f;
+    CHECK(matex_texture(m, &o, &zero, &err) == 0);
+    if (plain && styled && zero) {
+        const matex_image *a = &plain->textures[0], *b = &styled->textures[0], *c = &zero->textures[0];
+        size_t bytes = sizeof(float) * (size_t)a->width * a->height * a->channels;
+        CHECK(b->width == a->width && c->width == a->width);
+        CHECK(memcmp(a->pixels, b->pixels, bytes) != 0);
+        CHECK(memcmp(a->pixels, c->pixels, bytes) == 0);
+        CHECK(strstr(styled->report_json, "\"style_images\":[{\"source\":\"memory\"") != NULL &&
+              strstr(styled->report_json, "\"style_scale\":0.6,") != NULL && strstr(zero->report_json, "\"style_scale\":0,"));
+        CHECK(!strstr(plain->report_json, "style_images"));
+    }
+    matex_result_free(plain);
+    matex_result_free(styled);
+    matex_result_free(zero);
+}
+
 /* Enhance of the cube textured in memory, its texture passed in memory. */
 static void test_enhance_in_memory(matex_models *m) {
     matex_options o;
@@ -240,6 +305,8 @@ int main(void) {
         test_memory_and_file(m, tmp);
         test_cancel(m, tmp);
         test_bad_input(m);
+        test_style_refused(m, tmp);
+        test_style_in_memory(m);
         test_enhance_in_memory(m);
         test_transfer(m, tmp);
         matex_models_close(m);

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../pipeline/texture/style.h"
 #include "../runtime/fileio.h"
 #include "../runtime/json.h"
 
@@ -76,6 +77,12 @@ static int valid_name(const char *s) {
     return strspn(s, "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-") == strlen(s);
 }
 
+/* A path of the manifest: relative ones are relative to its folder dir ("" when none). */
+static int resolve(const char *dir, const char *rel, char *out, size_t cap) {
+    int n = rel[0] == '/' || !*dir ? snprintf(out, cap, "%s", rel) : snprintf(out, cap, "%s/%s", dir, rel);
+    return n < 0 || (size_t)n >= cap ? -1 : 0;
+}
+
 /* mesh, prompt, name and the output folder; dir: the manifest's folder ("" when none). */
 static int job_head(mx_batch_job *j, const mx_json *obj, const char *dir, const char *outroot) {
     const char *mesh = mx_json_get_str(obj, "mesh", NULL), *prompt = mx_json_get_str(obj, "prompt", NULL);
@@ -88,9 +95,8 @@ static int job_head(mx_batch_job *j, const mx_json *obj, const char *dir, const 
     if (!valid_name(j->name) || (name && strlen(name) >= sizeof j->name))
         return job_error(j, "name \"%s\" is not a folder name (letters, digits, '.', '_', '-')", j->name), -1;
     char path[4096], out[4096];
-    int n = mesh[0] == '/' || !*dir ? snprintf(path, sizeof path, "%s", mesh) : snprintf(path, sizeof path, "%s/%s", dir, mesh);
     int m = snprintf(out, sizeof out, "%s/%s", outroot, j->name);
-    if (n < 0 || (size_t)n >= sizeof path || m < 0 || (size_t)m >= sizeof out) return job_error(j, "path too long"), -1;
+    if (resolve(dir, mesh, path, sizeof path) || m < 0 || (size_t)m >= sizeof out) return job_error(j, "path too long"), -1;
     mx_cli_texture *c = &j->c;
     memset(c, 0, sizeof *c);
     matex_options_default(&c->o);
@@ -101,8 +107,28 @@ static int job_head(mx_batch_job *j, const mx_json *obj, const char *dir, const 
     return 0;
 }
 
+/* A path-list key (style_image): a string or an array of strings, each relative to the manifest's
+ * folder; the line's list replaces the batch's (--theme). */
+static int job_paths(mx_batch_job *j, const mx_option_spec *s, const char *key, const mx_json *v, const char *dir) {
+    int is_arr = mx_json_kind(v) == MX_JSON_ARR;
+    size_t n = is_arr ? mx_json_len(v) : 1;
+    if (!is_arr && mx_json_kind(v) != MX_JSON_STR) return job_error(j, "\"%s\" takes a file name or an array of them", key), -1;
+    mx_option_clear_paths(s, &j->c.o);
+    for (size_t i = 0; i < n; i++) {
+        const mx_json *e = is_arr ? mx_json_at(v, i) : v;
+        char path[4096];
+        const char *text;
+        mx_status st;
+        if (mx_json_kind(e) != MX_JSON_STR) return job_error(j, "\"%s\" takes a file name or an array of them", key), -1;
+        if (resolve(dir, mx_json_str(e), path, sizeof path)) return job_error(j, "\"%s\": path too long", key), -1;
+        if (!(text = keep(j, path))) return job_error(j, "too many options"), -1;
+        if (mx_cli_texture_option(&j->c, key, text, &st)) return job_error(j, "\"%s\": %s", key, st.msg), -1;
+    }
+    return 0;
+}
+
 /* One key of the line into the job's options (the error names the key). */
-static int job_key(mx_batch_job *j, const char *key, const mx_json *v) {
+static int job_key(mx_batch_job *j, const char *key, const mx_json *v, const char *dir) {
     char k[64], value[1024];
     snprintf(k, sizeof k, "%s", !strcmp(key, "negative_prompt") || !strcmp(key, "negative-prompt") ? "negative" : key);
     const mx_option_spec *s = mx_option_find(k, MX_VERB_TEXTURE);
@@ -113,6 +139,7 @@ static int job_key(mx_batch_job *j, const char *key, const mx_json *v) {
     char why[160];
     not_a_key(s, why, sizeof why);
     if (why[0]) return job_error(j, "\"%s\" %s", key, why), -1;
+    if (s->type == MX_OPTION_PATHS) return job_paths(j, s, key, v, dir);
     int is_flag = s->type == MX_OPTION_FLAG, is_bool = mx_json_kind(v) == MX_JSON_BOOL;
     if (is_flag != is_bool)
         return job_error(j, "\"%s\" takes %s", key, is_flag ? "true or false" : "a number, a text or an array of numbers"), -1;
@@ -136,12 +163,13 @@ static void parse_job(mx_batch_job *j, const char *text, size_t len, const char 
             if (mx_cli_texture_option(&j->c, defaults[i], defaults[i + 1], &st)) job_error(j, "%s", st.msg);
         for (size_t i = 0; i < mx_json_len(obj) && !j->error[0]; i++) {
             const char *key = mx_json_key(obj, i);
-            if (strcmp(key, "mesh") && strcmp(key, "prompt") && strcmp(key, "name")) job_key(j, key, mx_json_at(obj, i));
+            if (strcmp(key, "mesh") && strcmp(key, "prompt") && strcmp(key, "name")) job_key(j, key, mx_json_at(obj, i), dir);
         }
         mx_cli_texture *c = &j->c;
         if (c->o.fast && !c->steps_given) c->o.steps = 4;
         if (c->o.fast && !c->guidance_given) c->o.guidance = 1.0f;
-        if (!j->error[0] && mx_options_check(&c->o, MX_VERB_TEXTURE, &st)) job_error(j, "%s", st.msg);
+        if (!j->error[0] && (mx_options_check(&c->o, MX_VERB_TEXTURE, &st) || mx_style_check_inputs(&c->o, &st)))
+            job_error(j, "%s", st.msg);
     }
     mx_json_free(obj);
 }

@@ -5,7 +5,8 @@
  * under OUTROOT; default: the mesh's file name without extension) must be unique; every other
  * key is a `matex texture` option of job scope in the option table (pipeline/texture/options.c)
  * without its dashes ("image-size" or "image_size"; "fast": true), set by the same function as
- * the command line (mx_cli_texture_option). The model set's options (threads, precision, device)
+ * the command line (mx_cli_texture_option); "style_image" (a file name or an array of them, relative
+ * to the manifest's folder like mesh) replaces the batch's style images (--theme). The model set's options (threads, precision, device)
  * are the batch's own (its command line); output, weights and force are not keys (a job writes
  * OUTROOT/NAME; batch skips a complete job). Blank lines are skipped; a bad line becomes a job
  * with an error, reported with its line number. */

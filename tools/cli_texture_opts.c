@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "../runtime/buf.h"
+#include "../pipeline/texture/style.h"
 #include "../runtime/log.h"
 #include "cli_progress.h"
 #include "cli_signals.h"
@@ -151,6 +152,16 @@ static void print_json_summary(const mx_cli_texture *c, const matex_result *r) {
     mx_buf_free(&b);
 }
 
+/* A failed run's message on stderr (and stdout with json); the exit code: 2 usage, 130 interrupted, else 1. */
+static int run_failed(const mx_cli_texture *c, const char *verb, int code, const char *message) {
+    if (code == MATEX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", message);
+    fprintf(stderr, "matex %s: %s\n", verb, message);
+    int exit_code = code == MATEX_ECANCELLED ? 130 : 1;
+    if (c->json == MX_CLI_JSON_STREAM) stream_result(c, exit_code, message, NULL);
+    else if (c->json) print_json_error(message);
+    return exit_code;
+}
+
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     if (c->json == MX_CLI_JSON_STREAM) { /* the events replace the human lines */
         c->quiet = 1;
@@ -162,19 +173,13 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     matex_error err = {0};
     mx_status st;
     if (mx_options_check(&c->o, c->verb, &st)) return mx_cli_usage_error(verb, c->json, "%s", st.msg);
+    if (mx_style_check_inputs(&c->o, &st)) return run_failed(c, verb, st.code, st.msg); /* before the weights */
     c->o.cancel = mx_cli_signals_catch();
     mx_cli_signals_output(c->o.out_dir);
     matex_result *r = NULL;
     int rc = run_once(run, c, c->json ? &r : NULL, &err);
     mx_cli_signals_output(NULL);
-    if (rc) {
-        if (err.code == MATEX_EUSAGE) return mx_cli_usage_error(verb, c->json, "%s", err.message);
-        fprintf(stderr, "matex %s: %s\n", verb, err.message);
-        int code = err.code == MATEX_ECANCELLED ? 130 : 1;
-        if (c->json == MX_CLI_JSON_STREAM) stream_result(c, code, err.message, NULL);
-        else if (c->json) print_json_error(err.message);
-        return code;
-    }
+    if (rc) return run_failed(c, verb, err.code, err.message);
     if (c->json == MX_CLI_JSON_STREAM) stream_result(c, 0, NULL, r);
     else if (c->json) print_json_summary(c, r);
     matex_result_free(r);

@@ -23,6 +23,8 @@
 typedef struct batch_args {
     const char *manifest, *weights, *outroot;
     int shard, nshards, json, quiet, verbose;
+    int theme_from_first; /* the first job writes front.png, the style image of the jobs without their own */
+    char theme_path[4200]; /* OUTROOT/NAME/front.png of the first job (theme_from_first) */
     mx_cli_texture table;  /* the table's options given to batch: the model set's, and the jobs' defaults */
     const char *defaults[2 * BATCH_MAX_DEFAULTS]; /* the jobs' defaults as given: name, value (NULL: a flag) */
     int ndefaults;
@@ -55,6 +57,12 @@ static void batch_usage(FILE *f) {
             "options:\n"
             "  --shard I/N               run the jobs whose index (0-based, manifest order) mod N is I (default\n"
             "                            SLURM_ARRAY_TASK_ID-SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT, else 0/1)\n"
+            "  --theme FILE              one style image for the whole catalogue (--style-image FILE for every job;\n"
+            "                            a line's \"style_image\" replaces it)\n"
+            "  --theme-from-first        the first job of the manifest also writes front.png (its textured mesh\n"
+            "                            from the front) and that image is the style image of every other job\n"
+            "                            without its own; the other jobs wait for it: with shards, run the first\n"
+            "                            job's shard first\n"
             "  --json                    print the summary as JSON on stdout\n"
             "  --verbose                 the progress lines of every job on stderr\n"
             "  --quiet                   no per-job lines on stderr\n"
@@ -110,6 +118,12 @@ static int parse_args(batch_args *a, int argc, char **argv) {
         if (!strcmp(arg, "--json")) a->json = 1;
         else if (!strcmp(arg, "--quiet")) a->quiet = 1;
         else if (!strcmp(arg, "--verbose")) a->verbose = 1;
+        else if (!strcmp(arg, "--theme-from-first")) a->theme_from_first = 1;
+        else if (!strcmp(arg, "--theme")) { /* the style image of every job */
+            if (!val) return usage_error("missing value after", arg);
+            int rc = table_option(a, "--style-image", argv[++i]);
+            if (rc >= 0) return rc;
+        }
         else if (!strcmp(arg, "--weights") || !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--shard")) {
             if (!val) return usage_error("missing value after", arg);
             i++;
@@ -136,6 +150,8 @@ static int parse_args(batch_args *a, int argc, char **argv) {
     if (!a->manifest) return usage_error("missing MANIFEST", NULL);
     if (!a->weights) return usage_error("missing --weights FILE", NULL);
     if (!a->outroot) return usage_error("missing -o OUTROOT", NULL);
+    if (a->theme_from_first && a->table.o.style_images[0])
+        return usage_error("--theme-from-first takes the style image from the first job: give no --theme or --style-image", NULL);
     if (!have_shard && shard_from_slurm(&a->shard, &a->nshards) < 0)
         return usage_error("SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT do not give a shard; use --shard I/N", NULL);
     return -1;
@@ -248,7 +264,37 @@ static void add_result(batch_run *r, const mx_batch_job *j, int status, double s
         fprintf(stderr, "matex batch: line %d (%s): %s (%.2f s)\n", j->line, j->name, STATUS_NAME[status], seconds);
 }
 
+/* --theme-from-first: the first job writes front.png, the style image of every later job whose line
+ * gives none (their options borrow a->theme_path). */
+static void theme_from_first(batch_args *a, mx_batch_manifest *m) {
+    if (!m->njobs) return;
+    mx_batch_job *first = &m->jobs[0];
+    first->c.o.front_render = 1;
+    snprintf(a->theme_path, sizeof a->theme_path, "%s/%s/front.png", a->outroot, first->name);
+    for (int i = 1; i < m->njobs; i++)
+        if (!m->jobs[i].c.o.style_images[0]) m->jobs[i].c.o.style_images[0] = a->theme_path;
+}
+
+/* A later job of --theme-from-first needs the first job's front.png (the message says where it comes from). */
+static int theme_missing(const batch_run *r, const mx_batch_job *j, char *error, size_t cap) {
+    const batch_args *a = r->a;
+    struct stat sb;
+    if (!a->theme_from_first || j->index == 0 || j->c.o.style_images[0] != a->theme_path || !stat(a->theme_path, &sb))
+        return 0;
+    snprintf(error, cap,
+             "%s: the theme image is not there: the first job of the manifest writes it (with --theme-from-first; "
+             "run its shard first, or remove its folder if it was made without the option)",
+             a->theme_path);
+    return 1;
+}
+
 static void batch_job(batch_run *r, const mx_batch_job *j) {
+    char theme_error[4400];
+    if (theme_missing(r, j, theme_error, sizeof theme_error)) {
+        record_failure(r, j, theme_error);
+        add_result(r, j, JOB_FAILED, 0.0, 0.0, theme_error);
+        return;
+    }
     if (j->error[0]) {
         char msg[1200];
         snprintf(msg, sizeof msg, "%s:%d: %s", r->a->manifest, j->line, j->error);
@@ -308,6 +354,7 @@ int cmd_batch(int argc, char **argv) {
         fprintf(stderr, "matex batch: %s\n", st.msg);
         return 1;
     }
+    if (a.theme_from_first) theme_from_first(&a, &m);
     batch_run r = {&a, NULL, 0, {0}, 0.0, {0}, mx_cli_signals_catch()};
     forget_own_failures(&r, &m);
     double t0 = mx_now();

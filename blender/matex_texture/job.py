@@ -80,6 +80,8 @@ def _network_args(s):
         args += ["--steps", str(s.steps)]
     if s.negative:
         args += ["--negative", s.negative]
+    if s.style_image:
+        args += ["--style-image", bpy.path.abspath(s.style_image), "--style-scale", "%g" % s.style_scale]
     return args
 
 

@@ -20,6 +20,11 @@ class MatexSettings(bpy.types.PropertyGroup):
                        description="Denoising steps (0: matex's default, 10; 4 with Fast)")
     fast: BoolProperty(name="Fast", description="Few-step path (LCM + TAESD): needs a weight file made with "
                                                 "convert --lcm-lora --taesd")
+    style_image: StringProperty(name="Style image", subtype="FILE_PATH",
+                                description="An image whose style the texture follows (IP-Adapter; optional): "
+                                            "needs a weight file made with convert --image-encoder --ip-adapter")
+    style_scale: FloatProperty(name="Style scale", default=0.6, min=0.0, max=2.0,
+                               description="How strongly the style image steers the texture (0: not at all)")
     texture_size: IntProperty(name="Texture size", default=1024, min=16, max=8192, description="Texture side in texels")
     device: EnumProperty(name="Device", items=[("cpu", "CPU", "the CPU kernels"),
                                                ("cuda", "CUDA", "an NVIDIA GPU (a matex built by `make cuda`)")])

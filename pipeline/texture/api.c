@@ -15,6 +15,7 @@
 #include "models.h"
 #include "options.h"
 #include "outdir.h"
+#include "style.h"
 
 /* Errors pass through unchanged: the public codes are the status codes. */
 _Static_assert((int)MATEX_EINPUT == (int)MX_EINPUT && (int)MATEX_EUSAGE == (int)MX_EUSAGE &&
@@ -171,12 +172,14 @@ static int image_step(const mx_models *m, int fast) {
     return factor << (mx_unet_cfg(m->unet)->nlevels - 1);
 }
 
-/* The options against the table and, for runs with networks, the image size against the
- * networks: before any work. */
+/* The options against the table and, for runs with networks, the style images' files and the image
+ * size and style images against the networks: before any work. */
 static int check_options(const matex_models *m, const matex_options *o, unsigned verb, mx_status *st) {
     if (mx_options_check(o, verb, st)) return -1;
     if (verb == MX_VERB_TRANSFER) return 0;
     if (!m) return mx_fail(st, MX_EUSAGE, "no model set given");
+    if (mx_style_check_inputs(o, st)) return -1;
+    if ((o->style_images[0] || o->n_style_pixels) && mx_style_check_models(&m->m, st)) return -1;
     return mx_options_check_image_size(o->image_size, image_step(&m->m, o->fast), st);
 }
 

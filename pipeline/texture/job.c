@@ -6,12 +6,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../runtime/fileio.h"
 #include "../../runtime/log.h"
 #include "../../runtime/rng.h"
 #include "../../runtime/version.h"
 #include "../geom/export.h"
 #include "../geom/masks.h"
+#include "../geom/raster.h"
 #include "../geom/uvfill.h"
+#include "../io/io.h"
 #include "../nn/sd_edit.h"
 #include "../nn/vae_tiled.h"
 #include "condition.h"
@@ -198,6 +201,7 @@ static void report_header(mx_job *j) {
         mx_jw_bool(w, "fast", o->pub.fast);
         mx_jw_num(w, "guidance", o->pub.guidance);
         mx_jw_int(w, "image_size", o->pub.image_size);
+        mx_style_report(&j->gen.style, w);
     }
     mx_jw_int(w, "texture_size", o->pub.texture_size);
     mx_jw_int(w, "render_size", o->pub.render_size);
@@ -226,6 +230,17 @@ static void report_header(mx_job *j) {
     mx_jw_begin_arr(w, "views");
 }
 
+/* The style images' tokens, once for the whole run (style.h). */
+static int encode_style(mx_job *j, mx_status *st) {
+    mx_style *s = &j->gen.style;
+    if (!s->n) return 0;
+    double t = mx_now();
+    if (mx_style_check_models(j->gen.models, st) || mx_style_encode(s, j->gen.models, j->gen.ctx, st)) return -1;
+    mx_job_progress(j, "style: %d image(s), %d image tokens at scale %.2f, encoded in %.2fs", s->n, s->ntokens,
+                    s->scale, mx_now() - t);
+    return 0;
+}
+
 /* --fast runs the LCM scheduler on an LCM-distilled UNet and decodes with TAESD: both must be in
  * the weight file. */
 static int check_fast_models(const mx_job *j, mx_status *st) {
@@ -247,6 +262,7 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     j->rep.psnr_db = NAN;
     j->write_flags = o->pub.first_wins ? 0 : MX_BACKPROJECT_OVERWRITE;
     const char *inputs[] = {o->pub.mesh_path, o->models ? mx_models_path(o->models) : o->weights_path, o->pub.source_path};
+    if (model_needs != MX_JOB_NO_MODELS && mx_style_load(&j->gen.style, &o->pub, st)) return -1;
     if (o->pub.out_dir && mx_outdir_open(&j->out, o->pub.out_dir, o->pub.force, inputs, 3, st)) return -1;
     if (o->models) { /* an opened model set computes on its own context */
         j->gen.models = o->models;
@@ -268,7 +284,9 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
         mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->pub.fast ? " (fast: LCM + TAESD)" : "");
     }
     if (model_needs == MX_JOB_NO_MODELS) j->gen.models = NULL;
-    else if (mx_models_check(j->gen.models, model_needs, st) || (o->pub.fast && check_fast_models(j, st))) return -1;
+    else if (mx_models_check(j->gen.models, model_needs, st) || (o->pub.fast && check_fast_models(j, st)) ||
+             encode_style(j, st))
+        return -1;
     if (mx_job_check_cancel(j, st)) return -1;
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
                 : mx_mesh_load(o->pub.mesh_path, &j->mesh, st))
@@ -295,6 +313,7 @@ void mx_job_close(mx_job *j) {
         free(j->gen.prompts.emb[i]);
     }
     free(j->gen.uncond);
+    mx_style_free(&j->gen.style);
     free(j->sched.visible);
     free(j->sched.chart);
     if (j->sched.schedule_ready) mx_view_schedule_free(&j->sched.schedule);
@@ -404,6 +423,19 @@ static int decode_images(mx_job *j, const float *lat, int n, int h, int w, float
     return mx_vae_decode_image_tiled(j->gen.ctx, j->gen.models->vae, lat, n, h, w, VAE_TILE, images, st);
 }
 
+/* The run's style tokens for a diffusion call, the same for every item (NULL without style images). */
+static const mx_sd_image_guide *style_guide(const mx_job *j, mx_sd_image_guide *g) {
+    const mx_style *s = &j->gen.style;
+    if (!s->n) return NULL;
+    *g = (mx_sd_image_guide){.adapter = j->gen.models->ip_adapter,
+                             .cond = s->tokens,
+                             .uncond = s->zero_tokens,
+                             .n_tokens = s->ntokens,
+                             .per_latent = 0,
+                             .scale = s->scale};
+    return g;
+}
+
 int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *st) {
     int f = j->o->pub.fast ? mx_taesd_factor(j->gen.models->taesd) : mx_vae_factor(j->gen.models->vae);
     if (b->image_h % f || b->image_w % f)
@@ -435,6 +467,7 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
     if (b->inpaint_planes && j->gen.models->cn_inpaint && (b->w_inpaint != 0 || b->w_inpaint_items))
         controls[nc++] = (mx_sd_control){j->gen.models->cn_inpaint, b->inpaint_planes, b->w_inpaint, b->w_inpaint_items};
     mx_job_set_phase(j, b->stage);
+    mx_sd_image_guide guide;
     mx_sd_request rq = {.unet = j->gen.models->unet,
                         .controls = controls,
                         .n_controls = nc,
@@ -444,7 +477,8 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                         .guidance = j->o->pub.guidance,
                         .sched = &s,
                         .progress = report_step,
-                        .progress_user = j};
+                        .progress_user = j,
+                        .image = style_guide(j, &guide)};
     double t = mx_now();
     if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
@@ -723,6 +757,24 @@ static void result_fill(mx_job *j, mx_image *tex, mx_texture_result *res) {
     memset(&j->mesh, 0, sizeof j->mesh);
 }
 
+/* front.png in the staging folder: the textured mesh from the front, cropped to the object as a view
+ * is, image_size pixels on the views' grey (what `matex batch --theme-from-first` passes on). */
+static int write_front_render(mx_job *j, const mx_image *tex, mx_status *st) {
+    mx_job_view v;
+    memset(&v, 0, sizeof v);
+    mx_job_camera(&v.cam, 0.0f, 0.0f);
+    mx_image rgb = {0}, small = {0};
+    char path[4300];
+    int rc = mx_job_view_prepare(j, &v, st) ||
+             mx_render_textured(&v.vb.gb, &j->mesh, tex, j->nlayers, GREY, j->gen.ctx->pool, &rgb, st) ||
+             mx_crop_resize(&rgb, v.crop, j->o->pub.image_size, &small, st) ||
+             mx_path_join(path, sizeof path, j->out.stage, "front.png", st) || mx_io_write_png(path, &small, st);
+    mx_image_free(&rgb);
+    mx_image_free(&small);
+    mx_job_view_free(&v);
+    return rc ? -1 : 0;
+}
+
 int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *st) {
     double t = mx_now();
     mx_job_set_phase(j, "finish");
@@ -747,6 +799,10 @@ int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *s
     const char *text = mx_jw_text(w);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
     if (mx_job_check_cancel(j, st) || (res && result_reserve(j, text, res, st))) return -1;
+    if (j->o->pub.out_dir && j->o->pub.front_render && write_front_render(j, tex, st)) {
+        if (res) mx_texture_result_free(res);
+        return -1;
+    }
     if (j->o->pub.out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->pub.cancel, st)) {
         if (res) mx_texture_result_free(res);
         return -1;

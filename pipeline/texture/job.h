@@ -13,6 +13,7 @@
 #include "../../runtime/jsonw.h"
 #include "models.h"
 #include "outdir.h"
+#include "style.h"
 #include "texture.h"
 
 #define MX_JOB_MAX_PROMPTS 16
@@ -39,6 +40,7 @@ typedef struct mx_job_gen {
     mx_prompt_cache prompts;
     float *uncond; /* negative prompt embedding [77][C] */
     int truncation_warned;
+    mx_style style; /* the style images and their tokens, encoded once for every view (style.h) */
 } mx_job_gen;
 
 /* The views: candidates, what they see, what the mesh has, and the schedule (views.h). */

@@ -86,6 +86,24 @@ static int load_ip_adapter(mx_models *m, mx_status *st) {
     return 0;
 }
 
+/* The style images' encoder and its preprocessing: CLIP's defaults at the tower's image size, or
+ * the folder's preprocessor_config.json that convert stored as "image_encoder.processor". */
+static int load_image_encoder(mx_models *m, mx_status *st) {
+    if (!has_network(m->wf, "image_encoder.")) return 0;
+    const char *text = config_text(m->wf, "image_encoder.", st), *processor = mx_wf_meta(m->wf, "image_encoder.processor");
+    void *net = NULL;
+    int rc = bind_net(m, 7, &m->b_image, "image_encoder.", st) ||
+             mx_clip_vision_load_config(&net, text, strlen(text), mx_wf_path(m->wf), &m->b_image, st);
+    m->image_encoder = net; /* also after a failure: mx_models_free destroys it */
+    if (rc) return mx_fail_prefix(st, "%s: image_encoder", mx_wf_path(m->wf));
+    mx_clip_image_config_default(&m->image_processor);
+    m->image_processor.size = m->image_encoder->cfg.image_size;
+    if (processor && mx_clip_image_config_parse(&m->image_processor, processor, strlen(processor),
+                                                "image_encoder.processor", st))
+        return mx_fail_prefix(st, "%s", mx_wf_path(m->wf));
+    return 0;
+}
+
 static int load_scheduler(mx_models *m, mx_status *st) {
     const char *text = mx_wf_meta(m->wf, "scheduler.config");
     if (!text) {
@@ -124,7 +142,8 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
     if (mx_wf_open(&m->wf, path, st)) return -1;
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_clip(m, st) ||
         load_unet_like(m, "unet.", 0, 1, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
-        load_vae(m, st) || load_taesd(m, st) || load_ip_adapter(m, st) || load_scheduler(m, st)) {
+        load_vae(m, st) || load_taesd(m, st) || load_ip_adapter(m, st) || load_image_encoder(m, st) ||
+        load_scheduler(m, st)) {
         mx_models_free(m);
         return -1;
     }
@@ -147,6 +166,7 @@ void mx_models_free(mx_models *m) {
     mx_vae_free(m->vae);
     mx_taesd_free(m->taesd);
     mx_ip_adapter_free(m->ip_adapter);
+    mx_clip_vision_destroy(m->image_encoder);
     mx_binder_free(&m->b_clip);
     mx_binder_free(&m->b_unet);
     mx_binder_free(&m->b_depth);
@@ -154,7 +174,8 @@ void mx_models_free(mx_models *m) {
     mx_binder_free(&m->b_vae);
     mx_binder_free(&m->b_taesd);
     mx_binder_free(&m->b_ip);
-    for (int i = 0; i < 7; i++) mx_binder_free(&m->wf_binders[i]);
+    mx_binder_free(&m->b_image);
+    for (int i = 0; i < 8; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);

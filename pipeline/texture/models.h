@@ -2,13 +2,16 @@
  * text encoder, UNet, ControlNet depth, ControlNet inpaint, VAE and the scheduler config.
  * Tensor prefixes are those `matex convert` writes: "text_encoder.", "unet.",
  * "controlnet_depth." (or a single "controlnet."), "controlnet_inpaint.", "vae.", and for the
- * few-step path "taesd." (optional), for image guidance "ip_adapter." (optional). */
+ * few-step path "taesd." (optional), for image guidance "image_encoder." and "ip_adapter." (optional,
+ * opened when present: style images need both, pipeline/texture/style.h). */
 #ifndef MX_MODELS_H
 #define MX_MODELS_H
 
 #include "../../ops/ops.h"
 #include "../../weights/weights.h"
 #include "../nn/clip.h"
+#include "../nn/clip_image.h"
+#include "../nn/clip_vision.h"
 #include "../nn/controlnet.h"
 #include "../nn/ip_adapter.h"
 #include "../nn/params.h"
@@ -30,11 +33,13 @@ typedef struct mx_models {
     mx_vae *vae;
     mx_taesd *taesd;           /* NULL when the file has no taesd.* */
     mx_ip_adapter *ip_adapter; /* NULL when the file has no ip_adapter.*; else checked against the UNet */
+    mx_clip_vision *image_encoder; /* NULL when the file has no image_encoder.* (the style images' encoder) */
+    mx_clip_image_config image_processor; /* its preprocessing (with image_encoder) */
     int lcm;                   /* the UNet has a merged LCM-LoRA (metadata unet.lcm_lora) */
     mx_sched_config sched;
     const mx_ctx *c;                           /* the weights live on c's backend */
-    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd, b_ip; /* weights on the device */
-    mx_binder wf_binders[7];                   /* the weight file's binders behind them */
+    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd, b_ip, b_image; /* weights on the device */
+    mx_binder wf_binders[8];                   /* the weight file's binders behind them */
     int clip_loaded;
     char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;

@@ -14,6 +14,7 @@
 typedef float float2[2];
 typedef float float3[3];
 typedef const char *text;
+typedef const char *paths[MATEX_MAX_STYLE_IMAGES];
 
 /* The offset of a matex_options field, compiled only when the field has type T. */
 #define FIELD(f, T) (offsetof(matex_options, f) + 0 * sizeof(_Generic(&((matex_options *)0)->f, T *: 1)))
@@ -86,6 +87,15 @@ static const mx_option_spec TABLE[] = {
     {.name = "front-back-words", .arg = "TEXT", .type = MX_OPTION_TEXT, .field = FIELD(front_back_words, text),
      .def = "front and back view of", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "prompt prefix of the grid"},
+    {.name = "style-image", .arg = "FILE", .type = MX_OPTION_PATHS, .field = FIELD(style_images, paths),
+     .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+     .help = "style image (PNG, JPEG, TIFF; IP-Adapter image guidance); several: their\n"
+             "tokens are concatenated; needs convert --image-encoder DIR --ip-adapter FILE"},
+    {.name = "style-scale", .arg = "S", .type = MX_OPTION_FLOAT, .field = FIELD(style_scale, float), .lo = 0, .hi = 2,
+     .def = "0.6", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+     .help = "weight of the style image's tokens (0: as without one)"},
+    {.name = "front-render", .type = MX_OPTION_FLAG, .field = FIELD(front_render, int), .verbs = TEX | ENH | BAT,
+     .scope = MX_SCOPE_JOB, .help = "also write front.png: the textured mesh from the front (a style image)"},
     {.name = "write", .arg = "angle-aware|first-wins", .type = MX_OPTION_CHOICE, .field = FIELD(first_wins, int),
      .choices = "angle-aware|first-wins", .def = "angle-aware", .verbs = TRA, .scope = MX_SCOPE_JOB,
      .help = "a later view that sees a texel with |n.v| higher by 0.15\n"
@@ -155,6 +165,9 @@ static void describe_range(const mx_option_spec *s, char *out, size_t cap) {
                  s->lo_open ? '(' : '[', s->lo, s->hi, s->hi_open ? ')' : ']');
         return;
     case MX_OPTION_CHOICE: snprintf(out, cap, "one of %s", s->choices); return;
+    case MX_OPTION_PATHS:
+        snprintf(out, cap, "at most %d file names, none empty, none after the list's first NULL", MATEX_MAX_STYLE_IMAGES);
+        return;
     default: snprintf(out, cap, "a text"); return;
     }
 }
@@ -212,6 +225,16 @@ static int check_one(const mx_option_spec *s, const matex_options *o, const char
         snprintf(own, sizeof own, "%d", v);
         break;
     }
+    case MX_OPTION_PATHS: { /* a list ends at its first NULL: nothing may follow it */
+        const char *const *v = f;
+        int end = 0;
+        for (int i = 0; i < MATEX_MAX_STYLE_IMAGES; i++) {
+            ok = ok && !(end && v[i]) && !(v[i] && !*v[i]);
+            end |= !v[i];
+        }
+        snprintf(own, sizeof own, "%.80s", v[0] ? v[0] : "");
+        break;
+    }
     case MX_OPTION_TEXT: { /* NULL: the default ("" for a text, "cpu" for the device) */
         const char *t = *(const char *const *)f;
         ok = !t || !s->choices || choice_index(s->choices, t) >= 0;
@@ -240,6 +263,15 @@ static int parse_floats(const char *text, float *v, int n) {
     return 0;
 }
 
+/* The next value of a path list: the first free slot; an empty value or a full list is refused. */
+static int append_path(const mx_option_spec *s, const char **list, const char *value, mx_status *st) {
+    if (!*value) return mx_fail(st, MX_EUSAGE, "--%s must be a file name, not ''", s->name);
+    for (int i = 0; i < MATEX_MAX_STYLE_IMAGES; i++)
+        if (!list[i]) return list[i] = value, 0;
+    return mx_fail(st, MX_EUSAGE, "--%s may be given at most %d times ('%s' is one more)", s->name,
+                   MATEX_MAX_STYLE_IMAGES, value);
+}
+
 int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, mx_status *st) {
     void *f = field(o, s->field);
     int bad = 0;
@@ -247,6 +279,7 @@ int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, 
     case MX_OPTION_FLAG: *(int *)f = 1; return 0;
     case MX_OPTION_CLI: return 0;
     case MX_OPTION_TEXT: *(const char **)f = value; break;
+    case MX_OPTION_PATHS: return append_path(s, f, value, st);
     case MX_OPTION_INT: bad = mx_parse_int(value, -2147483647L, 2147483647L, f); break;
     case MX_OPTION_U64: bad = mx_parse_u64(value, f); break;
     case MX_OPTION_FLOAT: bad = mx_parse_float(value, f); break;
@@ -264,6 +297,10 @@ int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, 
     if (s->twin) *(int *)field(o, s->twin) = *(const int *)f;
     if (s->marks) *(int *)field(o, s->marks) = 1;
     return 0;
+}
+
+void mx_option_clear_paths(const mx_option_spec *s, matex_options *o) {
+    if (s->type == MX_OPTION_PATHS) memset(field(o, s->field), 0, sizeof(paths));
 }
 
 void matex_options_default(matex_options *o) {

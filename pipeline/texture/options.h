@@ -21,6 +21,8 @@ typedef enum {
     MX_OPTION_FLOAT2, /* float[2], "A" or "A,B" (B = A when absent), each in lo..hi */
     MX_OPTION_FLOAT3, /* float[3], "A,B,C", each in lo..hi */
     MX_OPTION_TEXT,   /* const char * (borrowed) */
+    MX_OPTION_PATHS,  /* const char *[MATEX_MAX_STYLE_IMAGES] (borrowed): each value goes into the first
+                         free (NULL) slot, so the option may be given several times */
     MX_OPTION_CHOICE, /* int: the index of the value among `choices` ("depth|geometric") */
     MX_OPTION_CLI     /* handled by the command line itself (--weights, --json, ...): no field */
 } mx_option_type;
@@ -60,6 +62,9 @@ const mx_option_spec *mx_options_table(int *n);
 const mx_option_spec *mx_option_find(const char *name, unsigned verb);
 /* Parses `value` into o's field(s) and checks its range: MX_EUSAGE with "--NAME must be ... not 'VALUE'". */
 int mx_option_set(const mx_option_spec *s, matex_options *o, const char *value, mx_status *st);
+/* Empties a path list (MX_OPTION_PATHS; other options are left as they are): a batch manifest's
+ * style_image replaces the batch's own. */
+void mx_option_clear_paths(const mx_option_spec *s, matex_options *o);
 /* One option's value in o within its range (the same message). */
 int mx_option_check(const mx_option_spec *s, const matex_options *o, mx_status *st);
 /* Every option of a verb within its range (the message names the option, its value and the valid

@@ -5,7 +5,8 @@ cube (one texture per material); checks each material's image (size, the UV isla
 not empty) and that the object's mesh and UVs are what they were; renders a frame with Cycles
 on the CPU and checks the object is textured in it (against the same frame untextured);
 enhances and transfers; cancels a run in the middle and checks nothing changed; and checks a
-bad weight path ends in matex's message in the operator's report."""
+bad weight path and a style image that is not an image end in matex's message in the operator's
+report."""
 
 import json
 import math
@@ -325,6 +326,34 @@ def test_bad_weights(s, obj):
     check("bad weights: object as it was", snapshot(obj) == before and not obj.material_slots)
 
 
+def test_style_image(s, obj):
+    """The style image field goes to matex as --style-image: a file that is not an image ends in
+    matex's message naming it, before any work, and the object stays as it was; a real image
+    textures the object."""
+    before = snapshot(obj)
+    notes = os.path.join(TMP, "notes.png")
+    with open(notes, "w") as f:
+        f.write("not a picture\n")
+    s.style_image = notes
+    res, err = run_operator(bpy.ops.matex.texture_selected, obj)
+    s.style_image = ""
+    check("style image: the operator fails", res is None and err is not None)
+    check("style image: matex's message naming it (%s)" % (err or "").strip(),
+          err is not None and "notes.png: style image is not an image" in err)
+    check("style image: object as it was", snapshot(obj) == before and not obj.material_slots)
+    # a real image: the demo weights hold a tiny image encoder and IP-Adapter, so the run finishes
+    image = bpy.data.images.new("matex_style_test", 8, 8)
+    image.pixels.foreach_set([(i % 7) / 6.0 for i in range(8 * 8 * 4)])
+    image.filepath_raw, image.file_format = os.path.join(TMP, "style.png"), "PNG"
+    image.save()
+    bpy.data.images.remove(image)
+    s.style_image, s.style_scale = os.path.join(TMP, "style.png"), 0.8
+    res, err = run_operator(bpy.ops.matex.texture_selected, obj)
+    s.style_image = ""
+    check("style image: a real one, finished: %s" % err, res == {"FINISHED"})
+    check("style image: the object textured", len(obj.material_slots) > 0)
+
+
 def test_saved_beside_blend(s):
     """Storage "SAVE": the texture goes to textures/ beside the saved .blend, a relative path."""
     blend = os.path.join(TMP, "scene.blend")
@@ -354,6 +383,7 @@ def main():
     test_enhance_and_transfer(s, suzanne)
     bare = test_cancel(s)
     test_bad_weights(s, bare)
+    test_style_image(s, bare)
     test_saved_beside_blend(s)
     print("test_addon: %d check(s) failed, %.1f s (Blender %s)" % (failures, time.time() - t0, bpy.app.version_string))
     sys.exit(1 if failures else 0)
