@@ -4,6 +4,8 @@
 
 #include <string.h>
 
+#include "../../runtime/log.h"
+
 /* Largest block of K packed at once. Each thread keeps its MC×kc block of A in L2 (240 KiB at
  * 640) and streams kc×NR panels of B; a longer block means fewer passes over C and fewer
  * pack/compute rounds (K = 5120: 8 instead of 16). On this Zen 5 (48 KiB L1, 1 MiB L2) 640
@@ -183,18 +185,28 @@ typedef struct {
     int n_off, n_end; /* the outer block of columns */
     int k0, kc, first_block, last_block;
     int mpanels, npanels, mc_panels, nc_panels, nmb, nnb;
+    /* with a profile (c->prof): thread t's seconds of each part at part_secs[t·MX_GEMM_PARTS + part] */
+    double *part_secs;
 } gemm_job;
+
+/* The clock of the profiled parts: 0 (never read) without a profile. */
+static double part_clock(const gemm_job *j) { return j->part_secs ? mx_now() : 0; }
+
+static void add_part(const gemm_job *j, int thread, mx_gemm_part part, double t0, double t1) {
+    if (j->part_secs) j->part_secs[(size_t)thread * MX_GEMM_PARTS + part] += t1 - t0;
+}
 
 #define PACK_PANELS_PER_TASK 4
 
 
 static void pack_b_task(void *arg, int task, int thread) {
-    (void)thread;
     const gemm_job *j = arg;
     int nr = j->g->nr;
+    double t0 = part_clock(j);
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
         j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * mx_gemm_panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr, j->k0,
                      j->kc);
+    add_part(j, thread, MX_GEMM_PACK_B, t0, part_clock(j));
 }
 
 /* The packed A panels of row block mb in this thread's buffer; packed only when the thread's
@@ -230,7 +242,10 @@ static void compute_task(void *arg, int task, int thread) {
     int mb = task / j->nnb, nb = task % j->nnb;
     int mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
     int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
+    double t0 = part_clock(j);
     const float *a = thread_a_block(j, mb, thread);
+    double t1 = part_clock(j);
+    add_part(j, thread, MX_GEMM_PACK_A, t0, t1);
     size_t words = mx_gemm_panel_words(j->g, j->kc);
     for (int np = np0; np < np1; np++) {
         const float *b = j->bpack + (size_t)np * words * nr;
@@ -241,9 +256,13 @@ static void compute_task(void *arg, int task, int thread) {
                         n, !j->first_block);
         }
     }
-    if (j->last_block && j->bias)
+    double t2 = part_clock(j);
+    add_part(j, thread, MX_GEMM_MICRO, t1, t2);
+    if (j->last_block && j->bias) {
         add_bias(p, j->bias, mp0 * mr, min_int(p->M, mp1 * mr), j->n_off + np0 * nr,
                  min_int(j->n_end, j->n_off + np1 * nr));
+        add_part(j, thread, MX_GEMM_EPILOGUE, t2, part_clock(j));
+    }
 }
 
 /* Task grid of the current outer block: MC-row blocks × NC-column blocks. */
@@ -286,6 +305,15 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
     j->p = p;
 }
 
+/* Adds the threads' part times and the FLOPs of p to the profile (conv: the problems with an image). */
+static void profile_gemm(mx_profile *prof, const mx_gemm_problem *p, const double *part_secs, int nthreads) {
+    int user = p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR;
+    for (int t = 0; t < nthreads; t++)
+        for (int part = 0; part < MX_GEMM_PARTS; part++)
+            prof->gemm_secs[user][part] += part_secs[(size_t)t * MX_GEMM_PARTS + part];
+    prof->gemm_flops[user] += 2.0 * p->M * p->N * (double)p->K * p->batch;
+}
+
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
     if (p->M <= 0 || p->N <= 0 || p->batch <= 0) return 0;
     /* outer blocks end on whole panels */
@@ -297,10 +325,16 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * words;
     size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * words;
     size_t floats = (size_t)nthreads * ablock_n + bpack_n + bias_n;
+    size_t nparts = c && c->prof ? (size_t)nthreads * MX_GEMM_PARTS : 0;
     mx_scratch s;
-    float *mem = mx_scratch_take(c, floats * sizeof(float) + (size_t)nthreads * sizeof(int), &s);
+    /* floats, then the profile's doubles (8-byte aligned: floats is rounded up to even), then ints */
+    floats += floats & 1;
+    float *mem = mx_scratch_take(c, floats * sizeof(float) + nparts * sizeof(double) + (size_t)nthreads * sizeof(int), &s);
     if (!mem) return -1;
-    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .ablock_mb = (int *)(mem + floats)};
+    double *part_secs = nparts ? (double *)(void *)(mem + floats) : NULL;
+    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .part_secs = part_secs,
+                  .ablock_mb = (int *)(void *)((char *)(mem + floats) + nparts * sizeof(double))};
+    for (size_t i = 0; i < nparts; i++) part_secs[i] = 0;
     j.bpack = mem + (size_t)nthreads * ablock_n;
     if (bias_n) {
         float *bias = j.bpack + bpack_n;
@@ -319,6 +353,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
         j.last_block = kb == nkb - 1;
         run_k_block(c, &j, p, nb_max, nthreads);
     }
+    if (part_secs) profile_gemm(c->prof, p, part_secs, nthreads);
     mx_scratch_release(c, &s);
     return 0;
 }

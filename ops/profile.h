@@ -1,0 +1,37 @@
+/* Where a run's time goes: per-op wall time and, inside the GEMM engine (linear, conv2d), the
+ * thread time of each part (packing A, packing B = the tiled im2col for conv, the micro-kernel,
+ * the bias epilogue). Filled only when a context carries one (mx_ctx.prof, set by
+ * `bench_nets --profile` / `make bench`); a NULL profile reads no clock. Plain sums, written by
+ * the calling thread after each op (the GEMM's worker threads write their own slots first). */
+#ifndef MX_OPS_PROFILE_H
+#define MX_OPS_PROFILE_H
+
+#include "op_list.h"
+
+/* The op ids, in list order: MX_OP_ID_linear, ... (profile slots and names). */
+#define MX_OP_ID_(name, guard, params, args) MX_OP_ID_##name,
+enum { MX_OPS(MX_OP_ID_) };
+#undef MX_OP_ID_
+
+typedef enum {
+    MX_GEMM_PACK_A,   /* A panels: linear's activations, conv's weights (widened, to pairs) */
+    MX_GEMM_PACK_B,   /* B panels: linear's weights, conv's im2col of the activations */
+    MX_GEMM_MICRO,    /* the register-blocked micro-kernel, C loads and stores included */
+    MX_GEMM_EPILOGUE, /* bias added to C after the last K block */
+    MX_GEMM_PARTS
+} mx_gemm_part;
+
+/* The GEMM users that are told apart (0: linear, 1: conv2d). */
+enum { MX_GEMM_LINEAR, MX_GEMM_CONV, MX_GEMM_USERS };
+
+typedef struct mx_profile {
+    double op_secs[MX_OP_COUNT]; /* wall seconds inside each op */
+    long op_calls[MX_OP_COUNT];
+    double gemm_secs[MX_GEMM_USERS][MX_GEMM_PARTS]; /* thread seconds, summed over threads */
+    double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls */
+} mx_profile;
+
+/* The name of op id `op` (its op_list.h name), or "?" out of range. */
+const char *mx_op_name(int op);
+
+#endif
