@@ -6,7 +6,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../runtime/log.h"
 #include "cpu/kernels.h"
 
 float mx_w_get(mx_wptr w, size_t i) {
@@ -50,14 +49,14 @@ static void op_end(const mx_ctx *c) {
     if (c && c->be && c->be->leave) c->be->leave(c->be);
 }
 
-/* Op id's call through the kernel table, timed when c carries a profile. */
+/* Op id's call through the kernel table, timed (process CPU time) when c carries a profile. */
 #define RUN_OP(c, id, call)                                                                                  \
     do {                                                                                                     \
         const mx_kernels *k_ = op_begin(c);                                                                  \
         if (k_) {                                                                                            \
-            double t0_ = c && c->prof ? mx_now() : 0;                                                        \
+            double t0_ = c && c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;                       \
             k_->call;                                                                                        \
-            if (c && c->prof) profile_op(c->prof, id, mx_now() - t0_);                                       \
+            if (c && c->prof) profile_op(c->prof, id, mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0_);      \
             op_end(c);                                                                                       \
         }                                                                                                    \
     } while (0)

@@ -1,10 +1,14 @@
-/* Where a run's time goes: per-op wall time and, inside the GEMM engine (linear, conv2d), the
- * thread time of each part (packing A, packing B = the tiled im2col for conv, the micro-kernel,
- * the bias epilogue). Filled only when a context carries one (mx_ctx.prof, set by
- * `bench_nets --profile` / `make bench`); a NULL profile reads no clock. Plain sums, written by
- * the calling thread after each op (the GEMM's worker threads write their own slots first). */
+/* Where a run's time goes: per op the CPU time of the process (all threads) while it ran and,
+ * inside the GEMM engine (linear, conv2d), the CPU time of each part in each thread (packing A,
+ * packing B = the tiled im2col for conv, the micro-kernel, the bias epilogue). CPU time, not
+ * wall time: on a shared machine it counts only the work of this run (the pool's idle workers
+ * sleep, so they add nothing). Filled only when a context carries one (mx_ctx.prof, set by
+ * bench_nets); a NULL profile reads no clock. Plain sums, written by the calling thread after
+ * each op (the GEMM's worker threads write their own slots first). */
 #ifndef MX_OPS_PROFILE_H
 #define MX_OPS_PROFILE_H
+
+#include <time.h>
 
 #include "op_list.h"
 
@@ -25,11 +29,18 @@ typedef enum {
 enum { MX_GEMM_LINEAR, MX_GEMM_CONV, MX_GEMM_USERS };
 
 typedef struct mx_profile {
-    double op_secs[MX_OP_COUNT]; /* wall seconds inside each op */
+    double op_secs[MX_OP_COUNT]; /* process CPU seconds inside each op */
     long op_calls[MX_OP_COUNT];
     double gemm_secs[MX_GEMM_USERS][MX_GEMM_PARTS]; /* thread seconds, summed over threads */
     double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls */
 } mx_profile;
+
+/* CPU seconds of the process (CLOCK_PROCESS_CPUTIME_ID) or the calling thread (…THREAD…). */
+static inline double mx_profile_clock(clockid_t which) {
+    struct timespec ts;
+    clock_gettime(which, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
 
 /* The name of op id `op` (its op_list.h name), or "?" out of range. */
 const char *mx_op_name(int op);

@@ -4,10 +4,13 @@
  * call (64×64 latent, batch 2, 77 tokens), one VAE decode (64×64 latent, batch 1) and one CLIP
  * call (batch 2), each in fp32 and, where the CPU has AVX512_BF16, in bf16 right after it (same
  * load on the machine), with the share of the measured peak of these cores (bench_sd15.h).
- * Then, per network and precision, where the time went (ops/profile.h): each op's share of the
- * wall time, the GEMM's parts (micro-kernel, packing of A and B — B is the im2col of a conv —,
- * bias epilogue, threads idle) and the minor page faults of the call. The timers read the clock
- * a few times per GEMM task and once per op (well under 1 % here); --no-profile runs without.
+ * Then, per network and precision, where the time went (ops/profile.h), as shares of the CPU
+ * time of the call (what survives other people's load on a shared machine): each op, the GEMM's
+ * parts (micro-kernel, packing of A and B — B is the im2col of a conv —, bias epilogue, the
+ * rest: task setup, waiting at the end of a phase), the micro-kernel's own GFLOP/s, the cores'
+ * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
+ * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
+ * (well under 1 % here); --no-profile runs without.
  * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--no-profile] */
 #include <stdio.h>
 #include <stdlib.h>
@@ -86,50 +89,51 @@ static void clock_net(net_time *t, mx_ctx *c, int p, int stop, int profile) {
 
 /* ---- where the time went ---- */
 
-/* One part of the breakdown: its share of the wall time (of threads × wall for thread seconds). */
+/* One part of the breakdown: its share of the call's CPU time. */
 static void part(const char *name, double secs, double whole) {
     if (secs > 0) printf(" %s %.1f%%", name, 100 * secs / whole);
 }
 
-/* The GEMM line of a user (linear or conv2d): the op's share of the wall time, then its parts as
- * shares of threads × wall, and the micro-kernel's own rate (FLOPs over its thread seconds). */
-static void report_gemm(const mx_profile *pr, int user, int op, double wall, int threads, double peak) {
+/* The GEMM line of a user (linear or conv2d): the op's share of the CPU time, its parts, and
+ * the micro-kernel's own rate (FLOPs over its CPU seconds, per `threads` cores). */
+static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int threads, double peak) {
     static const char *const user_name[MX_GEMM_USERS] = {"linear", "conv2d"};
     const double *s = pr->gemm_secs[user];
-    double busy = 0, whole = wall * threads, op_thread = pr->op_secs[op] * threads;
+    double busy = 0, whole = cpu;
     for (int q = 0; q < MX_GEMM_PARTS; q++) busy += s[q];
-    printf("  %-18s %5.1f%% (%ld calls):", user_name[user], 100 * pr->op_secs[op] / wall, pr->op_calls[op]);
+    printf("  %-18s %5.1f%% (%ld calls):", user_name[user], 100 * pr->op_secs[op] / cpu, pr->op_calls[op]);
     part("micro", s[MX_GEMM_MICRO], whole);
     part(user == MX_GEMM_CONV ? "pack-A(weights)" : "pack-A(x)", s[MX_GEMM_PACK_A], whole);
     part(user == MX_GEMM_CONV ? "pack-B(im2col)" : "pack-B(weights)", s[MX_GEMM_PACK_B], whole);
     part("bias", s[MX_GEMM_EPILOGUE], whole);
-    part("idle+serial", op_thread - busy, whole);
+    part("rest", pr->op_secs[op] - busy, whole);
     if (s[MX_GEMM_MICRO] > 0 && peak > 0)
         printf("; micro-kernel %.0f GFLOP/s = %.0f%% of peak", pr->gemm_flops[user] * 1e-9 / (s[MX_GEMM_MICRO] / threads),
                100 * pr->gemm_flops[user] * 1e-9 / (s[MX_GEMM_MICRO] / threads) / peak);
     printf("\n");
 }
 
-/* The breakdown of one run: the GEMM users, then every other op with ≥ 0.1 % of the wall time
+/* The breakdown of one run: the GEMM users, then every other op with ≥ 0.1 % of the CPU time
  * (largest first), then the time outside any op (the network's own code: arena, loops). */
 static void report_profile(const net_time *t, int p, double peak, int threads) {
     const mx_profile *pr = &t->prof[p];
-    double wall = t->secs[p], in_ops = 0;
-    printf("%s, %s: %.2f s wall, %ld minor page faults\n", t->what, p ? "bf16" : "fp32", wall, t->faults[p]);
+    double wall = t->secs[p], cpu = t->cpu[p], in_ops = 0;
+    printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall, %ld minor page faults\n", t->what,
+           p ? "bf16" : "fp32", wall, cpu, 100 * (threads * wall - cpu) / (threads * wall), t->faults[p]);
     for (int op = 0; op < MX_OP_COUNT; op++) in_ops += pr->op_secs[op];
-    report_gemm(pr, MX_GEMM_CONV, MX_OP_ID_conv2d, wall, threads, peak);
-    report_gemm(pr, MX_GEMM_LINEAR, MX_OP_ID_linear, wall, threads, peak);
+    report_gemm(pr, MX_GEMM_CONV, MX_OP_ID_conv2d, cpu, threads, peak);
+    report_gemm(pr, MX_GEMM_LINEAR, MX_OP_ID_linear, cpu, threads, peak);
     int done[MX_OP_COUNT] = {0};
     done[MX_OP_ID_conv2d] = done[MX_OP_ID_linear] = 1;
     for (;;) {
         int best = -1;
         for (int op = 0; op < MX_OP_COUNT; op++)
             if (!done[op] && (best < 0 || pr->op_secs[op] > pr->op_secs[best])) best = op;
-        if (best < 0 || pr->op_secs[best] < 1e-3 * wall) break;
+        if (best < 0 || pr->op_secs[best] < 1e-3 * cpu) break;
         done[best] = 1;
-        printf("  %-18s %5.1f%% (%ld calls)\n", mx_op_name(best), 100 * pr->op_secs[best] / wall, pr->op_calls[best]);
+        printf("  %-18s %5.1f%% (%ld calls)\n", mx_op_name(best), 100 * pr->op_secs[best] / cpu, pr->op_calls[best]);
     }
-    printf("  %-18s %5.1f%%\n", "outside ops", 100 * (wall - in_ops) / wall);
+    printf("  %-18s %5.1f%%\n", "outside ops", 100 * (cpu - in_ops) / cpu);
 }
 
 typedef struct bench_opts {
@@ -232,7 +236,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     report(&nt_unet, peak, nth);
     if (!o->skip_vae) report(&nt_vae, peak, nth);
     if (o->profile) {
-        printf("where the time went (share of wall time; GEMM parts: share of threads x wall time):\n");
+        printf("where the time went (shares of each call's CPU time, all threads):\n");
         for (int p = 0; p < nprec; p++) {
             if (!o->skip_cn) report_profile(&nt_cn, p, peak[p], nth);
             report_profile(&nt_unet, p, peak[p], nth);

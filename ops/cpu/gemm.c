@@ -4,8 +4,6 @@
 
 #include <string.h>
 
-#include "../../runtime/log.h"
-
 /* Largest block of K packed at once. Each thread keeps its MC×kc block of A in L2 (240 KiB at
  * 640) and streams kc×NR panels of B; a longer block means fewer passes over C and fewer
  * pack/compute rounds (K = 5120: 8 instead of 16). On this Zen 5 (48 KiB L1, 1 MiB L2) 640
@@ -177,10 +175,12 @@ typedef struct {
     const mx_gemm_problem *p;
     float *bpack;
     /* per-thread A blocks (MC rows × kc, packed by the thread that computes with them, so they
-     * stay in its L2) and the row block each one holds (-1: none yet in this K block) */
+     * stay in its L2) and the row block each one holds (-1: none yet in this K block); or, with
+     * shared_a, all of A's panels of the K block, packed once by all threads */
     float *ablock;
     size_t ablock_stride;
     int *ablock_mb;
+    int shared_a;
     const float *bias; /* widened, or NULL */
     int n_off, n_end; /* the outer block of columns */
     int k0, kc, first_block, last_block;
@@ -189,8 +189,8 @@ typedef struct {
     double *part_secs;
 } gemm_job;
 
-/* The clock of the profiled parts: 0 (never read) without a profile. */
-static double part_clock(const gemm_job *j) { return j->part_secs ? mx_now() : 0; }
+/* The clock of the profiled parts, the thread's CPU time: 0 (never read) without a profile. */
+static double part_clock(const gemm_job *j) { return j->part_secs ? mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) : 0; }
 
 static void add_part(const gemm_job *j, int thread, mx_gemm_part part, double t0, double t1) {
     if (j->part_secs) j->part_secs[(size_t)thread * MX_GEMM_PARTS + part] += t1 - t0;
@@ -209,10 +209,23 @@ static void pack_b_task(void *arg, int task, int thread) {
     add_part(j, thread, MX_GEMM_PACK_B, t0, part_clock(j));
 }
 
-/* The packed A panels of row block mb in this thread's buffer; packed only when the thread's
- * previous task used another block (tasks of one row block are claimed one after the other).
- * Packing copies values exactly, so who packs never changes a result. */
+/* A panels of the K block packed once for all tasks (shared_a). */
+static void pack_a_task(void *arg, int task, int thread) {
+    const gemm_job *j = arg;
+    int mr = j->g->mr;
+    size_t panel = mx_gemm_panel_words(j->g, j->kc) * mr;
+    double t0 = part_clock(j);
+    for (int mp = task * PACK_PANELS_PER_TASK; mp < min_int(j->mpanels, (task + 1) * PACK_PANELS_PER_TASK); mp++)
+        j->p->pack_a(j->p, j->g, j->ablock + (size_t)mp * panel, mp * mr, mr, j->k0, j->kc);
+    add_part(j, thread, MX_GEMM_PACK_A, t0, part_clock(j));
+}
+
+/* The packed A panels of row block mb: in the shared buffer (shared_a), else in this thread's
+ * buffer, packed only when the thread's previous task used another block (tasks of one row block
+ * are claimed one after the other). Packing copies values exactly, so who packs never changes a
+ * result. */
 static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
+    if (j->shared_a) return j->ablock + (size_t)mb * j->mc_panels * mx_gemm_panel_words(j->g, j->kc) * j->g->mr;
     float *buf = j->ablock + (size_t)thread * j->ablock_stride;
     if (j->ablock_mb[thread] != mb) {
         int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
@@ -292,6 +305,7 @@ static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
  * every batch item, so a thread's A block stays valid across items). */
 static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, int nb_max, int nthreads) {
     for (int t = 0; t < nthreads; t++) j->ablock_mb[t] = -1;
+    if (j->shared_a) mx_par_for(c, ceil_div(ceil_div(p->M, j->g->mr), PACK_PANELS_PER_TASK), pack_a_task, j);
     for (int b = 0; b < p->batch; b++) {
         mx_gemm_problem item = batch_item(p, b);
         j->p = &item;
@@ -323,8 +337,15 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
     size_t words = mx_gemm_panel_words(g, kc_max);
     size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * words;
+    /* Fewer row blocks than tasks wanted: each row block is split over column blocks (and batch
+     * items) that different threads compute, and per-thread A blocks would be packed once per
+     * thread (per batch item) instead of once: pack all of A's K block up front then (M < 3072
+     * rows here, so ≤ 7.5 MiB at kc = 640; e.g. every conv, M = Cout). */
+    int mpanels = ceil_div(p->M, g->mr), shared_a = ceil_div(mpanels, max_int(1, MC_ROWS / g->mr)) < TASKS_WANTED;
+    if (shared_a) ablock_n = (size_t)mpanels * g->mr * words;
     size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * words;
-    size_t floats = (size_t)nthreads * ablock_n + bpack_n + bias_n;
+    size_t ablocks = shared_a ? 1 : (size_t)nthreads;
+    size_t floats = ablocks * ablock_n + bpack_n + bias_n;
     size_t nparts = c && c->prof ? (size_t)nthreads * MX_GEMM_PARTS : 0;
     mx_scratch s;
     /* floats, then the profile's doubles (8-byte aligned: floats is rounded up to even), then ints */
@@ -332,10 +353,11 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     float *mem = mx_scratch_take(c, floats * sizeof(float) + nparts * sizeof(double) + (size_t)nthreads * sizeof(int), &s);
     if (!mem) return -1;
     double *part_secs = nparts ? (double *)(void *)(mem + floats) : NULL;
-    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .part_secs = part_secs,
+    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .shared_a = shared_a, .mpanels = mpanels,
+                  .part_secs = part_secs,
                   .ablock_mb = (int *)(void *)((char *)(mem + floats) + nparts * sizeof(double))};
     for (size_t i = 0; i < nparts; i++) part_secs[i] = 0;
-    j.bpack = mem + (size_t)nthreads * ablock_n;
+    j.bpack = mem + ablocks * ablock_n;
     if (bias_n) {
         float *bias = j.bpack + bpack_n;
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
