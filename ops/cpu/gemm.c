@@ -28,6 +28,18 @@ static void zero_pair_rows(uint32_t *dst, int width, int kp, size_t words) {
     for (size_t k = (size_t)kp; k < words; k++) memset(dst + k * width, 0, (size_t)width * sizeof *dst);
 }
 
+/* Starts fetching rows first..first+n-1, columns k0..k0+kc-1, of a row-major matrix. The packers
+ * read a weight matrix a few rows at a time, each row only a short run (kc elements: 1.25 KiB of
+ * fp16 at kc = 640) that the hardware prefetcher barely ramps up on; without this, widening the
+ * weights (straight from memory, far larger than the caches) stalled on every load. */
+static void prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc) {
+    size_t es = mx_dtype_size(src.dtype), bytes = (size_t)kc * es;
+    for (int r = 0; r < n; r++) {
+        const char *row = (const char *)src.data + ((size_t)(first + r) * ld + (size_t)k0) * es;
+        for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(row + b, 0, 3);
+    }
+}
+
 /* One row of src (element (r, k) at r*ld + k) as kc/2 words of pairs (16-bit weights widened). */
 static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int r, int k0, int kc) {
     float row[KC_MAX];
@@ -58,12 +70,13 @@ static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_
 /* bf16 pairs, k-major: each row converted to kc/2 words of pairs, WIDEN_ROWS rows at a time,
  * then transposed as 32-bit words into dst[kp][width]. */
 static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
-                            int width, int k0, int kc) {
+                            int total, int width, int k0, int kc) {
     enum { WORDS = KC_MAX / 2 };
     uint32_t tmp[WIDEN_ROWS * WORDS];
     int kp = (kc + 1) / 2;
     for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
         int n = min_int(WIDEN_ROWS, valid - r0);
+        prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
         for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
@@ -74,15 +87,17 @@ static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src,
 }
 
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
- * weights are widened WIDEN_ROWS rows at a time first. bf16 kernels: pack_rows_pairs, or
- * pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
-static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int valid,
+ * weights are widened WIDEN_ROWS rows at a time first, the next rows (of the `total` rows the
+ * matrix has from `first` on: into the next panel) fetched meanwhile. bf16 kernels:
+ * pack_rows_pairs, or pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
+static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int total,
                       int width, int k0, int kc, int row_major) {
+    int valid = min_int(width, total);
     if (g->to_pairs) {
         if (row_major)
             pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc);
         else
-            pack_rows_pairs(g, dstv, src, ld, first, valid, width, k0, kc);
+            pack_rows_pairs(g, dstv, src, ld, first, valid, total, width, k0, kc);
         return;
     }
     float *dst = dstv;
@@ -93,6 +108,7 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
         float tmp[WIDEN_ROWS * KC_MAX];
         for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
             int n = min_int(WIDEN_ROWS, valid - r0);
+            prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
             for (int i = 0; i < n; i++)
                 g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
             g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);
@@ -104,12 +120,12 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
 
 void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->a_mat, p->a_ld, first, min_int(rows, p->M - first), rows, k0, kc, g->a_rows);
+    pack_rows(g, dst, p->a_mat, p->a_ld, first, p->M - first, rows, k0, kc, g->a_rows);
 }
 
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->b_mat, p->b_ld, first, min_int(rows, p->N - first), rows, k0, kc, 0);
+    pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0);
 }
 
 /* One run of output pixels ox..ox+run-1 of one output row, for kernel tap (ky, kx) of channel ci. */
