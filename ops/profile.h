@@ -1,10 +1,10 @@
 /* Where a run's time goes: per op the CPU time of the process (all threads) while it ran and,
  * inside the GEMM engine (linear, conv2d), the CPU time of each part in each thread (packing A,
- * packing B = the tiled im2col for conv, the micro-kernel, the bias epilogue). CPU time, not
- * wall time: on a shared machine it counts only the work of this run (the pool's idle workers
- * sleep, so they add nothing). Filled only when a context carries one (mx_ctx.prof, set by
- * bench_nets); a NULL profile reads no clock. Plain sums, written by the calling thread after
- * each op (the GEMM's worker threads write their own slots first). */
+ * packing B = the tiled im2col for conv, the micro-kernel with the bias added to its tiles).
+ * CPU time, not wall time: on a shared machine it counts only the work of this run (the pool's
+ * idle workers sleep, so they add nothing). Filled only when a context carries one (mx_ctx.prof,
+ * set by bench_nets); a NULL profile reads no clock. Plain sums, written by the calling thread
+ * after each op (the GEMM's worker threads write their own slots first). */
 #ifndef MX_OPS_PROFILE_H
 #define MX_OPS_PROFILE_H
 
@@ -20,8 +20,7 @@ enum { MX_OPS(MX_OP_ID_) };
 typedef enum {
     MX_GEMM_PACK_A,   /* A panels: linear's activations, conv's weights (widened, to pairs) */
     MX_GEMM_PACK_B,   /* B panels: linear's weights, conv's im2col of the activations */
-    MX_GEMM_MICRO,    /* the register-blocked micro-kernel, C loads and stores included */
-    MX_GEMM_EPILOGUE, /* bias added to C after the last K block */
+    MX_GEMM_MICRO,    /* the register-blocked micro-kernel, C loads and stores and the bias included */
     MX_GEMM_PARTS
 } mx_gemm_part;
 
