@@ -222,6 +222,9 @@ TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS
            MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
            MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
 TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+# Everything the suite needs, built without running it (CI builds it before two suites run side by side).
+.PHONY: test-deps
+test-deps: $(TEST_DEPS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
@@ -270,7 +273,7 @@ asan:
 # demo weights made by the native matex. ----
 ARM64_CC    ?= aarch64-linux-gnu-gcc
 ARM64_BUILD ?= build-arm64
-ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip \
+ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip test_nn_clip_vision \
                test_nn_transformer test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline \
                test_texture_threads_core
 # also run on the CPU model without FEAT_BF16 (tests/arm64.sh)
@@ -342,7 +345,7 @@ LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
 CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
 CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
-                test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast
+                test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast test_nn_clip_vision
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu

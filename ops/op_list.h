@@ -100,7 +100,8 @@
        float max_period),                                                                                    \
       (y, t, B, dim, flip_sin_to_cos, downscale_freq_shift, max_period))                                     \
     /* y[b, t, :] = tokens[ids[b·T + t], :] + positions[t, :] (C columns). ids are HOST integers, already */ \
-    /* checked against the vocabulary by the caller. */                                                     \
+    /* checked against the vocabulary by the caller; a negative id takes no token row, y = positions[t] */  \
+    /* (CLIP vision: the class token at t = 0, the patch rows added after). */                              \
     X(embed_tokens, B > 0 && T > 0 && C > 0,                                                                 \
       (float *y, const int32_t *ids, int B, int T, int C, mx_wptr tokens, mx_wptr positions),                \
       (y, ids, B, T, C, tokens, positions))

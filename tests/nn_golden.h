@@ -187,12 +187,12 @@ static inline void golden_arena(const mx_ctx *c, mx_arena *a, size_t bytes) {
 }
 
 /* Runs one call on the context's device in an arena of exactly the measured size: the host
- * inputs are copied to the device, the output back. */
+ * inputs (image tokens too) are copied to the device, the output back. */
 static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out) {
     mx_status st;
     size_t bytes;
     mx_arena a;
-    if (mx_unet_arena_bytes(u, in->B, in->H, in->W, in->T, &bytes, &st)) {
+    if (mx_unet_call_arena_bytes(u, in, &bytes, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         return -1;
     }
@@ -204,6 +204,7 @@ static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_un
     d.sample = golden_dev(c, in->sample, (size_t)in->B * cfg->in_channels * in->H * in->W);
     d.timesteps = golden_dev(c, in->timesteps, (size_t)in->B);
     d.encoder_hidden_states = golden_dev(c, in->encoder_hidden_states, (size_t)in->B * in->T * cfg->cross_attention_dim);
+    d.ip_tokens = golden_dev(c, in->ip_tokens, (size_t)in->B * in->ip_n * cfg->cross_attention_dim);
     for (int i = 0; i <= n && in->down_residuals; i++) {
         mx_unet_residual_shape(cfg, i, in->H, in->W, &C, &h, &w);
         res[i] = golden_dev(c, i < n ? in->down_residuals[i] : in->mid_residual, (size_t)in->B * C * h * w);
@@ -219,6 +220,7 @@ static inline int golden_run_unet(const mx_ctx *c, const mx_unet *u, const mx_un
     mx_dev_free(c, (void *)d.sample);
     mx_dev_free(c, (void *)d.timesteps);
     mx_dev_free(c, (void *)d.encoder_hidden_states);
+    mx_dev_free(c, (void *)d.ip_tokens);
     for (int i = 0; i <= n; i++) mx_dev_free(c, res[i]);
     mx_arena_destroy(&a);
     return rc;

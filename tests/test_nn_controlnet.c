@@ -161,7 +161,8 @@ static void check_unet_fp16w_chain(const mx_ctx *c, const char *cn_net, const ch
     for (int s = 0; s < 2; s++) {
         x.in.scale = scales[s];
         CHECK(golden_run_controlnet(c, k.m, &x.in, res, res[n], 0) == 0);
-        mx_unet_input ui = {x.sample, x.ts, x.ehs, x.in.B, x.in.H, x.in.W, x.in.T, (const float *const *)res, res[n]};
+        mx_unet_input ui = {.sample = x.sample, .timesteps = x.ts, .encoder_hidden_states = x.ehs, .B = x.in.B, .H = x.in.H,
+                            .W = x.in.W, .T = x.in.T, .down_residuals = (const float *const *)res, .mid_residual = res[n]};
         size_t nw;
         CHECK(golden_run_unet(c, u, &ui, got) == 0);
         char name[64], label[160];

@@ -132,7 +132,8 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         CHECK(ts_equal);
         mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
         step_check sc = {after, 0, -1};
-        mx_sd_request rq = {n->unet, &control, 1, cond, unc, 77, 7.5f, &s, on_step, &sc, NULL, NULL};
+        mx_sd_request rq = {.unet = n->unet, .controls = &control, .n_controls = 1, .cond_text = cond, .uncond_text = unc,
+                            .T = 77, .guidance = 7.5f, .sched = &s, .progress = on_step, .progress_user = &sc};
         CHECK(mx_sd_denoise(&rq, c, lat, 1, 8, 8, &st) == 0);
         CHECK(sc.steps_seen == 6);
         float *img = malloc(sizeof(float) * nimg);

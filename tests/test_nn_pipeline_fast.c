@@ -49,7 +49,8 @@ static void test_edit_keep(const tiny_nets *n, const mx_ctx *c, const mx_sched_c
     CHECK(ok);
     if (ok) {
         mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
-        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, NULL, NULL, NULL, NULL};
+        mx_sd_request rq = {.unet = n->unet, .controls = &control, .n_controls = 1, .cond_text = cond, .T = 77,
+                            .guidance = 1.0f, .sched = &s};
         step_io io = {noises + nlat, NULL, 0};
         s.noise_fn = give_noise;
         s.noise_user = &io;
@@ -93,7 +94,8 @@ static void test_pipeline(const tiny_nets *n, const mx_ctx *c) {
         mx_sd_control control = {n->cnet, ctl, 0.8f, NULL};
         step_io io = {noises, after, 0};
         /* no negative embeddings: guidance 1 must not need them */
-        mx_sd_request rq = {n->unet, &control, 1, cond, NULL, 77, 1.0f, &s, on_step, &io, NULL, NULL};
+        mx_sd_request rq = {.unet = n->unet, .controls = &control, .n_controls = 1, .cond_text = cond, .T = 77,
+                            .guidance = 1.0f, .sched = &s, .progress = on_step, .progress_user = &io};
         s.noise_fn = give_noise;
         s.noise_user = &io;
         CHECK(mx_sd_denoise(&rq, c, lat, 2, 8, 8, &st) == 0);

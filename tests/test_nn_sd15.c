@@ -44,8 +44,8 @@ static void sd15_unet(const mx_ctx *c) {
     if (!ts || !te) return;
     float *sample = golden_f32(&in, "sample", NULL), *ehs = golden_f32(&in, "encoder_hidden_states", NULL);
     float *tsteps = golden_f32(&in, "timestep", NULL);
-    mx_unet_input ui = {sample, tsteps, ehs, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3], (int)te->shape[1],
-                        NULL, NULL};
+    mx_unet_input ui = {.sample = sample, .timesteps = tsteps, .encoder_hidden_states = ehs, .B = (int)ts->shape[0],
+                        .H = (int)ts->shape[2], .W = (int)ts->shape[3], .T = (int)te->shape[1]};
     float *got = malloc((size_t)ui.B * cfg.out_channels * ui.H * ui.W * sizeof *got);
     CHECK(mx_unet_arena_bytes(u, ui.B, ui.H, ui.W, ui.T, &bytes, &st) == 0);
     printf("sd15_unet: arena %.1f MB\n", bytes / 1e6);

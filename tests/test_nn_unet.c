@@ -55,8 +55,8 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
     const mx_st_tensor *st_s = mx_st_find(&in, "sample"), *st_e = mx_st_find(&in, "encoder_hidden_states");
     CHECK(sample && ehs && ts && st_s && st_e);
     if (!sample || !ehs || !ts || !st_s || !st_e) return;
-    mx_unet_input ui = {sample, ts, ehs, (int)st_s->shape[0], (int)st_s->shape[2], (int)st_s->shape[3],
-                        (int)st_e->shape[1], NULL, NULL};
+    mx_unet_input ui = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = (int)st_s->shape[0],
+                        .H = (int)st_s->shape[2], .W = (int)st_s->shape[3], .T = (int)st_e->shape[1]};
     float *got = calloc((size_t)ui.B * k.cfg.out_channels * ui.H * ui.W, sizeof *got);
     int nres = mx_unet_num_residuals(&k.cfg);
     for (int s = -1; s < (residuals ? 2 : 0); s++) {
@@ -113,8 +113,9 @@ static void check_batch_independence(const mx_ctx *c) {
     float ts[2] = {999.0f, 250.0f};
     mx_fill_random(sample, 2 * ns, 11, -1.5f, 1.5f);
     mx_fill_random(ehs, 2 * ne, 12, -2.0f, 2.0f);
-    mx_unet_input both = {sample, ts, ehs, 2, H, W, T, NULL, NULL};
-    mx_unet_input one = {sample + ns, ts + 1, ehs + ne, 1, H, W, T, NULL, NULL};
+    mx_unet_input both = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = 2, .H = H, .W = W, .T = T};
+    mx_unet_input one = {.sample = sample + ns, .timesteps = ts + 1, .encoder_hidden_states = ehs + ne,
+                         .B = 1, .H = H, .W = W, .T = T};
     CHECK(golden_run_unet(c, k.u, &both, out2) == 0);
     CHECK(golden_run_unet(c, k.u, &one, out1) == 0);
     mx_check_close("unet_tiny 8x16: batch item 1 vs alone", out1, out2 + no, no, 1e-6);
@@ -127,7 +128,7 @@ static void check_batch_independence(const mx_ctx *c) {
     CHECK(isfinite(ss) && ss > 0);
     /* a latent that is not a multiple of 2 (tiny has 2 levels) is refused with a message */
     mx_status st;
-    mx_unet_input bad = {sample, ts, ehs, 1, 7, 16, T, NULL, NULL};
+    mx_unet_input bad = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = 1, .H = 7, .W = 16, .T = T};
     size_t bytes;
     CHECK(mx_unet_arena_bytes(k.u, bad.B, bad.H, bad.W, bad.T, &bytes, &st) == -1 && strstr(st.msg, "multiple"));
     free(sample);
@@ -172,7 +173,7 @@ static void check_linear_projection(const mx_ctx *c) {
     float *o1 = malloc(no * sizeof(float)), *o2 = malloc(no * sizeof(float)), ts[1] = {500.0f};
     mx_fill_random(sample, ns, 31, -1.0f, 1.0f);
     mx_fill_random(ehs, ne, 32, -1.0f, 1.0f);
-    mx_unet_input in = {sample, ts, ehs, 1, H, W, T, NULL, NULL};
+    mx_unet_input in = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = 1, .H = H, .W = W, .T = T};
     CHECK(golden_run_unet(c, k.u, &in, o1) == 0);
     if (ul) CHECK(golden_run_unet(c, ul, &in, o2) == 0);
     if (ul) mx_check_close("unet_tiny linear projection vs 1x1 conv", o2, o1, no, 1e-5);

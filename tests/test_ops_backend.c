@@ -161,6 +161,11 @@ static void test_small_ops(const mx_ctx *c) {
     mx_embed_tokens(c, dy, ids, 2, 2, 2, mx_w_f32(tok), mx_w_f32(pos));
     CHECK(mx_download(c, got, dy, 8, &st) == 0);
     mx_check_close("embed_tokens", got, emb_want, 8, 0);
+    const int32_t no_token[4] = {1, -1, -1, 0}; /* a negative id: the position row alone */
+    const float pos_want[8] = {110, 211, 300, 400, 100, 200, 300, 401};
+    mx_embed_tokens(c, dy, no_token, 2, 2, 2, mx_w_f32(tok), mx_w_f32(pos));
+    CHECK(mx_download(c, got, dy, 8, &st) == 0);
+    mx_check_close("embed_tokens, negative ids", got, pos_want, 8, 0);
     mx_dev_free(c, dx);
     mx_dev_free(c, dy);
 }

@@ -1,6 +1,6 @@
 /* `matex convert` + `matex run-net` end to end (the binary ./matex, run from the repo root):
- * unet_tiny, controlnet_tiny (scale 0.5, inputs written here), vae_tiny and taesd encode/decode
- * against the golden outputs. */
+ * unet_tiny, controlnet_tiny (scale 0.5, inputs written here), vae_tiny, clip_vision_tiny, CLIP's
+ * image preprocessing and taesd encode/decode against the golden outputs. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -124,6 +124,18 @@ int main(void) {
     CHECK(run_net(args, "enc.safetensors") == 0);
     compare("enc.safetensors", "mean", "vae_tiny", "outputs.safetensors", "encode.mean");
     compare("enc.safetensors", "logvar", "vae_tiny", "outputs.safetensors", "encode.logvar");
+
+    CHECK(convert("clip_vision_tiny") == 0); /* a single network folder: its model_type names it */
+    golden_path(gin, sizeof gin, "clip_vision_tiny", "inputs.safetensors");
+    snprintf(args, sizeof args, "clip-vision --weights %s/clip_vision_tiny.mxw --inputs %s", tmpdir, gin);
+    CHECK(run_net(args, "cv.safetensors") == 0);
+    const char *cv_outputs[3] = {"image_embeds", "last_hidden_state", "penultimate_hidden_state"};
+    for (int i = 0; i < 3; i++)
+        compare("cv.safetensors", cv_outputs[i], "clip_vision_tiny", "outputs.safetensors", cv_outputs[i]);
+    golden_path(gin, sizeof gin, "clip_image_preprocess_tiny", "inputs.safetensors");
+    snprintf(args, sizeof args, "clip-preprocess --size 32 --inputs %s", gin);
+    CHECK(run_net(args, "pre.safetensors") == 0);
+    compare("pre.safetensors", "pixel_values", "clip_image_preprocess_tiny", "outputs.safetensors", "pixel_values");
 
     if (golden_have("taesd", "outputs.safetensors")) { /* the full-size TAESD lives outside the repository */
         CHECK(convert("taesd") == 0);

@@ -4,7 +4,11 @@
  * controlnet_tiny_inpaint) converted with `matex convert`, then
  *   inpaint-pipeline on golden/pipeline_controlnet_inpaint_tiny (latent blending, 6 steps)
  *   img2img-pipeline on golden/pipeline_controlnet_img2img_tiny (strength 0.5 of 10 steps)
- * timesteps equal, latents after EVERY step and the decoded image ≤ 1e-4 rel L2. */
+ *   inpaint-pipeline with a style image on golden/pipeline_controlnet_inpaint_ip_tiny (the set
+ *   converted with --ip-adapter golden/ip_adapter_tiny: image_embeds, ip_adapter_scale 0.6)
+ * timesteps equal, latents after EVERY step and the decoded image ≤ 1e-4 rel L2. And run-net unet
+ * with image_embeds on golden/ip_adapter_tiny (ip_adapter_scale absent: 1): out_scale_1_0 and
+ * image_tokens ≤ 1e-4. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,16 +35,17 @@ static int golden_dir(char *buf, size_t cap, const char *net) {
 
 /* tmpdir/set.mxw: a diffusers model folder of symlinks to the golden networks, converted. */
 static int make_model_set(void) {
-    static const char *nets[7] = {"unet_tiny", "vae_tiny", "clip_tiny", "tokenizer", "pipeline_controlnet_inpaint_tiny",
-                                  "controlnet_tiny", "controlnet_tiny_inpaint"};
-    char g[7][PATH_MAX], cmd[8 * PATH_MAX + 1024];
-    for (int i = 0; i < 7; i++)
+    static const char *nets[8] = {"unet_tiny", "vae_tiny", "clip_tiny", "tokenizer", "pipeline_controlnet_inpaint_tiny",
+                                  "controlnet_tiny", "controlnet_tiny_inpaint", "ip_adapter_tiny"};
+    char g[8][PATH_MAX], cmd[9 * PATH_MAX + 1024];
+    for (int i = 0; i < 8; i++)
         if (golden_dir(g[i], sizeof g[i], nets[i])) return fprintf(stderr, "golden/%s not found\n", nets[i]), -1;
     snprintf(cmd, sizeof cmd,
              "set -e; D=%s/set; mkdir -p $D/scheduler; ln -s %s $D/unet; ln -s %s $D/vae; ln -s %s $D/text_encoder; "
              "ln -s %s $D/tokenizer; cp %s/scheduler_config.json $D/scheduler/; "
-             "./matex convert $D --controlnet depth=%s --controlnet inpaint=%s --dtype f32 --quiet -o %s/set.mxw",
-             tmpdir, g[0], g[1], g[2], g[3], g[4], g[5], g[6], tmpdir);
+             "./matex convert $D --controlnet depth=%s --controlnet inpaint=%s --ip-adapter %s/ip_adapter.safetensors "
+             "--dtype f32 --quiet -o %s/set.mxw",
+             tmpdir, g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], tmpdir);
     return sh(cmd);
 }
 
@@ -72,7 +77,7 @@ static void compare_case(const char *verb, const char *gcase, int steps) {
     CHECK(g && w && ng == nw && nwts > 0);
     for (size_t s = 0; g && w && ng == nw && nwts > 0 && s < nwts; s++) {
         size_t per = nw / nwts;
-        snprintf(label, sizeof label, "%s latents after step %zu/%zu", verb, s + 1, nwts);
+        snprintf(label, sizeof label, "%s latents after step %zu/%zu", gcase, s + 1, nwts);
         mx_check_close(label, g + s * per, w + s * per, per, 1e-4);
     }
     free(g);
@@ -80,12 +85,42 @@ static void compare_case(const char *verb, const char *gcase, int steps) {
     g = golden_f32(&got, "image", &ng);
     w = golden_f32(&want, "image", &nw);
     CHECK(g && w && ng == nw);
-    snprintf(label, sizeof label, "%s decoded image", verb);
+    snprintf(label, sizeof label, "%s decoded image", gcase);
     if (g && w && ng == nw) mx_check_close(label, g, w, nw, 1e-4);
     free(g);
     free(w);
     free(gts);
     free(wts);
+    mx_st_close(&got);
+    mx_st_close(&want);
+}
+
+/* run-net unet with image_embeds through the set's IP-Adapter (its UNet is unet_tiny). */
+static void compare_unet_ip(void) {
+    char cmd[2048], gin[1024], out[512];
+    golden_path(gin, sizeof gin, "ip_adapter_tiny", "inputs.safetensors");
+    snprintf(out, sizeof out, "%s/unet_ip.safetensors", tmpdir);
+    const char *dev = getenv("MX_TEST_DEVICE");
+    snprintf(cmd, sizeof cmd, "./matex run-net unet --weights %s/set.mxw --inputs %s --out %s --device %s 2>/dev/null",
+             tmpdir, gin, out, dev && *dev ? dev : "cpu");
+    CHECK(sh(cmd) == 0);
+    mx_safetensors got, want;
+    mx_status st;
+    if (mx_st_open(&got, out, &st) || golden_open(&want, "ip_adapter_tiny", "outputs.safetensors")) {
+        CHECK(0);
+        return;
+    }
+    const char *pairs[2][2] = {{"out", "out_scale_1_0"}, {"image_tokens", "image_tokens"}};
+    for (int i = 0; i < 2; i++) {
+        size_t ng, nw;
+        float *g = golden_f32(&got, pairs[i][0], &ng), *w = golden_f32(&want, pairs[i][1], &nw);
+        char label[96];
+        snprintf(label, sizeof label, "run-net unet + ip_adapter %s", pairs[i][1]);
+        CHECK(g && w && ng == nw);
+        if (g && w && ng == nw) mx_check_close(label, g, w, nw, 1e-4);
+        free(g);
+        free(w);
+    }
     mx_st_close(&got);
     mx_st_close(&want);
 }
@@ -100,6 +135,8 @@ int main(void) {
     CHECK(make_model_set() == 0);
     compare_case("inpaint-pipeline", "pipeline_controlnet_inpaint_tiny", 6);
     compare_case("img2img-pipeline", "pipeline_controlnet_img2img_tiny", 10);
+    compare_case("inpaint-pipeline", "pipeline_controlnet_inpaint_ip_tiny", 6);
+    compare_unet_ip();
     char cmd[512];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     sh(cmd);

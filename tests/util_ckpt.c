@@ -90,11 +90,14 @@ static const char *storage_type(mx_st_dtype d) {
     case MX_ST_I64: return "LongStorage";
     case MX_ST_I32: return "IntStorage";
     case MX_ST_F64: return "DoubleStorage";
+    case MX_ST_U8: return "ByteStorage";
     }
     return "?";
 }
 
-static size_t elem_size(mx_st_dtype d) { return d == MX_ST_F16 || d == MX_ST_BF16 ? 2 : d == MX_ST_I64 || d == MX_ST_F64 ? 8 : 4; }
+static size_t elem_size(mx_st_dtype d) {
+    return d == MX_ST_U8 ? 1 : d == MX_ST_F16 || d == MX_ST_BF16 ? 2 : d == MX_ST_I64 || d == MX_ST_F64 ? 8 : 4;
+}
 
 /* _rebuild_tensor_v2(('storage', torch.XStorage, 'key', 'cpu', numel), 0, size, stride, False, OrderedDict()) */
 static void pk_tensor(mx_buf *b, const mx_st_tensor *t, size_t key) {
@@ -120,13 +123,43 @@ static void pk_tensor(mx_buf *b, const mx_st_tensor *t, size_t key) {
     mx_buf_put(b, "tR", 2);
 }
 
+/* {"a": {"b.c": tensor, ...}, ...}: plain dicts (EMPTY_DICT, MARK, SETITEMS) by first component. */
+static void pk_nested(mx_buf *b, const mx_st_tensor *t, size_t n) {
+    mx_buf_put(b, "}(", 2);
+    for (size_t i = 0; i < n;) {
+        const char *dot = strchr(t[i].name, '.');
+        if (!dot) { /* a tensor at the top */
+            pk_str(b, t[i].name);
+            pk_tensor(b, &t[i], i);
+            i++;
+            continue;
+        }
+        size_t glen = (size_t)(dot - t[i].name);
+        char group[128];
+        snprintf(group, sizeof group, "%.*s", (int)glen, t[i].name);
+        pk_str(b, group);
+        mx_buf_put(b, "}(", 2);
+        for (; i < n && !strncmp(t[i].name, group, glen) && t[i].name[glen] == '.'; i++) {
+            pk_str(b, t[i].name + glen + 1);
+            pk_tensor(b, &t[i], i);
+        }
+        mx_buf_put(b, "u", 1);
+    }
+    mx_buf_put(b, "u", 1);
+}
+
 void mx_test_pickle_state_dict(mx_buf *b, const mx_st_tensor *t, size_t n, int wrap) {
     mx_buf_put(b, "\x80\x02", 2);
-    if (wrap) {
+    if (wrap == 1) {
         mx_buf_put(b, "}q\x00(", 4);
         pk_str(b, "global_step");
         pk_int(b, 7);
         pk_str(b, "state_dict");
+    }
+    if (wrap == MX_TEST_NESTED) {
+        pk_nested(b, t, n);
+        mx_buf_put(b, ".", 1);
+        return;
     }
     mx_buf_printf(b, "ccollections\nOrderedDict\n)Rq\x01(");
     for (size_t i = 0; i < n; i++) {
@@ -134,7 +167,7 @@ void mx_test_pickle_state_dict(mx_buf *b, const mx_st_tensor *t, size_t n, int w
         pk_tensor(b, &t[i], i);
     }
     mx_buf_put(b, "u", 1);
-    if (wrap) mx_buf_put(b, "u", 1);
+    if (wrap == 1) mx_buf_put(b, "u", 1);
     mx_buf_put(b, ".", 1);
 }
 

@@ -23,7 +23,10 @@ typedef struct mx_test_zip_entry {
 int mx_test_write_zip(const char *path, const mx_test_zip_entry *e, size_t n);
 
 /* The pickle of a state dict of tensors as torch.save writes it; storage i holds tensor i.
- * wrap: 1 puts it under {"state_dict": ..., "global_step": 7}. Caller frees b->p. */
+ * wrap: 1 puts it under {"state_dict": ..., "global_step": 7}; MX_TEST_NESTED writes a dict of
+ * dicts by the names' first component, "a.b.c" as {"a": {"b.c": ...}} (the IP-Adapter .bin; the
+ * tensors sorted by it). Caller frees b->p. */
+#define MX_TEST_NESTED 2
 void mx_test_pickle_state_dict(mx_buf *b, const mx_st_tensor *t, size_t n, int wrap);
 
 /* A whole checkpoint: pickle + storages + byteorder + version. */

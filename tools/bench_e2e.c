@@ -61,7 +61,7 @@ static int time_unet(const char *weights, int threads, double secs[2], mx_status
     }
     for (size_t i = 0; i < ns; i++) x[i] = (float)((i * 2654435761u) % 2001) / 1000.0f - 1.0f;
     for (size_t i = 0; i < nt; i++) e[i] = (float)((i * 40503u) % 2001) / 1000.0f - 1.0f;
-    mx_unet_input in = {x, ts, e, B, H, W, T, NULL, NULL};
+    mx_unet_input in = {.sample = x, .timesteps = ts, .encoder_hidden_states = e, .B = B, .H = H, .W = W, .T = T};
     rc = mx_unet_arena_bytes(m.unet, B, H, W, T, &bytes, st) || mx_arena_create(&a, bytes, st) ? -1 : 0;
     for (int r = 0; r < UNET_REPEATS && rc == 0; r++)
         for (int p = 0; p < nprec && rc == 0; p++) {

@@ -212,8 +212,9 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
         clock_net(&nt_cn, &c[p], p, 1, o->profile);
     }
-    mx_unet_input ui = {sample, ts, ehs, B, H, W, T, o->skip_cn ? NULL : (const float *const *)res,
-                        o->skip_cn ? NULL : res[nres]};
+    mx_unet_input ui = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = B, .H = H, .W = W, .T = T,
+                        .down_residuals = o->skip_cn ? NULL : (const float *const *)res,
+                        .mid_residual = o->skip_cn ? NULL : res[nres]};
     for (int p = 0; p < nprec; p++) {
         clock_net(&nt_unet, &c[p], p, 0, o->profile);
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;

@@ -98,7 +98,8 @@ static int stage_step(stage_env *e, int n, mx_status *st) {
     int rc = !x || !c || !u || !d || !p ? mx_fail(st, MX_ENOMEM, "out of memory") : mx_sched_init(&s, &e->ctx, &cfg, 1, lat, st);
     if (!rc) {
         mx_sd_control controls[2] = {{e->cn[0], d, 1.0f, NULL}, {e->cn[1], p, 0.8f, NULL}};
-        mx_sd_request rq = {e->unet, controls, 2, c, u, 77, 7.5f, &s, NULL, NULL, NULL, NULL};
+        mx_sd_request rq = {.unet = e->unet, .controls = controls, .n_controls = 2, .cond_text = c, .uncond_text = u,
+                            .T = 77, .guidance = 7.5f, .sched = &s};
         rc = mx_sd_denoise(&rq, &e->ctx, x, n, 64, 64, st);
         mx_sched_free(&s);
     }

@@ -20,8 +20,10 @@ static void convert_usage(FILE *f) {
             "layout (model.diffusion_model.*, first_stage_model.*, cond_stage_model.transformer.*),\n"
             "or a diffusers model-set folder (subfolders unet/, controlnet/, vae/, text_encoder/, tokenizer/,\n"
             "scheduler/; each one present is converted) or a single network folder whose config.json\n"
-            "names a UNet2DConditionModel, ControlNetModel, AutoencoderKL, AutoencoderTiny or CLIPTextModel.\n"
-            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, taesd.*, text_encoder.*\n"
+            "names a UNet2DConditionModel, ControlNetModel, AutoencoderKL, AutoencoderTiny, CLIPTextModel or\n"
+            "CLIPVisionModelWithProjection.\n"
+            "Tensor names: unet.*, controlnet.*, controlnet_NAME.*, vae.*, taesd.*, text_encoder.*, image_encoder.*,\n"
+            "ip_adapter.*\n"
             "\n"
             "options:\n"
             "  -o, --output FILE        weight file to write (written to a temporary name, then renamed)\n"
@@ -39,6 +41,10 @@ static void convert_usage(FILE *f) {
             "  --lcm-lora FILE          merge the LCM-LoRA (a --lora, recorded so that `texture --fast` may run)\n"
             "  --taesd PATH             add TAESD as taesd.*, the fast decoder: an AutoencoderTiny folder, or the\n"
             "                           original taesd_encoder + taesd_decoder files (one of them, or their folder)\n"
+            "  --image-encoder DIR      add the IP-Adapter's CLIP vision tower as image_encoder.*: a transformers\n"
+            "                           CLIPVisionModelWithProjection folder (config.json + model.safetensors)\n"
+            "  --ip-adapter FILE        add the SD1.5 IP-Adapter (image guidance) as ip_adapter.*: h94/IP-Adapter's\n"
+            "                           ip-adapter_sd15.safetensors or .bin, checked against the UNet converted with it\n"
             "  --json                   print a JSON summary on stdout\n"
             "  --quiet                  no progress lines\n"
             "  -h, --help               this help\n"
@@ -76,7 +82,8 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         int takes = !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--dtype") ||
                     !strcmp(arg, "--variant") || !strcmp(arg, "--controlnet") || !strcmp(arg, "--lora") ||
                     !strcmp(arg, "--lora-scale") || !strcmp(arg, "--lcm-lora") || !strcmp(arg, "--taesd") ||
-                    !strcmp(arg, "--tokenizer") || !strcmp(arg, "--vae");
+                    !strcmp(arg, "--tokenizer") || !strcmp(arg, "--vae") || !strcmp(arg, "--image-encoder") ||
+                    !strcmp(arg, "--ip-adapter");
         if (takes && !val) return usage_error("missing value after", arg);
         if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
             convert_usage(stdout);
@@ -103,8 +110,12 @@ static int parse_args(int argc, char **argv, convert_args *a) {
             a->o.loras[a->o.n_loras++].scale = 1.0f;
         } else if (!strcmp(arg, "--taesd")) {
             a->o.taesd = val;
+        } else if (!strcmp(arg, "--image-encoder")) {
+            a->o.image_encoder = val;
         } else if (!strcmp(arg, "--vae")) {
             a->o.vae = val;
+        } else if (!strcmp(arg, "--ip-adapter")) {
+            a->o.ip_adapter = val;
         } else if (!strcmp(arg, "--tokenizer")) {
             a->o.tokenizer = val;
         } else if (!strcmp(arg, "--ema")) {
@@ -127,7 +138,8 @@ static int parse_args(int argc, char **argv, convert_args *a) {
         if (takes) i++;
     }
     if (!a->o.output) return usage_error("no output file (-o OUT.mxw)", NULL);
-    if (!a->o.input && a->o.n_controlnets == 0 && !a->o.taesd && !a->o.vae) return usage_error("no INPUT folder or checkpoint file", NULL);
+    if (!a->o.input && a->o.n_controlnets == 0 && !a->o.taesd && !a->o.vae && !a->o.image_encoder)
+        return usage_error("no INPUT folder or checkpoint file", NULL);
     return -1;
 }
 

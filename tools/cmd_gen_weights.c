@@ -17,6 +17,7 @@
 #include "../pipeline/nn/params.h"
 #include "../runtime/log.h"
 #include "../weights/golden_rule.h"
+#include "../weights/ip_adapter_file.h"
 #include "cli.h"
 #include "cli_args.h"
 
@@ -29,7 +30,8 @@ static void usage(FILE *f) {
                "\n"
                "Writes the golden-v1 rule weights (the rule: tests/data/golden/README.md in the source tree)\n"
                "of the network a diffusers / transformers config.json describes (UNet2DConditionModel,\n"
-               "ControlNetModel, AutoencoderKL, CLIPTextModel), with the reference state-dict names, so that\n"
+               "ControlNetModel, AutoencoderKL, CLIPTextModel; IPAdapter: matex's config of an IP-Adapter,\n"
+               "written as the published file for `convert --ip-adapter`), with the reference names, so that\n"
                "  mkdir d; cp CONFIG.json d/config.json; matex gen-weights CONFIG.json --seed 1 -o d/diffusion_pytorch_model.safetensors\n"
                "  matex convert d -o w.mxw\n"
                "works.\n\n"
@@ -156,6 +158,18 @@ static int lcm_lora_list(mx_binder *lb, const mx_binder *b, int64_t r, mx_status
     return 0;
 }
 
+/* The list of b under the names of the published IP-Adapter file (weights/ip_adapter_file.h). */
+static int published_ip_adapter(mx_binder *pb, const mx_binder *b, mx_status *st) {
+    mx_wptr unused;
+    for (size_t i = 0; i < mx_binder_enum_count(b); i++) {
+        const mx_param_info *p = mx_binder_enum_at(b, i);
+        char name[240];
+        mx_ip_adapter_published_name(p->name, name, sizeof name);
+        if (pb->bind(pb, name, p->ndim, p->shape, &unused, st)) return -1;
+    }
+    return 0;
+}
+
 int cmd_gen_weights(int argc, char **argv) {
     const char *config = NULL, *out = NULL, *dtype = "f32";
     uint64_t seed = 1;
@@ -199,13 +213,15 @@ int cmd_gen_weights(int argc, char **argv) {
     int rc = !text || mx_binder_enum(&b, &st) || mx_net_enumerate(&b, text, len, config, &st);
     if (!rc) {
         mx_info("gen-weights: %zu tensors, %.1f M parameters", mx_binder_enum_count(&b), mx_binder_enum_bytes(&b) / 4e6);
-        char cls[64];
-        if (lora_rank && !mx_config_class_name(cls, sizeof cls, text, len, config, &st) &&
-            strcmp(cls, "UNet2DConditionModel"))
+        char cls[64] = "";
+        int ip = !mx_config_class_name(cls, sizeof cls, text, len, config, &st) && !strcmp(cls, "IPAdapter");
+        if (lora_rank && strcmp(cls, "UNet2DConditionModel"))
             rc = mx_fail(&st, MX_EINPUT, "%s: --lcm-lora needs a UNet2DConditionModel config, not %s", config, cls);
         else if (lora_rank)
             rc = mx_binder_enum(&lb, &st) || lcm_lora_list(&lb, &b, lora_rank, &st);
-        if (!rc) rc = write_file(out, lora_rank ? &lb : &b, seed, f16, lora_rank ? LCM_LORA_ALPHA : 0, &st);
+        else if (ip)
+            rc = mx_binder_enum(&lb, &st) || published_ip_adapter(&lb, &b, &st);
+        if (!rc) rc = write_file(out, lora_rank || ip ? &lb : &b, seed, f16, lora_rank ? LCM_LORA_ALPHA : 0, &st);
     }
     free(text);
     mx_binder_free(&b);

@@ -9,6 +9,7 @@
 #include "../pipeline/io/io.h"
 #include "../runtime/buf.h"
 #include "../runtime/log.h"
+#include "../weights/ip_adapter_file.h"
 #include "../weights/single_file.h"
 #include "../weights/wfinfo.h"
 #include "cli.h"
@@ -132,9 +133,10 @@ static int image_info(const char *path, int json) {
     return 0;
 }
 
-/* .safetensors, .ckpt, .pt, .pth: a single-file checkpoint (weights/single_file.h). */
+/* .safetensors, .ckpt, .pt, .pth, .bin: a single-file checkpoint (weights/single_file.h) or an
+ * IP-Adapter (weights/ip_adapter_file.h). */
 static int is_checkpoint_name(const char *path) {
-    static const char *const ext[] = {".safetensors", ".ckpt", ".pt", ".pth"};
+    static const char *const ext[] = {".safetensors", ".ckpt", ".pt", ".pth", ".bin"};
     size_t n = strlen(path);
     for (size_t i = 0; i < sizeof ext / sizeof ext[0]; i++)
         if (n > strlen(ext[i]) && !strcmp(path + n - strlen(ext[i]), ext[i])) return 1;
@@ -144,9 +146,10 @@ static int is_checkpoint_name(const char *path) {
 static int checkpoint_info(const char *path) {
     mx_single_file sf;
     mx_status st;
-    mx_status st_vae;
-    /* a VAE file of its own (vae-ft-mse-...) holds none of a model's networks */
-    if (mx_sf_open(&sf, path, 0, &st) && mx_sf_open(&sf, path, MX_SF_VAE_ONLY, &st_vae)) {
+    mx_status st_other;
+    /* a VAE file of its own (vae-ft-mse-...) or an IP-Adapter holds none of a model's networks */
+    if (mx_sf_open(&sf, path, 0, &st) && mx_sf_open(&sf, path, MX_SF_VAE_ONLY, &st_other) &&
+        mx_ip_adapter_file_open(&sf, path, &st_other)) {
         fprintf(stderr, "matex info: %s\n", st.msg);
         return 1;
     }

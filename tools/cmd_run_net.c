@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "../ops/ops.h"
+#include "../pipeline/nn/clip_image.h"
 #include "../pipeline/nn/registry.h"
 #include "../pipeline/nn/sd_edit.h"
 #include "../pipeline/nn/unet.h"
@@ -15,6 +16,7 @@
 #include "../weights/weights.h"
 #include "cli.h"
 #include "cli_args.h"
+#include "cli_clip_preprocess.h"
 
 #define MAX_OUTS (MX_UNET_MAX_RES + 4)
 #define SCRATCH_BYTES ((size_t)256 << 20)
@@ -31,10 +33,14 @@ static void usage(FILE *f) {
             "  inpaint-pipeline  (W: a model set with controlnet_depth and controlnet_inpaint; --steps N [--guidance G])\n"
             "              prompt_embeds, negative_prompt_embeds [B,T,D], image [B,3,H,W] in [0,1], mask [B,1,H,W]\n"
             "              (1 = paint), control_depth, control_inpaint [B,3,H,W], noise [B,4,H/8,W/8],\n"
-            "              conditioning_scales [2] (depth, inpaint)  -> timesteps, latents_after_step, image\n"
+            "              conditioning_scales [2] (depth, inpaint), optional image_embeds [B,n_images,E] and\n"
+            "              ip_adapter_scale [1] (W with an ip_adapter.; the unconditional half gets a zero embedding)\n"
+            "              -> timesteps, latents_after_step, image\n"
             "  img2img-pipeline  (W: a model set with a depth ControlNet; --steps N [--guidance G])\n"
             "              prompt_embeds, negative_prompt_embeds, image, control_depth, noise, strength [1],\n"
             "              optional conditioning_scales [1] (default 1)  -> timesteps, latents_after_step, image\n"
+            "  clip-preprocess  (no --weights; --size N, default 224) image_u8_hwc [H,W,C] (C 1..4, 0..255)\n"
+            "              -> pixel_values [1,3,N,N]: CLIP's resize (PIL bicubic), centre crop, mean/std\n"
             "\n"
             "options:\n"
             "  --prefix P      network prefix in the weight file (default: the network's, unet., controlnet., vae.,\n"
@@ -42,6 +48,7 @@ static void usage(FILE *f) {
             "  --threads N     worker threads (default: all CPUs)\n"
             "  --steps N       pipelines: scheduler steps before strength (required)\n"
             "  --guidance G    pipelines: classifier-free guidance scale (default 7.5)\n"
+            "  --size N        clip-preprocess: the image side N (default 224)\n"
             "  --device D      cpu (default), cpu-strict (activations guarded: tests) or cuda (`make cuda` builds)\n"
             "  --precision P   fp32 (default) or bf16: bf16 products with fp32 sums where the CPU has\n"
             "                  AVX512_BF16 (linear, conv, attention); elsewhere fp32 with a warning\n"
@@ -55,6 +62,9 @@ typedef struct run_io {
     int in_open;
     mx_weightfile *wf;
     mx_binder wb, b; /* the weight file's binder; b keeps the weights on the device */
+    mx_binder wb2, b2; /* the same for the one companion network (net_io.h network: an IP-Adapter) */
+    const mx_net_def *def2;
+    void *net2;
     mx_ctx ctx;
     int ctx_ok;
     mx_arena arena;
@@ -195,6 +205,20 @@ static const char *net_config(run_io *io, const char *prefix, char *key, size_t 
     return cfg;
 }
 
+static const void *io_network(mx_net_io *n, const char *kind, mx_status *st) {
+    run_io *io = n->impl;
+    char prefix[80], key[96];
+    const mx_net_def *def = mx_net_named(kind);
+    if (!def || io->def2) return mx_fail(st, MX_EINTERNAL, "run-net: companion network %s", kind), NULL;
+    snprintf(prefix, sizeof prefix, "%s.", kind);
+    const char *text = net_config(io, prefix, key, sizeof key, st);
+    if (!text || mx_binder_wf(&io->wb2, io->wf, prefix, st) || mx_binder_device(&io->b2, &io->wb2, &io->ctx, st))
+        return NULL;
+    io->def2 = def;
+    if (def->load(&io->net2, text, strlen(text), key, &io->b2, st)) return mx_fail_prefix(st, "%s", mx_wf_path(io->wf)), NULL;
+    return io->net2;
+}
+
 /* Any network of the registry: its config and weights under `prefix`, loaded, run by the verb. */
 static int run_network(run_io *io, const mx_net_def *def, const mx_net_verb *verb, const char *prefix, mx_status *st) {
     char key[96];
@@ -208,7 +232,8 @@ static int run_network(run_io *io, const mx_net_def *def, const mx_net_verb *ver
                             .host_flat = io_host_flat,
                             .device = io_device,
                             .output = io_output,
-                            .arena = io_arena};
+                            .arena = io_arena,
+                            .network = io_network};
     int rc = def->load(&net, text, strlen(text), key, &io->b, st) || verb->run(&io->ctx, net, &io->iface, st) ? -1 : 0;
     def->free(net);
     return rc;
@@ -237,7 +262,30 @@ static int record_step(void *user, int step, int n_steps, int64_t t, const float
 typedef struct pipe_inputs {
     float *cond, *uncond, *image, *mask, *depth, *inpaint, *noise, *scales, *strength;
     int B, T, H, W;
+    float *embeds, *ip_scale; /* optional image guidance: [B, n_images, E], [1] */
+    int n_images;
 } pipe_inputs;
+
+/* The optional image_embeds [B, n_images, E] and ip_adapter_scale [1] (default 1): they need the
+ * weight file's ip_adapter. */
+static int pipe_read_image_guidance(run_io *io, const mx_models *m, pipe_inputs *p, mx_status *st) {
+    int has_embeds = mx_st_find(&io->in, "image_embeds") != NULL;
+    if (!has_embeds)
+        return mx_st_find(&io->in, "ip_adapter_scale")
+                   ? mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale without image_embeds", io->in_path)
+                   : 0;
+    if (!m->ip_adapter)
+        return mx_fail(st, MX_EINPUT, "%s: image_embeds given, but %s has no IP-Adapter (convert --ip-adapter)",
+                       io->in_path, mx_models_path(m));
+    int64_t es[3] = {p->B, -1, m->ip_adapter->embed_dim}, one[1] = {1};
+    if (!(p->embeds = input(io, "image_embeds", 3, es, 1, st))) return -1;
+    if (es[1] > MX_IP_MAX_TOKENS / m->ip_adapter->num_tokens)
+        return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->in_path,
+                       (long long)es[1], m->ip_adapter->num_tokens, MX_IP_MAX_TOKENS);
+    p->n_images = (int)es[1];
+    return mx_st_find(&io->in, "ip_adapter_scale") && !(p->ip_scale = input(io, "ip_adapter_scale", 1, one, 1, st)) ? -1
+                                                                                                                   : 0;
+}
 
 static int pipe_read_inputs(run_io *io, const mx_models *m, const pipe_opts *po, pipe_inputs *p, mx_status *st) {
     int D = mx_unet_cfg(m->unet)->cross_attention_dim, f = mx_vae_factor(m->vae);
@@ -252,7 +300,8 @@ static int pipe_read_inputs(run_io *io, const mx_models *m, const pipe_opts *po,
         return mx_fail(st, MX_EINPUT, "%s: image is %dx%d, not a multiple of the VAE factor %d", io->in_path, p->W,
                        p->H, f);
     int64_t ms[4] = {p->B, 1, p->H, p->W}, cs[4] = {p->B, 3, p->H, p->W}, ns[4] = {p->B, 4, p->H / f, p->W / f};
-    if (!(p->depth = input(io, "control_depth", 4, cs, 1, st)) || !(p->noise = input(io, "noise", 4, ns, 1, st)))
+    if (!(p->depth = input(io, "control_depth", 4, cs, 1, st)) || !(p->noise = input(io, "noise", 4, ns, 1, st)) ||
+        pipe_read_image_guidance(io, m, p, st))
         return -1;
     if (po->inpaint)
         return !(p->mask = input(io, "mask", 4, ms, 1, st)) || !(p->inpaint = input(io, "control_inpaint", 4, cs, 1, st)) ||
@@ -263,6 +312,18 @@ static int pipe_read_inputs(run_io *io, const mx_models *m, const pipe_opts *po,
     if (mx_st_find(&io->in, "conditioning_scales") && !(p->scales = input(io, "conditioning_scales", 1, one, 1, st)))
         return -1;
     return 0;
+}
+
+/* Each item's image tokens (and a zero embedding's, for the unconditional half) into g. */
+static int pipe_image_guide(run_io *io, const mx_models *m, const pipe_inputs *p, mx_sd_image_guide *g,
+                            mx_status *st) {
+    const mx_ip_adapter *ad = m->ip_adapter;
+    int n = p->B * p->n_images;
+    size_t nt = (size_t)n * ad->num_tokens * ad->cross_dim;
+    float *cond = new_floats(io, nt, st), *uncond = cond ? new_floats(io, nt, st) : NULL;
+    *g = (mx_sd_image_guide){.adapter = ad, .cond = cond, .uncond = uncond, .n_tokens = p->n_images * ad->num_tokens,
+                             .per_latent = 1, .scale = p->ip_scale ? p->ip_scale[0] : 1.0f};
+    return uncond ? mx_ip_adapter_guidance_tokens(&io->ctx, ad, p->embeds, n, cond, uncond, st) : -1;
 }
 
 static int pipe_denoise(run_io *io, const mx_models *m, const pipe_opts *po, const pipe_inputs *p, mx_status *st) {
@@ -276,8 +337,22 @@ static int pipe_denoise(run_io *io, const mx_models *m, const pipe_opts *po, con
                             {m->cn_inpaint, p->inpaint, po->inpaint ? p->scales[1] : 0.0f, NULL}};
     float *lat = new_floats(io, numel, st), *image = new_floats(io, (size_t)p->B * 3 * p->H * p->W, st);
     step_record r = {new_floats(io, (size_t)po->steps * numel, st), (int64_t *)new_floats(io, 2 * (size_t)po->steps, st)};
-    mx_sd_request rq = {m->unet, ctl, po->inpaint ? 2 : 1, p->cond, p->uncond, p->T, po->guidance, &s,
-                        record_step, &r, NULL, NULL};
+    mx_sd_image_guide guide;
+    mx_sd_request rq = {.unet = m->unet,
+                        .controls = ctl,
+                        .n_controls = po->inpaint ? 2 : 1,
+                        .cond_text = p->cond,
+                        .uncond_text = p->uncond,
+                        .T = p->T,
+                        .guidance = po->guidance,
+                        .sched = &s,
+                        .progress = record_step,
+                        .progress_user = &r,
+                        .image = p->embeds ? &guide : NULL};
+    if (p->embeds && pipe_image_guide(io, m, p, &guide, st)) {
+        mx_sched_free(&s);
+        return -1;
+    }
     mx_sd_edit e = {m->vae, p->image, p->mask, p->noise, po->inpaint ? 1.0f : p->strength[0], NULL};
     if (lat && image && r.after && r.timesteps && mx_sd_edit_run(&rq, &e, &io->ctx, p->B, h, w, lat, st) == 0 &&
         mx_sd_decode_latents(&io->ctx, m->vae, lat, p->B, h, w, image, st) == 0) {
@@ -304,6 +379,9 @@ static int run_pipeline(run_io *io, const char *weights, const pipe_opts *po, mx
 }
 
 static void io_free(run_io *io) {
+    if (io->def2) io->def2->free(io->net2);
+    mx_binder_free(&io->b2);
+    mx_binder_free(&io->wb2);
     if (io->arena_ok) mx_arena_destroy(&io->arena);
     mx_binder_free(&io->b);
     mx_binder_free(&io->wb);
@@ -316,13 +394,13 @@ static void io_free(run_io *io) {
 
 static int is_pipeline(const char *net) { return !strcmp(net, "inpaint-pipeline") || !strcmp(net, "img2img-pipeline"); }
 
-/* "unet, controlnet, ..., inpaint-pipeline or img2img-pipeline": the NETs, for the usage error. */
+/* "unet, controlnet, ..., img2img-pipeline or clip-preprocess": the NETs, for the usage error. */
 static void net_names(char *buf, size_t cap) {
     size_t len = 0;
     for (size_t i = 0; i < mx_net_count && len < cap; i++)
         for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name && len < cap; v++)
             len += (size_t)snprintf(buf + len, cap - len, "%s, ", mx_nets[i].verbs[v].name);
-    if (len < cap) snprintf(buf + len, cap - len, "inpaint-pipeline or img2img-pipeline");
+    if (len < cap) snprintf(buf + len, cap - len, "inpaint-pipeline, img2img-pipeline or clip-preprocess");
 }
 
 static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
@@ -343,9 +421,24 @@ static int run(run_io *io, const char *net, const char *weights, const char *pre
     return mx_st_write(io->out_path, io->outs, (size_t)io->nout, st);
 }
 
+/* run-net clip-preprocess: no weights, no device. */
+static int clip_preprocess(const char *in_path, const char *out_path, int size) {
+    mx_status st;
+    mx_status_clear(&st);
+    if (!in_path || !out_path) {
+        fprintf(stderr, "matex run-net: clip-preprocess needs --inputs and --out\n");
+        return 2;
+    }
+    if (mx_cli_clip_preprocess(in_path, out_path, size, &st)) {
+        fprintf(stderr, "matex run-net: %s\n", st.msg);
+        return st.code == MX_EUSAGE ? 2 : 1;
+    }
+    return 0;
+}
+
 int cmd_run_net(int argc, char **argv) {
     const char *net = NULL, *weights = NULL, *prefix = NULL, *device = "cpu", *precision = "fp32";
-    int threads = 0;
+    int threads = 0, size = 224;
     pipe_opts po = {0, 0, 7.5f};
     mx_precision prec = MX_PREC_FP32;
     const mx_net_def *def = NULL;
@@ -361,6 +454,7 @@ int cmd_run_net(int argc, char **argv) {
         {"--guidance", NULL, MX_OPT_FLOAT, &po.guidance, 0, 0},
         {"--device", NULL, MX_OPT_STR, &device, 0, 0},
         {"--precision", NULL, MX_OPT_STR, &precision, 0, 0},
+        {"--size", NULL, MX_OPT_INT, &size, 1, MX_CLIP_IMAGE_MAX_SIZE},
     };
     int parsed = mx_args_parse("run-net", argc, argv, opts, sizeof opts / sizeof opts[0], &net, usage);
     if (parsed) return parsed == 1 ? 0 : 2;
@@ -368,6 +462,7 @@ int cmd_run_net(int argc, char **argv) {
         fprintf(stderr, "matex run-net: --precision must be fp32 or bf16, not '%s'\n", precision);
         return 2;
     }
+    if (net && !strcmp(net, "clip-preprocess")) return clip_preprocess(io.in_path, io.out_path, size);
     int known = net && (mx_net_verb_named(net, &def) || is_pipeline(net));
     if (!net || !weights || !io.in_path || !io.out_path || !known) {
         char names[256];

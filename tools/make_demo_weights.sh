@@ -4,6 +4,10 @@
 # tests/data/golden/tokenizer (MIT, see LICENSE there), assembled as a diffusers model folder
 # and converted with `matex convert`. Random weights paint noise: this only exercises the whole
 # pipeline. Run from the repository root.
+# Both model sets carry a tiny CLIP vision tower (image_encoder.*, the IP-Adapter's image encoder:
+# 32² images, patch 8, projection 24, as golden/clip_vision_tiny) and a tiny IP-Adapter for the demo
+# UNet (ip_adapter.*, tests/data/demo/ip_adapter.json: image embeddings of 24, 4 tokens), written by
+# gen-weights in the published file's layout.
 # Also OUT_unet_only.mxw (a UNet alone) and OUT_fast.mxw (the same set plus a TAESD and a small
 # LoRA converted as the LCM-LoRA: what `texture --fast` requires, not a real LCM distillation).
 # usage: sh tools/make_demo_weights.sh MATEX OUT.mxw
@@ -24,7 +28,8 @@ net controlnet_depth controlnet.json 12 diffusion_pytorch_model.safetensors
 net controlnet_inpaint controlnet.json 13 diffusion_pytorch_model.safetensors
 net vae vae.json 14 diffusion_pytorch_model.safetensors
 net text_encoder clip.json 15 model.safetensors
-mkdir -p "$DIR/taesd"
+mkdir -p "$DIR/taesd" "$DIR/image_encoder"
+net image_encoder clip_vision.json 17 model.safetensors
 net taesd taesd.json 16 diffusion_pytorch_model.safetensors
 # A random TAESD decoder paints near black: its last conv gives about 0 in [0, 1] (the VAE's
 # gives 0 in [-1, 1], mid grey) with little spread. That conv (decoder.layers.18: the 18 follows
@@ -48,10 +53,11 @@ T=$DIR/taesd/diffusion_pytorch_model.safetensors
 set_f32 "$T" decoder.layers.18.bias '\000\000\000\077'                            # 0.5
 set_f32 "$T" decoder.layers.18.weight \
     '\000\000\200\077\000\000\200\277\000\000\000\077\000\000\000\277\000\000\200\077\000\000\200\277\000\000\000\000'
+"$MATEX" gen-weights "$CFG/ip_adapter.json" --seed 18 -o "$DIR/ip_adapter.safetensors"
 cp tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt "$DIR/tokenizer/"
 cp "$CFG/scheduler_config.json" "$DIR/scheduler/scheduler_config.json"
 "$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \
-    --dtype f32 --quiet -o "$OUT"
+    --image-encoder "$DIR/image_encoder" --ip-adapter "$DIR/ip_adapter.safetensors" --dtype f32 --quiet -o "$OUT"
 # A kohya-keyed LoRA of one module (time_embedding.linear_1 of the demo UNet, [128, 32], rank 1),
 # every value the float of bytes 0x3c3c3c3c (about 0.0115), as safetensors: 8-byte LE header size,
 # the JSON header padded with spaces, the data.
@@ -69,6 +75,7 @@ lora_file() {
 }
 lora_file "$DIR/lcm_lora.safetensors"
 "$MATEX" convert "$DIR" --controlnet "depth=$DIR/controlnet_depth" --controlnet "inpaint=$DIR/controlnet_inpaint" \
-    --lcm-lora "$DIR/lcm_lora.safetensors" --taesd "$DIR/taesd" --dtype f32 --quiet -o "${OUT%.mxw}_fast.mxw"
+    --lcm-lora "$DIR/lcm_lora.safetensors" --taesd "$DIR/taesd" --image-encoder "$DIR/image_encoder" \
+    --ip-adapter "$DIR/ip_adapter.safetensors" --dtype f32 --quiet -o "${OUT%.mxw}_fast.mxw"
 # A file with only a UNet: the pipeline tests check that a wrong file is refused clearly.
 "$MATEX" convert "$DIR/unet" --dtype f32 --quiet -o "${OUT%.mxw}_unet_only.mxw"

@@ -14,6 +14,7 @@
 #include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
+#include "ip_adapter_file.h"
 #include "lora.h"
 #include "networks.h"
 #include "safetensors.h"
@@ -38,6 +39,7 @@ typedef struct {
     mx_single_file *singles[MX_CONVERT_MAX_EXTRA + 1]; /* single-file inputs, mapped until the end */
     size_t n_singles;
     text_buf sources; /* provenance: JSON array items */
+    char *unet_config; /* of the UNet converted, for the IP-Adapter's check */
     mx_convert_result res;
 } converter;
 
@@ -98,7 +100,7 @@ static int own_buffer(converter *cv, void *p, mx_status *st) {
 /* ---- network type from config.json ---- */
 
 /* The network a config names: diffusers' "_class_name", else a known class among transformers'
- * "architectures" or, for CLIP, its "model_type". NULL when none is known. */
+ * "architectures" or, for the CLIP towers, its "model_type". NULL when none is known. */
 static const mx_net_kind *network_kind(const mx_json *cfg) {
     const char *cls = mx_json_get_str(cfg, "_class_name", NULL);
     if (cls) return mx_net_kind_of_class(cls);
@@ -107,8 +109,7 @@ static const mx_net_kind *network_kind(const mx_json *cfg) {
         const mx_net_kind *k = mx_net_kind_of_class(mx_json_str(mx_json_at(arch, i)));
         if (k) return k;
     }
-    return !strcmp(mx_json_get_str(cfg, "model_type", ""), "clip_text_model") ? mx_net_kind_of_class("CLIPTextModel")
-                                                                              : NULL;
+    return mx_net_kind_of_model_type(mx_json_get_str(cfg, "model_type", NULL));
 }
 
 /* ---- locating weight files ---- */
@@ -149,7 +150,7 @@ static int read_shard_index(const char *dir, const char *index_path, weight_file
 }
 
 /* The weights of a network folder: single files first, then sharded indexes; the fp16
- * variants first when asked for, and as a fallback when only they exist. */
+ * variants first when asked for, and as a fallback when only they exist; a .bin last. */
 static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs, mx_status *st) {
     static const char *bases[2] = {"diffusion_pytorch_model", "model"};
     wfs->n = 0;
@@ -169,9 +170,19 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
             if (is_file(path)) return read_shard_index(dir, path, wfs, st);
         }
     }
+    /* the PyTorch pickles of older folders (transformers' pytorch_model.bin), through the safe
+     * checkpoint reader (torchzip.h, pickle.h: tensors only, no code run) */
+    static const char *bins[2] = {"diffusion_pytorch_model.bin", "pytorch_model.bin"};
+    for (int b = 0; b < 2; b++) {
+        if (mx_path_join(wfs->paths[0], PATH_MAX, dir, bins[b], st)) return -1;
+        if (is_file(wfs->paths[0])) {
+            wfs->n = 1;
+            return 0;
+        }
+    }
     return mx_fail(st, MX_EINPUT,
                    "%s: no weights found: expected diffusion_pytorch_model.safetensors or model.safetensors "
-                   "(or their .fp16 variants, or a sharded .safetensors.index.json); .bin files are not read",
+                   "(or their .fp16 variants, a sharded .safetensors.index.json, or a single .bin)",
                    dir);
 }
 
@@ -184,7 +195,7 @@ static int lora_targets(const converter *cv, const char *kind) {
 
 static int add_integer_tensor(converter *cv, const char *name, const mx_safetensors *f, const mx_st_tensor *t,
                               int ndim, const int64_t *shape, mx_status *st) {
-    size_t n = t->nbytes / (t->dtype == MX_ST_I64 ? 8 : 4);
+    size_t es = t->dtype == MX_ST_I64 ? 8 : t->dtype == MX_ST_U8 ? 1 : 4, n = t->nbytes / es;
     int32_t *out = malloc((n ? n : 1) * sizeof *out);
     if (!out) return mx_fail(st, MX_ENOMEM, "%s: tensor '%s': out of memory", f->path, t->name);
     if (own_buffer(cv, out, st)) return -1;
@@ -193,6 +204,8 @@ static int add_integer_tensor(converter *cv, const char *name, const mx_safetens
         int64_t v;
         if (t->dtype == MX_ST_I64) {
             memcpy(&v, p + 8 * i, 8);
+        } else if (t->dtype == MX_ST_U8) {
+            v = p[i];
         } else {
             int32_t v32;
             memcpy(&v32, p + 4 * i, 4);
@@ -234,7 +247,7 @@ static int add_tensor(converter *cv, const char *prefix, const char *kind, const
     const int64_t *shape = t->ndim ? t->shape : &one;
     if (ndim > MX_MAX_DIMS)
         return mx_fail(st, MX_EINPUT, "%s: tensor '%s': %d dimensions (at most %d)", f->path, t->name, ndim, MX_MAX_DIMS);
-    if (t->dtype == MX_ST_I64 || t->dtype == MX_ST_I32) return add_integer_tensor(cv, name, f, t, ndim, shape, st);
+    if (t->dtype == MX_ST_I64 || t->dtype == MX_ST_I32 || t->dtype == MX_ST_U8) return add_integer_tensor(cv, name, f, t, ndim, shape, st);
     mx_dtype out = ndim >= 2 ? cv->o->dtype : MX_F32;
     if (t->dtype == MX_ST_F64 || needs_lora(cv, kind, t->name)) {
         float *w = mx_st_to_f32(f, t, st);
@@ -251,7 +264,8 @@ static int add_weight_file(converter *cv, const char *prefix, const char *kind, 
         return mx_fail(st, MX_EINPUT, "%s: too many weight files", path);
     mx_safetensors *f = calloc(1, sizeof *f);
     if (!f) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
-    if (mx_st_open(f, path, st)) {
+    const char *container;
+    if (mx_sf_open_tensors(f, path, &container, NULL, st)) { /* safetensors or a PyTorch zip */
         free(f);
         return -1;
     }
@@ -293,6 +307,8 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
         snprintf(key, sizeof key, "%s.config", resolved_prefix);
         rc = mx_wf_writer_meta(cv->w, key, cfg_text, st);
     }
+    if (!rc && !strcmp(kind, "unet") && !cv->unet_config && !(cv->unet_config = strdup(cfg_text)))
+        rc = mx_fail(st, MX_ENOMEM, "convert: out of memory");
     size_t before = cv->res.tensors;
     if (!rc) {
         mx_buf_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
@@ -379,6 +395,11 @@ static int add_single_net(converter *cv, const mx_single_file *sf, const mx_sf_n
     char key[128];
     snprintf(key, sizeof key, "%s.config", prefix);
     if (mx_wf_writer_meta(cv->w, key, n->config, st)) return -1;
+    if (!strcmp(n->kind, "unet") && !cv->unet_config && !(cv->unet_config = strdup(n->config)))
+        return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    if (!strcmp(n->kind, "ip_adapter") && cv->unet_config &&
+        mx_ip_adapter_file_check_unet(n->config, cv->unet_config, sf->src.path, st))
+        return -1;
     for (size_t i = 0; i < n->count; i++) {
         if (add_tensor(cv, prefix, n->kind, &sf->src, &n->tensors[i], st)) return -1;
         cv->res.tensors++;
@@ -400,7 +421,9 @@ static int add_single_file(converter *cv, const char *path, int only, const char
     mx_single_file *sf = calloc(1, sizeof *sf);
     if (!sf) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
     int flags = (cv->o->ema && !only ? MX_SF_EMA : 0) | only;
-    if (only == MX_SF_TAESD ? mx_taesd_files_open(sf, path, st) : mx_sf_open(sf, path, flags, st)) {
+    if (only == MX_SF_TAESD        ? mx_taesd_files_open(sf, path, st)
+        : only == MX_SF_IP_ADAPTER ? mx_ip_adapter_file_open(sf, path, st)
+                                   : mx_sf_open(sf, path, flags, st)) {
         free(sf);
         return -1;
     }
@@ -424,6 +447,16 @@ static int valid_controlnet_name(const char *s) {
     for (; *s; s++)
         if (!((*s >= 'a' && *s <= 'z') || (*s >= '0' && *s <= '9') || *s == '_')) return 0;
     return 1;
+}
+
+/* The IP-Adapter's CLIP vision tower, and its preprocessor_config.json (image size, mean, std)
+ * as the metadata "image_encoder.processor" when the folder has one. */
+static int add_image_encoder(converter *cv, const char *dir, mx_status *st) {
+    char path[PATH_MAX];
+    if (add_network(cv, dir, "image_encoder", "image_encoder", st) ||
+        mx_path_join(path, sizeof path, dir, "preprocessor_config.json", st))
+        return -1;
+    return is_file(path) ? add_text_meta(cv, dir, "preprocessor_config.json", "image_encoder.processor", 1, st) : 0;
 }
 
 static int convert_inputs(converter *cv, mx_status *st) {
@@ -452,6 +485,8 @@ static int convert_inputs(converter *cv, mx_status *st) {
     if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
                                  : add_network(cv, o->taesd, "taesd", "taesd", st)))
         return -1;
+    if (o->image_encoder && add_image_encoder(cv, o->image_encoder, st)) return -1;
+    if (o->ip_adapter && add_single_file(cv, o->ip_adapter, MX_SF_IP_ADAPTER, "ip_adapter", st)) return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -516,6 +551,7 @@ static void converter_free(converter *cv) {
         free(cv->singles[k]);
     }
     free(cv->sources.p);
+    free(cv->unet_config);
 }
 
 int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) {

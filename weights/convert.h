@@ -2,7 +2,8 @@
  * Input is either a model-set folder (subfolders unet/, controlnet/, vae/, text_encoder/,
  * tokenizer/, scheduler/; each present one is converted) or a single network folder whose
  * config.json names its type. Extra ControlNets come as NAME=DIR, a TAESD (AutoencoderTiny)
- * folder as `taesd`. LoRA files are merged into the UNet and text-encoder weights; one marked as
+ * folder as `taesd`, a CLIP vision tower (the IP-Adapter's image encoder) as `image_encoder`, an IP-Adapter
+ * file as `ip_adapter` (checked against the UNet converted with it). LoRA files are merged into the UNet and text-encoder weights; one marked as
  * the LCM-LoRA is recorded (metadata "unet.lcm_lora") so that the few-step path can require it. */
 #ifndef MX_CONVERT_H
 #define MX_CONVERT_H
@@ -25,6 +26,9 @@ typedef struct mx_convert_opts {
         const char *dir; /* a diffusers folder or a single file (single_file.h) */
     } controlnets[MX_CONVERT_MAX_EXTRA];
     const char *taesd;  /* AutoencoderTiny folder -> taesd.*, or NULL */
+    const char *image_encoder; /* CLIPVisionModelWithProjection folder -> image_encoder.* (and its
+                                  preprocessor_config.json -> metadata image_encoder.processor), or NULL */
+    const char *ip_adapter; /* the published IP-Adapter file (ip_adapter_file.h) -> ip_adapter.*, or NULL */
     int ema;            /* single-file checkpoints: take the EMA copy of the UNet */
     const char *vae;    /* a VAE replacing the model's: a single file (single_file.h) or an AutoencoderKL folder */
     const char *tokenizer; /* folder with vocab.json + merges.txt for single files (no tokenizer/), or NULL */

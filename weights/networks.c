@@ -8,8 +8,13 @@ const mx_net_kind mx_net_kinds[] = {
     {.name = "unet", .class_name = "UNet2DConditionModel", .in_model_set = 1, .lora_prefix = "lora_unet_"},
     {.name = "controlnet", .class_name = "ControlNetModel", .in_model_set = 1, .lora_prefix = NULL},
     {.name = "vae", .class_name = "AutoencoderKL", .in_model_set = 1, .lora_prefix = NULL},
-    {.name = "text_encoder", .class_name = "CLIPTextModel", .in_model_set = 1, .lora_prefix = "lora_te_"},
+    {.name = "text_encoder", .class_name = "CLIPTextModel", .in_model_set = 1, .lora_prefix = "lora_te_",
+     .model_type = "clip_text_model"},
     {.name = "taesd", .class_name = "AutoencoderTiny", .in_model_set = 0, .lora_prefix = NULL},
+    {.name = "image_encoder", .class_name = "CLIPVisionModelWithProjection", .in_model_set = 0, .lora_prefix = NULL,
+     .model_type = "clip_vision_model"},
+    /* matex's own config of the published adapter file (weights/ip_adapter_file.h) */
+    {.name = "ip_adapter", .class_name = "IPAdapter", .in_model_set = 0, .lora_prefix = NULL},
 };
 const size_t mx_net_kind_count = sizeof mx_net_kinds / sizeof mx_net_kinds[0];
 
@@ -22,6 +27,12 @@ const mx_net_kind *mx_net_kind_named(const char *name) {
 const mx_net_kind *mx_net_kind_of_class(const char *class_name) {
     for (size_t i = 0; class_name && i < mx_net_kind_count; i++)
         if (!strcmp(mx_net_kinds[i].class_name, class_name)) return &mx_net_kinds[i];
+    return NULL;
+}
+
+const mx_net_kind *mx_net_kind_of_model_type(const char *model_type) {
+    for (size_t i = 0; model_type && i < mx_net_kind_count; i++)
+        if (mx_net_kinds[i].model_type && !strcmp(mx_net_kinds[i].model_type, model_type)) return &mx_net_kinds[i];
     return NULL;
 }
 

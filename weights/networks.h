@@ -14,6 +14,8 @@ typedef struct mx_net_kind {
     const char *class_name;  /* "UNet2DConditionModel": the config's _class_name / architectures[0] */
     int in_model_set;        /* 1: converted from the model-set subfolder of the same name */
     const char *lora_prefix; /* kohya LoRA key prefix ("lora_unet_"), NULL: LoRAs do not apply */
+    const char *model_type;  /* transformers' "model_type" naming the class when "architectures" is
+                                absent ("clip_text_model"), or NULL */
 } mx_net_kind;
 
 /* The list, and its length. */
@@ -23,6 +25,7 @@ extern const size_t mx_net_kind_count;
 /* The entry of that name / class, or NULL. */
 const mx_net_kind *mx_net_kind_named(const char *name);
 const mx_net_kind *mx_net_kind_of_class(const char *class_name);
+const mx_net_kind *mx_net_kind_of_model_type(const char *model_type);
 /* "A, B, ... or E": the known classes, for a message about an unknown one (cut at cap). */
 void mx_net_kind_classes(char *buf, size_t cap);
 

@@ -612,30 +612,59 @@ static int cmp_name(const void *a, const void *b) {
     return strcmp(((const mx_st_tensor *)a)->name, ((const mx_st_tensor *)b)->name);
 }
 
-static int collect_tensors(pk *k, const pk_value *d, mx_pickle_result *out) {
-    size_t cap = d->n / 2 + 1;
-    out->tensors = calloc(cap, sizeof *out->tensors);
-    if (!out->tensors) return pk_fail(k, "out of memory");
+/* Appends tensor v as `name` (prefix + key, key not NUL-terminated). */
+static int add_tensor(pk *k, const char *prefix, const pk_value *key, const pk_value *v, mx_pickle_result *out,
+                      size_t *cap) {
+    size_t plen = strlen(prefix);
+    if (key->kind != PV_STR || key->len == 0 || key->len > 1000 || memchr(key->s, 0, key->len))
+        return pk_fail(k, "a tensor's key is not a name");
+    if (out->count == *cap) {
+        size_t nc = *cap ? 2 * *cap : 64;
+        mx_st_tensor *nt = realloc(out->tensors, nc * sizeof *nt);
+        if (!nt) return pk_fail(k, "out of memory");
+        out->tensors = nt;
+        *cap = nc;
+    }
+    mx_st_tensor *t = &out->tensors[out->count];
+    memset(t, 0, sizeof *t);
+    if (!(t->name = malloc(plen + key->len + 1))) return pk_fail(k, "out of memory");
+    out->count++;
+    memcpy(t->name, prefix, plen);
+    memcpy(t->name + plen, key->s, key->len);
+    t->name[plen + key->len] = 0;
+    t->dtype = (mx_st_dtype)v->dtype;
+    t->ndim = v->ndim;
+    memcpy(t->shape, v->shape, sizeof t->shape);
+    t->data = v->data;
+    t->nbytes = v->nbytes;
+    return 0;
+}
+
+/* The tensors of dict d. A dict of tensors inside it under a name (the IP-Adapter's
+ * {"image_proj": {...}, "ip_adapter": {...}}) gives its tensors as "name.key", one level deep;
+ * other values, and entries of such a dict that are not named tensors, are skipped. */
+static int collect_dict(pk *k, const pk_value *d, const char *prefix, mx_pickle_result *out, size_t *cap) {
     for (size_t i = 0; i + 1 < d->n; i += 2) {
         const pk_value *key = &k->vals[d->items[i]], *v = &k->vals[d->items[i + 1]];
-        if (v->kind != PV_TENSOR) {
+        if (v->kind == PV_TENSOR) {
+            if (*prefix && key->kind != PV_STR) out->skipped++;
+            else if (add_tensor(k, prefix, key, v, out, cap)) return -1;
+        } else if (v->kind == PV_DICT && !*prefix && key->kind == PV_STR && key->len > 0 && key->len < 200 &&
+                   !memchr(key->s, 0, key->len)) {
+            char sub[256];
+            snprintf(sub, sizeof sub, "%.*s.", (int)key->len, key->s);
+            if (collect_dict(k, v, sub, out, cap)) return -1;
+        } else {
             out->skipped++;
-            continue;
         }
-        if (key->kind != PV_STR || key->len == 0 || key->len > 1000 || memchr(key->s, 0, key->len))
-            return pk_fail(k, "a tensor's key is not a name");
-        mx_st_tensor *t = &out->tensors[out->count];
-        if (!(t->name = malloc(key->len + 1))) return pk_fail(k, "out of memory");
-        out->count++;
-        memcpy(t->name, key->s, key->len);
-        t->name[key->len] = 0;
-        t->dtype = (mx_st_dtype)v->dtype;
-        t->ndim = v->ndim;
-        memcpy(t->shape, v->shape, sizeof t->shape);
-        t->data = v->data;
-        t->nbytes = v->nbytes;
     }
-    qsort(out->tensors, out->count, sizeof *out->tensors, cmp_name);
+    return 0;
+}
+
+static int collect_tensors(pk *k, const pk_value *d, mx_pickle_result *out) {
+    size_t cap = 0;
+    if (collect_dict(k, d, "", out, &cap)) return -1;
+    if (out->count) qsort(out->tensors, out->count, sizeof *out->tensors, cmp_name);
     for (size_t i = 1; i < out->count; i++)
         if (!strcmp(out->tensors[i - 1].name, out->tensors[i].name))
             return pk_fail(k, "duplicate tensor name '%s'", out->tensors[i].name);

@@ -28,7 +28,9 @@ typedef struct mx_pickle_result {
 } mx_pickle_result;
 
 /* Reads the pickle P (N bytes) of a checkpoint: the state dict is the top-level dict, or its
- * "state_dict" entry when it has one. `what` names the source in messages. */
+ * "state_dict" entry when it has one. A dict of tensors inside it under a name gives its tensors
+ * as "name.key" (the IP-Adapter .bin: {"image_proj": {...}, "ip_adapter": {...}}), one level.
+ * `what` names the source in messages. */
 int mx_pickle_read_state_dict(const uint8_t *p, size_t n, const char *what, mx_pickle_storage_fn storage, void *ctx,
                               mx_pickle_result *out, mx_status *st);
 

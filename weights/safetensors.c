@@ -27,7 +27,7 @@ static const struct {
     size_t size;
 } st_dtypes[] = {
     {"F32", MX_ST_F32, 4}, {"F16", MX_ST_F16, 2}, {"BF16", MX_ST_BF16, 2},
-    {"I64", MX_ST_I64, 8}, {"I32", MX_ST_I32, 4}, {"F64", MX_ST_F64, 8},
+    {"I64", MX_ST_I64, 8}, {"I32", MX_ST_I32, 4}, {"F64", MX_ST_F64, 8}, {"U8", MX_ST_U8, 1},
 };
 
 static size_t st_dtype_size(mx_st_dtype dt) {
@@ -92,7 +92,7 @@ static int parse_tensor_entry(mx_safetensors *f, mx_st_tensor *t, const char *na
     const mx_json *jd = mx_json_get(e, "dtype");
     if (parse_dtype(jd, &t->dtype, &esize)) {
         const char *s = mx_json_str(jd);
-        return mx_fail(st, MX_EINPUT, "%s: tensor '%s': unsupported dtype '%s' (F32, F16, BF16, F64, I64, I32 are read)",
+        return mx_fail(st, MX_EINPUT, "%s: tensor '%s': unsupported dtype '%s' (F32, F16, BF16, F64, I64, I32, U8 are read)",
                        path, name, s ? s : "(missing)");
     }
     const mx_json *js = mx_json_get(e, "shape");
@@ -303,6 +303,7 @@ float *mx_st_to_f32(const mx_safetensors *f, const mx_st_tensor *t, mx_status *s
             out[i] = (float)v;
             break;
         }
+        case MX_ST_U8: out[i] = (float)*p; break;
         }
     }
     return out;

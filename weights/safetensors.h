@@ -1,5 +1,6 @@
 /* Reader of the safetensors format (8-byte LE header length N, N bytes of JSON, raw data).
- * Every offset is checked against the file length; dtypes F32, F16, BF16, I64, I32 are read.
+ * Every offset is checked against the file length; dtypes F32, F16, BF16, F64, I64, I32 and U8
+ * (8-bit images) are read.
  * The file is mmapped; tensor data pointers point into the mapping (possibly unaligned:
  * copy before SIMD use). */
 #ifndef MX_SAFETENSORS_H
@@ -11,7 +12,7 @@
 #include "../runtime/status.h"
 #include "../runtime/tensor.h"
 
-typedef enum { MX_ST_F32, MX_ST_F16, MX_ST_BF16, MX_ST_I64, MX_ST_I32, MX_ST_F64 } mx_st_dtype;
+typedef enum { MX_ST_F32, MX_ST_F16, MX_ST_BF16, MX_ST_I64, MX_ST_I32, MX_ST_F64, MX_ST_U8 } mx_st_dtype;
 
 typedef struct mx_st_tensor {
     char *name;
@@ -40,7 +41,7 @@ void mx_st_close(mx_safetensors *f);
 const mx_st_tensor *mx_st_find(const mx_safetensors *f, const char *name);
 /* Sorts the tensors by name again (after a caller renamed them), as mx_st_find needs. */
 void mx_st_sort(mx_safetensors *f);
-/* Copies a floating tensor (F32/F16/BF16/F64) into a new malloc'ed fp32 array; I64/I32 are
+/* Copies a floating tensor (F32/F16/BF16/F64) into a new malloc'ed fp32 array; I64/I32/U8 are
  * converted to float too. Returns NULL with an error naming file and tensor. */
 float *mx_st_to_f32(const mx_safetensors *f, const mx_st_tensor *t, mx_status *st);
 

@@ -19,7 +19,13 @@
 /* MX_SF_CONTROLNET_ONLY: only the ControlNet (control_model.* or bare keys). MX_SF_VAE_ONLY: only the
  * VAE (first_stage_model.*, or a VAE file of its own with LDM names encoder.*, decoder.* or diffusers
  * names, e.g. vae-ft-mse-840000-ema-pruned). */
-enum { MX_SF_EMA = 1, MX_SF_CONTROLNET_ONLY = 2, MX_SF_VAE_ONLY = 4, MX_SF_TAESD = 8 /* taesd_file.h */ };
+enum {
+    MX_SF_EMA = 1,
+    MX_SF_CONTROLNET_ONLY = 2,
+    MX_SF_VAE_ONLY = 4,
+    MX_SF_TAESD = 8,      /* taesd_file.h */
+    MX_SF_IP_ADAPTER = 16 /* ip_adapter_file.h */
+};
 
 typedef struct mx_sf_net {
     const char *kind; /* "unet", "controlnet", "vae", "text_encoder" */

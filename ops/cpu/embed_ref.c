@@ -28,9 +28,11 @@ void mx_embed_tokens_ref(const mx_ctx *c, float *y, const int32_t *ids, int B, i
     (void)c;
     for (int b = 0; b < B; b++)
         for (int t = 0; t < T; t++) {
-            size_t tok = (size_t)ids[b * T + t] * (size_t)C, pos = (size_t)t * (size_t)C;
+            int id = ids[b * T + t];
+            size_t tok = (size_t)(id < 0 ? 0 : id) * (size_t)C, pos = (size_t)t * (size_t)C;
             float *row = y + ((size_t)b * T + t) * C;
             for (int i = 0; i < C; i++)
-                row[i] = mx_w_get(tokens, tok + (size_t)i) + mx_w_get(positions, pos + (size_t)i);
+                row[i] = id < 0 ? mx_w_get(positions, pos + (size_t)i)
+                                : mx_w_get(tokens, tok + (size_t)i) + mx_w_get(positions, pos + (size_t)i);
         }
 }

@@ -24,8 +24,8 @@ __global__ void embed_kernel(float *y, const int32_t *ids, int T, int C, const v
     MX_CUDA_GRID_STRIDE(i, n) {
         size_t row = i / (size_t)C, col = i % (size_t)C;
         int t = (int)(row % (size_t)T);
-        y[i] = __fadd_rn(mx_cuda_wload(tok, tok_dt, (size_t)ids[row] * C + col),
-                         mx_cuda_wload(pos, pos_dt, (size_t)t * C + col));
+        float p = mx_cuda_wload(pos, pos_dt, (size_t)t * C + col);
+        y[i] = ids[row] < 0 ? p : __fadd_rn(mx_cuda_wload(tok, tok_dt, (size_t)ids[row] * C + col), p);
     }
 }
 

@@ -52,20 +52,25 @@ int mx_bake_init(mx_bake *b, int w, int h, int nlayers, mx_status *st) {
     return 0;
 }
 
+/* The per-texel buffers of one view (allocated together, q_cap entries each). */
+static void free_texel_buffers(bp_scratch *s) {
+    free(s->view_w);
+    free(s->view_wc);
+    free(s->view_q);
+    free(s->reach);
+    free(s->near_row);
+    free(s->near_col);
+    free(s->hole);
+    free(s->claim);
+}
+
 void mx_bake_free(mx_bake *b) {
     bp_scratch *s = b->scratch;
     if (s) {
         free(s->counts);
         free(s->bin_start);
         free(s->recs);
-        free(s->view_w);
-        free(s->view_wc);
-        free(s->view_q);
-        free(s->reach);
-        free(s->near_row);
-        free(s->near_col);
-        free(s->hole);
-        free(s->claim);
+        free_texel_buffers(s);
         free(s->staged);
         free(s->nstaged);
         free(s);
@@ -497,14 +502,7 @@ static int reserve(bp_job *j, mx_status *st) {
         s->bin_cap = s->bin_start ? (size_t)j->nbins + 1 : 0;
     }
     if (need_q > s->q_cap) {
-        free(s->view_w);
-        free(s->view_wc);
-        free(s->view_q);
-        free(s->reach);
-        free(s->near_row);
-        free(s->near_col);
-        free(s->hole);
-        free(s->claim);
+        free_texel_buffers(s);
         s->view_w = malloc(need_q * sizeof *s->view_w);
         s->view_wc = malloc(3 * need_q * sizeof *s->view_wc);
         s->view_q = malloc(need_q * sizeof *s->view_q);

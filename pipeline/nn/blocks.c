@@ -206,12 +206,14 @@ static int tblock_load(mx_tblock *p, mx_binder *b, const char *path, int dim, in
 
 /* hs[B*HW, dim] is updated in place: self-attention, cross-attention, feed-forward, each
  * pre-normed and added back (diffusers BasicTransformerBlock, norm_type "layer_norm"). */
-static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, const float *context, int T) {
+static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, const float *context, int T,
+                      const mx_ip_guide *ip) {
     size_t mark = mx_arena_mark(r->a);
     int dim = p->dim, D = dim / p->heads, N = B * HW;
-    size_t nd = (size_t)N * dim, td = (size_t)B * T * dim;
+    size_t nd = (size_t)N * dim, td = (size_t)B * T * dim, kvd = nd > td ? nd : td;
+    if (ip && (size_t)B * ip->n * dim > kvd) kvd = (size_t)B * ip->n * dim;
     float *n = mx_run_alloc(r, nd), *q = mx_run_alloc(r, nd), *a = mx_run_alloc(r, nd);
-    float *k = mx_run_alloc(r, nd > td ? nd : td), *v = mx_run_alloc(r, nd > td ? nd : td);
+    float *k = mx_run_alloc(r, kvd), *v = mx_run_alloc(r, kvd);
     if (!n || !q || !a || !k || !v) return -1;
 
     mx_ln_run(r, &p->norm1, n, hs, N);
@@ -227,6 +229,12 @@ static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, c
     mx_lin_run(r, &p->k2, k, context, B * T);
     mx_lin_run(r, &p->v2, v, context, B * T);
     run_attention(r, a, q, k, v, B, p->heads, HW, T, D, dim, dim, dim);
+    if (ip) { /* a += scale · attention(q, K_ip, V_ip); n is free until to_out */
+        mx_lin_run(r, &ip->k[p->ip_layer], k, ip->tokens, B * ip->n);
+        mx_lin_run(r, &ip->v[p->ip_layer], v, ip->tokens, B * ip->n);
+        run_attention(r, n, q, k, v, B, p->heads, HW, ip->n, D, dim, dim, dim);
+        mx_axpy(r->c, a, n, ip->scale, nd);
+    }
     mx_lin_run(r, &p->o2, n, a, N);
     run_add(r, hs, hs, n, nd);
 
@@ -280,7 +288,7 @@ void mx_transformer_free(mx_transformer *p) {
 }
 
 int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float *x, int B, int H, int W,
-                       const float *context, int T) {
+                       const float *context, int T, const mx_ip_guide *ip) {
     size_t mark = mx_arena_mark(r->a);
     int HW = H * W, C = p->channels, inner = p->inner;
     size_t n = (size_t)B * HW * (C > inner ? C : inner);
@@ -296,7 +304,7 @@ int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float
         mx_transpose_chw_hwc(r->c, hs, y, B, inner, HW);
     }
     for (int i = 0; i < p->nblocks; i++)
-        if (tblock_run(r, &p->blocks[i], hs, B, HW, context, T)) return -1;
+        if (tblock_run(r, &p->blocks[i], hs, B, HW, context, T, ip)) return -1;
     if (p->linear_proj) {
         mx_lin_run(r, &p->proj_out_lin, t, hs, B * HW);
         mx_transpose_hwc_chw(r->c, y, t, B, C, HW);

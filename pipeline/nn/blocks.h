@@ -67,7 +67,18 @@ typedef struct mx_tblock {
     mx_ln norm1, norm2, norm3;
     mx_lin q1, k1, v1, o1, q2, k2, v2, o2, ff_in, ff_out;
     int dim, heads, ctx_dim, ff_dim;
+    int ip_layer; /* its cross-attention's index among the UNet's (ip_adapter.h), set by the UNet */
 } mx_tblock;
+
+/* Image guidance of one forward (IP-Adapter, ip_adapter.h): every cross-attention adds
+ * scale · attention(q, to_k_ip(tokens), to_v_ip(tokens)) to its text attention, before to_out
+ * (diffusers IPAdapterAttnProcessor2_0). NULL: none (the plain block, no extra op). */
+typedef struct mx_ip_guide {
+    const mx_lin *k, *v;  /* to_k_ip, to_v_ip of each cross-attention layer, by mx_tblock.ip_layer */
+    const float *tokens;  /* [B, n, ctx_dim] */
+    int n;                /* image tokens per item */
+    float scale;          /* non-zero */
+} mx_ip_guide;
 
 /* Transformer2DModel (continuous input): GroupNorm (eps 1e-6), proj_in (1×1 conv or linear),
  * transformer blocks, proj_out, residual. */
@@ -81,9 +92,10 @@ typedef struct mx_transformer {
 int mx_transformer_load(mx_transformer *p, mx_binder *b, const char *path, int channels, int heads, int layers,
                         int ctx_dim, int groups, int linear_proj, mx_status *st);
 void mx_transformer_free(mx_transformer *p);
-/* y[B, C, H, W] = transformer(x, context[B, T, ctx_dim]); y may not alias x. */
+/* y[B, C, H, W] = transformer(x, context[B, T, ctx_dim]) with image guidance ip (may be NULL);
+ * y may not alias x. */
 int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float *x, int B, int H, int W,
-                       const float *context, int T);
+                       const float *context, int T, const mx_ip_guide *ip);
 
 /* VAE mid-block attention (one head over channels, GroupNorm, q/k/v/out with bias, residual). */
 typedef struct mx_vae_attn {

@@ -21,17 +21,6 @@ void mx_clip_config_sd15(mx_clip_config *cfg) {
     cfg->hidden_act = MX_TF_ACT_QUICK_GELU;
 }
 
-/* Reads an integer member in [lo, hi] (absent: keeps *v). */
-static int get_int(const mx_json *root, const char *key, int lo, int hi, int *v, const char *what, mx_status *st) {
-    const mx_json *j = mx_json_get(root, key);
-    if (!j) return 0;
-    double d = mx_json_num(j);
-    if (mx_json_kind(j) != MX_JSON_NUM || d != floor(d) || d < lo || d > hi)
-        return mx_fail(st, MX_EINPUT, "%s: \"%s\" must be an integer in [%d, %d]", what, key, lo, hi);
-    *v = (int)d;
-    return 0;
-}
-
 int mx_clip_config_parse(mx_clip_config *cfg, const char *json_text, size_t len, const char *what,
                          mx_status *st) {
     mx_json *root = mx_json_parse(json_text, len, what, st);
@@ -42,24 +31,16 @@ int mx_clip_config_parse(mx_clip_config *cfg, const char *json_text, size_t len,
         mx_fail(st, MX_EINPUT, "%s: config is not a JSON object", what);
         goto done;
     }
-    if (get_int(root, "hidden_size", 1, 1 << 16, &cfg->hidden_size, what, st) ||
-        get_int(root, "intermediate_size", 1, 1 << 18, &cfg->intermediate_size, what, st) ||
-        get_int(root, "num_attention_heads", 1, 1024, &cfg->num_attention_heads, what, st) ||
-        get_int(root, "num_hidden_layers", 1, 256, &cfg->num_hidden_layers, what, st) ||
-        get_int(root, "max_position_embeddings", 1, 1 << 16, &cfg->max_position_embeddings, what, st) ||
-        get_int(root, "vocab_size", 1, 1 << 24, &cfg->vocab_size, what, st) ||
-        get_int(root, "eos_token_id", 0, 1 << 24, &cfg->eos_token_id, what, st))
+    if (mx_tf_json_int(root, "hidden_size", 1, 1 << 16, &cfg->hidden_size, what, st) ||
+        mx_tf_json_int(root, "intermediate_size", 1, 1 << 18, &cfg->intermediate_size, what, st) ||
+        mx_tf_json_int(root, "num_attention_heads", 1, 1024, &cfg->num_attention_heads, what, st) ||
+        mx_tf_json_int(root, "num_hidden_layers", 1, 256, &cfg->num_hidden_layers, what, st) ||
+        mx_tf_json_int(root, "max_position_embeddings", 1, 1 << 16, &cfg->max_position_embeddings, what, st) ||
+        mx_tf_json_int(root, "vocab_size", 1, 1 << 24, &cfg->vocab_size, what, st) ||
+        mx_tf_json_int(root, "eos_token_id", 0, 1 << 24, &cfg->eos_token_id, what, st))
         goto done;
     cfg->layer_norm_eps = (float)mx_json_get_num(root, "layer_norm_eps", cfg->layer_norm_eps);
-    const char *act = mx_json_get_str(root, "hidden_act", "quick_gelu");
-    if (!strcmp(act, "quick_gelu")) {
-        cfg->hidden_act = MX_TF_ACT_QUICK_GELU;
-    } else if (!strcmp(act, "gelu")) {
-        cfg->hidden_act = MX_TF_ACT_GELU;
-    } else {
-        mx_fail(st, MX_EINPUT, "%s: hidden_act \"%s\" is not supported (quick_gelu, gelu)", what, act);
-        goto done;
-    }
+    if (mx_tf_act_parse(mx_json_get_str(root, "hidden_act", "quick_gelu"), &cfg->hidden_act, what, st)) goto done;
     if (cfg->hidden_size % cfg->num_attention_heads != 0) {
         mx_fail(st, MX_EINPUT, "%s: hidden_size %d is not divisible by num_attention_heads %d", what,
                 cfg->hidden_size, cfg->num_attention_heads);

@@ -126,7 +126,7 @@ static int controlnet_run(mx_run *r, const mx_controlnet *m, const mx_controlnet
         mx_unet_residual_shape(c, i, in->H, in->W, &C, &h, &w);
         if (!(res[i] = mx_run_alloc(r, (size_t)B * C * h * w))) return -1;
     }
-    if (mx_unet_encoder_run(r, &m->enc, in->sample, emb, B, in->H, in->W, temb, in->encoder_hidden_states, in->T, res,
+    if (mx_unet_encoder_run(r, &m->enc, in->sample, emb, B, in->H, in->W, temb, in->encoder_hidden_states, in->T, NULL, res,
                             res[n]))
         return -1;
     /* zero convolutions, scaled, written or accumulated into the caller's buffers */

@@ -29,6 +29,10 @@ struct mx_net_io {
     float *(*output)(mx_net_io *io, const char *name, int ndim, const int64_t *shape, mx_status *st);
     /* The call's arena on the device, `bytes` big (one per call). */
     mx_arena *(*arena)(mx_net_io *io, size_t bytes, mx_status *st);
+    /* Another network of the same weight file, by its registry kind ("ip_adapter": prefix
+     * "ip_adapter."), loaded with its weights on the device (freed after the call); NULL with st
+     * set when the file has none. */
+    const void *(*network)(mx_net_io *io, const char *kind, mx_status *st);
 };
 
 /* Device copy of input `name` (shape as io->host). */

@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "../../runtime/json.h"
+#include "../../weights/networks.h"
 
 #define MAX_CHANNELS 16384
 #define MAX_LAYERS 16
@@ -327,7 +328,8 @@ int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, co
     const char *cls = mx_json_get_str(root, "_class_name", NULL);
     const mx_json *arch = mx_json_get(root, "architectures");
     if (!cls && mx_json_len(arch) > 0) cls = mx_json_str(mx_json_at(arch, 0));
-    if (!cls && !strcmp(mx_json_get_str(root, "model_type", ""), "clip_text_model")) cls = "CLIPTextModel";
+    const mx_net_kind *k = cls ? NULL : mx_net_kind_of_model_type(mx_json_get_str(root, "model_type", NULL));
+    if (k) cls = k->class_name;
     snprintf(buf, cap, "%s", cls ? cls : "");
     mx_json_free(root);
     return 0;

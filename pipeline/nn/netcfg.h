@@ -69,8 +69,9 @@ int mx_unet_config_parse(mx_unet_config *cfg, const char *text, size_t len, cons
 int mx_vae_config_parse(mx_vae_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
 int mx_taesd_config_parse(mx_taesd_config *cfg, const char *text, size_t len, const char *what, mx_status *st);
 
-/* Class of a config text ("_class_name", else "architectures"[0], else CLIPTextModel for
- * model_type clip_text_model), copied into buf (empty when none). */
+/* Class of a config text ("_class_name", else "architectures"[0], else the class of its
+ * "model_type" in weights/networks.h: clip_text_model, clip_vision_model), copied into buf (empty
+ * when none). */
 int mx_config_class_name(char *buf, size_t cap, const char *text, size_t len, const char *what, mx_status *st);
 
 #endif

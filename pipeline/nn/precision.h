@@ -7,7 +7,7 @@
  *         embedding and zero convolutions, the resnets' 1×1 shortcuts, the down/upsamplers,
  *         proj_in and proj_out), and the whole VAE (encoder and decoder);
  *   GroupNorm, LayerNorm, softmax, activations and residual adds are fp32 at every level.
- *   CLIP and TAESD follow the context.
+ *   CLIP (text and vision towers) and TAESD follow the context.
  *
  * Why (relative L2 against the fp32 goldens): bf16 rounds both operands of a product to 8 bits
  * (~1.6e-3 per layer) and the errors of the layers add up. With every layer in bf16 the

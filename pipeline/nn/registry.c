@@ -4,7 +4,9 @@
 #include <string.h>
 
 #include "clip.h"
+#include "clip_vision.h"
 #include "controlnet.h"
+#include "ip_adapter.h"
 #include "taesd.h"
 #include "unet.h"
 #include "vae.h"
@@ -19,7 +21,9 @@ static void taesd_free(void *n) { mx_taesd_free(n); }
 
 const mx_net_def mx_nets[] = {
     {.kind = "unet", .load = mx_unet_load_config, .free = unet_free,
-     .verbs = {{"unet", CONDITIONING ",\n               optional down_block_res_sample.{i} and mid_block_res_sample -> out",
+     .verbs = {{"unet", CONDITIONING ",\n               optional down_block_res_sample.{i} and mid_block_res_sample,\n"
+                        "               optional image_embeds [B,n_images,E] + ip_adapter_scale [1] (the file's ip_adapter.)\n"
+                        "               -> out (+ image_tokens [B,n_images,tokens,D])",
                 mx_unet_run_io}}},
     {.kind = "controlnet", .load = mx_controlnet_load_config, .free = controlnet_free,
      .verbs = {{"controlnet", "sample, timestep, encoder_hidden_states (as unet), controlnet_cond [B,3,8H,8W],\n"
@@ -36,6 +40,12 @@ const mx_net_def mx_nets[] = {
      .verbs = {{"taesd-encode", "image [B,3,H,W] in [-1,1] -> latents (SD latents, scaling factor 1)",
                 mx_taesd_run_encode_io},
                {"taesd-decode", "latents [B,4,h,w] -> image (in about [-1,1], unclamped)", mx_taesd_run_decode_io}}},
+    {.kind = "image_encoder", .load = mx_clip_vision_load_config, .free = mx_clip_vision_destroy,
+     .verbs = {{"clip-vision", "pixel_values [B,3,S,S] (clip-preprocess) -> image_embeds [B,P],\n"
+                               "               last_hidden_state, penultimate_hidden_state [B,1+(S/patch)^2,D]",
+                mx_clip_vision_run_io}}},
+    /* run by the UNet's cross-attentions: run-net unet's image_embeds */
+    {.kind = "ip_adapter", .load = mx_ip_adapter_load_config, .free = mx_ip_adapter_destroy},
 };
 const size_t mx_net_count = sizeof mx_nets / sizeof mx_nets[0];
 

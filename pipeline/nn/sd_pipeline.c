@@ -17,6 +17,8 @@ typedef struct sd_dims {
     size_t text;     /* T*Ct per item */
     int n_res;       /* down residuals (mid one extra) */
     size_t res_numel[MX_UNET_MAX_RES + 1];
+    int ip_sets;     /* image-token sets (0: no image guidance) */
+    size_t ip;       /* image-token floats per item */
 } sd_dims;
 
 /* Working memory on the context's backend: one block and the arena. text and cond hold every
@@ -25,6 +27,7 @@ typedef struct sd_dims {
 typedef struct sd_work {
     float *block;
     float *lat, *x_in, *text, *timesteps, *eps, *guided;
+    float *ip; /* per token set its call's image tokens, [uncond; cond] (or cond) */
     float *res[MX_UNET_MAX_RES + 1];
     float *cond[MX_SD_MAX_CONTROLNETS];
     mx_arena arena;
@@ -34,6 +37,20 @@ static size_t control_numel(const mx_controlnet *net, int h, int w) {
     const mx_unet_config *cc = mx_controlnet_cfg(net);
     int f = 1 << (cc->n_cond_emb > 0 ? cc->n_cond_emb - 1 : 0);
     return (size_t)cc->conditioning_channels * (size_t)(f * h) * (size_t)(f * w);
+}
+
+/* The image guidance's sizes into d (none: d->ip_sets 0). */
+static int check_image_guide(const mx_sd_request *rq, sd_dims *d, mx_status *st) {
+    const mx_sd_image_guide *g = rq->image;
+    d->ip_sets = 0;
+    if (!g || g->scale == 0.0f) return 0;
+    if (!g->adapter || !g->cond || (d->B == 2 && !g->uncond) || g->n_tokens < 1 || g->n_tokens > MX_IP_MAX_TOKENS)
+        return mx_fail(st, MX_EUSAGE, "sd pipeline: image guidance without adapter or tokens, or with %d tokens",
+                       g->n_tokens);
+    if (mx_unet_check_ip(rq->unet, g->adapter, st)) return mx_fail_prefix(st, "sd pipeline");
+    d->ip_sets = g->per_latent ? d->n : 1;
+    d->ip = (size_t)g->n_tokens * (size_t)d->Ct;
+    return 0;
 }
 
 static int check_request(const mx_sd_request *rq, const mx_ctx *c, int n, int h, int w, sd_dims *d,
@@ -72,12 +89,25 @@ static int check_request(const mx_sd_request *rq, const mx_ctx *c, int n, int h,
     for (int k = 0; k < rq->n_controls; k++)
         if (!rq->controls[k].net || !rq->controls[k].image)
             return mx_fail(st, MX_EUSAGE, "sd pipeline: ControlNet %d has no network or image", k);
-    return 0;
+    return check_image_guide(rq, d, st);
+}
+
+/* The UNet call of latent i (its image tokens in wk->ip, when it has some). */
+static mx_unet_input unet_call(const mx_sd_request *rq, const sd_dims *d, const sd_work *wk, int i) {
+    mx_unet_input in = {.B = d->B, .H = d->h, .W = d->w, .T = d->T};
+    if (d->ip_sets) {
+        in.ip = rq->image->adapter;
+        in.ip_n = rq->image->n_tokens;
+        in.ip_scale = rq->image->scale;
+        in.ip_tokens = wk ? wk->ip + (size_t)(d->ip_sets > 1 ? i : 0) * d->B * d->ip : NULL;
+    }
+    return in;
 }
 
 /* The largest arena any network call of the loop needs. */
 static int loop_arena_bytes(const mx_sd_request *rq, const sd_dims *d, size_t *bytes, mx_status *st) {
-    if (mx_unet_arena_bytes(rq->unet, d->B, d->h, d->w, d->T, bytes, st)) return -1;
+    mx_unet_input dry = unet_call(rq, d, NULL, 0);
+    if (mx_unet_call_arena_bytes(rq->unet, &dry, bytes, st)) return -1;
     for (int k = 0; k < rq->n_controls; k++) {
         size_t b;
         if (mx_controlnet_arena_bytes(rq->controls[k].net, d->B, d->h, d->w, d->T, &b, st)) return -1;
@@ -93,14 +123,15 @@ static void work_free(const mx_ctx *c, sd_work *wk) {
 
 static int work_alloc(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, mx_status *st) {
     memset(wk, 0, sizeof *wk);
-    size_t sizes[5 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
-    float **ptrs[5 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    size_t sizes[6 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
+    float **ptrs[6 + MX_UNET_MAX_RES + 1 + MX_SD_MAX_CONTROLNETS];
     size_t per_b = d->lat / (size_t)d->n, np = 0, total = 0;
     sizes[np] = d->lat, ptrs[np++] = &wk->lat;
     sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->x_in;
     sizes[np] = (size_t)d->n * d->B * d->text, ptrs[np++] = &wk->text;
     sizes[np] = (size_t)d->B * per_b, ptrs[np++] = &wk->eps;
     sizes[np] = d->lat, ptrs[np++] = &wk->guided;
+    if (d->ip_sets) sizes[np] = (size_t)d->ip_sets * d->B * d->ip, ptrs[np++] = &wk->ip;
     for (int i = 0; i <= d->n_res; i++) sizes[np] = d->res_numel[i], ptrs[np++] = &wk->res[i];
     for (int k = 0; k < rq->n_controls; k++)
         sizes[np] = (size_t)d->n * d->B * control_numel(rq->controls[k].net, d->h, d->w), ptrs[np++] = &wk->cond[k];
@@ -123,12 +154,24 @@ static int work_alloc(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d
     return 0;
 }
 
+/* Each set of image tokens as its calls take them: [uncond_s; cond_s] (or cond_s). */
+static int upload_image_tokens(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk,
+                               mx_status *st) {
+    for (int s = 0; s < d->ip_sets; s++) {
+        float *dst = wk->ip + (size_t)s * d->B * d->ip;
+        if ((d->B == 2 && mx_upload(c, dst, rq->image->uncond + (size_t)s * d->ip, d->ip, st)) ||
+            mx_upload(c, dst + (d->B == 2 ? d->ip : 0), rq->image->cond + (size_t)s * d->ip, d->ip, st))
+            return -1;
+    }
+    return 0;
+}
+
 /* The edge in: latents, and per latent i its call's text [uncond_i; cond_i] (or cond_i) and
- * control images (repeated for both halves) go to the device once. */
+ * control images (repeated for both halves) go to the device once; the image tokens too. */
 static int upload_inputs(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk,
                          const float *latents, mx_status *st) {
     int cfg_on = d->B == 2;
-    if (mx_upload(c, wk->lat, latents, d->lat, st)) return -1;
+    if (mx_upload(c, wk->lat, latents, d->lat, st) || upload_image_tokens(rq, c, d, wk, st)) return -1;
     for (int i = 0; i < d->n; i++) {
         float *text = wk->text + (size_t)i * d->B * d->text;
         if ((cfg_on && mx_upload(c, text, rq->uncond_text + (size_t)i * d->text, d->text, st)) ||
@@ -182,8 +225,12 @@ static int predict_one(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *
     mx_fill(c, wk->timesteps, (float)t, (size_t)d->B);
     int with_res = run_controlnets(rq, c, d, wk, i, st);
     if (with_res < 0) return -1;
-    mx_unet_input in = {wk->x_in, wk->timesteps, wk->text + (size_t)i * d->B * d->text, d->B, d->h, d->w, d->T,
-                        with_res ? (const float *const *)wk->res : NULL, with_res ? wk->res[d->n_res] : NULL};
+    mx_unet_input in = unet_call(rq, d, wk, i);
+    in.sample = wk->x_in;
+    in.timesteps = wk->timesteps;
+    in.encoder_hidden_states = wk->text + (size_t)i * d->B * d->text;
+    in.down_residuals = with_res ? (const float *const *)wk->res : NULL;
+    in.mid_residual = with_res ? wk->res[d->n_res] : NULL;
     if (mx_unet_forward(c, rq->unet, &in, wk->eps, &wk->arena, st)) return mx_fail_prefix(st, "UNet: ");
     if (d->B == 2) cfg_combine(c, wk->guided + (size_t)i * per, wk->eps, rq->guidance, per);
     else mx_copy(c, wk->guided + (size_t)i * per, wk->eps, per);

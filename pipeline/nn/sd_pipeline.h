@@ -45,6 +45,20 @@ typedef int (*mx_sd_progress)(void *user, int step, int n_steps, int64_t timeste
 typedef int (*mx_sd_after_step)(void *user, const mx_ctx *c, int step, int n_steps, float *latents,
                                 mx_status *st);
 
+/* Image guidance of the loop (IP-Adapter, ip_adapter.h): image tokens in every cross-attention of
+ * the UNet (not the ControlNets) at `scale`. The conditional half gets `cond`, the unconditional
+ * half `uncond`, the tokens of a zero embedding as diffusers' prepare_ip_adapter_image_embeds
+ * makes them (mx_ip_adapter_guidance_tokens gives both). Host memory, [sets, n_tokens,
+ * cross_attention_dim] each: one set shared by every latent (a batch of views with one style
+ * image), or one per latent (per_latent). */
+typedef struct mx_sd_image_guide {
+    const mx_ip_adapter *adapter;
+    const float *cond, *uncond; /* uncond unused when guidance <= 1 */
+    int n_tokens;               /* per set: num_tokens × images */
+    int per_latent;             /* 0: one set for all latents; 1: n sets */
+    float scale;                /* 0: the plain UNet */
+} mx_sd_image_guide;
+
 typedef struct mx_sd_request {
     const mx_unet *unet;
     const mx_sd_control *controls; /* 0..MX_SD_MAX_CONTROLNETS */
@@ -58,6 +72,7 @@ typedef struct mx_sd_request {
     void *progress_user;
     mx_sd_after_step after_step; /* may be NULL */
     void *after_step_user;
+    const mx_sd_image_guide *image; /* NULL: no image guidance */
 } mx_sd_request;
 
 /* Runs every remaining scheduler step in place on latents [n, C, h, w] (C = the UNet's

@@ -4,6 +4,29 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
+
+#include "../../runtime/json.h"
+
+int mx_tf_json_int(const mx_json *root, const char *key, int lo, int hi, int *v, const char *what, mx_status *st) {
+    const mx_json *j = mx_json_get(root, key);
+    if (!j) return 0;
+    double d = mx_json_num(j);
+    if (mx_json_kind(j) != MX_JSON_NUM || d != floor(d) || d < lo || d > hi)
+        return mx_fail(st, MX_EINPUT, "%s: \"%s\" must be an integer in [%d, %d]", what, key, lo, hi);
+    *v = (int)d;
+    return 0;
+}
+
+int mx_tf_act_parse(const char *name, mx_tf_act *act, const char *what, mx_status *st) {
+    if (!strcmp(name, "quick_gelu"))
+        *act = MX_TF_ACT_QUICK_GELU;
+    else if (!strcmp(name, "gelu"))
+        *act = MX_TF_ACT_GELU;
+    else
+        return mx_fail(st, MX_EINPUT, "%s: hidden_act \"%s\" is not supported (quick_gelu, gelu)", what, name);
+    return 0;
+}
 
 static int bind_linear(mx_binder *b, const char *base, int64_t out, int64_t in, mx_wptr *w, mx_wptr *bias,
                        mx_status *st) {

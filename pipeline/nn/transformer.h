@@ -32,6 +32,13 @@ typedef struct mx_tf_buffers {
     float *h, *q, *k, *v, *attn, *mlp;
 } mx_tf_buffers;
 
+/* Config helpers of the CLIP towers (text and vision): an integer member `key` of a JSON object
+ * in [lo, hi] (absent: keeps *v), and the activation named by "hidden_act" (quick_gelu, gelu). */
+struct mx_json;
+int mx_tf_json_int(const struct mx_json *root, const char *key, int lo, int hi, int *v, const char *what,
+                   mx_status *st);
+int mx_tf_act_parse(const char *name, mx_tf_act *act, const char *what, mx_status *st);
+
 /* Binds a LayerNorm's weight and bias under `path`. */
 int mx_tf_norm_bind(mx_binder *b, const char *path, int64_t c, mx_wptr *w, mx_wptr *bias, mx_status *st);
 /* Binds the layer under `path` (layer_norm1, self_attn.{q,k,v,out}_proj, layer_norm2, mlp.fc{1,2}). */

@@ -23,7 +23,49 @@ struct mx_unet {
     up_level *up; /* cfg.nlevels */
     mx_gn norm_out;
     mx_conv conv_out;
+    int n_cross; /* cross-attention layers (one per transformer block) */
 };
+
+/* The transformers in the order of diffusers' unet.attn_processors: the down blocks, the up
+ * blocks, then the mid block (UNet2DConditionModel registers mid_block after up_blocks). Each of
+ * their blocks is one cross-attention layer, the IP-Adapter's numbering (ip_adapter.h). */
+static int cross_attention_transformers(const mx_unet *u, mx_transformer **list) {
+    const mx_unet_config *c = &u->enc.cfg;
+    int n = 0;
+    for (int i = 0; i < c->nlevels; i++)
+        for (int j = 0; u->enc.levels[i].cross && j < c->layers_per_block; j++) list[n++] = &u->enc.levels[i].attn[j];
+    for (int i = 0; i < c->nlevels; i++)
+        for (int j = 0; u->up[i].cross && j < u->up[i].nres; j++) list[n++] = &u->up[i].attn[j];
+    list[n++] = (mx_transformer *)&u->enc.mid.attn;
+    return n;
+}
+
+static void number_cross_attentions(mx_unet *u) {
+    mx_transformer *list[2 * MX_NET_MAX_LEVELS * (MX_ENC_MAX_LAYERS + 1) + 1];
+    int n = cross_attention_transformers(u, list);
+    u->n_cross = 0;
+    for (int t = 0; t < n; t++)
+        for (int b = 0; b < list[t]->nblocks; b++) list[t]->blocks[b].ip_layer = u->n_cross++;
+}
+
+int mx_unet_check_ip(const mx_unet *u, const mx_ip_adapter *ad, mx_status *st) {
+    mx_transformer *list[2 * MX_NET_MAX_LEVELS * (MX_ENC_MAX_LAYERS + 1) + 1];
+    int n = cross_attention_transformers(u, list);
+    if (ad->n_layers != u->n_cross)
+        return mx_fail(st, MX_EINPUT, "the IP-Adapter has %d cross-attention layers, the UNet %d", ad->n_layers,
+                       u->n_cross);
+    if (ad->cross_dim != u->enc.cfg.cross_attention_dim)
+        return mx_fail(st, MX_EINPUT, "the IP-Adapter's tokens are %d wide, the UNet's cross_attention_dim is %d",
+                       ad->cross_dim, u->enc.cfg.cross_attention_dim);
+    for (int t = 0; t < n; t++)
+        for (int b = 0; b < list[t]->nblocks; b++) {
+            const mx_tblock *tb = &list[t]->blocks[b];
+            if (ad->hidden[tb->ip_layer] != tb->dim)
+                return mx_fail(st, MX_EINPUT, "IP-Adapter layer %d (%d.to_k_ip) is %d wide, the UNet's is %d",
+                               tb->ip_layer, 2 * tb->ip_layer + 1, ad->hidden[tb->ip_layer], tb->dim);
+        }
+    return 0;
+}
 
 const mx_unet_config *mx_unet_cfg(const mx_unet *u) { return &u->enc.cfg; }
 
@@ -75,6 +117,7 @@ int mx_unet_load(mx_unet **out, const mx_unet_config *cfg, mx_binder *b, mx_stat
         mx_unet_free(u);
         return -1;
     }
+    number_cross_attentions(u);
     *out = u;
     return 0;
 }
@@ -108,7 +151,7 @@ static size_t up_path_max(const mx_unet_config *c, int B, int H, int W) {
 /* Up level i: each resnet on concat(h, skip) (skips popped from the end), optional
  * transformer, then the upsampler. h moves between the ping-pong buffers p[0], p[1]. */
 static int up_level_run(mx_run *r, const up_level *lv, float **h, float *p[2], float *const *res, int *k, int B,
-                        int *H, int *W, const float *temb, const float *context, int T) {
+                        int *H, int *W, const float *temb, const float *context, int T, const mx_ip_guide *ip) {
     for (int j = 0; j < lv->nres; j++) {
         size_t mark = mx_arena_mark(r->a), hw = (size_t)*H * *W;
         float *cat = mx_run_alloc(r, (size_t)B * (lv->cin[j] + lv->cskip[j]) * hw);
@@ -121,7 +164,7 @@ static int up_level_run(mx_run *r, const up_level *lv, float **h, float *p[2], f
         *h = dst;
         if (lv->cross) {
             dst = *h == p[0] ? p[1] : p[0];
-            if (mx_transformer_run(r, &lv->attn[j], dst, *h, B, *H, *W, context, T)) return -1;
+            if (mx_transformer_run(r, &lv->attn[j], dst, *h, B, *H, *W, context, T, ip)) return -1;
             *h = dst;
         }
     }
@@ -145,9 +188,18 @@ static void add_residuals(mx_run *r, const mx_unet_config *c, const mx_unet_inpu
     }
 }
 
+/* The call's image guidance, or NULL when it has none (no adapter, no tokens or scale 0). */
+static const mx_ip_guide *ip_guide(const mx_unet_input *in, mx_ip_guide *g) {
+    if (!in->ip || in->ip_n <= 0 || in->ip_scale == 0.0f) return NULL;
+    *g = (mx_ip_guide){.k = in->ip->k, .v = in->ip->v, .tokens = in->ip_tokens, .n = in->ip_n, .scale = in->ip_scale};
+    return g;
+}
+
 static int unet_run(mx_run *r, const mx_unet *u, const mx_unet_input *in, float *out) {
     const mx_unet_config *c = &u->enc.cfg;
     int B = in->B, n = mx_unet_num_residuals(c), C, h, w;
+    mx_ip_guide guide;
+    const mx_ip_guide *ip = ip_guide(in, &guide);
     float *res[MX_UNET_MAX_RES];
     float *temb = mx_run_alloc(r, (size_t)B * c->time_embed_dim);
     if (!temb || mx_time_embed_run(r, &u->enc.time, temb, in->timesteps, B)) return -1;
@@ -156,7 +208,7 @@ static int unet_run(mx_run *r, const mx_unet *u, const mx_unet_input *in, float 
         if (!(res[i] = mx_run_alloc(r, (size_t)B * C * h * w))) return -1;
     }
     float *mid = res[n];
-    if (mx_unet_encoder_run(r, &u->enc, in->sample, NULL, B, in->H, in->W, temb, in->encoder_hidden_states, in->T, res,
+    if (mx_unet_encoder_run(r, &u->enc, in->sample, NULL, B, in->H, in->W, temb, in->encoder_hidden_states, in->T, ip, res,
                             mid))
         return -1;
     add_residuals(r, c, in, res, mid);
@@ -166,7 +218,8 @@ static int unet_run(mx_run *r, const mx_unet *u, const mx_unet_input *in, float 
     float *hcur = mid;
     int k = n, H = h, W = w;
     for (int i = 0; i < c->nlevels; i++)
-        if (up_level_run(r, &u->up[i], &hcur, p, res, &k, B, &H, &W, temb, in->encoder_hidden_states, in->T)) return -1;
+        if (up_level_run(r, &u->up[i], &hcur, p, res, &k, B, &H, &W, temb, in->encoder_hidden_states, in->T, ip))
+            return -1;
     float *t = hcur == p[0] ? p[1] : p[0];
     mx_gn_run(r, &u->norm_out, t, hcur, B, H * W, 1);
     mx_conv_run(r, &u->conv_out, out, t, B, H, W);
@@ -175,7 +228,11 @@ static int unet_run(mx_run *r, const mx_unet *u, const mx_unet_input *in, float 
 
 int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,
                     mx_status *st) {
+    mx_ip_guide guide;
     if (mx_unet_check_sizes(&u->enc.cfg, in->B, in->H, in->W, in->T, st)) return -1;
+    if (ip_guide(in, &guide) && mx_unet_check_ip(u, in->ip, st)) return -1;
+    if (ip_guide(in, &guide) && in->ip_n > MX_IP_MAX_TOKENS)
+        return mx_fail(st, MX_EINPUT, "%d image tokens (at most %d)", in->ip_n, MX_IP_MAX_TOKENS);
     mx_run r;
     mx_run_init(&r, c, a, st);
     size_t mark = mx_arena_mark(a);
@@ -184,20 +241,26 @@ int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, 
     return rc ? mx_fail_prefix(st, "UNet forward") : 0;
 }
 
-int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+int mx_unet_call_arena_bytes(const mx_unet *u, const mx_unet_input *in, size_t *bytes, mx_status *st) {
     mx_arena a;
     mx_arena_measure(&a);
-    mx_unet_input in = {NULL, NULL, NULL, B, H, W, T, NULL, NULL};
-    if (mx_unet_forward(NULL, u, &in, NULL, &a, st)) return -1;
+    mx_unet_input dry = {.B = in->B, .H = in->H, .W = in->W, .T = in->T, .ip = in->ip, .ip_n = in->ip_n,
+                         .ip_scale = in->ip_scale};
+    if (mx_unet_forward(NULL, u, &dry, NULL, &a, st)) return -1;
     *bytes = a.peak + 4 * MX_ARENA_ALIGN;
     return 0;
+}
+
+int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st) {
+    mx_unet_input in = {.B = B, .H = H, .W = W, .T = T};
+    return mx_unet_call_arena_bytes(u, &in, bytes, st);
 }
 
 double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T) {
     mx_arena a;
     mx_status st;
     mx_arena_measure(&a);
-    mx_unet_input in = {NULL, NULL, NULL, B, H, W, T, NULL, NULL};
+    mx_unet_input in = {.B = B, .H = H, .W = W, .T = T};
     mx_run r;
     mx_run_init(&r, NULL, &a, &st);
     if (mx_unet_check_sizes(&u->enc.cfg, B, H, W, T, &st) || unet_run(&r, u, &in, NULL)) return 0.0;
@@ -218,7 +281,37 @@ void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int
     else snprintf(buf, cap, "mid_block_res_sample");
 }
 
-/* run-net unet: sample, timestep, encoder_hidden_states, optional residuals -> out. */
+/* run-net unet's optional image guidance: image_embeds [B, n_images, E] through the weight file's
+ * IP-Adapter into the output image_tokens [B, n_images, num_tokens, C], at ip_adapter_scale [1]
+ * (default 1). *ad stays NULL without image_embeds. */
+static int read_image_guidance(mx_net_io *io, const mx_unet *u, mx_unet_input *in, const mx_ip_adapter **ad,
+                               const float **embeds, float **tokens, mx_status *st) {
+    *ad = NULL;
+    if (!io->has(io, "image_embeds"))
+        return io->has(io, "ip_adapter_scale")
+                   ? mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale without image_embeds", io->source)
+                   : 0;
+    if (!(*ad = io->network(io, "ip_adapter", st)) || mx_unet_check_ip(u, *ad, st)) return -1;
+    int64_t es[3] = {in->B, -1, (*ad)->embed_dim};
+    if (!(*embeds = mx_net_io_input(io, "image_embeds", 3, es, st))) return -1;
+    if (es[1] > MX_IP_MAX_TOKENS / (*ad)->num_tokens)
+        return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->source,
+                       (long long)es[1], (*ad)->num_tokens, MX_IP_MAX_TOKENS);
+    in->ip = *ad;
+    in->ip_n = (int)es[1] * (*ad)->num_tokens;
+    in->ip_scale = 1.0f;
+    if (io->has(io, "ip_adapter_scale")) {
+        size_t n;
+        const float *s = io->host_flat(io, "ip_adapter_scale", &n, st);
+        if (!s) return -1;
+        if (n != 1) return mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale has %zu values, expected 1", io->source, n);
+        in->ip_scale = s[0];
+    }
+    int64_t ts[4] = {in->B, es[1], (*ad)->num_tokens, (*ad)->cross_dim};
+    return (in->ip_tokens = *tokens = io->output(io, "image_tokens", 4, ts, st)) ? 0 : -1;
+}
+
+/* run-net unet: sample, timestep, encoder_hidden_states, optional residuals and image guidance -> out. */
 int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
     const mx_unet *u = net;
     const mx_unet_config *cfg = mx_unet_cfg(u);
@@ -244,9 +337,17 @@ int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *s
         else in.mid_residual = p;
     }
     if (have) in.down_residuals = res;
+    const mx_ip_adapter *ad;
+    const float *embeds = NULL;
+    float *tokens = NULL;
+    if (read_image_guidance(io, u, &in, &ad, &embeds, &tokens, st)) return -1;
     int64_t os[4] = {in.B, cfg->out_channels, in.H, in.W};
-    size_t bytes;
+    size_t bytes, ip_bytes = 0;
     float *out = io->output(io, "out", 4, os, st);
-    mx_arena *a = out && !mx_unet_arena_bytes(u, in.B, in.H, in.W, in.T, &bytes, st) ? io->arena(io, bytes, st) : NULL;
-    return a ? mx_unet_forward(c, u, &in, out, a, st) : -1;
+    if (!out || mx_unet_call_arena_bytes(u, &in, &bytes, st) ||
+        (ad && mx_ip_adapter_arena_bytes(ad, in.ip_n / ad->num_tokens * in.B, &ip_bytes, st)))
+        return -1;
+    mx_arena *a = io->arena(io, bytes > ip_bytes ? bytes : ip_bytes, st);
+    if (!a || (ad && mx_ip_adapter_tokens(c, ad, embeds, in.ip_n / ad->num_tokens * in.B, tokens, a, st))) return -1;
+    return mx_unet_forward(c, u, &in, out, a, st);
 }

@@ -14,6 +14,7 @@
 #define MX_UNET_H
 
 #include "../../ops/ops.h"
+#include "ip_adapter.h"
 #include "net_io.h"
 #include "netcfg.h"
 #include "params.h"
@@ -35,6 +36,14 @@ typedef struct mx_unet_input {
      * caller): down[i] has the shape of mx_unet_residual_shape(i); NULL arrays = none. */
     const float *const *down_residuals; /* mx_unet_num_residuals() pointers, or NULL */
     const float *mid_residual;          /* [B, C_last, H/2^(L-1), W/2^(L-1)] or NULL */
+    /* Optional image guidance (IP-Adapter, ip_adapter.h): each item's image tokens
+     * ip_tokens [B, ip_n, cross_attention_dim]; every cross-attention adds ip_scale ·
+     * attention(q, to_k_ip(tokens), to_v_ip(tokens)). A NULL adapter, ip_n 0 or ip_scale 0 is the
+     * plain UNet, bit for bit (the branch is skipped, not multiplied by 0). */
+    const mx_ip_adapter *ip;
+    const float *ip_tokens;
+    int ip_n;
+    float ip_scale;
 } mx_unet_input;
 
 /* Binds every parameter (names as diffusers' state dict). With an enumerating binder it only
@@ -52,8 +61,13 @@ void mx_unet_residual_shape(const mx_unet_config *cfg, int i, int H, int W, int 
  * multiple of 2^(levels-1), sizes within int range); the message says what is wrong. */
 int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, mx_status *st);
 
-/* Arena bytes a forward with these sizes needs (dry run). */
+/* Arena bytes a forward with these sizes needs (dry run), without image guidance; with it, the
+ * dry run of the call `in` (its sizes and adapter; its pointers are not read). */
 int mx_unet_arena_bytes(const mx_unet *u, int B, int H, int W, int T, size_t *bytes, mx_status *st);
+int mx_unet_call_arena_bytes(const mx_unet *u, const mx_unet_input *in, size_t *bytes, mx_status *st);
+/* Whether the adapter fits this UNet: one to_k_ip/to_v_ip pair per cross-attention layer, of its
+ * width, over its cross_attention_dim. The message says what differs. */
+int mx_unet_check_ip(const mx_unet *u, const mx_ip_adapter *ad, mx_status *st);
 /* out: [B, out_channels, H, W] (caller's buffer). Fails with a message on bad sizes or when
  * the arena is too small. With a measuring arena (mx_arena_measure) nothing is computed. */
 int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, float *out, mx_arena *a,

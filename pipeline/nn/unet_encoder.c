@@ -106,7 +106,8 @@ int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, m
 }
 
 int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample, const float *add, int B, int H,
-                        int W, const float *temb_silu, const float *context, int T, float *const *res, float *mid) {
+                        int W, const float *temb_silu, const float *context, int T, const mx_ip_guide *ip,
+                        float *const *res, float *mid) {
     const mx_unet_config *c = &e->cfg;
     mx_conv_run(r, &e->conv_in, res[0], sample, B, H, W);
     if (add) mx_add(r->c, res[0], res[0], add, (size_t)B * c->block_out_channels[0] * H * W);
@@ -119,7 +120,7 @@ int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample
             if (lv->cross) {
                 size_t mark = mx_arena_mark(r->a);
                 float *t = mx_run_alloc(r, (size_t)B * lv->cout * h * w);
-                if (!t || mx_transformer_run(r, &lv->attn[j], t, dst, B, h, w, context, T)) return -1;
+                if (!t || mx_transformer_run(r, &lv->attn[j], t, dst, B, h, w, context, T, ip)) return -1;
                 mx_copy(r->c, dst, t, (size_t)B * lv->cout * h * w);
                 mx_arena_reset(r->a, mark);
             }
@@ -138,7 +139,7 @@ int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample
     float *t = mx_run_alloc(r, (size_t)B * ch * h * w);
     if (!t) return -1;
     if (mx_resnet_run(r, &e->mid.res0, mid, res[k], B, h, w, temb_silu) ||
-        mx_transformer_run(r, &e->mid.attn, t, mid, B, h, w, context, T) ||
+        mx_transformer_run(r, &e->mid.attn, t, mid, B, h, w, context, T, ip) ||
         mx_resnet_run(r, &e->mid.res1, mid, t, B, h, w, temb_silu))
         return -1;
     mx_arena_reset(r->a, mark);

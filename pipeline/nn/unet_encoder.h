@@ -38,8 +38,10 @@ typedef struct mx_unet_encoder {
 int mx_unet_encoder_load(mx_unet_encoder *e, const mx_unet_config *cfg, mx_binder *b, mx_status *st);
 void mx_unet_encoder_free(mx_unet_encoder *e);
 /* conv_in(sample) [+ add, when not NULL] -> res[0]; down levels -> res[1..]; mid block -> mid.
- * res[i] are caller buffers shaped by mx_unet_residual_shape. */
+ * res[i] are caller buffers shaped by mx_unet_residual_shape. ip: image guidance of the UNet's
+ * cross-attentions (blocks.h), NULL for none (always for a ControlNet). */
 int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample, const float *add, int B, int H,
-                        int W, const float *temb_silu, const float *context, int T, float *const *res, float *mid);
+                        int W, const float *temb_silu, const float *context, int T, const mx_ip_guide *ip,
+                        float *const *res, float *mid);
 
 #endif

@@ -76,6 +76,16 @@ static int load_taesd(mx_models *m, mx_status *st) {
     return mx_taesd_load(&m->taesd, &cfg, &m->b_taesd, st);
 }
 
+static int load_ip_adapter(mx_models *m, mx_status *st) {
+    if (!has_network(m->wf, "ip_adapter.")) return 0;
+    const char *text = config_text(m->wf, "ip_adapter.", st);
+    if (bind_net(m, 6, &m->b_ip, "ip_adapter.", st) ||
+        mx_ip_adapter_load(&m->ip_adapter, text, strlen(text), mx_wf_path(m->wf), &m->b_ip, st) ||
+        mx_unet_check_ip(m->unet, m->ip_adapter, st))
+        return mx_fail_prefix(st, "%s: ip_adapter", mx_wf_path(m->wf));
+    return 0;
+}
+
 static int load_scheduler(mx_models *m, mx_status *st) {
     const char *text = mx_wf_meta(m->wf, "scheduler.config");
     if (!text) {
@@ -114,7 +124,7 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
     if (mx_wf_open(&m->wf, path, st)) return -1;
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_clip(m, st) ||
         load_unet_like(m, "unet.", 0, 1, &m->b_unet, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
-        load_vae(m, st) || load_taesd(m, st) || load_scheduler(m, st)) {
+        load_vae(m, st) || load_taesd(m, st) || load_ip_adapter(m, st) || load_scheduler(m, st)) {
         mx_models_free(m);
         return -1;
     }
@@ -136,13 +146,15 @@ void mx_models_free(mx_models *m) {
     mx_controlnet_free(m->cn_inpaint);
     mx_vae_free(m->vae);
     mx_taesd_free(m->taesd);
+    mx_ip_adapter_free(m->ip_adapter);
     mx_binder_free(&m->b_clip);
     mx_binder_free(&m->b_unet);
     mx_binder_free(&m->b_depth);
     mx_binder_free(&m->b_inpaint);
     mx_binder_free(&m->b_vae);
     mx_binder_free(&m->b_taesd);
-    for (int i = 0; i < 6; i++) mx_binder_free(&m->wf_binders[i]);
+    mx_binder_free(&m->b_ip);
+    for (int i = 0; i < 7; i++) mx_binder_free(&m->wf_binders[i]);
     mx_tok_free(m->tok);
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);

@@ -2,7 +2,7 @@
  * text encoder, UNet, ControlNet depth, ControlNet inpaint, VAE and the scheduler config.
  * Tensor prefixes are those `matex convert` writes: "text_encoder.", "unet.",
  * "controlnet_depth." (or a single "controlnet."), "controlnet_inpaint.", "vae.", and for the
- * few-step path "taesd." (optional). */
+ * few-step path "taesd." (optional), for image guidance "ip_adapter." (optional). */
 #ifndef MX_MODELS_H
 #define MX_MODELS_H
 
@@ -10,6 +10,7 @@
 #include "../../weights/weights.h"
 #include "../nn/clip.h"
 #include "../nn/controlnet.h"
+#include "../nn/ip_adapter.h"
 #include "../nn/params.h"
 #include "../nn/scheduler.h"
 #include "../nn/taesd.h"
@@ -28,11 +29,12 @@ typedef struct mx_models {
     mx_controlnet *cn_inpaint; /* NULL when not in the file and not needed */
     mx_vae *vae;
     mx_taesd *taesd;           /* NULL when the file has no taesd.* */
+    mx_ip_adapter *ip_adapter; /* NULL when the file has no ip_adapter.*; else checked against the UNet */
     int lcm;                   /* the UNet has a merged LCM-LoRA (metadata unet.lcm_lora) */
     mx_sched_config sched;
     const mx_ctx *c;                           /* the weights live on c's backend */
-    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd; /* weights on the device */
-    mx_binder wf_binders[6];                   /* the weight file's binders behind them */
+    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd, b_ip; /* weights on the device */
+    mx_binder wf_binders[7];                   /* the weight file's binders behind them */
     int clip_loaded;
     char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;

@@ -412,7 +412,7 @@ static void test_small_ops(env *e) {
     if (dts && !gpu_ok(e, mx_cuda_timestep_embedding(e->gpu, dz, dts, 3, 321, 1, 0.0f, 10000.0f, &e->st), "temb"))
         compare_dev(e, "timestep embedding 3x321", dz, want2, 3 * 321, FP32_BOUND);
     test_weight tok = make_weight(e, 50 * 24, 133, MX_F16), pos = make_weight(e, 5 * 24, 134, MX_F32);
-    const int32_t ids[10] = {0, 49, 7, 7, 3, 12, 1, 48, 2, 0};
+    const int32_t ids[10] = {0, 49, 7, -1, 3, 12, 1, 48, -1, 0}; /* -1: the position row alone */
     e->cpu.k->embed_tokens(&e->cpu, want2, ids, 2, 5, 24, tok.host, pos.host);
     if (tok.dev.data && pos.dev.data &&
         !gpu_ok(e, mx_cuda_embed_tokens(e->gpu, dz, ids, 2, 5, 24, tok.dev, pos.dev, &e->st), "embed"))
