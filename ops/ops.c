@@ -49,14 +49,29 @@ static void op_end(const mx_ctx *c) {
     if (c && c->be && c->be->leave) c->be->leave(c->be);
 }
 
-#define RUN_OP(c, call)                                                                                      \
+/* Op id's call through the kernel table, timed (process CPU time) when c carries a profile. */
+#define RUN_OP(c, id, call)                                                                                  \
     do {                                                                                                     \
         const mx_kernels *k_ = op_begin(c);                                                                  \
         if (k_) {                                                                                            \
+            double t0_ = c && c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;                       \
             k_->call;                                                                                        \
+            if (c && c->prof) profile_op(c->prof, id, mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0_);      \
             op_end(c);                                                                                       \
         }                                                                                                    \
     } while (0)
+
+static void profile_op(mx_profile *p, int id, double secs) {
+    p->op_secs[id] += secs;
+    p->op_calls[id]++;
+}
+
+const char *mx_op_name(int op) {
+#define MX_NAME_(name, guard, params, args) #name,
+    static const char *const names[MX_OP_COUNT] = {MX_OPS(MX_NAME_)};
+#undef MX_NAME_
+    return op >= 0 && op < MX_OP_COUNT ? names[op] : "?";
+}
 
 int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim) {
     for (int d = 0; d < ndim; d++)
@@ -68,7 +83,7 @@ int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim) {
  * entry. None needs more checking: the kernels take any sizes the guards let through. */
 #define MX_WRAPPER_DEF_(name, guard, params, args)                                                          \
     void mx_##name(const mx_ctx *c, MX_SPLICE params) {                                                      \
-        if (guard) RUN_OP(c, name(c, MX_SPLICE args));                                                      \
+        if (guard) RUN_OP(c, MX_OP_ID_##name, name(c, MX_SPLICE args));                                                      \
     }
 MX_OPS(MX_WRAPPER_DEF_)
 

@@ -37,6 +37,7 @@
 #include "../runtime/tensor.h"
 #include "../runtime/threadpool.h"
 #include "op_list.h"
+#include "profile.h"
 
 typedef struct mx_wptr {
     const void *data;
@@ -56,6 +57,7 @@ typedef struct mx_ctx {
     mx_arena *scratch;       /* temporary memory for kernels; must be a real (non-measuring) arena */
     mx_backend *be;          /* where activations live; NULL: host memory, no guard */
     int measuring;           /* 1: dry run, every op returns at once */
+    mx_profile *prof;        /* NULL, or where each op's time is added (profile.h) */
 } mx_ctx;
 
 typedef enum { MX_BIN_ADD = 0, MX_BIN_SUB = 1, MX_BIN_MUL = 2 } mx_binop;

@@ -4,7 +4,14 @@
  * call (64×64 latent, batch 2, 77 tokens), one VAE decode (64×64 latent, batch 1) and one CLIP
  * call (batch 2), each in fp32 and, where the CPU has AVX512_BF16, in bf16 right after it (same
  * load on the machine), with the share of the measured peak of these cores (bench_sd15.h).
- * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] */
+ * Then, per network and precision, where the time went (ops/profile.h), as shares of the CPU
+ * time of the call (what survives other people's load on a shared machine): each op, the GEMM's
+ * parts (micro-kernel with the bias it adds, packing of A and B — B is the im2col of a conv —,
+ * the rest: task setup, waiting at the end of a phase), the micro-kernel's own GFLOP/s, the cores'
+ * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
+ * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
+ * (well under 1 % here); --no-profile runs without.
+ * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--no-profile] */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,6 +21,7 @@
 #include <unistd.h>
 
 #include "../ops/ops.h"
+#include "../ops/profile.h"
 #include "../pipeline/nn/clip.h"
 #include "../pipeline/nn/controlnet.h"
 #include "../pipeline/nn/netcfg.h"
@@ -40,10 +48,12 @@ static const char *config_of(const mx_weightfile *wf, const char *prefix, mx_sta
 }
 
 /* One network in fp32 ([0]) and bf16 ([1]; 0 without bf16): wall seconds, process CPU seconds
- * (all threads), and its FLOPs. */
+ * (all threads), minor page faults, where the time went, and its FLOPs. */
 typedef struct net_time {
     const char *what;
     double secs[2], cpu[2], flops;
+    long faults[2];
+    mx_profile prof[2];
 } net_time;
 
 /* A line: per precision the wall time, the GFLOP/s over CPU time (what `threads` cores of its
@@ -60,15 +70,73 @@ static void report(const net_time *t, const double peak[2], int threads) {
         printf(" %7s %7s %5s %6s %6s\n", "-", "-", "-", "-", "-");
 }
 
-/* Starts (secs, cpu) or, with stop, turns them into elapsed values. */
-static void clock_net(net_time *t, int p, int stop) {
+static long minor_faults(void) {
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return ru.ru_minflt;
+}
+
+/* Starts (secs, cpu, faults; the context's profile when profiling) or, with stop, turns them
+ * into elapsed values. */
+static void clock_net(net_time *t, mx_ctx *c, int p, int stop, int profile) {
     double now = mx_now(), cpu = bench_cpu_seconds(CLOCK_PROCESS_CPUTIME_ID);
+    long faults = minor_faults();
     t->secs[p] = stop ? now - t->secs[p] : now;
     t->cpu[p] = stop ? cpu - t->cpu[p] : cpu;
+    t->faults[p] = stop ? faults - t->faults[p] : faults;
+    c->prof = profile && !stop ? &t->prof[p] : NULL;
+}
+
+/* ---- where the time went ---- */
+
+/* One part of the breakdown: its share of the call's CPU time. */
+static void part(const char *name, double secs, double whole) {
+    if (secs > 0) printf(" %s %.1f%%", name, 100 * secs / whole);
+}
+
+/* The GEMM line of a user (linear or conv2d): the op's share of the CPU time, its parts, and
+ * the micro-kernel's own rate (FLOPs over its CPU seconds, per `threads` cores). */
+static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int threads, double peak) {
+    static const char *const user_name[MX_GEMM_USERS] = {"linear", "conv2d"};
+    const double *s = pr->gemm_secs[user];
+    double busy = 0, whole = cpu;
+    for (int q = 0; q < MX_GEMM_PARTS; q++) busy += s[q];
+    printf("  %-18s %5.1f%% (%ld calls):", user_name[user], 100 * pr->op_secs[op] / cpu, pr->op_calls[op]);
+    part("micro", s[MX_GEMM_MICRO], whole);
+    part(user == MX_GEMM_CONV ? "pack-A(weights)" : "pack-A(x)", s[MX_GEMM_PACK_A], whole);
+    part(user == MX_GEMM_CONV ? "pack-B(im2col)" : "pack-B(weights)", s[MX_GEMM_PACK_B], whole);
+    part("rest", pr->op_secs[op] - busy, whole);
+    if (s[MX_GEMM_MICRO] > 0 && peak > 0)
+        printf("; micro-kernel %.0f GFLOP/s = %.0f%% of peak", pr->gemm_flops[user] * 1e-9 / (s[MX_GEMM_MICRO] / threads),
+               100 * pr->gemm_flops[user] * 1e-9 / (s[MX_GEMM_MICRO] / threads) / peak);
+    printf("\n");
+}
+
+/* The breakdown of one run: the GEMM users, then every other op with ≥ 0.1 % of the CPU time
+ * (largest first), then the time outside any op (the network's own code: arena, loops). */
+static void report_profile(const net_time *t, int p, double peak, int threads) {
+    const mx_profile *pr = &t->prof[p];
+    double wall = t->secs[p], cpu = t->cpu[p], in_ops = 0;
+    printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall, %ld minor page faults\n", t->what,
+           p ? "bf16" : "fp32", wall, cpu, 100 * (threads * wall - cpu) / (threads * wall), t->faults[p]);
+    for (int op = 0; op < MX_OP_COUNT; op++) in_ops += pr->op_secs[op];
+    report_gemm(pr, MX_GEMM_CONV, MX_OP_ID_conv2d, cpu, threads, peak);
+    report_gemm(pr, MX_GEMM_LINEAR, MX_OP_ID_linear, cpu, threads, peak);
+    int done[MX_OP_COUNT] = {0};
+    done[MX_OP_ID_conv2d] = done[MX_OP_ID_linear] = 1;
+    for (;;) {
+        int best = -1;
+        for (int op = 0; op < MX_OP_COUNT; op++)
+            if (!done[op] && (best < 0 || pr->op_secs[op] > pr->op_secs[best])) best = op;
+        if (best < 0 || pr->op_secs[best] < 1e-3 * cpu) break;
+        done[best] = 1;
+        printf("  %-18s %5.1f%% (%ld calls)\n", mx_op_name(best), 100 * pr->op_secs[best] / cpu, pr->op_calls[best]);
+    }
+    printf("  %-18s %5.1f%%\n", "outside ops", 100 * (cpu - in_ops) / cpu);
 }
 
 typedef struct bench_opts {
-    int threads, skip_vae, skip_cn;
+    int threads, skip_vae, skip_cn, profile;
     const char *weights;
 } bench_opts;
 
@@ -135,27 +203,27 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     }
     float *cond = bench_filled((size_t)B * 3 * H * 8 * W * 8, 0, 1, 3);
     float *img = malloc((size_t)3 * H * 8 * W * 8 * sizeof *img);
-    net_time nt_cn = {"ControlNet 64x64 batch 2", {0, 0}, {0, 0}, mx_controlnet_flops(cn[0], B, H, W, T)};
-    net_time nt_unet = {"UNet 64x64 batch 2 (+residuals)", {0, 0}, {0, 0}, mx_unet_flops(u, B, H, W, T)};
-    net_time nt_vae = {"VAE decode 64x64 batch 1", {0, 0}, {0, 0}, mx_vae_decode_flops(v, 1, H, W)};
+    net_time nt_cn = {.what = "ControlNet 64x64 batch 2", .flops = mx_controlnet_flops(cn[0], B, H, W, T)};
+    net_time nt_unet = {.what = "UNet 64x64 batch 2 (+residuals)", .flops = mx_unet_flops(u, B, H, W, T)};
+    net_time nt_vae = {.what = "VAE decode 64x64 batch 1", .flops = mx_vae_decode_flops(v, 1, H, W)};
     for (int p = 0; p < nprec && !o->skip_cn; p++) {
         mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f};
-        clock_net(&nt_cn, p, 0);
+        clock_net(&nt_cn, &c[p], p, 0, o->profile);
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
-        clock_net(&nt_cn, p, 1);
+        clock_net(&nt_cn, &c[p], p, 1, o->profile);
     }
     mx_unet_input ui = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = B, .H = H, .W = W, .T = T,
                         .down_residuals = o->skip_cn ? NULL : (const float *const *)res,
                         .mid_residual = o->skip_cn ? NULL : res[nres]};
     for (int p = 0; p < nprec; p++) {
-        clock_net(&nt_unet, p, 0);
+        clock_net(&nt_unet, &c[p], p, 0, o->profile);
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
-        clock_net(&nt_unet, p, 1);
+        clock_net(&nt_unet, &c[p], p, 1, o->profile);
     }
     for (int p = 0; p < nprec && !o->skip_vae; p++) {
-        clock_net(&nt_vae, p, 0);
+        clock_net(&nt_vae, &c[p], p, 0, o->profile);
         if (mx_vae_decode(&c[p], v, sample, 1, H, W, img, &a, st)) return -1;
-        clock_net(&nt_vae, p, 1);
+        clock_net(&nt_vae, &c[p], p, 1, o->profile);
     }
     double peak_after[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
     for (int p = 0; p < 2; p++) peak[p] = peak[p] > peak_after[p] ? peak[p] : peak_after[p];
@@ -167,6 +235,14 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     if (!o->skip_cn) report(&nt_cn, peak, nth);
     report(&nt_unet, peak, nth);
     if (!o->skip_vae) report(&nt_vae, peak, nth);
+    if (o->profile) {
+        printf("where the time went (shares of each call's CPU time, all threads):\n");
+        for (int p = 0; p < nprec; p++) {
+            if (!o->skip_cn) report_profile(&nt_cn, p, peak[p], nth);
+            report_profile(&nt_unet, p, peak[p], nth);
+            if (!o->skip_vae) report_profile(&nt_vae, p, peak[p], nth);
+        }
+    }
     {
         int32_t ids[2 * 77];
         for (int i = 0; i < 2 * 77; i++) ids[i] = i % 77 == 0 ? 49406 : i % 77 < 9 ? 320 + i % 77 : 49407;
@@ -213,15 +289,17 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
 
 int main(int argc, char **argv) {
     char cached[1100];
-    bench_opts o = {0, 0, 0, NULL};
+    bench_opts o = {.profile = 1};
     setvbuf(stdout, NULL, _IOLBF, 0); /* progress lines show up as they happen */
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--skip-vae")) o.skip_vae = 1;
         else if (!strcmp(argv[i], "--skip-controlnet")) o.skip_cn = 1;
+        else if (!strcmp(argv[i], "--no-profile")) o.profile = 0;
         else {
-            fprintf(stderr, "usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet]\n");
+            fprintf(stderr, "usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] "
+                            "[--no-profile]\n");
             return 2;
         }
     }

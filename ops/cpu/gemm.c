@@ -28,6 +28,18 @@ static void zero_pair_rows(uint32_t *dst, int width, int kp, size_t words) {
     for (size_t k = (size_t)kp; k < words; k++) memset(dst + k * width, 0, (size_t)width * sizeof *dst);
 }
 
+/* Starts fetching rows first..first+n-1, columns k0..k0+kc-1, of a row-major matrix. The packers
+ * read a weight matrix a few rows at a time, each row only a short run (kc elements: 1.25 KiB of
+ * fp16 at kc = 640) that the hardware prefetcher barely ramps up on; without this, widening the
+ * weights (straight from memory, far larger than the caches) stalled on every load. */
+static void prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc) {
+    size_t es = mx_dtype_size(src.dtype), bytes = (size_t)kc * es;
+    for (int r = 0; r < n; r++) {
+        const char *row = (const char *)src.data + ((size_t)(first + r) * ld + (size_t)k0) * es;
+        for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(row + b, 0, 3);
+    }
+}
+
 /* One row of src (element (r, k) at r*ld + k) as kc/2 words of pairs (16-bit weights widened). */
 static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int r, int k0, int kc) {
     float row[KC_MAX];
@@ -58,12 +70,13 @@ static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_
 /* bf16 pairs, k-major: each row converted to kc/2 words of pairs, WIDEN_ROWS rows at a time,
  * then transposed as 32-bit words into dst[kp][width]. */
 static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
-                            int width, int k0, int kc) {
+                            int total, int width, int k0, int kc) {
     enum { WORDS = KC_MAX / 2 };
     uint32_t tmp[WIDEN_ROWS * WORDS];
     int kp = (kc + 1) / 2;
     for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
         int n = min_int(WIDEN_ROWS, valid - r0);
+        prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
         for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
@@ -74,15 +87,17 @@ static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src,
 }
 
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
- * weights are widened WIDEN_ROWS rows at a time first. bf16 kernels: pack_rows_pairs, or
- * pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
-static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int valid,
+ * weights are widened WIDEN_ROWS rows at a time first, the next rows (of the `total` rows the
+ * matrix has from `first` on: into the next panel) fetched meanwhile. bf16 kernels:
+ * pack_rows_pairs, or pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
+static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int total,
                       int width, int k0, int kc, int row_major) {
+    int valid = min_int(width, total);
     if (g->to_pairs) {
         if (row_major)
             pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc);
         else
-            pack_rows_pairs(g, dstv, src, ld, first, valid, width, k0, kc);
+            pack_rows_pairs(g, dstv, src, ld, first, valid, total, width, k0, kc);
         return;
     }
     float *dst = dstv;
@@ -93,6 +108,7 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
         float tmp[WIDEN_ROWS * KC_MAX];
         for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
             int n = min_int(WIDEN_ROWS, valid - r0);
+            prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
             for (int i = 0; i < n; i++)
                 g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
             g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);
@@ -104,12 +120,12 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
 
 void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->a_mat, p->a_ld, first, min_int(rows, p->M - first), rows, k0, kc, g->a_rows);
+    pack_rows(g, dst, p->a_mat, p->a_ld, first, p->M - first, rows, k0, kc, g->a_rows);
 }
 
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->b_mat, p->b_ld, first, min_int(rows, p->N - first), rows, k0, kc, 0);
+    pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0);
 }
 
 /* One run of output pixels ox..ox+run-1 of one output row, for kernel tap (ky, kx) of channel ci. */
@@ -175,32 +191,57 @@ typedef struct {
     const mx_gemm_problem *p;
     float *bpack;
     /* per-thread A blocks (MC rows × kc, packed by the thread that computes with them, so they
-     * stay in its L2) and the row block each one holds (-1: none yet in this K block) */
+     * stay in its L2) and the row block each one holds (-1: none yet in this K block); or, with
+     * shared_a, all of A's panels of the K block, packed once by all threads */
     float *ablock;
     size_t ablock_stride;
     int *ablock_mb;
+    int shared_a;
     const float *bias; /* widened, or NULL */
     int n_off, n_end; /* the outer block of columns */
     int k0, kc, first_block, last_block;
     int mpanels, npanels, mc_panels, nc_panels, nmb, nnb;
+    /* with a profile (c->prof): thread t's seconds of each part at part_secs[t·MX_GEMM_PARTS + part] */
+    double *part_secs;
 } gemm_job;
+
+/* The clock of the profiled parts, the thread's CPU time: 0 (never read) without a profile. */
+static double part_clock(const gemm_job *j) { return j->part_secs ? mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) : 0; }
+
+static void add_part(const gemm_job *j, int thread, mx_gemm_part part, double t0, double t1) {
+    if (j->part_secs) j->part_secs[(size_t)thread * MX_GEMM_PARTS + part] += t1 - t0;
+}
 
 #define PACK_PANELS_PER_TASK 4
 
 
 static void pack_b_task(void *arg, int task, int thread) {
-    (void)thread;
     const gemm_job *j = arg;
     int nr = j->g->nr;
+    double t0 = part_clock(j);
     for (int np = task * PACK_PANELS_PER_TASK; np < min_int(j->npanels, (task + 1) * PACK_PANELS_PER_TASK); np++)
         j->p->pack_b(j->p, j->g, j->bpack + (size_t)np * mx_gemm_panel_words(j->g, j->kc) * nr, j->n_off + np * nr, nr, j->k0,
                      j->kc);
+    add_part(j, thread, MX_GEMM_PACK_B, t0, part_clock(j));
 }
 
-/* The packed A panels of row block mb in this thread's buffer; packed only when the thread's
- * previous task used another block (tasks of one row block are claimed one after the other).
- * Packing copies values exactly, so who packs never changes a result. */
+/* A panels of the K block packed once for all tasks (shared_a). */
+static void pack_a_task(void *arg, int task, int thread) {
+    const gemm_job *j = arg;
+    int mr = j->g->mr;
+    size_t panel = mx_gemm_panel_words(j->g, j->kc) * mr;
+    double t0 = part_clock(j);
+    for (int mp = task * PACK_PANELS_PER_TASK; mp < min_int(j->mpanels, (task + 1) * PACK_PANELS_PER_TASK); mp++)
+        j->p->pack_a(j->p, j->g, j->ablock + (size_t)mp * panel, mp * mr, mr, j->k0, j->kc);
+    add_part(j, thread, MX_GEMM_PACK_A, t0, part_clock(j));
+}
+
+/* The packed A panels of row block mb: in the shared buffer (shared_a), else in this thread's
+ * buffer, packed only when the thread's previous task used another block (tasks of one row block
+ * are claimed one after the other). Packing copies values exactly, so who packs never changes a
+ * result. */
 static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
+    if (j->shared_a) return j->ablock + (size_t)mb * j->mc_panels * mx_gemm_panel_words(j->g, j->kc) * j->g->mr;
     float *buf = j->ablock + (size_t)thread * j->ablock_stride;
     if (j->ablock_mb[thread] != mb) {
         int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
@@ -230,7 +271,10 @@ static void compute_task(void *arg, int task, int thread) {
     int mb = task / j->nnb, nb = task % j->nnb;
     int mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
     int np0 = nb * j->nc_panels, np1 = min_int(j->npanels, np0 + j->nc_panels);
+    double t0 = part_clock(j);
     const float *a = thread_a_block(j, mb, thread);
+    double t1 = part_clock(j);
+    add_part(j, thread, MX_GEMM_PACK_A, t0, t1);
     size_t words = mx_gemm_panel_words(j->g, j->kc);
     for (int np = np0; np < np1; np++) {
         const float *b = j->bpack + (size_t)np * words * nr;
@@ -239,11 +283,12 @@ static void compute_task(void *arg, int task, int thread) {
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
             j->g->micro(j->kc, a + (size_t)(mp - mp0) * words * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m,
                         n, !j->first_block);
+            /* the bias while the tile is still in L1 (a pass over C afterwards read it back from
+             * memory: 2-3 % of a VAE decode); the same sums, so the same results */
+            if (j->last_block && j->bias) add_bias(p, j->bias, m0, m0 + m, n0, n0 + n);
         }
     }
-    if (j->last_block && j->bias)
-        add_bias(p, j->bias, mp0 * mr, min_int(p->M, mp1 * mr), j->n_off + np0 * nr,
-                 min_int(j->n_end, j->n_off + np1 * nr));
+    add_part(j, thread, MX_GEMM_MICRO, t1, part_clock(j));
 }
 
 /* Task grid of the current outer block: MC-row blocks × NC-column blocks. */
@@ -273,6 +318,7 @@ static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
  * every batch item, so a thread's A block stays valid across items). */
 static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, int nb_max, int nthreads) {
     for (int t = 0; t < nthreads; t++) j->ablock_mb[t] = -1;
+    if (j->shared_a) mx_par_for(c, ceil_div(ceil_div(p->M, j->g->mr), PACK_PANELS_PER_TASK), pack_a_task, j);
     for (int b = 0; b < p->batch; b++) {
         mx_gemm_problem item = batch_item(p, b);
         j->p = &item;
@@ -286,6 +332,15 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
     j->p = p;
 }
 
+/* Adds the threads' part times and the FLOPs of p to the profile (conv: the problems with an image). */
+static void profile_gemm(mx_profile *prof, const mx_gemm_problem *p, const double *part_secs, int nthreads) {
+    int user = p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR;
+    for (int t = 0; t < nthreads; t++)
+        for (int part = 0; part < MX_GEMM_PARTS; part++)
+            prof->gemm_secs[user][part] += part_secs[(size_t)t * MX_GEMM_PARTS + part];
+    prof->gemm_flops[user] += 2.0 * p->M * p->N * (double)p->K * p->batch;
+}
+
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
     if (p->M <= 0 || p->N <= 0 || p->batch <= 0) return 0;
     /* outer blocks end on whole panels */
@@ -295,13 +350,27 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
     size_t words = mx_gemm_panel_words(g, kc_max);
     size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * words;
+    /* Fewer row blocks than tasks wanted: each row block is split over column blocks (and batch
+     * items) that different threads compute, and per-thread A blocks would be packed once per
+     * thread (per batch item) instead of once: pack all of A's K block up front then (M < 3072
+     * rows here, so ≤ 7.5 MiB at kc = 640; e.g. every conv, M = Cout). */
+    int mpanels = ceil_div(p->M, g->mr), shared_a = ceil_div(mpanels, max_int(1, MC_ROWS / g->mr)) < TASKS_WANTED;
+    if (shared_a) ablock_n = (size_t)mpanels * g->mr * words;
     size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * words;
-    size_t floats = (size_t)nthreads * ablock_n + bpack_n + bias_n;
+    size_t ablocks = shared_a ? 1 : (size_t)nthreads;
+    size_t floats = ablocks * ablock_n + bpack_n + bias_n;
+    size_t nparts = c && c->prof ? (size_t)nthreads * MX_GEMM_PARTS : 0;
     mx_scratch s;
-    float *mem = mx_scratch_take(c, floats * sizeof(float) + (size_t)nthreads * sizeof(int), &s);
+    /* floats, then the profile's doubles (8-byte aligned: floats is rounded up to even), then ints */
+    floats += floats & 1;
+    float *mem = mx_scratch_take(c, floats * sizeof(float) + nparts * sizeof(double) + (size_t)nthreads * sizeof(int), &s);
     if (!mem) return -1;
-    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .ablock_mb = (int *)(mem + floats)};
-    j.bpack = mem + (size_t)nthreads * ablock_n;
+    double *part_secs = nparts ? (double *)(void *)(mem + floats) : NULL;
+    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .shared_a = shared_a, .mpanels = mpanels,
+                  .part_secs = part_secs,
+                  .ablock_mb = (int *)(void *)((char *)(mem + floats) + nparts * sizeof(double))};
+    for (size_t i = 0; i < nparts; i++) part_secs[i] = 0;
+    j.bpack = mem + ablocks * ablock_n;
     if (bias_n) {
         float *bias = j.bpack + bpack_n;
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
@@ -319,6 +388,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
         j.last_block = kb == nkb - 1;
         run_k_block(c, &j, p, nb_max, nthreads);
     }
+    if (part_secs) profile_gemm(c->prof, p, part_secs, nthreads);
     mx_scratch_release(c, &s);
     return 0;
 }

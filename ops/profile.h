@@ -1,0 +1,47 @@
+/* Where a run's time goes: per op the CPU time of the process (all threads) while it ran and,
+ * inside the GEMM engine (linear, conv2d), the CPU time of each part in each thread (packing A,
+ * packing B = the tiled im2col for conv, the micro-kernel with the bias added to its tiles).
+ * CPU time, not wall time: on a shared machine it counts only the work of this run (the pool's
+ * idle workers sleep, so they add nothing). Filled only when a context carries one (mx_ctx.prof,
+ * set by bench_nets); a NULL profile reads no clock. Plain sums, written by the calling thread
+ * after each op (the GEMM's worker threads write their own slots first). */
+#ifndef MX_OPS_PROFILE_H
+#define MX_OPS_PROFILE_H
+
+#include <time.h>
+
+#include "op_list.h"
+
+/* The op ids, in list order: MX_OP_ID_linear, ... (profile slots and names). */
+#define MX_OP_ID_(name, guard, params, args) MX_OP_ID_##name,
+enum { MX_OPS(MX_OP_ID_) };
+#undef MX_OP_ID_
+
+typedef enum {
+    MX_GEMM_PACK_A,   /* A panels: linear's activations, conv's weights (widened, to pairs) */
+    MX_GEMM_PACK_B,   /* B panels: linear's weights, conv's im2col of the activations */
+    MX_GEMM_MICRO,    /* the register-blocked micro-kernel, C loads and stores and the bias included */
+    MX_GEMM_PARTS
+} mx_gemm_part;
+
+/* The GEMM users that are told apart (0: linear, 1: conv2d). */
+enum { MX_GEMM_LINEAR, MX_GEMM_CONV, MX_GEMM_USERS };
+
+typedef struct mx_profile {
+    double op_secs[MX_OP_COUNT]; /* process CPU seconds inside each op */
+    long op_calls[MX_OP_COUNT];
+    double gemm_secs[MX_GEMM_USERS][MX_GEMM_PARTS]; /* thread seconds, summed over threads */
+    double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls */
+} mx_profile;
+
+/* CPU seconds of the process (CLOCK_PROCESS_CPUTIME_ID) or the calling thread (…THREAD…). */
+static inline double mx_profile_clock(clockid_t which) {
+    struct timespec ts;
+    clock_gettime(which, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* The name of op id `op` (its op_list.h name), or "?" out of range. */
+const char *mx_op_name(int op);
+
+#endif

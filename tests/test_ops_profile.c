@@ -1,0 +1,85 @@
+/* The profile (ops/profile.h): a context with one counts each op's calls and time, and the GEMM
+ * engine's FLOPs and part times (linear and conv2d told apart, K split into several blocks); the
+ * results are bit-identical with and without it; a context without one records nothing; the op
+ * names are the list's. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../ops/ops.h"
+#include "util_test.h"
+
+enum { M = 50, N = 70, K = 1500 }; /* K: more than one K block of the GEMM */
+enum { CB = 2, CIN = 20, H = 9, W = 11, COUT = 13 };
+
+typedef struct {
+    float x[M * K], w[N * K], y[M * N];
+    float img[CB * CIN * H * W], cw[COUT * CIN * 9], cy[CB * COUT * H * W];
+} problem;
+
+static void run_ops(const mx_ctx *c, problem *p) {
+    mx_linear(c, p->y, p->x, mx_w_f32(p->w), mx_w_none(), M, N, K);
+    mx_conv2d(c, p->cy, p->img, CB, CIN, H, W, mx_w_f32(p->cw), mx_w_none(), COUT, 3, 3, 1, 1);
+    mx_silu(c, p->y, (size_t)M * N);
+}
+
+static void check_gemm_user(const mx_profile *pr, int user, double flops, int engine) {
+    double parts = 0;
+    for (int q = 0; q < MX_GEMM_PARTS; q++) {
+        CHECK(pr->gemm_secs[user][q] >= 0);
+        parts += pr->gemm_secs[user][q];
+    }
+    if (engine) { /* the SIMD levels run the GEMM engine */
+        CHECK(pr->gemm_flops[user] == flops);
+        CHECK(pr->gemm_secs[user][MX_GEMM_MICRO] > 0 && parts > 0);
+    } else { /* the scalar reference does not */
+        CHECK(pr->gemm_flops[user] == 0 && parts == 0);
+    }
+}
+
+static void test_level(mx_isa isa) {
+    mx_status st = {0};
+    mx_ctx c;
+    if (mx_ctx_create(&c, 2, isa, (size_t)16 << 20, &st)) {
+        printf("FAIL: context: %s\n", st.msg);
+        CHECK(0);
+        return;
+    }
+    problem *a = calloc(1, sizeof *a), *b = calloc(1, sizeof *b);
+    CHECK(a && b);
+    if (!a || !b) goto done;
+    mx_fill_random(a->x, M * K, 1, -1, 1);
+    mx_fill_random(a->w, N * K, 2, -1, 1);
+    mx_fill_random(a->img, sizeof a->img / sizeof *a->img, 3, -1, 1);
+    mx_fill_random(a->cw, sizeof a->cw / sizeof *a->cw, 4, -1, 1);
+    memcpy(b, a, sizeof *a);
+    mx_profile pr;
+    memset(&pr, 0, sizeof pr);
+    run_ops(&c, a); /* no profile: nothing to record into, nothing read */
+    c.prof = &pr;
+    run_ops(&c, b);
+    CHECK(memcmp(a->y, b->y, sizeof a->y) == 0 && memcmp(a->cy, b->cy, sizeof a->cy) == 0);
+    CHECK(pr.op_calls[MX_OP_ID_linear] == 1 && pr.op_calls[MX_OP_ID_conv2d] == 1 && pr.op_calls[MX_OP_ID_silu] == 1);
+    CHECK(pr.op_calls[MX_OP_ID_gelu] == 0 && pr.op_secs[MX_OP_ID_gelu] == 0);
+    for (int op = 0; op < MX_OP_COUNT; op++) CHECK(pr.op_secs[op] >= 0);
+    int engine = c.k->isa != MX_ISA_SCALAR;
+    check_gemm_user(&pr, MX_GEMM_LINEAR, 2.0 * M * N * K, engine);
+    check_gemm_user(&pr, MX_GEMM_CONV, 2.0 * CB * COUT * H * W * CIN * 9, engine);
+    printf("profile %-10s linear %.2e FLOP, conv2d %.2e FLOP: ok\n", mx_isa_name(c.k->isa),
+           pr.gemm_flops[MX_GEMM_LINEAR], pr.gemm_flops[MX_GEMM_CONV]);
+done:
+    free(a);
+    free(b);
+    mx_ctx_destroy(&c);
+}
+
+int main(void) {
+    CHECK(strcmp(mx_op_name(MX_OP_ID_linear), "linear") == 0);
+    CHECK(strcmp(mx_op_name(MX_OP_ID_embed_tokens), "embed_tokens") == 0);
+    CHECK(strcmp(mx_op_name(MX_OP_COUNT), "?") == 0 && strcmp(mx_op_name(-1), "?") == 0);
+    test_level(MX_ISA_SCALAR);
+    test_level(mx_cpu_isa_for(MX_PREC_FP32));
+    mx_isa bf16 = mx_cpu_isa_for(MX_PREC_BF16);
+    if (mx_isa_precision(bf16) == MX_PREC_BF16) test_level(bf16);
+    return mx_test_finish("test_ops_profile");
+}
