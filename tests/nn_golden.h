@@ -11,6 +11,7 @@
 
 #include "../ops/ops.h"
 #include "../pipeline/nn/controlnet.h"
+#include "../pipeline/nn/registry.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
 #include "../runtime/fileio.h"
@@ -78,6 +79,41 @@ static inline void golden_weights_close(golden_weights *g) {
     mx_binder_free(&g->host);
     if (g->wf.map) mx_st_close(&g->wf);
     memset(g, 0, sizeof *g);
+}
+
+/* A golden network loaded as the product loads one: its config.json through the network registry
+ * (registry.h: the config class picks the entry), its weights NET/FILE through the device binder. */
+typedef struct golden_net {
+    golden_weights g;
+    const mx_net_def *def;
+    void *net; /* the entry's network (mx_unet *, mx_vae *, ...) */
+} golden_net;
+
+static inline void golden_net_free(golden_net *k) {
+    if (k->def && k->net) k->def->free(k->net);
+    golden_weights_close(&k->g);
+    memset(k, 0, sizeof *k);
+}
+
+/* Loads NET with FILE's weights; fails unless its config is of registry kind `kind` ("unet"). */
+static inline int golden_net_load(golden_net *k, const mx_ctx *c, const char *net, const char *file,
+                                  const char *kind) {
+    mx_status st = {0};
+    size_t len;
+    memset(k, 0, sizeof *k);
+    char *cfg = golden_text(net, "config.json", &len);
+    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
+    int rc = golden_weights_open(&k->g, c, net, file, &st) ||
+             mx_net_load_config(&k->def, &k->net, cfg, len, net, &k->g.dev, &st);
+    free(cfg);
+    if (!rc && strcmp(k->def->kind, kind))
+        rc = mx_fail(&st, MX_EINPUT, "%s: a %s, expected a %s", net, k->def->kind, kind);
+    if (rc) {
+        fprintf(stderr, "%s: %s\n", net, st.msg);
+        golden_net_free(k);
+        return -1;
+    }
+    return 0;
 }
 
 /* fp32 copy of a tensor (malloc'ed), with its element count; NULL when absent. */

@@ -11,31 +11,20 @@
 #include "nn_golden.h"
 
 typedef struct cn_case {
+    golden_net n;
     mx_controlnet *m;
-    golden_weights g;
     mx_unet_config cfg;
 } cn_case;
 
 static int load_cn(cn_case *k, const mx_ctx *c, const char *net, const char *wfile) {
-    mx_status st;
-    size_t len;
     memset(k, 0, sizeof *k);
-    char *cfg = golden_text(net, "config.json", &len);
-    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
-    int rc = mx_unet_config_parse(&k->cfg, cfg, len, net, &st);
-    free(cfg);
-    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
-        mx_controlnet_load(&k->m, &k->cfg, &k->g.dev, &st)) {
-        fprintf(stderr, "%s: %s\n", net, st.msg);
-        return -1;
-    }
+    if (golden_net_load(&k->n, c, net, wfile, "controlnet")) return -1;
+    k->m = k->n.net;
+    k->cfg = *mx_controlnet_cfg(k->m);
     return 0;
 }
 
-static void free_cn(cn_case *k) {
-    mx_controlnet_free(k->m);
-    golden_weights_close(&k->g);
-}
+static void free_cn(cn_case *k) { golden_net_free(&k->n); }
 
 typedef struct cn_inputs {
     float *sample, *ehs, *ts, *cond;

@@ -10,31 +10,20 @@
 #include "nn_golden.h"
 
 typedef struct taesd_case {
+    golden_net n;
     mx_taesd *t;
-    golden_weights g;
     mx_taesd_config cfg;
 } taesd_case;
 
 static int load_taesd(taesd_case *k, const mx_ctx *c, const char *net, const char *wfile) {
-    mx_status st;
-    size_t len;
     memset(k, 0, sizeof *k);
-    char *cfg = golden_text(net, "config.json", &len);
-    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
-    int rc = mx_taesd_config_parse(&k->cfg, cfg, len, net, &st);
-    free(cfg);
-    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
-        mx_taesd_load(&k->t, &k->cfg, &k->g.dev, &st)) {
-        fprintf(stderr, "%s: %s\n", net, st.msg);
-        return -1;
-    }
+    if (golden_net_load(&k->n, c, net, wfile, "taesd")) return -1;
+    k->t = k->n.net;
+    k->cfg = *mx_taesd_cfg(k->t);
     return 0;
 }
 
-static void free_taesd(taesd_case *k) {
-    mx_taesd_free(k->t);
-    golden_weights_close(&k->g);
-}
+static void free_taesd(taesd_case *k) { golden_net_free(&k->n); }
 
 /* One network call on the test device: input uploaded, arena on the backend, output fetched. */
 static int run(const mx_ctx *c, const mx_taesd *t, int dec, const float *in, int B, int H, int W, float *out) {

@@ -10,31 +10,20 @@
 #include "nn_golden.h"
 
 typedef struct unet_case {
+    golden_net n;
     mx_unet *u;
-    golden_weights g;
     mx_unet_config cfg;
 } unet_case;
 
 static int load_unet(unet_case *k, const mx_ctx *c, const char *net, const char *wfile) {
-    mx_status st;
-    size_t len;
     memset(k, 0, sizeof *k);
-    char *cfg = golden_text(net, "config.json", &len);
-    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
-    int rc = mx_unet_config_parse(&k->cfg, cfg, len, net, &st);
-    free(cfg);
-    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
-        mx_unet_load(&k->u, &k->cfg, &k->g.dev, &st)) {
-        fprintf(stderr, "%s: %s\n", net, st.msg);
-        return -1;
-    }
+    if (golden_net_load(&k->n, c, net, wfile, "unet")) return -1;
+    k->u = k->n.net;
+    k->cfg = *mx_unet_cfg(k->u);
     return 0;
 }
 
-static void free_unet(unet_case *k) {
-    mx_unet_free(k->u);
-    golden_weights_close(&k->g);
-}
+static void free_unet(unet_case *k) { golden_net_free(&k->n); }
 
 /* The golden outputs of one weight variant: out_plain, and with residuals the
  * out_controlnet_scale{0,1} cases. The residuals stored in the inputs come from the fp32
@@ -161,7 +150,7 @@ static void check_linear_projection(const mx_ctx *c) {
     if (!k.u) return;
     mx_unet_config lcfg = k.cfg;
     lcfg.use_linear_projection = 1;
-    linear_view lv = {&k.g.dev}; /* binds through the device binder */
+    linear_view lv = {&k.n.g.dev}; /* binds through the device binder */
     mx_binder view = {bind_linear_view, &lv, "", 0};
     mx_unet *ul = NULL;
     CHECK(mx_unet_load(&ul, &lcfg, &view, &st) == 0);

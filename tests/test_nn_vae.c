@@ -10,31 +10,20 @@
 #include "nn_golden.h"
 
 typedef struct vae_case {
+    golden_net n;
     mx_vae *v;
-    golden_weights g;
     mx_vae_config cfg;
 } vae_case;
 
 static int load_vae(vae_case *k, const mx_ctx *c, const char *net, const char *wfile) {
-    mx_status st;
-    size_t len;
     memset(k, 0, sizeof *k);
-    char *cfg = golden_text(net, "config.json", &len);
-    if (!cfg) return fprintf(stderr, "%s: no config.json\n", net), -1;
-    int rc = mx_vae_config_parse(&k->cfg, cfg, len, net, &st);
-    free(cfg);
-    if (rc || golden_weights_open(&k->g, c, net, wfile, &st) ||
-        mx_vae_load(&k->v, &k->cfg, &k->g.dev, &st)) {
-        fprintf(stderr, "%s: %s\n", net, st.msg);
-        return -1;
-    }
+    if (golden_net_load(&k->n, c, net, wfile, "vae")) return -1;
+    k->v = k->n.net;
+    k->cfg = *mx_vae_cfg(k->v);
     return 0;
 }
 
-static void free_vae(vae_case *k) {
-    mx_vae_free(k->v);
-    golden_weights_close(&k->g);
-}
+static void free_vae(vae_case *k) { golden_net_free(&k->n); }
 
 static void compare(const mx_ctx *c, const mx_safetensors *out, const char *net, const char *outfile, const char *name,
                     const float *got) {
