@@ -108,7 +108,7 @@ static int transfer(const char *src_dir, float r, float g, float b, const char *
     o.pub.views = 4;
     o.pub.verbose = 0;
     o.pub.background[0] = r, o.pub.background[1] = g, o.pub.background[2] = b;
-    return mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, st) || mx_transfer_run(&o, NULL, st);
+    return mx_texture_opts_check(&o, MX_VERB_TRANSFER, st) || mx_transfer_run(&o, NULL, st);
 }
 
 int main(void) {

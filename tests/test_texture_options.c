@@ -30,7 +30,7 @@ static void base_opts(mx_texture_opts *o, const char *weights, const char *out) 
 }
 
 /* One impossible value: refused as a usage error whose message holds `want`. */
-static void expect_refused(const mx_texture_opts *o, mx_texture_mode mode, const char *want) {
+static void expect_refused(const mx_texture_opts *o, unsigned mode, const char *want) {
     mx_status st;
     mx_status_clear(&st);
     int rc = mx_texture_opts_check(o, mode, &st);
@@ -45,12 +45,12 @@ static void test_options(void) {
     mx_texture_opts o;
     mx_status st;
     base_opts(&o, "w.mxw", "out");
-    CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_TEXTURE, &st) == 0);
+    CHECK(mx_texture_opts_check(&o, MX_VERB_TEXTURE, &st) == 0);
 #define REFUSE(field, value, want)                                                                                     \
     do {                                                                                                               \
         base_opts(&o, "w.mxw", "out");                                                                                 \
         o.field = value;                                                                                               \
-        expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, want);                                                             \
+        expect_refused(&o, MX_VERB_TEXTURE, want);                                                             \
     } while (0)
     /* ranges: the option table's (test_table checks every bound) */
     REFUSE(pub.frontal_threshold, 1.5f, "--frontal-threshold must be a number in [0, 1), not '1.5'");
@@ -73,16 +73,16 @@ static void test_options(void) {
     base_opts(&o, "w.mxw", "out");
     o.pub.prompt = "";
     o.pub.views = 1;
-    CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_ENHANCE, &st) == 0);
-    expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "--views must be an integer in 2..64, not '1'");
+    CHECK(mx_texture_opts_check(&o, MX_VERB_ENHANCE, &st) == 0);
+    expect_refused(&o, MX_VERB_TEXTURE, "--views must be an integer in 2..64, not '1'");
     o.pub.views = 2;
-    expect_refused(&o, MX_TEXTURE_MODE_TEXTURE, "the prompt is empty");
+    expect_refused(&o, MX_VERB_TEXTURE, "the prompt is empty");
     /* transfer: a source, no weights, no prompt */
     base_opts(&o, NULL, "out");
     o.pub.prompt = NULL;
-    expect_refused(&o, MX_TEXTURE_MODE_TRANSFER, "no source mesh");
+    expect_refused(&o, MX_VERB_TRANSFER, "no source mesh");
     o.pub.source_path = "src.glb";
-    CHECK(mx_texture_opts_check(&o, MX_TEXTURE_MODE_TRANSFER, &st) == 0);
+    CHECK(mx_texture_opts_check(&o, MX_VERB_TRANSFER, &st) == 0);
     /* mx_texture_run refuses before touching anything */
     base_opts(&o, "w.mxw", "out_never");
     o.pub.coverage_stop = 2;

@@ -403,24 +403,22 @@ static int blank(const char *s) {
     return *s == 0;
 }
 
-static int check_given(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
+static int check_given(const mx_texture_opts *o, unsigned verb, mx_status *st) {
     const matex_options *p = &o->pub;
     /* the embedding API may give the mesh in memory, an opened model set, and keep the results */
     if (!o->mesh && (!p->mesh_path || !*p->mesh_path)) return mx_fail(st, MX_EUSAGE, "no mesh given");
     if (!o->keep_outputs && (!p->out_dir || !*p->out_dir))
         return mx_fail(st, MX_EUSAGE, "no output folder given (-o)");
-    if (mode == MX_TEXTURE_MODE_TRANSFER)
+    if (verb == MX_VERB_TRANSFER)
         return !p->source_path || !*p->source_path ? mx_fail(st, MX_EUSAGE, "no source mesh given") : 0;
     if (!o->models && (!o->weights_path || !*o->weights_path))
         return mx_fail(st, MX_EUSAGE, "no weight file given (--weights)");
     if (!p->prompt) return mx_fail(st, MX_EUSAGE, "no prompt given");
-    if (mode == MX_TEXTURE_MODE_TEXTURE && blank(p->prompt))
+    if (verb == MX_VERB_TEXTURE && blank(p->prompt))
         return mx_fail(st, MX_EUSAGE, "the prompt is empty: describe the texture, e.g. \"a rustic wooden chair\"");
     return 0;
 }
 
-int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st) {
-    static const unsigned verbs[] = {[MX_TEXTURE_MODE_TEXTURE] = MX_VERB_TEXTURE, [MX_TEXTURE_MODE_ENHANCE] = MX_VERB_ENHANCE,
-                                     [MX_TEXTURE_MODE_TRANSFER] = MX_VERB_TRANSFER};
-    return mx_options_check(&o->pub, verbs[mode], st) || check_given(o, mode, st) ? -1 : 0;
+int mx_texture_opts_check(const mx_texture_opts *o, unsigned verb, mx_status *st) {
+    return mx_options_check(&o->pub, verb, st) || check_given(o, verb, st) ? -1 : 0;
 }

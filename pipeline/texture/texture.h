@@ -26,6 +26,7 @@
 #include "../../runtime/status.h"
 #include "../geom/image.h"
 #include "../geom/mesh.h"
+#include "options.h" /* MX_VERB_*: the verb a run checks its options for */
 
 struct mx_models;
 
@@ -65,13 +66,11 @@ const char *mx_texture_opts_device_name(const mx_texture_opts *o);
 
 void mx_texture_opts_default(mx_texture_opts *o);
 
-typedef enum { MX_TEXTURE_MODE_TEXTURE, MX_TEXTURE_MODE_ENHANCE, MX_TEXTURE_MODE_TRANSFER } mx_texture_mode;
-
 /* Checks every option before any work (MX_EUSAGE, the message names the option, its value and
  * the valid range): pub against the option table (mx_options_check), then what the run is given
- * (mesh, weights or model set, prompt, output). mx_texture_run, mx_enhance_run and mx_transfer_run
- * call it first. */
-int mx_texture_opts_check(const mx_texture_opts *o, mx_texture_mode mode, mx_status *st);
+ * (mesh, weights or model set, prompt, output), for the verb that runs (MX_VERB_TEXTURE, _ENHANCE or
+ * _TRANSFER: options.h). mx_texture_run, mx_enhance_run and mx_transfer_run call it first. */
+int mx_texture_opts_check(const mx_texture_opts *o, unsigned verb, mx_status *st);
 
 typedef struct mx_texture_result {
     double coverage;   /* fraction of the mesh's texels (inside a face in UV space) painted by views */

@@ -150,7 +150,7 @@ static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status 
 }
 
 int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
-    if (mx_texture_opts_check(o, MX_TEXTURE_MODE_TRANSFER, st)) return -1;
+    if (mx_texture_opts_check(o, MX_VERB_TRANSFER, st)) return -1;
     mx_job j;
     memset(&j, 0, sizeof j);
     source s;
