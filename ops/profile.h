@@ -19,7 +19,7 @@ enum { MX_OPS(MX_OP_ID_) };
 
 typedef enum {
     MX_GEMM_PACK_A,   /* A panels: linear's activations, conv's weights (widened, to pairs) */
-    MX_GEMM_PACK_B,   /* B panels: linear's weights, conv's im2col of the activations */
+    MX_GEMM_PACK_B,   /* B panels: linear's weights; conv's input band (gemm_conv.c) and panels copied from it */
     MX_GEMM_MICRO,    /* the register-blocked micro-kernel, C loads and stores and the bias included */
     MX_GEMM_PARTS
 } mx_gemm_part;

@@ -171,6 +171,15 @@ static void test_gemm_ops(const levels *lv) {
     test_linear_case(lv, 64, 64, 64, MX_F32, 1);            /* whole AMX tiles (32×32 blocks, 16 k-pairs) */
     test_linear_case(lv, 33, 65, 33, MX_BF16, 1);           /* one row / column / k-pair past the tiles */
     test_conv_case(lv, 1, 16, 8, 8, 32, 3, 1, 1, MX_F16);   /* K = 144: 72 k-pairs, padded to 80 */
+    /* the band packer (gemm_conv.c): K groups, stride, padding and band bounds */
+    test_conv_case(lv, 1, 1, 5, 7, 4, 3, 1, 1, MX_F32);      /* Cin = 1: one channel paired with zero */
+    test_conv_case(lv, 2, 4, 9, 37, 6, 1, 1, 0, MX_BF16);    /* 1×1, batch 2, W past one panel */
+    test_conv_case(lv, 1, 5, 13, 45, 7, 3, 2, 0, MX_F16);    /* stride 2, pad 0, odd Cin */
+    test_conv_case(lv, 2, 3, 33, 70, 9, 3, 2, 1, MX_F32);    /* stride 2, pad 1: strided copies */
+    test_conv_case(lv, 1, 151, 20, 23, 20, 3, 1, 1, MX_F16); /* 3 K groups, the last one smaller */
+    test_conv_case(lv, 1, 40, 11, 12, 5, 5, 1, 2, MX_BF16);  /* 5×5: groups of 25 taps */
+    test_conv_case(lv, 1, 2, 20, 20, 3, 19, 1, 9, MX_F16);   /* 361 taps: past a K block on pairs */
+    test_conv_case(lv, 1, 512, 4, 1100, 3, 3, 1, 1, MX_F32); /* band of 1 output row (8 MiB bound) */
 }
 
 #ifndef MX_NO_X86_SIMD

@@ -9,7 +9,7 @@
  * pack/compute rounds (K = 5120: 8 instead of 16). On this Zen 5 (48 KiB L1, 1 MiB L2) 640
  * was a little faster than 320 on the K ≥ 1280 shapes and no slower on K = 320; 1024 was no
  * better (the shared machine is too noisy to separate a few percent). */
-#define KC_MAX 640
+#define KC_MAX MX_GEMM_KC_MAX
 /* Rows of A per compute task (rounded down to whole MR panels). */
 #define MC_ROWS 96
 /* Compute tasks wanted, so that a few threads stay busy; the row blocks of a tall GEMM
@@ -23,9 +23,13 @@ static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 /* 16-bit weight rows widened per transpose call (8 × KC_MAX floats of stack). */
 #define WIDEN_ROWS 8
 
-/* Zero pair rows kp..words of a k-major panel dst[words][width] (the pair_align padding). */
-static void zero_pair_rows(uint32_t *dst, int width, int kp, size_t words) {
-    for (size_t k = (size_t)kp; k < words; k++) memset(dst + k * width, 0, (size_t)width * sizeof *dst);
+void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dstv, int width, int valid, int kc) {
+    int rows = g->to_pairs ? (kc + 1) / 2 : kc;
+    uint32_t *dst = dstv;
+    for (int k = 0; k < rows && valid < width; k++)
+        memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
+    size_t words = mx_gemm_panel_words(g, kc);
+    for (size_t k = (size_t)rows; k < words; k++) memset(dst + k * width, 0, (size_t)width * sizeof *dst);
 }
 
 /* Starts fetching rows first..first+n-1, columns k0..k0+kc-1, of a row-major matrix. The packers
@@ -81,9 +85,7 @@ static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src,
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
     }
-    for (int k = 0; k < kp && valid < width; k++)
-        memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
-    zero_pair_rows(dst, width, kp, mx_gemm_panel_words(g, kc));
+    mx_gemm_zero_panel_tail(g, dst, width, valid, kc);
 }
 
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
@@ -114,8 +116,7 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
             g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);
         }
     }
-    for (int k = 0; k < kc && valid < width; k++)
-        memset(dst + (size_t)k * width + valid, 0, (size_t)(width - valid) * sizeof *dst);
+    mx_gemm_zero_panel_tail(g, dst, width, valid, kc);
 }
 
 void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
@@ -126,60 +127,6 @@ void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
     pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0);
-}
-
-/* One run of output pixels ox..ox+run-1 of one output row, for kernel tap (ky, kx) of channel ci. */
-static void im2col_run(const mx_gemm_problem *p, float *d, int ci, int ky, int kx, int oy, int ox, int run) {
-    int iy = oy * p->stride - p->pad + ky;
-    if (iy < 0 || iy >= p->H) {
-        memset(d, 0, (size_t)run * sizeof *d);
-        return;
-    }
-    const float *row = p->image + ((size_t)ci * p->H + iy) * p->W;
-    if (p->stride == 1) {
-        int ix0 = ox - p->pad + kx; /* input column of d[0] */
-        int lo = min_int(run, max_int(0, -ix0)), hi = max_int(lo, min_int(run, p->W - ix0));
-        memset(d, 0, (size_t)lo * sizeof *d);
-        memcpy(d + lo, row + ix0 + lo, (size_t)(hi - lo) * sizeof *d);
-        memset(d + hi, 0, (size_t)(run - hi) * sizeof *d);
-        return;
-    }
-    for (int t = 0; t < run; t++) {
-        int ix = (ox + t) * p->stride - p->pad + kx;
-        d[t] = ix >= 0 && ix < p->W ? row[ix] : 0.0f;
-    }
-}
-
-/* The fp32 im2col panel dst[k][cols]. */
-static void im2col_panel(const mx_gemm_problem *p, float *dst, int first, int cols, int k0, int kc) {
-    int taps = p->kh * p->kw;
-    for (int k = 0; k < kc; k++) {
-        int kk = k0 + k, ci = kk / taps, ky = kk % taps / p->kw, kx = kk % p->kw;
-        float *d = dst + (size_t)k * cols;
-        int j = 0;
-        while (j < cols) {
-            int pix = first + j;
-            if (pix >= p->N) {
-                memset(d + j, 0, (size_t)(cols - j) * sizeof *d);
-                break;
-            }
-            int oy = pix / p->Wo, ox = pix % p->Wo, run = min_int(cols - j, p->Wo - ox);
-            im2col_run(p, d + j, ci, ky, kx, oy, ox, run);
-            j += run;
-        }
-    }
-}
-
-void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
-                           int k0, int kc) {
-    if (!g->to_pairs) {
-        im2col_panel(p, dst, first, cols, k0, kc);
-        return;
-    }
-    float staging[KC_MAX * MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
-    im2col_panel(p, staging, first, cols, k0, kc);
-    g->to_pairs(dst, staging, cols, kc);
-    zero_pair_rows(dst, cols, (kc + 1) / 2, mx_gemm_panel_words(g, kc));
 }
 
 /* Outer blocks of columns bound the shared B buffer (≤ OUTER_MAX columns per K block, ~5 MiB),
@@ -346,6 +293,12 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     /* outer blocks end on whole panels */
     int nb_max = OUTER_MAX / g->nr * g->nr, nb = min_int(p->N, nb_max);
     int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
+    /* a multiple of the problem's (≤ KC_MAX): rounded up, or down where up passes KC_MAX */
+    if (p->k_multiple > 1) {
+        int up = ceil_div(kc_max, p->k_multiple) * p->k_multiple;
+        kc_max = up <= KC_MAX ? up : KC_MAX / p->k_multiple * p->k_multiple;
+        nkb = ceil_div(p->K, kc_max);
+    }
     int nthreads = mx_par_threads(c);
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
     size_t words = mx_gemm_panel_words(g, kc_max);
@@ -404,30 +357,4 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     p.b_ld = (size_t)K;
     p.bias = bias;
     if (mx_gemm_run(c, g, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
-}
-
-void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
-                    int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
-    int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
-    mx_gemm_problem p = {.M = Cout, .N = Ho * Wo, .K = Cin * kh * kw, .ldc = (size_t)Ho * Wo};
-    p.pack_a = mx_gemm_pack_a_rows;
-    p.pack_b = mx_gemm_pack_b_im2col;
-    p.a_mat = w;
-    p.a_ld = (size_t)p.K;
-    p.Cin = Cin;
-    p.H = H;
-    p.W = W;
-    p.kh = kh;
-    p.kw = kw;
-    p.stride = stride;
-    p.pad = pad;
-    p.Wo = Wo;
-    p.bias = bias;
-    p.bias_per_row = 1;
-    p.batch = B;
-    p.image = x;
-    p.image_batch_stride = (size_t)Cin * H * W;
-    p.C = y;
-    p.c_batch_stride = (size_t)Cout * Ho * Wo;
-    if (mx_gemm_run(c, g, &p) != 0) mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }

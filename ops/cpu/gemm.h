@@ -4,12 +4,12 @@
  * register-blocked micro-kernel on every MR×NR sub-tile; each thread packs the MC-row block
  * of A it works on into its own buffer (MR-row panels; it stays in the thread's L2). Panels
  * are k-major and zero-padded at the edges. Packing is pluggable, so conv2d packs its B panels
- * straight from the image (tiled im2col, never a full copy). Every split depends on the
+ * straight from (a padded band of) the image, never a full im2col copy. Every split depends on the
  * problem size only, so results do not depend on the thread count.
  * bf16 levels: panels of k-pairs (one 32-bit word = bf16 of k and k+1, an odd last k paired
  * with zero), the operand layout of vdpbf16ps, so the micro-kernel does two k per instruction.
- * The row packers convert each row to pairs (adjacent in a row) and transpose words; the im2col
- * packer builds an fp32 panel and turns it into pairs. The AMX level (gemm_amx.inc) pads each
+ * The row packers convert each row to pairs (adjacent in a row) and transpose words; the conv
+ * packers copy words from a band of the input converted to channel pairs once (gemm_conv.c). The AMX level (gemm_amx.inc) pads each
  * panel's pair rows to whole tiles (pair_align 16) and keeps A panels row-major (a_rows: the
  * tile rows of TDPBF16PS's first operand); its B panels are the same k-pair panels. */
 #ifndef MX_OPS_CPU_GEMM_H
@@ -40,8 +40,10 @@ typedef struct mx_gemm_kernel {
     int pair_align, a_rows;
 } mx_gemm_kernel;
 
-/* Widest panel (MR or NR) of any kernel: bounds the fp32 staging panel of the bf16 levels. */
+/* Widest panel (MR or NR) of any kernel: bounds the packers' stack buffers. */
 #define MX_GEMM_PANEL_MAX 32
+/* Longest K block the engine packs (gemm.c's KC_MAX): bounds the packers' row buffers. */
+#define MX_GEMM_KC_MAX 640
 
 typedef struct mx_gemm_problem mx_gemm_problem;
 /* dst[k][r] for k < kc, r < rows: a panel starting at row (A) or column (B) `first`, rows past
@@ -60,11 +62,15 @@ struct mx_gemm_problem {
     /* operand sources used by the packers */
     mx_wptr a_mat, b_mat; /* row-major matrices for mx_gemm_pack_rows */
     size_t a_ld, b_ld;
-    const float *image;   /* conv: batch item 0 [Cin, H, W] */
+    /* conv (gemm_conv.c): a_mat the weights [M][Cin][kh][kw]; image the band of batch item 0,
+     * band[chans][band_rows][band_width] 32-bit words (fp32, or bf16 channel pairs); K in groups
+     * of group_words channel words × kh·kw taps */
+    const float *image;
     size_t image_batch_stride;
-    int Cin, H, W, kh, kw, stride, pad, Wo;
+    int Cin, chans, group_words, band_rows, band_width, kh, kw, stride, Wo;
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
+    int k_multiple;   /* ≤ MX_GEMM_KC_MAX; K blocks are multiples of it long (0 or 1: any length) */
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
@@ -74,9 +80,15 @@ void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
                          int k0, int kc);
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc);
-/* Packs B = im2col(image) columns [first, first+cols) for rows k0..k0+kc of (ci, ky, kx). */
-void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
-                           int k0, int kc);
+/* conv (gemm_conv.c), K in the order (ky, kx, ci): A from the weights, B columns [first,
+ * first+cols) (output pixels) copied from the band. */
+void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                         int k0, int kc);
+void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
+                         int k0, int kc);
+/* Zeros what a packer left of a k-major panel dst[words][width] for a K block of kc: columns
+ * valid..width of the kc rows (or pair rows), and the pair_align padding rows. */
+void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dst, int width, int valid, int kc);
 
 /* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 levels. */
 void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);

@@ -1,0 +1,276 @@
+/* conv2d as an implicit GEMM on the engine of gemm.c: C[Cout, pixels] = W[Cout, K] · B[K, pixels]
+ * with K in the order (ky, kx, ci). The output is computed in blocks of whole output rows; for
+ * each block all threads first prepare a band of the input rows it reads, zero-padded on every
+ * side and, on the bf16 levels, already converted to channel pairs (one 32-bit word = bf16 of
+ * channels 2cp and 2cp+1 at one pixel, an odd last channel paired with zero). A word row of a B
+ * panel, one (tap, channel or channel pair) over up to NR consecutive output pixels, is then a
+ * straight copy from the band (a strided one for stride > 1): no index arithmetic per element,
+ * no edge tests, each input converted to bf16 once instead of once per tap. The weights' A
+ * panels gather the same K order: k = (ky·kw + kx)·Cin' + ci, Cin' = Cin rounded up to even on
+ * the bf16 levels (the pair of a padding channel is zero in both A and B). */
+#include "gemm.h"
+
+#include <string.h>
+
+/* Output columns per block: within gemm.c's outer block of columns (4096), so one block is one
+ * pass of the engine over its B panels. */
+#define CONV_COLS_MAX 4096
+/* Bound of the band (all batch items): at least one output row's input rows are prepared, so
+ * a block is smaller only for images of more than BAND_BYTES_MAX / (kh · channels · 4) columns. */
+#define BAND_BYTES_MAX ((size_t)8 << 20)
+/* Input columns converted to pairs per to_pairs call (a staging panel of 2 rows). */
+#define PAIR_CHUNK 256
+/* Weight values widened per call of the kernel's widen when gathering a row of A. */
+#define WIDEN_MAX 2304
+/* Rows of A gathered before a transpose (the same as gemm.c's WIDEN_ROWS). */
+#define GATHER_ROWS 8
+
+static int min_int(int a, int b) { return a < b ? a : b; }
+static int max_int(int a, int b) { return a > b ? a : b; }
+
+/* 32-bit words per band pixel: channels (fp32) or channel pairs (bf16 levels). */
+static int band_chans(const mx_gemm_kernel *g, int Cin) { return g->to_pairs ? (Cin + 1) / 2 : Cin; }
+static int k_per_word(const mx_gemm_kernel *g) { return g->to_pairs ? 2 : 1; }
+
+/* Where word row q of B (k = q·k_per_word) is: channel group, tap, word in the group. The K
+ * order is (group, ky, kx, ci in the group): a K block of the engine is one whole group, so the
+ * weights it needs, channels of the group × all taps, are one contiguous run of each weight row. */
+typedef struct {
+    int group, tap, word, group_words; /* group_words: words per pixel in this group */
+} k_pos;
+
+static k_pos k_pos_of(const mx_gemm_problem *p, int q) {
+    int gw = p->group_words, taps = p->kh * p->kw, grp = q / (gw * taps), first = grp * gw;
+    /* at least 1: the position past the last row, which k_pos_next may reach, is never read */
+    int words = max_int(1, min_int(gw, p->chans - first)), r = q - first * taps;
+    return (k_pos){.group = grp, .tap = r / words, .word = r % words, .group_words = words};
+}
+
+/* The next word row. */
+static void k_pos_next(const mx_gemm_problem *p, k_pos *at) {
+    if (++at->word < at->group_words) return;
+    at->word = 0;
+    if (++at->tap < p->kh * p->kw) return;
+    *at = k_pos_of(p, (at->group + 1) * p->group_words * p->kh * p->kw);
+}
+
+/* ---- A: the weights [Cout][Cin][kh][kw] in the K order of k_pos ---- */
+
+/* out[0 .. kc) = row m of A for k0 .. k0+kc (a channel past Cin, the pair of an odd Cin: 0). */
+static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *out, int m, int k0, int kc) {
+    float buf[MX_GEMM_KC_MAX];
+    int taps = p->kh * p->kw, k = k0, group = p->group_words * k_per_word(g), span = group * taps;
+    while (k < k0 + kc) {
+        int grp = k / span, c0 = grp * group, size = min_int(group, p->chans * k_per_word(g) - c0);
+        int real = max_int(0, min_int(size, p->Cin - c0)), r = k - grp * span, r1 = min_int(size * taps, r + k0 + kc - k);
+        /* the group's channels × taps: one run of the weight row, widened once */
+        size_t at = ((size_t)m * p->Cin + (size_t)c0) * taps;
+        const float *w = (const float *)p->a_mat.data + at;
+        if (p->a_mat.dtype != MX_F32) { /* NULL: a group of one word longer than buf (kernels > 17×17) */
+            w = (size_t)real * taps <= MX_GEMM_KC_MAX ? buf : NULL;
+            if (w) g->widen(buf, p->a_mat, at, (size_t)real * taps);
+        }
+        if (w && r == 0 && r1 == size * taps) { /* the whole group: [real][taps] to [taps][size] */
+            float *o = out + (k - k0);
+            g->transpose(o, (size_t)size, w, (size_t)taps, real, taps);
+            for (int t = 0; t < taps && real < size; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
+            k += r1;
+            continue;
+        }
+        for (int t = r / size, ci = r % size; r < r1; r++, k++) {
+            size_t i = (size_t)ci * taps + (size_t)t;
+            out[k - k0] = ci >= real ? 0.0f : w ? w[i] : mx_w_get(p->a_mat, at + i);
+            if (++ci == size) ci = 0, t++;
+        }
+    }
+}
+
+void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int rows,
+                         int k0, int kc) {
+    enum { KC = MX_GEMM_KC_MAX };
+    float tmp[GATHER_ROWS * KC];
+    uint32_t words_tmp[GATHER_ROWS * KC / 2];
+    int valid = min_int(rows, p->M - first), kp = (kc + 1) / 2;
+    size_t words = mx_gemm_panel_words(g, kc);
+    uint32_t *dst = dstv;
+    for (int r0 = 0; r0 < valid; r0 += GATHER_ROWS) {
+        int n = min_int(GATHER_ROWS, valid - r0);
+        for (int i = 0; i < n; i++) weight_row(p, g, tmp + (size_t)i * KC, first + r0 + i, k0, kc);
+        if (!g->to_pairs) {
+            g->transpose((float *)dstv + r0, (size_t)rows, tmp, KC, n, kc);
+            continue;
+        }
+        for (int i = 0; i < n; i++) {
+            uint32_t *d = g->a_rows ? dst + (size_t)(r0 + i) * words : words_tmp + (size_t)i * (KC / 2);
+            g->row_pairs(d, tmp + (size_t)i * KC, kc);
+            if (g->a_rows) memset(d + kp, 0, (words - (size_t)kp) * sizeof *d);
+        }
+        /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
+        if (!g->a_rows)
+            g->transpose((float *)dstv + r0, (size_t)rows, (const float *)(const void *)words_tmp, KC / 2, n, kp);
+    }
+    if (g->a_rows) {
+        memset(dst + (size_t)valid * words, 0, (size_t)(rows - valid) * words * sizeof *dst);
+        return;
+    }
+    mx_gemm_zero_panel_tail(g, dst, rows, valid, kc);
+}
+
+/* ---- B: panels copied from the band ---- */
+
+/* Panel columns j .. j+len, consecutive output pixels of one output row, whose inputs for the
+ * tap (0, 0) start at word `off` of a band plane (the other taps: off + ky·width + kx). */
+typedef struct {
+    int j, len;
+    size_t off;
+} pixel_run;
+
+/* The runs of panel columns first .. first+cols that are pixels (< N); *valid: their count. */
+static int panel_runs(const mx_gemm_problem *p, pixel_run *runs, int first, int cols, int *valid) {
+    int n = 0, j = 0, end = max_int(0, min_int(cols, p->N - first));
+    while (j < end) {
+        int pix = first + j, oy = pix / p->Wo, ox = pix % p->Wo, len = min_int(end - j, p->Wo - ox);
+        runs[n++] = (pixel_run){.j = j, .len = len,
+                                .off = ((size_t)oy * p->band_width + (size_t)ox) * (size_t)p->stride};
+        j += len;
+    }
+    *valid = end;
+    return n;
+}
+
+/* d[i] = s[i · stride] for i < len, as 32-bit words (fp32 or pairs: copied, never converted). */
+static void copy_run(uint32_t *d, const uint32_t *s, int len, int stride) {
+    if (stride != 1)
+        for (int i = 0; i < len; i++) memcpy(d + i, s + (size_t)i * stride, sizeof *d);
+    else if (len == MX_GEMM_PANEL_MAX) /* the whole AVX-512 panel: a fixed-size copy, inlined */
+        memcpy(d, s, MX_GEMM_PANEL_MAX * sizeof *d);
+    else
+        memcpy(d, s, (size_t)len * sizeof *d);
+}
+
+void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int cols,
+                         int k0, int kc) {
+    pixel_run runs[MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
+    int valid, nruns = panel_runs(p, runs, first, cols, &valid);
+    int nq = (kc + k_per_word(g) - 1) / k_per_word(g);
+    k_pos at = k_pos_of(p, k0 / k_per_word(g));
+    const uint32_t *band = (const uint32_t *)(const void *)p->image;
+    size_t plane = (size_t)p->band_rows * p->band_width;
+    uint32_t *dst = dstv;
+    for (int q = 0; q < nq; q++, k_pos_next(p, &at)) {
+        int cp = at.group * p->group_words + at.word, ky = at.tap / p->kw, kx = at.tap % p->kw;
+        const uint32_t *src = band + (size_t)cp * plane + (size_t)ky * p->band_width + (size_t)kx;
+        uint32_t *d = dst + (size_t)q * cols;
+        for (int r = 0; r < nruns; r++) copy_run(d + runs[r].j, src + runs[r].off, runs[r].len, p->stride);
+    }
+    mx_gemm_zero_panel_tail(g, dst, cols, valid, kc);
+}
+
+/* ---- the band: input rows of a block of output rows, padded, in the kernel's words ---- */
+
+typedef struct {
+    const mx_gemm_kernel *g;
+    const float *x; /* the input [B][Cin][H][W] */
+    uint32_t *band; /* [B][chans][rows][width] */
+    int Cin, H, W, pad, chans, rows, width;
+    int iy0;      /* input row of band row 0 (negative in the top padding) */
+    double *secs; /* with a profile: each thread's CPU seconds */
+} band_job;
+
+/* d[0 .. W) = pairs of the rows even and odd (NULL: zeros), through the kernel's to_pairs. */
+static void pairs_of_rows(const mx_gemm_kernel *g, uint32_t *d, const float *even, const float *odd, int W) {
+    float staging[2 * PAIR_CHUNK];
+    for (int x0 = 0; x0 < W; x0 += PAIR_CHUNK) {
+        int n = min_int(PAIR_CHUNK, W - x0);
+        memcpy(staging, even + x0, (size_t)n * sizeof *staging);
+        if (odd) memcpy(staging + n, odd + x0, (size_t)n * sizeof *staging);
+        g->to_pairs(d + x0, staging, n, odd ? 2 : 1);
+    }
+}
+
+/* Task (batch item, band channel): its rows of the band. */
+static void prepare_band_task(void *arg, int task, int thread) {
+    const band_job *j = arg;
+    double t0 = j->secs ? mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) : 0;
+    int b = task / j->chans, cp = task % j->chans, pairs = j->g->to_pairs != NULL, ci = pairs ? 2 * cp : cp;
+    size_t plane = (size_t)j->H * j->W;
+    const float *chan = j->x + ((size_t)b * j->Cin + (size_t)ci) * plane;
+    uint32_t *d = j->band + ((size_t)b * j->chans + (size_t)cp) * j->rows * j->width;
+    for (int r = 0; r < j->rows; r++, d += j->width) {
+        int iy = j->iy0 + r;
+        if (iy < 0 || iy >= j->H) {
+            memset(d, 0, (size_t)j->width * sizeof *d);
+            continue;
+        }
+        const float *row = chan + (size_t)iy * j->W;
+        memset(d, 0, (size_t)j->pad * sizeof *d);
+        if (pairs)
+            pairs_of_rows(j->g, d + j->pad, row, ci + 1 < j->Cin ? row + plane : NULL, j->W);
+        else
+            memcpy(d + j->pad, row, (size_t)j->W * sizeof *d);
+        memset(d + j->pad + j->W, 0, (size_t)(j->width - j->pad - j->W) * sizeof *d);
+    }
+    if (j->secs) j->secs[thread] += mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) - t0;
+}
+
+/* Channel words per K group: all of them when K fits one K block of the engine, else groups as
+ * equal as can be of at most MX_GEMM_KC_MAX k values (e.g. 3×3, Cin 320, bf16: 5 groups of 32
+ * pairs, K blocks of 576); groups of one word where even that is longer (then split over K blocks). */
+static int group_words(int chans, int k_word, int taps) {
+    int most = MX_GEMM_KC_MAX / (taps * k_word);
+    if (most < 1 || chans < 1) return 1;
+    int groups = (chans + most - 1) / most;
+    return (chans + groups - 1) / groups;
+}
+
+/* Output rows per block: whole rows up to CONV_COLS_MAX columns, fewer where the band (all batch
+ * items) would pass BAND_BYTES_MAX; at least one. */
+static int rows_per_block(int B, int chans, int width, int kh, int stride, int Ho, int Wo) {
+    int rows = min_int(Ho, max_int(1, CONV_COLS_MAX / Wo));
+    size_t row_bytes = (size_t)B * chans * width * sizeof(uint32_t);
+    size_t in_rows = row_bytes ? BAND_BYTES_MAX / row_bytes : (size_t)kh + (size_t)rows * stride;
+    if ((size_t)(rows - 1) * stride + kh > in_rows) rows = in_rows < (size_t)kh ? 1 : (int)((in_rows - kh) / stride) + 1;
+    return max_int(1, rows);
+}
+
+/* Prepares the band of output rows oy0 .. oy0+rows and points p at it. */
+static void prepare_band(const mx_ctx *c, band_job *j, mx_gemm_problem *p, int oy0, int rows, int B) {
+    int nthreads = mx_par_threads(c);
+    j->rows = (rows - 1) * p->stride + p->kh;
+    j->iy0 = oy0 * p->stride - j->pad;
+    for (int t = 0; t < nthreads && j->secs; t++) j->secs[t] = 0;
+    mx_par_for(c, B * j->chans, prepare_band_task, j);
+    for (int t = 0; t < nthreads && j->secs; t++) c->prof->gemm_secs[MX_GEMM_CONV][MX_GEMM_PACK_B] += j->secs[t];
+    p->band_rows = j->rows;
+    p->image = (const float *)(const void *)j->band;
+    p->image_batch_stride = (size_t)j->chans * j->rows * j->width;
+    p->N = rows * p->Wo;
+}
+
+void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                    int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
+    if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
+    int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps);
+    int span = group * k_per_word(g) * taps; /* K blocks of whole groups, where a group fits one */
+    mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo,
+                         .c_batch_stride = (size_t)Cout * Ho * Wo, .pack_a = mx_gemm_pack_a_conv,
+                         .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .bias = bias, .bias_per_row = 1, .Cin = Cin,
+                         .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
+                         .band_width = width, .k_multiple = span <= MX_GEMM_KC_MAX ? span : k_per_word(g)};
+    int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
+    size_t band_words = (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
+    size_t nsecs = c && c->prof ? (size_t)nthreads : 0;
+    mx_scratch s;
+    double *mem = mx_scratch_take(c, nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
+    int failed = !mem;
+    band_job j = {.g = g, .x = x, .band = (uint32_t *)(void *)(mem + nsecs), .Cin = Cin, .H = H, .W = W,
+                  .pad = pad, .chans = chans, .width = width, .secs = nsecs ? mem : NULL};
+    for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
+        prepare_band(c, &j, &p, oy0, min_int(rows, Ho - oy0), B);
+        p.C = y + (size_t)oy0 * Wo;
+        failed = mx_gemm_run(c, g, &p) != 0;
+    }
+    if (mem) mx_scratch_release(c, &s);
+    if (failed) mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+}
