@@ -36,7 +36,7 @@ void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dstv, int width, int
  * read a weight matrix a few rows at a time, each row only a short run (kc elements: 1.25 KiB of
  * fp16 at kc = 640) that the hardware prefetcher barely ramps up on; without this, widening the
  * weights (straight from memory, far larger than the caches) stalled on every load. */
-static void prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc) {
+void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc) {
     size_t es = mx_dtype_size(src.dtype), bytes = (size_t)kc * es;
     for (int r = 0; r < n; r++) {
         const char *row = (const char *)src.data + ((size_t)(first + r) * ld + (size_t)k0) * es;
@@ -80,7 +80,7 @@ static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src,
     int kp = (kc + 1) / 2;
     for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
         int n = min_int(WIDEN_ROWS, valid - r0);
-        prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
+        mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
         for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
@@ -110,7 +110,7 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
         float tmp[WIDEN_ROWS * KC_MAX];
         for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
             int n = min_int(WIDEN_ROWS, valid - r0);
-            prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
+            mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
             for (int i = 0; i < n; i++)
                 g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
             g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);

@@ -30,9 +30,9 @@ typedef struct mx_gemm_kernel {
     void (*widen)(float *y, mx_wptr x, size_t offset, size_t n);
     /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols (the packing transpose). */
     void (*transpose)(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols);
-    /* NULL for fp32 panels; else dst[kp][c] = bf16(src[2kp][c]) | bf16(src[2kp+1][c]) << 16 for
-     * c < width, kp < (kc+1)/2 (src[kc][·] read as zero), rounding to nearest even. */
-    void (*to_pairs)(uint32_t *dst, const float *src, int width, int kc);
+    /* NULL for fp32 panels; else dst[c] = bf16(even[c]) | bf16(odd[c]) << 16 for c < n (odd NULL:
+     * zeros), rounding to nearest even: a pair row from two rows (conv: two channels' rows). */
+    void (*to_pairs)(uint32_t *dst, const float *even, const float *odd, int n);
     /* With to_pairs: dst[0 .. (n+1)/2) = pairs of the row src[0 .. n). */
     void (*row_pairs)(uint32_t *dst, const float *src, int n);
     /* With to_pairs: pair rows of a panel padded with zeros to a multiple of this (0 or 1: none);
@@ -62,12 +62,13 @@ struct mx_gemm_problem {
     /* operand sources used by the packers */
     mx_wptr a_mat, b_mat; /* row-major matrices for mx_gemm_pack_rows */
     size_t a_ld, b_ld;
-    /* conv (gemm_conv.c): a_mat the weights [M][Cin][kh][kw]; image the band of batch item 0,
-     * band[chans][band_rows][band_width] 32-bit words (fp32, or bf16 channel pairs); K in groups
-     * of group_words channel words × kh·kw taps */
+    /* conv (gemm_conv.c): a_mat the weights [M][Cin][kh][kw]; image the band of batch item 0:
+     * chans planes (band_plane words apart) of rows of band_width 32-bit words (fp32, or bf16
+     * channel pairs); K in groups of group_words channel words × kh·kw taps */
     const float *image;
-    size_t image_batch_stride;
-    int Cin, chans, group_words, band_rows, band_width, kh, kw, stride, Wo;
+    size_t image_batch_stride, band_plane;
+    int Cin, chans, group_words, band_width, kh, kw, stride, Wo;
+    int band_fp32; /* bf16 levels, 1×1 stride 1 unpadded: the band is the fp32 input, paired per panel */
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
     int k_multiple;   /* ≤ MX_GEMM_KC_MAX; K blocks are multiples of it long (0 or 1: any length) */
@@ -86,6 +87,8 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
                          int k0, int kc);
 void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
                          int k0, int kc);
+/* Starts fetching rows first..first+n-1, columns k0..k0+kc-1, of a row-major weight matrix. */
+void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc);
 /* Zeros what a packer left of a k-major panel dst[words][width] for a K block of kc: columns
  * valid..width of the kc rows (or pair rows), and the pair_align padding rows. */
 void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dst, int width, int valid, int kc);
@@ -95,7 +98,7 @@ void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);
 /* The NEON weight widening (gemm_neon.c), also used by the neonbf16 level. */
 void mx_gemm_widen_neon(float *y, mx_wptr w, size_t off, size_t n);
 /* The AVX512_BF16 to_pairs (gemm_avx512bf16.c), also used by the AMX level. */
-void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc);
+void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *even, const float *odd, int n);
 /* 32-bit words per row (A) or column (B) of a packed panel for a K block of kc: kc for fp32
  * panels, (kc+1)/2 k-pairs rounded up to pair_align for bf16 ones. */
 static inline size_t mx_gemm_panel_words(const mx_gemm_kernel *g, int kc) {

@@ -17,17 +17,13 @@
     }
 #include "gemm_micro_avx512.inc"
 
-/* Word c of pair row kp: bf16(src[2kp][c]) in the low half, bf16(src[2kp+1][c]) in the high. */
-void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *src, int width, int kc) {
-    for (int kp = 0; kp < (kc + 1) / 2; kp++) {
-        const float *even = src + (size_t)(2 * kp) * width, *odd = even + width;
-        int has_odd = 2 * kp + 1 < kc;
-        for (int c = 0; c < width; c += 16) {
-            __mmask16 m = bf16_mask(width - c);
-            __m512 e = _mm512_maskz_loadu_ps(m, even + c);
-            __m512 o = has_odd ? _mm512_maskz_loadu_ps(m, odd + c) : _mm512_setzero_ps();
-            _mm512_mask_storeu_epi32(dst + (size_t)kp * width + c, m, bf16_pairs_of_rows(e, o));
-        }
+/* Word c: bf16(even[c]) in the low half, bf16(odd[c]) (or 0) in the high. */
+void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *even, const float *odd, int n) {
+    for (int c = 0; c < n; c += 16) {
+        __mmask16 m = bf16_mask(n - c);
+        __m512 e = _mm512_maskz_loadu_ps(m, even + c);
+        __m512 o = odd ? _mm512_maskz_loadu_ps(m, odd + c) : _mm512_setzero_ps();
+        _mm512_mask_storeu_epi32(dst + c, m, bf16_pairs_of_rows(e, o));
     }
 }
 

@@ -18,10 +18,10 @@
 /* Bound of the band (all batch items): at least one output row's input rows are prepared, so
  * a block is smaller only for images of more than BAND_BYTES_MAX / (kh · channels · 4) columns. */
 #define BAND_BYTES_MAX ((size_t)8 << 20)
-/* Input columns converted to pairs per to_pairs call (a staging panel of 2 rows). */
-#define PAIR_CHUNK 256
 /* Weight values widened per call of the kernel's widen when gathering a row of A. */
 #define WIDEN_MAX 2304
+/* Band channels (all their rows) per task of the band's preparation. */
+#define BAND_TASK_CHANS 16
 /* Rows of A gathered before a transpose (the same as gemm.c's WIDEN_ROWS). */
 #define GATHER_ROWS 8
 
@@ -72,7 +72,10 @@ static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float 
         }
         if (w && r == 0 && r1 == size * taps) { /* the whole group: [real][taps] to [taps][size] */
             float *o = out + (k - k0);
-            g->transpose(o, (size_t)size, w, (size_t)taps, real, taps);
+            if (taps == 1) /* 1×1: the run is the row already */
+                memcpy(o, w, (size_t)real * sizeof *o);
+            else
+                g->transpose(o, (size_t)size, w, (size_t)taps, real, taps);
             for (int t = 0; t < taps && real < size; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
             k += r1;
             continue;
@@ -93,8 +96,14 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
     int valid = min_int(rows, p->M - first), kp = (kc + 1) / 2;
     size_t words = mx_gemm_panel_words(g, kc);
     uint32_t *dst = dstv;
+    /* the weights of the K block's first group: one run of each row, fetched a row group ahead
+     * (into the next panel's rows at the end) */
+    int taps = p->kh * p->kw, group = p->group_words * k_per_word(g), c0 = k0 / (group * taps) * group;
+    int run = max_int(0, min_int(group, p->Cin - c0)) * taps;
     for (int r0 = 0; r0 < valid; r0 += GATHER_ROWS) {
         int n = min_int(GATHER_ROWS, valid - r0);
+        mx_gemm_prefetch_rows(p->a_mat, (size_t)p->Cin * taps, first + r0 + n,
+                              min_int(GATHER_ROWS, p->M - first - r0 - n), c0 * taps, run);
         for (int i = 0; i < n; i++) weight_row(p, g, tmp + (size_t)i * KC, first + r0 + i, k0, kc);
         if (!g->to_pairs) {
             g->transpose((float *)dstv + r0, (size_t)rows, tmp, KC, n, kc);
@@ -148,6 +157,16 @@ static void copy_run(uint32_t *d, const uint32_t *s, int len, int stride) {
         memcpy(d, s, (size_t)len * sizeof *d);
 }
 
+/* Word row of channel pair cp, straight from the fp32 input (band_fp32): each value of a 1×1
+ * conv is converted once either way, so a band of pairs would only add a copy. */
+static void pair_row_from_input(const mx_gemm_problem *p, const mx_gemm_kernel *g, uint32_t *d, int cp,
+                                const pixel_run *runs, int nruns) {
+    const float *even = p->image + (size_t)2 * cp * p->band_plane;
+    const float *odd = 2 * cp + 1 < p->Cin ? even + p->band_plane : NULL;
+    for (int r = 0; r < nruns; r++)
+        g->to_pairs(d + runs[r].j, even + runs[r].off, odd ? odd + runs[r].off : NULL, runs[r].len);
+}
+
 void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int cols,
                          int k0, int kc) {
     pixel_run runs[MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
@@ -155,12 +174,16 @@ void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
     int nq = (kc + k_per_word(g) - 1) / k_per_word(g);
     k_pos at = k_pos_of(p, k0 / k_per_word(g));
     const uint32_t *band = (const uint32_t *)(const void *)p->image;
-    size_t plane = (size_t)p->band_rows * p->band_width;
+    size_t plane = p->band_plane;
     uint32_t *dst = dstv;
     for (int q = 0; q < nq; q++, k_pos_next(p, &at)) {
         int cp = at.group * p->group_words + at.word, ky = at.tap / p->kw, kx = at.tap % p->kw;
         const uint32_t *src = band + (size_t)cp * plane + (size_t)ky * p->band_width + (size_t)kx;
         uint32_t *d = dst + (size_t)q * cols;
+        if (p->band_fp32) {
+            pair_row_from_input(p, g, d, cp, runs, nruns);
+            continue;
+        }
         for (int r = 0; r < nruns; r++) copy_run(d + runs[r].j, src + runs[r].off, runs[r].len, p->stride);
     }
     mx_gemm_zero_panel_tail(g, dst, cols, valid, kc);
@@ -171,28 +194,15 @@ void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
 typedef struct {
     const mx_gemm_kernel *g;
     const float *x; /* the input [B][Cin][H][W] */
-    uint32_t *band; /* [B][chans][rows][width] */
-    int Cin, H, W, pad, chans, rows, width;
+    uint32_t *band; /* [B][chans][rows][width]; NULL: the input is the band (problem.band_fp32 on pairs) */
+    int B, Cin, H, W, pad, chans, rows, width;
     int iy0;      /* input row of band row 0 (negative in the top padding) */
     double *secs; /* with a profile: each thread's CPU seconds */
 } band_job;
 
-/* d[0 .. W) = pairs of the rows even and odd (NULL: zeros), through the kernel's to_pairs. */
-static void pairs_of_rows(const mx_gemm_kernel *g, uint32_t *d, const float *even, const float *odd, int W) {
-    float staging[2 * PAIR_CHUNK];
-    for (int x0 = 0; x0 < W; x0 += PAIR_CHUNK) {
-        int n = min_int(PAIR_CHUNK, W - x0);
-        memcpy(staging, even + x0, (size_t)n * sizeof *staging);
-        if (odd) memcpy(staging + n, odd + x0, (size_t)n * sizeof *staging);
-        g->to_pairs(d + x0, staging, n, odd ? 2 : 1);
-    }
-}
-
-/* Task (batch item, band channel): its rows of the band. */
-static void prepare_band_task(void *arg, int task, int thread) {
-    const band_job *j = arg;
-    double t0 = j->secs ? mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) : 0;
-    int b = task / j->chans, cp = task % j->chans, pairs = j->g->to_pairs != NULL, ci = pairs ? 2 * cp : cp;
+/* The rows of band channel cp of batch item b. */
+static void prepare_band_channel(const band_job *j, int b, int cp) {
+    int pairs = j->g->to_pairs != NULL, ci = pairs ? 2 * cp : cp;
     size_t plane = (size_t)j->H * j->W;
     const float *chan = j->x + ((size_t)b * j->Cin + (size_t)ci) * plane;
     uint32_t *d = j->band + ((size_t)b * j->chans + (size_t)cp) * j->rows * j->width;
@@ -205,11 +215,21 @@ static void prepare_band_task(void *arg, int task, int thread) {
         const float *row = chan + (size_t)iy * j->W;
         memset(d, 0, (size_t)j->pad * sizeof *d);
         if (pairs)
-            pairs_of_rows(j->g, d + j->pad, row, ci + 1 < j->Cin ? row + plane : NULL, j->W);
+            j->g->to_pairs(d + j->pad, row, ci + 1 < j->Cin ? row + plane : NULL, j->W);
         else
             memcpy(d + j->pad, row, (size_t)j->W * sizeof *d);
         memset(d + j->pad + j->W, 0, (size_t)(j->width - j->pad - j->W) * sizeof *d);
     }
+}
+
+/* Task t: band channels t·BAND_TASK_CHANS... of all batch items in a row (few tasks: a profile
+ * reads the thread clock per task, a system call on some VMs). */
+static void prepare_band_task(void *arg, int task, int thread) {
+    const band_job *j = arg;
+    double t0 = j->secs ? mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) : 0;
+    int n = j->B * j->chans;
+    for (int i = task * BAND_TASK_CHANS; i < n && i < (task + 1) * BAND_TASK_CHANS; i++)
+        prepare_band_channel(j, i / j->chans, i % j->chans);
     if (j->secs) j->secs[thread] += mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) - t0;
 }
 
@@ -236,15 +256,21 @@ static int rows_per_block(int B, int chans, int width, int kh, int stride, int H
 /* Prepares the band of output rows oy0 .. oy0+rows and points p at it. */
 static void prepare_band(const mx_ctx *c, band_job *j, mx_gemm_problem *p, int oy0, int rows, int B) {
     int nthreads = mx_par_threads(c);
-    j->rows = (rows - 1) * p->stride + p->kh;
+    p->N = rows * p->Wo;
     j->iy0 = oy0 * p->stride - j->pad;
+    if (!j->band) {
+        p->image = j->x + (size_t)j->iy0 * j->W;
+        p->image_batch_stride = (size_t)j->Cin * j->H * j->W;
+        p->band_plane = (size_t)j->H * j->W;
+        return;
+    }
+    j->rows = (rows - 1) * p->stride + p->kh;
     for (int t = 0; t < nthreads && j->secs; t++) j->secs[t] = 0;
-    mx_par_for(c, B * j->chans, prepare_band_task, j);
+    mx_par_for(c, (B * j->chans + BAND_TASK_CHANS - 1) / BAND_TASK_CHANS, prepare_band_task, j);
     for (int t = 0; t < nthreads && j->secs; t++) c->prof->gemm_secs[MX_GEMM_CONV][MX_GEMM_PACK_B] += j->secs[t];
-    p->band_rows = j->rows;
     p->image = (const float *)(const void *)j->band;
     p->image_batch_stride = (size_t)j->chans * j->rows * j->width;
-    p->N = rows * p->Wo;
+    p->band_plane = (size_t)j->rows * j->width;
 }
 
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
@@ -253,18 +279,20 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
     int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps);
     int span = group * k_per_word(g) * taps; /* K blocks of whole groups, where a group fits one */
+    /* no padding: the input rows are already a band (fp32; on pairs a 1×1 stride-1 conv) */
+    int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1));
     mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo,
                          .c_batch_stride = (size_t)Cout * Ho * Wo, .pack_a = mx_gemm_pack_a_conv,
                          .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .bias = bias, .bias_per_row = 1, .Cin = Cin,
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
-                         .band_width = width, .k_multiple = span <= MX_GEMM_KC_MAX ? span : k_per_word(g)};
+                         .band_width = width, .band_fp32 = direct && g->to_pairs, .k_multiple = span <= MX_GEMM_KC_MAX ? span : k_per_word(g)};
     int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
-    size_t band_words = (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
+    size_t band_words = direct ? 0 : (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
     size_t nsecs = c && c->prof ? (size_t)nthreads : 0;
     mx_scratch s;
     double *mem = mx_scratch_take(c, nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
     int failed = !mem;
-    band_job j = {.g = g, .x = x, .band = (uint32_t *)(void *)(mem + nsecs), .Cin = Cin, .H = H, .W = W,
+    band_job j = {.g = g, .x = x, .B = B, .band = direct ? NULL : (uint32_t *)(void *)(mem + nsecs), .Cin = Cin, .H = H, .W = W,
                   .pad = pad, .chans = chans, .width = width, .secs = nsecs ? mem : NULL};
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
         prepare_band(c, &j, &p, oy0, min_int(rows, Ho - oy0), B);

@@ -16,17 +16,12 @@
 #define MICRO_FMA(acc, b, a, lane) vbfdotq_laneq_f32(acc, b, a, lane)
 #include "gemm_micro_neon.inc"
 
-/* Word c of pair row kp: bf16(src[2kp][c]) in the low half, bf16(src[2kp+1][c]) in the high. */
-static void to_pairs_neonbf16(uint32_t *dst, const float *src, int width, int kc) {
-    for (int kp = 0; kp < (kc + 1) / 2; kp++) {
-        const float *even = src + (size_t)(2 * kp) * width, *odd = even + width;
-        int has_odd = 2 * kp + 1 < kc, c = 0;
-        uint32_t *d = dst + (size_t)kp * width;
-        for (; c + 4 <= width; c += 4)
-            vst1q_u32(d + c, bf16_pairs_of_rows(vld1q_f32(even + c), has_odd ? vld1q_f32(odd + c) : vdupq_n_f32(0)));
-        for (; c < width; c++)
-            d[c] = (uint32_t)mx_float_to_bf16(even[c]) | (uint32_t)(has_odd ? mx_float_to_bf16(odd[c]) : 0) << 16;
-    }
+/* Word c: bf16(even[c]) in the low half, bf16(odd[c]) (or 0) in the high. */
+static void to_pairs_neonbf16(uint32_t *dst, const float *even, const float *odd, int n) {
+    int c = 0;
+    for (; c + 4 <= n; c += 4)
+        vst1q_u32(dst + c, bf16_pairs_of_rows(vld1q_f32(even + c), odd ? vld1q_f32(odd + c) : vdupq_n_f32(0)));
+    for (; c < n; c++) dst[c] = (uint32_t)mx_float_to_bf16(even[c]) | (uint32_t)(odd ? mx_float_to_bf16(odd[c]) : 0) << 16;
 }
 
 static const mx_gemm_kernel kernel_neonbf16 = {MR, NR, micro_8x12_bf16, mx_gemm_widen_neon, transpose_neon,
