@@ -293,10 +293,8 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     /* outer blocks end on whole panels */
     int nb_max = OUTER_MAX / g->nr * g->nr, nb = min_int(p->N, nb_max);
     int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
-    /* a multiple of the problem's (≤ KC_MAX): rounded up, or down where up passes KC_MAX */
-    if (p->k_multiple > 1) {
-        int up = ceil_div(kc_max, p->k_multiple) * p->k_multiple;
-        kc_max = up <= KC_MAX ? up : KC_MAX / p->k_multiple * p->k_multiple;
+    if (p->kc_block > 0) { /* the problem's own K blocks */
+        kc_max = min_int(p->kc_block, KC_MAX);
         nkb = ceil_div(p->K, kc_max);
     }
     int nthreads = mx_par_threads(c);

@@ -71,7 +71,7 @@ struct mx_gemm_problem {
     int band_fp32; /* bf16 levels, 1×1 stride 1 unpadded: the band is the fp32 input, paired per panel */
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
-    int k_multiple;   /* ≤ MX_GEMM_KC_MAX; K blocks are multiples of it long (0 or 1: any length) */
+    int kc_block;     /* K blocks of this length (≤ MX_GEMM_KC_MAX), the last one shorter; 0: the engine's */
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
