@@ -6,7 +6,7 @@
  * load on the machine), with the share of the measured peak of these cores (bench_sd15.h).
  * Then, per network and precision, where the time went (ops/profile.h), as shares of the CPU
  * time of the call (what survives other people's load on a shared machine): each op, the GEMM's
- * parts (micro-kernel with the bias it adds, packing of A and B — B is the im2col of a conv —,
+ * parts (micro-kernel with the bias it adds, packing of A and B — B is the input band of a conv —,
  * the rest: task setup, waiting at the end of a phase), the micro-kernel's own GFLOP/s, the cores'
  * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
  * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
@@ -104,7 +104,7 @@ static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int 
     printf("  %-18s %5.1f%% (%ld calls):", user_name[user], 100 * pr->op_secs[op] / cpu, pr->op_calls[op]);
     part("micro", s[MX_GEMM_MICRO], whole);
     part(user == MX_GEMM_CONV ? "pack-A(weights)" : "pack-A(x)", s[MX_GEMM_PACK_A], whole);
-    part(user == MX_GEMM_CONV ? "pack-B(im2col)" : "pack-B(weights)", s[MX_GEMM_PACK_B], whole);
+    part(user == MX_GEMM_CONV ? "pack-B(input)" : "pack-B(weights)", s[MX_GEMM_PACK_B], whole);
     part("rest", pr->op_secs[op] - busy, whole);
     if (s[MX_GEMM_MICRO] > 0 && peak > 0)
         printf("; micro-kernel %.0f GFLOP/s = %.0f%% of peak", pr->gemm_flops[user] * 1e-9 / (s[MX_GEMM_MICRO] / threads),
