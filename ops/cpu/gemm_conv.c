@@ -285,7 +285,8 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1));
     mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo,
                          .c_batch_stride = (size_t)Cout * Ho * Wo, .pack_a = mx_gemm_pack_a_conv,
-                         .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .bias = bias, .bias_per_row = 1, .Cin = Cin,
+                         .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .a_ld = (size_t)Cin * taps, .a_weight = 1,
+                         .bias = bias, .bias_per_row = 1, .Cin = Cin,
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
                          .band_width = width, .band_fp32 = direct && g->to_pairs,
                          .kc_block = span <= MX_GEMM_KC_MAX ? span : MX_GEMM_KC_MAX};
