@@ -2,5 +2,5 @@
 #include "kernels.h"
 #include "simd_avx512.h"
 #include "vmath_simd.inc"
-#define ATT_QG 4
+#define ATT_QG 6
 #include "attention_simd.inc"

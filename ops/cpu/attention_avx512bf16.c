@@ -6,6 +6,6 @@
 #include "vmath_simd.inc"
 #undef KFN
 #define KFN(name) name##_avx512bf16
-#define ATT_QG 4
+#define ATT_QG 6
 #define ATT_BF16
 #include "attention_simd.inc"
