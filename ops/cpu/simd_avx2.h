@@ -59,6 +59,9 @@ static inline vf v_pow2i(vf n) {
     __m256i e = _mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127));
     return _mm256_castsi256_ps(_mm256_slli_epi32(e, 23));
 }
+/* the float whose bits are t's shifted left by 23: moves a biased exponent held in t's low bits
+ * into the exponent field */
+static inline vf v_shl23(vf t) { return _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_castps_si256(t), 23)); }
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
 static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     transpose_avx(dst, dst_ld, src, src_ld, rows, cols);

@@ -52,6 +52,9 @@ static inline vf v_pow2i(vf n) {
     __m512i e = _mm512_add_epi32(_mm512_cvtps_epi32(n), _mm512_set1_epi32(127));
     return _mm512_castsi512_ps(_mm512_slli_epi32(e, 23));
 }
+/* the float whose bits are t's shifted left by 23: moves a biased exponent held in t's low bits
+ * into the exponent field */
+static inline vf v_shl23(vf t) { return _mm512_castsi512_ps(_mm512_slli_epi32(_mm512_castps_si512(t), 23)); }
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
 static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     transpose_avx(dst, dst_ld, src, src_ld, rows, cols);
