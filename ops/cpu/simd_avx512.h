@@ -43,6 +43,8 @@ static inline vf v_zero_below(vf v, vf x, float lo) {
 static inline vf v_blend_negative(vf x, vf pos, vf neg) {
     return _mm512_mask_mov_ps(pos, _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LT_OQ), neg);
 }
+/* 1 when some lane of a is greater than the same lane of b */
+static inline int v_any_gt(vf a, vf b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ) != 0; }
 /* Horizontal reductions, fixed order (determinism). */
 static inline float v_hsum(vf v) { return _mm512_reduce_add_ps(v); }
 static inline float v_hmax(vf v) { return _mm512_reduce_max_ps(v); }

@@ -54,6 +54,8 @@ static inline vf v_zero_below(vf v, vf x, float lo) {
 }
 /* neg where x < 0, else pos */
 static inline vf v_blend_negative(vf x, vf pos, vf neg) { return vbslq_f32(vcltq_f32(x, vdupq_n_f32(0.0f)), neg, pos); }
+/* 1 when some lane of a is greater than the same lane of b */
+static inline int v_any_gt(vf a, vf b) { return vmaxvq_u32(vcgtq_f32(a, b)) != 0; }
 /* Horizontal reductions, fixed order (determinism): pairwise. */
 static inline float v_hsum(vf v) { return vaddvq_f32(v); }
 static inline float v_hmax(vf v) { return vmaxvq_f32(v); }
