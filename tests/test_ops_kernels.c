@@ -362,6 +362,7 @@ static void test_elementwise_ops(const levels *lv) {
     test_layer_norm_case(lv, 7, 77, MX_F32);
     test_layer_norm_case(lv, 3, 768, MX_BF16);
     test_layer_norm_case(lv, 4, 5, MX_F16);
+    test_layer_norm_case(lv, 150, 320, MX_F32); /* 51 rows per task: 3 tasks, the last one short */
     test_unary_case(lv, "gelu", mx_gelu, 100003, 8);
     test_unary_case(lv, "gelu", mx_gelu, 37, 0.5f);
     test_gelu_tail(lv);
