@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "cpu/kernels.h"
+#include "cpu/wpack.h"
 
 float mx_w_get(mx_wptr w, size_t i) {
     switch (w.dtype) {
@@ -226,7 +227,13 @@ void mx_ctx_destroy(mx_ctx *c) {
         mx_arena_destroy(c->scratch);
         free(c->scratch);
     }
+    mx_wpack_destroy(c->wpack);
     mx_pool_destroy(c->pool);
     mx_backend_destroy(c->be);
     memset(c, 0, sizeof *c);
+}
+
+int mx_ctx_pack_weights(mx_ctx *c, size_t budget_bytes, int sources_mapped, mx_status *st) {
+    if (c->wpack || (c->be && c->be->kind != MX_BACKEND_CPU)) return 0;
+    return mx_wpack_create(&c->wpack, budget_bytes, sources_mapped, st);
 }

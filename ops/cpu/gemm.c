@@ -4,6 +4,8 @@
 
 #include <string.h>
 
+#include "wpack.h"
+
 /* Largest block of K packed at once. Each thread keeps its MC×kc block of A in L2 (240 KiB at
  * 640) and streams kc×NR panels of B; a longer block means fewer passes over C and fewer
  * pack/compute rounds (K = 5120: 8 instead of 16). On this Zen 5 (48 KiB L1, 1 MiB L2) 640
@@ -189,14 +191,21 @@ void mx_gemm_pack_b_im2col(const mx_gemm_problem *p, const mx_gemm_kernel *g, vo
 typedef struct {
     const mx_gemm_kernel *g;
     const mx_gemm_problem *p;
+    /* the B panels of the outer block: bpack (packed by all threads), or the weight's cached ones */
     float *bpack;
+    const float *b;
     /* per-thread A blocks (MC rows × kc, packed by the thread that computes with them, so they
      * stay in its L2) and the row block each one holds (-1: none yet in this K block); or, with
-     * shared_a, all of A's panels of the K block, packed once by all threads */
+     * shared_a, all of A's panels of the K block at a: packed once by all threads into ablock,
+     * or the weight's cached ones */
     float *ablock;
+    const float *a;
     size_t ablock_stride;
     int *ablock_mb;
     int shared_a;
+    /* a weight's panels of every K block from the context's cache (pack_weight_once), or NULL */
+    const float *a_cached, *b_cached;
+    int kc_max;
     const float *bias; /* widened, or NULL */
     int n_off, n_end; /* the outer block of columns */
     int k0, kc, first_block, last_block;
@@ -241,7 +250,7 @@ static void pack_a_task(void *arg, int task, int thread) {
  * are claimed one after the other). Packing copies values exactly, so who packs never changes a
  * result. */
 static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
-    if (j->shared_a) return j->ablock + (size_t)mb * j->mc_panels * mx_gemm_panel_words(j->g, j->kc) * j->g->mr;
+    if (j->shared_a) return j->a + (size_t)mb * j->mc_panels * mx_gemm_panel_words(j->g, j->kc) * j->g->mr;
     float *buf = j->ablock + (size_t)thread * j->ablock_stride;
     if (j->ablock_mb[thread] != mb) {
         int mr = j->g->mr, mp0 = mb * j->mc_panels, mp1 = min_int(j->mpanels, mp0 + j->mc_panels);
@@ -277,7 +286,7 @@ static void compute_task(void *arg, int task, int thread) {
     add_part(j, thread, MX_GEMM_PACK_A, t0, t1);
     size_t words = mx_gemm_panel_words(j->g, j->kc);
     for (int np = np0; np < np1; np++) {
-        const float *b = j->bpack + (size_t)np * words * nr;
+        const float *b = j->b + (size_t)np * words * nr;
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
         for (int mp = mp0; mp < mp1; mp++) {
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
@@ -313,19 +322,83 @@ static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
     return q;
 }
 
+/* ---- a weight's panels packed once (wpack.h) ----
+ * Layout: the panels of K block kb, as one call packs them (panel i at i · words(kc) · width),
+ * start at kb · panels · words(kc_max) · width floats. */
+
+static size_t cached_block_offset(const mx_gemm_kernel *g, int width, int rows, int kc_max, int kb) {
+    return (size_t)kb * (size_t)ceil_div(rows, width) * mx_gemm_panel_words(g, kc_max) * (size_t)width;
+}
+
+typedef struct {
+    const mx_gemm_kernel *g;
+    const mx_gemm_problem *p;
+    mx_gemm_pack_fn pack;
+    float *dst;
+    int width, rows, kc_max, tasks_per_block;
+} weight_fill;
+
+static void fill_task(void *arg, int task, int thread) {
+    (void)thread;
+    const weight_fill *f = arg;
+    int kb = task / f->tasks_per_block, first = task % f->tasks_per_block * PACK_PANELS_PER_TASK;
+    int k0 = kb * f->kc_max, kc = min_int(f->kc_max, f->p->K - k0), panels = ceil_div(f->rows, f->width);
+    size_t words = mx_gemm_panel_words(f->g, kc);
+    float *block = f->dst + cached_block_offset(f->g, f->width, f->rows, f->kc_max, kb);
+    for (int i = first; i < min_int(panels, first + PACK_PANELS_PER_TASK); i++)
+        f->pack(f->p, f->g, block + (size_t)i * words * f->width, i * f->width, f->width, k0, kc);
+}
+
+/* The panels of the weight operand (B with operand_b, else A) for every K block: from the
+ * context's cache, packed into it by all threads on first use. NULL without a cache or room in
+ * it (the caller packs per call). The packing's CPU time (all threads: nothing else runs in the
+ * process meanwhile) goes to the profile's part of that operand. */
+static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p,
+                                     int operand_b, int kc_max) {
+    if (!c || !c->wpack || !(operand_b ? p->b_weight : p->a_weight)) return NULL;
+    mx_wptr w = operand_b ? p->b_mat : p->a_mat;
+    weight_fill f = {.g = g, .p = p, .pack = operand_b ? p->pack_b : p->pack_a, .width = operand_b ? g->nr : g->mr,
+                     .rows = operand_b ? p->N : p->M, .kc_max = kc_max};
+    mx_wpack_key key = {.data = w.data, .dtype = w.dtype, .packer = (const void *)(uintptr_t)f.pack, .kernel = g,
+                        .rows = f.rows, .K = p->K, .ld = operand_b ? p->b_ld : p->a_ld};
+    const float *have = mx_wpack_find(c->wpack, &key);
+    if (have) return have;
+    int nkb = ceil_div(p->K, kc_max);
+    f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float));
+    if (!f.dst) return NULL;
+    double t0 = c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;
+    f.tasks_per_block = ceil_div(ceil_div(f.rows, f.width), PACK_PANELS_PER_TASK);
+    mx_par_for(c, nkb * f.tasks_per_block, fill_task, &f);
+    if (c->prof)
+        c->prof->gemm_secs[p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR][operand_b ? MX_GEMM_PACK_B : MX_GEMM_PACK_A] +=
+            mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0;
+    mx_wpack_release_source(c->wpack, w.data, (size_t)f.rows * (operand_b ? p->b_ld : p->a_ld) * mx_dtype_size(w.dtype));
+    return f.dst;
+}
+
 /* One K block: for every batch item and outer block of columns, B is packed by all threads,
  * then the tiles are computed (each thread packing the A blocks it needs; A is the same for
  * every batch item, so a thread's A block stays valid across items). */
 static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, int nb_max, int nthreads) {
+    const mx_gemm_kernel *g = j->g;
+    int kb = j->k0 / j->kc_max;
+    size_t words = mx_gemm_panel_words(g, j->kc);
     for (int t = 0; t < nthreads; t++) j->ablock_mb[t] = -1;
-    if (j->shared_a) mx_par_for(c, ceil_div(ceil_div(p->M, j->g->mr), PACK_PANELS_PER_TASK), pack_a_task, j);
+    if (j->a_cached)
+        j->a = j->a_cached + cached_block_offset(g, g->mr, p->M, j->kc_max, kb);
+    else if (j->shared_a)
+        mx_par_for(c, ceil_div(ceil_div(p->M, g->mr), PACK_PANELS_PER_TASK), pack_a_task, j);
     for (int b = 0; b < p->batch; b++) {
         mx_gemm_problem item = batch_item(p, b);
         j->p = &item;
         for (j->n_off = 0; j->n_off < p->N; j->n_off += nb_max) {
             j->n_end = min_int(p->N, j->n_off + nb_max);
             plan_tiles(j);
-            mx_par_for(c, ceil_div(j->npanels, PACK_PANELS_PER_TASK), pack_b_task, j);
+            if (j->b_cached)
+                j->b = j->b_cached + cached_block_offset(g, g->nr, p->N, j->kc_max, kb) +
+                       (size_t)(j->n_off / g->nr) * words * g->nr;
+            else
+                mx_par_for(c, ceil_div(j->npanels, PACK_PANELS_PER_TASK), pack_b_task, j);
             mx_par_for(c, j->nmb * j->nnb, compute_task, j);
         }
     }
@@ -355,8 +428,10 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
      * thread (per batch item) instead of once: pack all of A's K block up front then (M < 3072
      * rows here, so ≤ 7.5 MiB at kc = 640; e.g. every conv, M = Cout). */
     int mpanels = ceil_div(p->M, g->mr), shared_a = ceil_div(mpanels, max_int(1, MC_ROWS / g->mr)) < TASKS_WANTED;
-    if (shared_a) ablock_n = (size_t)mpanels * g->mr * words;
-    size_t bpack_n = (size_t)ceil_div(nb, g->nr) * g->nr * words;
+    const float *a_cached = pack_weight_once(c, g, p, 0, kc_max), *b_cached = pack_weight_once(c, g, p, 1, kc_max);
+    if (a_cached) shared_a = 1;
+    if (shared_a) ablock_n = a_cached ? 0 : (size_t)mpanels * g->mr * words;
+    size_t bpack_n = b_cached ? 0 : (size_t)ceil_div(nb, g->nr) * g->nr * words;
     size_t ablocks = shared_a ? 1 : (size_t)nthreads;
     size_t floats = ablocks * ablock_n + bpack_n + bias_n;
     size_t nparts = c && c->prof ? (size_t)nthreads * MX_GEMM_PARTS : 0;
@@ -366,11 +441,13 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     float *mem = mx_scratch_take(c, floats * sizeof(float) + nparts * sizeof(double) + (size_t)nthreads * sizeof(int), &s);
     if (!mem) return -1;
     double *part_secs = nparts ? (double *)(void *)(mem + floats) : NULL;
-    gemm_job j = {.g = g, .p = p, .ablock = mem, .ablock_stride = ablock_n, .shared_a = shared_a, .mpanels = mpanels,
+    gemm_job j = {.g = g, .p = p, .ablock = mem, .a = mem, .ablock_stride = ablock_n, .shared_a = shared_a,
+                  .mpanels = mpanels, .a_cached = a_cached, .b_cached = b_cached, .kc_max = kc_max,
                   .part_secs = part_secs,
                   .ablock_mb = (int *)(void *)((char *)(mem + floats) + nparts * sizeof(double))};
     for (size_t i = 0; i < nparts; i++) part_secs[i] = 0;
     j.bpack = mem + ablocks * ablock_n;
+    j.b = j.bpack;
     if (bias_n) {
         float *bias = j.bpack + bpack_n;
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
@@ -402,6 +479,7 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     p.a_ld = (size_t)K;
     p.b_mat = w;
     p.b_ld = (size_t)K;
+    p.b_weight = 1;
     p.bias = bias;
     if (mx_gemm_run(c, g, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
 }
@@ -414,6 +492,7 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     p.pack_b = mx_gemm_pack_b_im2col;
     p.a_mat = w;
     p.a_ld = (size_t)p.K;
+    p.a_weight = 1;
     p.Cin = Cin;
     p.H = H;
     p.W = W;

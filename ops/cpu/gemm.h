@@ -65,6 +65,9 @@ struct mx_gemm_problem {
     int Cin, H, W, kh, kw, stride, pad, Wo;
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
+    /* 1: the operand is a weight (a_mat of conv, b_mat of linear), the same on every call: its
+     * panels are packed once into the context's cache when it has one (wpack.h) */
+    int a_weight, b_weight;
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at

@@ -91,7 +91,10 @@ matex_models *matex_models_open(const char *weights_path, const matex_options *o
     } else if (!check_model_options(o, &st)) {
         run_options(o, &t);
         m->ctx_ready = !mx_job_ctx_create(&m->ctx, &t, &st);
-        if (m->ctx_ready && !mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) return m;
+        if (m->ctx_ready && !mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) {
+            if (!mx_models_pack_weights(&m->m, &m->ctx, &st)) return m;
+            mx_models_free(&m->m);
+        }
     }
     set_error(err, st.code, st.msg);
     matex_models_close(m);

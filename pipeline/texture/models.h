@@ -49,6 +49,10 @@ typedef struct mx_models {
  * network is an error naming the file and the prefix it looked for. */
 int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st);
 void mx_models_free(mx_models *m);
+/* Lets c keep the set's weights packed once for its GEMM kernels (mx_ctx_pack_weights), in at
+ * most as many bytes as the weight file's tensors (whose mapped pages they replace). Only for a
+ * context made for this set and destroyed after it: the packed copies are keyed by address. */
+int mx_models_pack_weights(const mx_models *m, mx_ctx *c, mx_status *st);
 /* The same check for a model set already open (needs: MX_MODELS_NEED_*). */
 int mx_models_check(const mx_models *m, int needs, mx_status *st);
 /* The weight file's path. */

@@ -1,0 +1,44 @@
+/* A context's weights packed once (issue 25): the GEMM engine (gemm.c) keeps the panels it
+ * packs from a weight operand (conv2d's A, linear's B) here, keyed by the weight and by how it
+ * was packed, and reuses them on every later call instead of widening and repacking the
+ * weights each time. Owned by the context that enabled it (mx_ctx_pack_weights); used by the
+ * thread that calls the ops. Entries are never freed before the cache: the weights must stay
+ * unchanged at their addresses while the context lives.
+ * Memory: at most `budget` bytes of panels; a weight past it is packed per call as without a
+ * cache. With sources_mapped (the weights are pages of a read-only file mapping), a weight's
+ * pages are handed back to the kernel once packed (MADV_PAGEOUT): they would otherwise stay
+ * resident beside their packed copy; the kernel reads them back from the file if ever needed. */
+#ifndef MX_OPS_CPU_WPACK_H
+#define MX_OPS_CPU_WPACK_H
+
+#include <stddef.h>
+
+#include "../../runtime/status.h"
+
+typedef struct mx_wpack mx_wpack;
+
+/* What identifies packed panels: the weight and every input of its packing. */
+typedef struct mx_wpack_key {
+    const void *data;   /* the weight's first element */
+    int dtype;          /* its stored type */
+    const void *packer; /* the pack function */
+    const void *kernel; /* the micro-kernel's description (its panel format) */
+    int rows, K;        /* rows packed into panels, and the length of the sums */
+    size_t ld;          /* the weight's row stride, in elements */
+} mx_wpack_key;
+
+int mx_wpack_create(mx_wpack **out, size_t budget, int sources_mapped, mx_status *st);
+void mx_wpack_destroy(mx_wpack *w);
+
+/* The panels stored under key, or NULL. */
+const float *mx_wpack_find(const mx_wpack *w, const mx_wpack_key *key);
+/* A new entry of `bytes` (64-byte aligned) under key, for the caller to fill at once; NULL when
+ * it would pass the budget or no memory could be had (the caller packs per call then). */
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes);
+/* Called once an entry is filled from source[0 .. source_bytes): hands the source's whole
+ * pages back to the kernel when the weights are mapped from a file. */
+void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes);
+/* Bytes of panels held (for reports and tests). */
+size_t mx_wpack_bytes(const mx_wpack *w);
+
+#endif

@@ -1,0 +1,170 @@
+/* Weights packed once (ops/cpu/wpack.h, mx_ctx_pack_weights): at every CPU level this machine
+ * has, linear and conv2d on a context that keeps packed weights give bit for bit what the same
+ * level gives packing per call, on the call that packs and on the calls that reuse; a weight
+ * used by two levels (a bf16 context and its mx_ctx_fp32 view share one cache) gets one entry
+ * per level; the cache grows past its first table; a budget too small for a weight leaves it
+ * packed per call, with the same results. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../ops/cpu/wpack.h"
+#include "../ops/ops.h"
+#include "util_test.h"
+
+typedef struct {
+    int M, N, K; /* linear */
+    int B, Cin, H, W, Cout, k, stride, pad; /* conv */
+} shapes;
+
+/* Awkward sizes: odd everything, several K blocks (K > 640), a conv with three K blocks. */
+static const shapes cases[] = {
+    {.M = 37, .N = 70, .K = 1300, .B = 2, .Cin = 5, .H = 9, .W = 11, .Cout = 19, .k = 3, .stride = 1, .pad = 1},
+    {.M = 3, .N = 33, .K = 17, .B = 1, .Cin = 150, .H = 7, .W = 6, .Cout = 13, .k = 3, .stride = 2, .pad = 1},
+    {.M = 130, .N = 9, .K = 641, .B = 2, .Cin = 4, .H = 5, .W = 40, .Cout = 35, .k = 1, .stride = 1, .pad = 0},
+};
+
+/* fp16 copies of x (the dtype the model files store). */
+static uint16_t *to_f16(const float *x, size_t n) {
+    uint16_t *h = malloc(n * sizeof *h);
+    for (size_t i = 0; i < n && h; i++) h[i] = mx_float_to_half(x[i]);
+    return h;
+}
+
+static int conv_out(int n, const shapes *s) { return (n + 2 * s->pad - s->k) / s->stride + 1; }
+
+/* linear then conv2d of case s on c into y (linear's M·N, then conv's outputs). */
+static void run_case(const mx_ctx *c, const shapes *s, float *y, const float *x, mx_wptr lw, mx_wptr lb, mx_wptr cw,
+                     mx_wptr cb) {
+    mx_linear(c, y, x, lw, lb, s->M, s->N, s->K);
+    mx_conv2d(c, y + (size_t)s->M * s->N, x, s->B, s->Cin, s->H, s->W, cw, cb, s->Cout, s->k, s->k, s->stride, s->pad);
+}
+
+static size_t case_outputs(const shapes *s) {
+    return (size_t)s->M * s->N + (size_t)s->B * s->Cout * conv_out(s->H, s) * conv_out(s->W, s);
+}
+
+static int same_bits(const float *a, const float *b, size_t n) { return memcmp(a, b, n * sizeof *a) == 0; }
+
+/* Case s at level k: per-call packing vs a caching context (first and second call), fp16 and
+ * fp32 weights. */
+static void check_case(const mx_kernels *k, mx_pool *pool, mx_arena *scratch, const shapes *s, uint64_t seed) {
+    size_t nx = (size_t)s->M * s->K, ncx = (size_t)s->B * s->Cin * s->H * s->W;
+    if (ncx > nx) nx = ncx;
+    size_t nlw = (size_t)s->N * s->K, ncw = (size_t)s->Cout * s->Cin * s->k * s->k, ny = case_outputs(s);
+    float *x = malloc(nx * sizeof *x), *lw = malloc(nlw * sizeof *lw), *cw = malloc(ncw * sizeof *cw);
+    float *lb = malloc((size_t)s->N * sizeof *lb), *cb = malloc((size_t)s->Cout * sizeof *cb);
+    float *want = malloc(ny * sizeof *want), *got = malloc(ny * sizeof *got);
+    CHECK(x && lw && cw && lb && cb && want && got);
+    mx_fill_random(x, nx, seed, -1, 1);
+    mx_fill_random(lw, nlw, seed + 1, -0.5f, 0.5f);
+    mx_fill_random(cw, ncw, seed + 2, -0.5f, 0.5f);
+    mx_fill_random(lb, (size_t)s->N, seed + 3, -1, 1);
+    mx_fill_random(cb, (size_t)s->Cout, seed + 4, -1, 1);
+    uint16_t *lw16 = to_f16(lw, nlw), *cw16 = to_f16(cw, ncw);
+    CHECK(lw16 && cw16);
+    mx_wptr wl[2] = {mx_w_f32(lw), {lw16, MX_F16}}, wc[2] = {mx_w_f32(cw), {cw16, MX_F16}};
+    for (int d = 0; d < 2; d++) {
+        mx_status st;
+        mx_ctx plain = {.pool = pool, .k = k, .scratch = scratch}, cached = plain;
+        CHECK(mx_ctx_pack_weights(&cached, (size_t)1 << 30, 0, &st) == 0);
+        run_case(&plain, s, want, x, wl[d], mx_w_f32(lb), wc[d], mx_w_f32(cb));
+        for (int call = 0; call < 2; call++) {
+            memset(got, 0xff, ny * sizeof *got);
+            run_case(&cached, s, got, x, wl[d], mx_w_f32(lb), wc[d], mx_w_f32(cb));
+            if (!same_bits(got, want, ny)) {
+                fprintf(stderr, "%s M=%d N=%d K=%d Cin=%d %s weights, call %d: packed-once result differs\n",
+                        mx_isa_name(k->isa), s->M, s->N, s->K, s->Cin, d ? "fp16" : "fp32", call + 1);
+                mx_test_failures++;
+            }
+        }
+        /* both weights are kept on the levels with the GEMM engine */
+        if (k->isa != MX_ISA_SCALAR) CHECK(mx_wpack_bytes(cached.wpack) > 0);
+        mx_wpack_destroy(cached.wpack);
+    }
+    free(lw16), free(cw16);
+    free(x), free(lw), free(cw), free(lb), free(cb), free(want), free(got);
+}
+
+/* Many weights in one cache (its table grows), each reused on a second pass with the bytes held
+ * unchanged; then a budget too small for any: nothing kept, same results. */
+static void check_many_and_budget(const mx_kernels *k, mx_pool *pool, mx_arena *scratch) {
+    enum { NW = 100, M = 5, N = 24, K = 40 };
+    float *x = malloc(M * K * sizeof *x), *w = malloc((size_t)NW * N * K * sizeof *w);
+    float *want = malloc((size_t)NW * M * N * sizeof *want), *got = malloc((size_t)NW * M * N * sizeof *got);
+    CHECK(x && w && want && got);
+    mx_fill_random(x, M * K, 7, -1, 1);
+    mx_fill_random(w, (size_t)NW * N * K, 8, -1, 1);
+    mx_status st;
+    mx_ctx plain = {.pool = pool, .k = k, .scratch = scratch}, cached = plain, tiny = plain;
+    CHECK(mx_ctx_pack_weights(&cached, (size_t)1 << 30, 0, &st) == 0);
+    CHECK(mx_ctx_pack_weights(&tiny, 64, 0, &st) == 0);
+    for (int i = 0; i < NW; i++)
+        mx_linear(&plain, want + (size_t)i * M * N, x, mx_w_f32(w + (size_t)i * N * K), mx_w_none(), M, N, K);
+    size_t held = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        for (int i = 0; i < NW; i++)
+            mx_linear(&cached, got + (size_t)i * M * N, x, mx_w_f32(w + (size_t)i * N * K), mx_w_none(), M, N, K);
+        CHECK(same_bits(got, want, (size_t)NW * M * N));
+        if (pass == 0) held = mx_wpack_bytes(cached.wpack);
+    }
+    CHECK(mx_wpack_bytes(cached.wpack) == held);
+    if (k->isa != MX_ISA_SCALAR) CHECK(held >= (size_t)NW * N * K * 2); /* the scalar level packs nothing */
+    memset(got, 0, (size_t)NW * M * N * sizeof *got);
+    for (int i = 0; i < NW; i++)
+        mx_linear(&tiny, got + (size_t)i * M * N, x, mx_w_f32(w + (size_t)i * N * K), mx_w_none(), M, N, K);
+    CHECK(same_bits(got, want, (size_t)NW * M * N));
+    CHECK(mx_wpack_bytes(tiny.wpack) == 0);
+    mx_wpack_destroy(cached.wpack);
+    mx_wpack_destroy(tiny.wpack);
+    free(x), free(w), free(want), free(got);
+}
+
+/* A bf16 context and its fp32 view share the cache: one entry per level, each level's own result. */
+static void check_two_levels(const mx_kernels *bf16, mx_pool *pool, mx_arena *scratch) {
+    enum { M = 9, N = 50, K = 70 };
+    float x[M * K], w[N * K], want[2][M * N], got[M * N];
+    mx_fill_random(x, M * K, 11, -1, 1);
+    mx_fill_random(w, N * K, 12, -1, 1);
+    mx_status st;
+    mx_ctx plain = {.pool = pool, .k = bf16, .scratch = scratch}, cached = plain;
+    CHECK(mx_ctx_pack_weights(&cached, (size_t)1 << 30, 0, &st) == 0);
+    mx_ctx plain32 = mx_ctx_fp32(&plain), cached32 = mx_ctx_fp32(&cached);
+    mx_linear(&plain, want[0], x, mx_w_f32(w), mx_w_none(), M, N, K);
+    mx_linear(&plain32, want[1], x, mx_w_f32(w), mx_w_none(), M, N, K);
+    CHECK(!same_bits(want[0], want[1], M * N)); /* else this test could not tell the levels apart */
+    for (int round = 0; round < 2; round++) {
+        mx_linear(&cached, got, x, mx_w_f32(w), mx_w_none(), M, N, K);
+        CHECK(same_bits(got, want[0], M * N));
+        mx_linear(&cached32, got, x, mx_w_f32(w), mx_w_none(), M, N, K);
+        CHECK(same_bits(got, want[1], M * N));
+    }
+    mx_wpack_destroy(cached.wpack);
+}
+
+int main(void) {
+    mx_status st;
+    mx_pool *pool = mx_pool_create(2, &st);
+    mx_arena scratch;
+    CHECK(pool != NULL);
+    CHECK(mx_arena_create(&scratch, (size_t)16 << 20, &st) == 0);
+    int tested = 0;
+    for (mx_isa isa = MX_ISA_SCALAR; isa < MX_ISA_COUNT; isa++) {
+        const mx_kernels *k = mx_kernels_for(isa);
+        if (!mx_kernels_compiled(isa)) continue; /* another architecture's level */
+        if (k->isa != isa) {
+            printf("%s: NOT TESTED (not a level of this CPU, or lowered by MATEX_ISA)\n", mx_isa_name(isa));
+            continue;
+        }
+        for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) check_case(k, pool, &scratch, &cases[i], 100 + i);
+        check_many_and_budget(k, pool, &scratch);
+        if (mx_isa_precision(isa) == MX_PREC_BF16) check_two_levels(k, pool, &scratch);
+        printf("%s: packed-once weights give the per-call results\n", mx_isa_name(isa));
+        tested++;
+    }
+    CHECK(tested >= 1);
+    mx_arena_destroy(&scratch);
+    mx_pool_destroy(pool);
+    if (mx_test_failures) fprintf(stderr, "test_ops_wpack: %d failures\n", mx_test_failures);
+    return mx_test_failures ? 1 : 0;
+}
