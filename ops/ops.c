@@ -233,7 +233,7 @@ void mx_ctx_destroy(mx_ctx *c) {
     memset(c, 0, sizeof *c);
 }
 
-int mx_ctx_pack_weights(mx_ctx *c, size_t budget_bytes, int sources_mapped, mx_status *st) {
+int mx_ctx_pack_weights(mx_ctx *c, size_t extra_bytes, int sources_mapped, mx_status *st) {
     if (c->wpack || (c->be && c->be->kind != MX_BACKEND_CPU)) return 0;
-    return mx_wpack_create(&c->wpack, budget_bytes, sources_mapped, st);
+    return mx_wpack_create(&c->wpack, extra_bytes, sources_mapped, st);
 }

@@ -140,11 +140,12 @@ int mx_ctx_create_on(mx_ctx *c, mx_backend_kind kind, int nthreads, mx_isa isa, 
                      mx_status *st);
 void mx_ctx_destroy(mx_ctx *c);
 /* Keeps the weights of linear and conv2d packed once, in the panels of the GEMM engine, for every
- * later call on c (ops/cpu/wpack.h) instead of repacking them per call; same results. At most
- * budget_bytes of packed panels. sources_mapped: the weights are a read-only file mapping whose
- * pages may be given back once packed. The weights must stay unchanged at their addresses while
- * c lives. On a backend without the CPU's GEMM engine (cpu-strict, cuda) it does nothing. */
-int mx_ctx_pack_weights(mx_ctx *c, size_t budget_bytes, int sources_mapped, mx_status *st);
+ * later call on c (ops/cpu/wpack.h) instead of repacking them per call; same results. The panels
+ * may take at most extra_bytes more than the weights they replace (fp32 panels of fp16 weights
+ * take twice the weight). sources_mapped: the weights are a read-only file mapping whose pages
+ * may be given back once packed. The weights must stay unchanged at their addresses while c
+ * lives. On a backend without the CPU's GEMM engine (cpu-strict, cuda) it does nothing. */
+int mx_ctx_pack_weights(mx_ctx *c, size_t extra_bytes, int sources_mapped, mx_status *st);
 
 /* Makes a backend (ops/backend.c): kernels for `isa` on the CPU kinds. */
 int mx_backend_create(mx_backend **out, mx_backend_kind kind, mx_isa isa, mx_status *st);

@@ -2,8 +2,9 @@
  * has, linear and conv2d on a context that keeps packed weights give bit for bit what the same
  * level gives packing per call, on the call that packs and on the calls that reuse; a weight
  * used by two levels (a bf16 context and its mx_ctx_fp32 view share one cache) gets one entry
- * per level; the cache grows past its first table; a budget too small for a weight leaves it
- * packed per call, with the same results. */
+ * per level; the cache grows past its first table; panels that would take more than their
+ * weight beyond the budget are not kept (packed per call, the same results), panels of the
+ * weight's own size are. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -98,7 +99,7 @@ static void check_many_and_budget(const mx_kernels *k, mx_pool *pool, mx_arena *
     mx_status st;
     mx_ctx plain = {.pool = pool, .k = k, .scratch = scratch}, cached = plain, tiny = plain;
     CHECK(mx_ctx_pack_weights(&cached, (size_t)1 << 30, 0, &st) == 0);
-    CHECK(mx_ctx_pack_weights(&tiny, 64, 0, &st) == 0);
+    CHECK(mx_ctx_pack_weights(&tiny, 0, 0, &st) == 0);
     for (int i = 0; i < NW; i++)
         mx_linear(&plain, want + (size_t)i * M * N, x, mx_w_f32(w + (size_t)i * N * K), mx_w_none(), M, N, K);
     size_t held = 0;
@@ -110,11 +111,26 @@ static void check_many_and_budget(const mx_kernels *k, mx_pool *pool, mx_arena *
     }
     CHECK(mx_wpack_bytes(cached.wpack) == held);
     if (k->isa != MX_ISA_SCALAR) CHECK(held >= (size_t)NW * N * K * 2); /* the scalar level packs nothing */
+    /* no room beyond the weights: fp16 weights of 24 rows (fp32 panels: twice; pairs: padded to
+     * 32 rows) stay unpacked, fp16 weights of 32 rows as bf16 pairs (the same bytes) are kept */
+    uint16_t *w16 = to_f16(w, (size_t)NW * N * K);
+    CHECK(w16 != NULL);
+    for (int i = 0; i < NW; i++)
+        mx_linear(&plain, want + (size_t)i * M * N, x, (mx_wptr){w16 + (size_t)i * N * K, MX_F16}, mx_w_none(), M, N, K);
     memset(got, 0, (size_t)NW * M * N * sizeof *got);
     for (int i = 0; i < NW; i++)
-        mx_linear(&tiny, got + (size_t)i * M * N, x, mx_w_f32(w + (size_t)i * N * K), mx_w_none(), M, N, K);
+        mx_linear(&tiny, got + (size_t)i * M * N, x, (mx_wptr){w16 + (size_t)i * N * K, MX_F16}, mx_w_none(), M, N, K);
     CHECK(same_bits(got, want, (size_t)NW * M * N));
     CHECK(mx_wpack_bytes(tiny.wpack) == 0);
+    float *y32 = malloc(M * 32 * sizeof *y32), *want32 = malloc(M * 32 * sizeof *want32);
+    CHECK(y32 && want32);
+    mx_linear(&plain, want32, x, (mx_wptr){w16, MX_F16}, mx_w_none(), M, 32, K);
+    mx_linear(&tiny, y32, x, (mx_wptr){w16, MX_F16}, mx_w_none(), M, 32, K);
+    CHECK(same_bits(y32, want32, M * 32));
+    if (mx_isa_precision(k->isa) == MX_PREC_BF16) CHECK(mx_wpack_bytes(tiny.wpack) == (size_t)32 * K * 2);
+    else CHECK(mx_wpack_bytes(tiny.wpack) == 0);
+    CHECK(mx_wpack_extra_bytes(tiny.wpack) == 0);
+    free(w16), free(y32), free(want32);
     mx_wpack_destroy(cached.wpack);
     mx_wpack_destroy(tiny.wpack);
     free(x), free(w), free(want), free(got);

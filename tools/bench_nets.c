@@ -30,6 +30,7 @@
 #include "../pipeline/nn/netcfg.h"
 #include "../pipeline/nn/unet.h"
 #include "../pipeline/nn/vae.h"
+#include "../pipeline/texture/models.h"
 #include "../runtime/log.h"
 #include "../weights/weights.h"
 #include "bench_sd15.h"
@@ -191,12 +192,11 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     if (mx_ctx_create(&c[0], o->threads, mx_cpu_isa_for(MX_PREC_FP32), (size_t)512 << 20, st) ||
         (nprec == 2 && mx_ctx_create(&c[1], o->threads, bf16_isa, (size_t)512 << 20, st)))
         return -1;
-    /* weights packed once per context, as a texture job does (models.h: as many bytes as the
-     * file's tensors); the fp32 one gets twice that, its panels being fp32 from fp16 weights */
+    /* weights packed once per context: the bf16 one as a texture job does (models.h), the fp32 one
+     * with room for all (its fp32 panels of fp16 weights take twice the file: one more file) */
     size_t wbytes = 0;
     for (size_t i = 0; i < mx_wf_count(wf); i++) wbytes += mx_wf_tensor(wf, i)->nbytes;
-    for (int p = 0; p < nprec; p++)
-        if (mx_ctx_pack_weights(&c[p], p ? wbytes : 2 * wbytes, 1, st)) return -1;
+    if (mx_ctx_pack_weights(&c[0], wbytes, 1, st) || (nprec == 2 && mx_models_pack_weights(&c[1], st))) return -1;
     printf("threads %d, kernels %s%s%s\n", mx_pool_threads(c[0].pool), mx_isa_name(c[0].k->isa),
            nprec == 2 ? " and " : " (bf16 not available on this CPU)", nprec == 2 ? mx_isa_name(c[1].k->isa) : "");
     double peak[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};

@@ -364,7 +364,9 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     const float *have = mx_wpack_find(c->wpack, &key);
     if (have) return have;
     int nkb = ceil_div(p->K, kc_max);
-    f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float));
+    size_t source_bytes = (size_t)f.rows * key.ld * mx_dtype_size(w.dtype);
+    f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float),
+                         source_bytes);
     if (!f.dst) return NULL;
     double t0 = c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;
     f.tasks_per_block = ceil_div(ceil_div(f.rows, f.width), PACK_PANELS_PER_TASK);
@@ -372,7 +374,7 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     if (c->prof)
         c->prof->gemm_secs[p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR][operand_b ? MX_GEMM_PACK_B : MX_GEMM_PACK_A] +=
             mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0;
-    mx_wpack_release_source(c->wpack, w.data, (size_t)f.rows * (operand_b ? p->b_ld : p->a_ld) * mx_dtype_size(w.dtype));
+    mx_wpack_release_source(c->wpack, w.data, source_bytes);
     return f.dst;
 }
 

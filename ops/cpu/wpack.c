@@ -15,11 +15,11 @@ typedef struct {
 struct mx_wpack {
     wpack_entry *slots;
     size_t cap, used; /* cap: a power of two, at least twice used */
-    size_t bytes, budget;
+    size_t bytes, extra, extra_budget; /* panels held; their excess over the weights (wpack.h) */
     int sources_mapped;
 };
 
-int mx_wpack_create(mx_wpack **out, size_t budget, int sources_mapped, mx_status *st) {
+int mx_wpack_create(mx_wpack **out, size_t extra_budget, int sources_mapped, mx_status *st) {
     mx_wpack *w = calloc(1, sizeof *w);
     if (w) w->slots = calloc(64, sizeof *w->slots);
     if (!w || !w->slots) {
@@ -27,7 +27,7 @@ int mx_wpack_create(mx_wpack **out, size_t budget, int sources_mapped, mx_status
         return mx_fail(st, MX_ENOMEM, "packed-weight cache: out of memory");
     }
     w->cap = 64;
-    w->budget = budget;
+    w->extra_budget = extra_budget;
     w->sources_mapped = sources_mapped;
     *out = w;
     return 0;
@@ -77,8 +77,9 @@ static int grow(mx_wpack *w) {
     return 0;
 }
 
-float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes) {
-    if (bytes > w->budget - w->bytes || bytes == 0) return NULL;
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t source_bytes) {
+    size_t extra = bytes > source_bytes ? bytes - source_bytes : 0;
+    if (bytes == 0 || extra > w->extra_budget - w->extra) return NULL;
     if (2 * (w->used + 1) > w->cap && grow(w)) return NULL;
     wpack_entry *e = slot_of(w->slots, w->cap, key);
     if (e->panels) return NULL; /* already there: the caller looks up first */
@@ -87,6 +88,7 @@ float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes) {
     *e = (wpack_entry){.key = *key, .panels = p};
     w->used++;
     w->bytes += bytes;
+    w->extra += extra;
     return p;
 }
 
@@ -106,3 +108,5 @@ void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t sourc
 }
 
 size_t mx_wpack_bytes(const mx_wpack *w) { return w ? w->bytes : 0; }
+
+size_t mx_wpack_extra_bytes(const mx_wpack *w) { return w ? w->extra : 0; }

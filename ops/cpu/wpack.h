@@ -4,10 +4,12 @@
  * weights each time. Owned by the context that enabled it (mx_ctx_pack_weights); used by the
  * thread that calls the ops. Entries are never freed before the cache: the weights must stay
  * unchanged at their addresses while the context lives.
- * Memory: at most `budget` bytes of panels; a weight past it is packed per call as without a
- * cache. With sources_mapped (the weights are pages of a read-only file mapping), a weight's
- * pages are handed back to the kernel once packed (MADV_PAGEOUT): they would otherwise stay
- * resident beside their packed copy; the kernel reads them back from the file if ever needed. */
+ * Memory: the panels replace their weight (with sources_mapped, the weights being pages of a
+ * read-only file mapping, a weight's pages are handed back to the kernel once packed,
+ * MADV_PAGEOUT; it reads them back from the file if ever needed), so what counts is what they
+ * take beyond it: bf16 pairs of fp16 weights take the same, fp32 panels of fp16 weights twice.
+ * That excess, summed over the entries, stays within `extra_budget` bytes; a weight past it is
+ * packed per call as without a cache. */
 #ifndef MX_OPS_CPU_WPACK_H
 #define MX_OPS_CPU_WPACK_H
 
@@ -27,18 +29,20 @@ typedef struct mx_wpack_key {
     size_t ld;          /* the weight's row stride, in elements */
 } mx_wpack_key;
 
-int mx_wpack_create(mx_wpack **out, size_t budget, int sources_mapped, mx_status *st);
+int mx_wpack_create(mx_wpack **out, size_t extra_budget, int sources_mapped, mx_status *st);
 void mx_wpack_destroy(mx_wpack *w);
 
 /* The panels stored under key, or NULL. */
 const float *mx_wpack_find(const mx_wpack *w, const mx_wpack_key *key);
-/* A new entry of `bytes` (64-byte aligned) under key, for the caller to fill at once; NULL when
- * it would pass the budget or no memory could be had (the caller packs per call then). */
-float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes);
+/* A new entry of `bytes` (64-byte aligned) under key, for the caller to fill at once from a weight
+ * of source_bytes; NULL when its excess would pass the budget or no memory could be had (the
+ * caller packs per call then). */
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t source_bytes);
 /* Called once an entry is filled from source[0 .. source_bytes): hands the source's whole
  * pages back to the kernel when the weights are mapped from a file. */
 void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes);
-/* Bytes of panels held (for reports and tests). */
+/* Bytes of panels held, and their excess over the weights they replace (for reports and tests). */
 size_t mx_wpack_bytes(const mx_wpack *w);
+size_t mx_wpack_extra_bytes(const mx_wpack *w);
 
 #endif

@@ -92,7 +92,7 @@ matex_models *matex_models_open(const char *weights_path, const matex_options *o
         run_options(o, &t);
         m->ctx_ready = !mx_job_ctx_create(&m->ctx, &t, &st);
         if (m->ctx_ready && !mx_models_load(&m->m, &m->ctx, weights_path, 0, &st)) {
-            if (!mx_models_pack_weights(&m->m, &m->ctx, &st)) return m;
+            if (!mx_models_pack_weights(&m->ctx, &st)) return m;
             mx_models_free(&m->m);
         }
     }

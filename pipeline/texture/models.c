@@ -158,10 +158,8 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
     return 0;
 }
 
-int mx_models_pack_weights(const mx_models *m, mx_ctx *c, mx_status *st) {
-    size_t bytes = 0;
-    for (size_t i = 0; i < mx_wf_count(m->wf); i++) bytes += mx_wf_tensor(m->wf, i)->nbytes;
-    return mx_ctx_pack_weights(c, bytes, 1, st);
+int mx_models_pack_weights(mx_ctx *c, mx_status *st) {
+    return mx_ctx_pack_weights(c, MX_MODELS_PACK_EXTRA, 1, st);
 }
 
 void mx_models_free(mx_models *m) {

@@ -49,10 +49,14 @@ typedef struct mx_models {
  * network is an error naming the file and the prefix it looked for. */
 int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st);
 void mx_models_free(mx_models *m);
-/* Lets c keep the set's weights packed once for its GEMM kernels (mx_ctx_pack_weights), in at
- * most as many bytes as the weight file's tensors (whose mapped pages they replace). Only for a
- * context made for this set and destroyed after it: the packed copies are keyed by address. */
-int mx_models_pack_weights(const mx_models *m, mx_ctx *c, mx_status *st);
+/* Lets c keep the set's weights packed once for its GEMM kernels (mx_ctx_pack_weights; their
+ * mapped pages given back), taking at most MX_MODELS_PACK_EXTRA bytes beyond the weights. Only
+ * for a context made for this set and destroyed after it: the packed copies are keyed by address. */
+int mx_models_pack_weights(mx_ctx *c, mx_status *st);
+/* bf16 pairs take what the fp16 weights took; the layers the precision policy keeps in fp32
+ * (about 0.4 GB of fp32 panels beyond their fp16 weights in SD1.5, VAE included) are packed
+ * once while this lasts, the rest per call: the peak RSS stays within the weights + 1 GB. */
+#define MX_MODELS_PACK_EXTRA ((size_t)256 << 20)
 /* The same check for a model set already open (needs: MX_MODELS_NEED_*). */
 int mx_models_check(const mx_models *m, int needs, mx_status *st);
 /* The weight file's path. */
