@@ -342,7 +342,28 @@ static void test_binary_case(const levels *lv, mx_binop op, int ndim, const int6
     free(a), free(b), free(y), free(want);
 }
 
+/* Both transposes of B items of C × HW at the SIMD level against the reference, bit for bit (sizes
+ * off the register blocks and the 64-float tiles). */
+static void test_transpose_case(const levels *lv, int B, int C, int HW) {
+    size_t n = (size_t)B * C * HW;
+    float *x = rnd(n, 91), *y = rnd(n, 92), *want = rnd(n, 93);
+    char name[96];
+    mx_transpose_chw_hwc(lv->ref, want, x, B, C, HW);
+    mx_transpose_chw_hwc(lv->simd, y, x, B, C, HW);
+    snprintf(name, sizeof name, "%s transpose_chw_hwc [%d, %d, %d]", lv->isa, B, C, HW);
+    mx_check_close(name, y, want, n, 0);
+    mx_transpose_hwc_chw(lv->ref, want, x, B, C, HW);
+    mx_transpose_hwc_chw(lv->simd, y, x, B, C, HW);
+    snprintf(name, sizeof name, "%s transpose_hwc_chw [%d, %d, %d]", lv->isa, B, C, HW);
+    mx_check_close(name, y, want, n, 0);
+    free(x), free(y), free(want);
+}
+
 static void test_elementwise_ops(const levels *lv) {
+    test_transpose_case(lv, 2, 320, 4096);
+    test_transpose_case(lv, 3, 37, 131);
+    test_transpose_case(lv, 1, 1, 7);
+    test_transpose_case(lv, 2, 67, 5);
     test_group_norm_case(lv, 2, 12, 37, 3, MX_F32, 0);
     test_group_norm_case(lv, 1, 64, 1, 32, MX_F16, 1);
     test_group_norm_case(lv, 2, 320, 1024, 32, MX_BF16, 1);
@@ -350,6 +371,7 @@ static void test_elementwise_ops(const levels *lv) {
     test_layer_norm_case(lv, 7, 77, MX_F32);
     test_layer_norm_case(lv, 3, 768, MX_BF16);
     test_layer_norm_case(lv, 4, 5, MX_F16);
+    test_layer_norm_case(lv, 150, 320, MX_F32); /* 51 rows per task: 3 tasks, the last one short */
     test_unary_case(lv, "gelu", mx_gelu, 100003, 8);
     test_unary_case(lv, "gelu", mx_gelu, 37, 0.5f);
     test_gelu_tail(lv);

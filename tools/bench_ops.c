@@ -2,7 +2,7 @@
  * sgemm) on the SD1.5 UNet shapes at a 64×64 latent, same thread count for both, plus
  * attention at 4096 tokens × 8 heads × 40 dims. Where the CPU has AVX512_BF16 the bf16 kernels
  * run too, interleaved with the fp32 ones and OpenBLAS, so their ratios come from one run.
- * Usage: bench_ops [--threads N] [--repeats R]. */
+ * Usage: bench_ops [--threads N] [--repeats R] [--attention-only]. */
 #include <cblas.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -227,14 +227,16 @@ static void bench_attention(bench_args *base, int repeats, double ms[2]) {
 }
 
 int main(int argc, char **argv) {
-    int threads = 2, repeats = 5;
+    int threads = 2, repeats = 5, attention_only = 0;
     for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--threads") && i + 1 < argc)
+        if (!strcmp(argv[i], "--attention-only"))
+            attention_only = 1;
+        else if (!strcmp(argv[i], "--threads") && i + 1 < argc)
             threads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--repeats") && i + 1 < argc)
             repeats = atoi(argv[++i]);
         else {
-            fprintf(stderr, "usage: bench_ops [--threads N] [--repeats R]\n");
+            fprintf(stderr, "usage: bench_ops [--threads N] [--repeats R] [--attention-only]\n");
             return 2;
         }
     }
@@ -256,15 +258,19 @@ int main(int argc, char **argv) {
            mx_isa_name(fp32.k->isa), has_bf16 ? mx_isa_name(bf16.k->isa) : "(no bf16)", repeats,
            openblas_get_corename());
     bench_args base = {NULL, &fp32, has_bf16 ? &bf16 : NULL, NULL, NULL, NULL, NULL, NULL, NULL};
-    double gb, cb, ms[2];
-    double g = bench_gemms(&base, repeats, &gb);
-    double c = bench_convs(&base, repeats, &cb);
-    bench_attention(&base, repeats < 3 ? repeats : 3, ms);
-    printf("bench-summary: gemm_ratio_min=%.3f conv_ratio_min=%.3f attention_ms=%.1f", g, c, ms[0]);
-    if (has_bf16)
-        printf(" bf16_gemm_speedup_min=%.3f bf16_conv_speedup_min=%.3f attention_bf16_ms=%.1f\n", gb, cb, ms[1]);
-    else
-        printf(" bf16=na\n");
+    double gb = 0, cb = 0, g = 0, c = 0, ms[2];
+    if (!attention_only) {
+        g = bench_gemms(&base, repeats, &gb);
+        c = bench_convs(&base, repeats, &cb);
+    }
+    bench_attention(&base, attention_only ? repeats : repeats < 3 ? repeats : 3, ms);
+    if (!attention_only) {
+        printf("bench-summary: gemm_ratio_min=%.3f conv_ratio_min=%.3f attention_ms=%.1f", g, c, ms[0]);
+        if (has_bf16)
+            printf(" bf16_gemm_speedup_min=%.3f bf16_conv_speedup_min=%.3f attention_bf16_ms=%.1f\n", gb, cb, ms[1]);
+        else
+            printf(" bf16=na\n");
+    }
     mx_ctx_destroy(&fp32);
     if (has_bf16) mx_ctx_destroy(&bf16);
     return 0;

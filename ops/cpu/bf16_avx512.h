@@ -2,7 +2,7 @@
  * 32-bit word holds two bf16 (the lower index in the low half), the operand layout of vdpbf16ps.
  * Rounding to nearest even by vcvtne2ps2bf16 (which, like vdpbf16ps, reads denormals as zero).
  * The bf16 vocabulary of attention_simd.inc (vbw, vbw_load, vbw_set1, v_dot_bf16,
- * bf16_pairs_row, bf16_store_pairs_of_rows) is the same in bf16_neon.h. */
+ * bf16_pairs_row, bf16_store_pairs_of_rows, bf16_store_pairs_of_keys) is the same in bf16_neon.h. */
 #ifndef MX_BF16_AVX512_H
 #define MX_BF16_AVX512_H
 
@@ -40,6 +40,10 @@ static inline __m512 v_dot_bf16(__m512 acc, vbw a, vbw b) { return _mm512_dpbf16
 /* dst[c] = bf16(even[c]) | bf16(odd[c]) << 16 for the 16 lanes. */
 static inline void bf16_store_pairs_of_rows(uint32_t *dst, __m512 even, __m512 odd) {
     _mm512_storeu_si512(dst, bf16_pairs_of_rows(even, odd));
+}
+/* dst[i] = bf16(lo_hi[2i]) | bf16(lo_hi[2i+1]) << 16 for the 2·16 values of lo then hi. */
+static inline void bf16_store_pairs_of_keys(uint32_t *dst, __m512 lo, __m512 hi) {
+    _mm512_storeu_si512(dst, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
 }
 
 #endif

@@ -48,5 +48,9 @@ static inline float32x4_t v_dot_bf16(float32x4_t acc, vbw a, vbw b) { return vbf
 static inline void bf16_store_pairs_of_rows(uint32_t *dst, float32x4_t even, float32x4_t odd) {
     vst1q_u32(dst, bf16_pairs_of_rows(even, odd));
 }
+/* dst[i] = bf16(lo_hi[2i]) | bf16(lo_hi[2i+1]) << 16 for the 2·4 values of lo then hi. */
+static inline void bf16_store_pairs_of_keys(uint32_t *dst, float32x4_t lo, float32x4_t hi) {
+    vst1q_u32(dst, bf16_pairs_of_rows(vuzp1q_f32(lo, hi), vuzp2q_f32(lo, hi)));
+}
 
 #endif

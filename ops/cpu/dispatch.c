@@ -19,20 +19,23 @@
 #define MX_REF_ENTRY_(name, guard, params, args) .name = mx_##name##_ref,
 #define MX_SCALAR_KERNELS MX_OPS(MX_REF_ENTRY_)
 
-/* avx2 (+FMA): the SIMD templates and the GEMM micro-kernel; layout, vector, embedding and tanh
- * stay on the reference (memory-bound copies the compiler vectorises, or tiny). */
+/* avx2 (+FMA): the SIMD templates and the GEMM micro-kernel; the layout ops but the transposes,
+ * vector, embedding and tanh stay on the reference (memory-bound copies the compiler vectorises,
+ * or tiny). */
 #define MX_AVX2_KERNELS                                                                                      \
     MX_SCALAR_KERNELS .linear = mx_linear_avx2, .conv2d = mx_conv2d_avx2, .group_norm = mx_group_norm_avx2,   \
     .layer_norm = mx_layer_norm_avx2, .attention = mx_attention_avx2, .gelu = mx_gelu_avx2,                   \
     .quick_gelu = mx_quick_gelu_avx2, .silu = mx_silu_avx2, .geglu = mx_geglu_avx2,                         \
-    .binary = mx_binary_avx2, .scale = mx_scale_avx2,
+    .binary = mx_binary_avx2, .scale = mx_scale_avx2, .transpose_chw_hwc = mx_transpose_chw_hwc_avx2,         \
+    .transpose_hwc_chw = mx_transpose_hwc_chw_avx2,
 
 /* avx512: the same kernels on 16-float vectors. */
 #define MX_AVX512_KERNELS                                                                                    \
     MX_AVX2_KERNELS .linear = mx_linear_avx512, .conv2d = mx_conv2d_avx512, .group_norm = mx_group_norm_avx512, \
     .layer_norm = mx_layer_norm_avx512, .attention = mx_attention_avx512, .gelu = mx_gelu_avx512,             \
     .quick_gelu = mx_quick_gelu_avx512, .silu = mx_silu_avx512, .geglu = mx_geglu_avx512,                   \
-    .binary = mx_binary_avx512, .scale = mx_scale_avx512,
+    .binary = mx_binary_avx512, .scale = mx_scale_avx512, .transpose_chw_hwc = mx_transpose_chw_hwc_avx512,   \
+    .transpose_hwc_chw = mx_transpose_hwc_chw_avx512,
 
 /* avx512bf16: the matrix products in bf16 arithmetic with fp32 sums (vdpbf16ps). */
 #define MX_AVX512BF16_KERNELS                                                                                \
@@ -47,7 +50,8 @@
     MX_SCALAR_KERNELS .linear = mx_linear_neon, .conv2d = mx_conv2d_neon, .group_norm = mx_group_norm_neon,   \
     .layer_norm = mx_layer_norm_neon, .attention = mx_attention_neon, .gelu = mx_gelu_neon,                   \
     .quick_gelu = mx_quick_gelu_neon, .silu = mx_silu_neon, .geglu = mx_geglu_neon,                         \
-    .binary = mx_binary_neon, .scale = mx_scale_neon,
+    .binary = mx_binary_neon, .scale = mx_scale_neon, .transpose_chw_hwc = mx_transpose_chw_hwc_neon,         \
+    .transpose_hwc_chw = mx_transpose_hwc_chw_neon,
 
 /* neonbf16 (FEAT_BF16): the matrix products in bf16 arithmetic with fp32 sums (BFDOT). */
 #define MX_NEONBF16_KERNELS                                                                                  \

@@ -1,6 +1,7 @@
-/* Element-wise ops, norms and softmax, AVX2+FMA (templates *_simd.inc). */
+/* Element-wise ops, norms, softmax and the layout transposes, AVX2+FMA (templates *_simd.inc). */
 #include "kernels.h"
 #include "simd_avx2.h"
 #include "vmath_simd.inc"
 #include "activation_simd.inc"
 #include "norm_simd.inc"
+#include "transpose_simd.inc"

@@ -312,8 +312,9 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     if (have) return have;
     int nkb = ceil_div(p->K, kc_max);
     size_t source_bytes = (size_t)f.rows * key.ld * mx_dtype_size(w.dtype);
+    /* a 32-bit panel word holds one fp32 value or a pair of bf16 ones */
     f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float),
-                         source_bytes);
+                         g->to_pairs ? 2 : 4, mx_dtype_size(w.dtype));
     if (!f.dst) return NULL;
     double t0 = c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;
     f.tasks_per_block = ceil_div(ceil_div(f.rows, f.width), PACK_PANELS_PER_TASK);

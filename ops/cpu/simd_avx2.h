@@ -42,6 +42,8 @@ static inline vf v_zero_below(vf v, vf x, float lo) {
 static inline vf v_blend_negative(vf x, vf pos, vf neg) {
     return _mm256_blendv_ps(pos, neg, _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_LT_OQ));
 }
+/* 1 when some lane of a is greater than the same lane of b */
+static inline int v_any_gt(vf a, vf b) { return _mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_GT_OQ)) != 0; }
 static inline float v_hsum(vf v) {
     __m128 s = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
     s = _mm_add_ps(s, _mm_movehl_ps(s, s));
@@ -59,6 +61,9 @@ static inline vf v_pow2i(vf n) {
     __m256i e = _mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127));
     return _mm256_castsi256_ps(_mm256_slli_epi32(e, 23));
 }
+/* the float whose bits are t's shifted left by 23: moves a biased exponent held in t's low bits
+ * into the exponent field */
+static inline vf v_shl23(vf t) { return _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_castps_si256(t), 23)); }
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
 static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     transpose_avx(dst, dst_ld, src, src_ld, rows, cols);

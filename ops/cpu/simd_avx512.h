@@ -43,6 +43,8 @@ static inline vf v_zero_below(vf v, vf x, float lo) {
 static inline vf v_blend_negative(vf x, vf pos, vf neg) {
     return _mm512_mask_mov_ps(pos, _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LT_OQ), neg);
 }
+/* 1 when some lane of a is greater than the same lane of b */
+static inline int v_any_gt(vf a, vf b) { return _mm512_cmp_ps_mask(a, b, _CMP_GT_OQ) != 0; }
 /* Horizontal reductions, fixed order (determinism). */
 static inline float v_hsum(vf v) { return _mm512_reduce_add_ps(v); }
 static inline float v_hmax(vf v) { return _mm512_reduce_max_ps(v); }
@@ -52,6 +54,9 @@ static inline vf v_pow2i(vf n) {
     __m512i e = _mm512_add_epi32(_mm512_cvtps_epi32(n), _mm512_set1_epi32(127));
     return _mm512_castsi512_ps(_mm512_slli_epi32(e, 23));
 }
+/* the float whose bits are t's shifted left by 23: moves a biased exponent held in t's low bits
+ * into the exponent field */
+static inline vf v_shl23(vf t) { return _mm512_castsi512_ps(_mm512_slli_epi32(_mm512_castps_si512(t), 23)); }
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
 static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     transpose_avx(dst, dst_ld, src, src_ld, rows, cols);

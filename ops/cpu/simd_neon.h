@@ -54,6 +54,8 @@ static inline vf v_zero_below(vf v, vf x, float lo) {
 }
 /* neg where x < 0, else pos */
 static inline vf v_blend_negative(vf x, vf pos, vf neg) { return vbslq_f32(vcltq_f32(x, vdupq_n_f32(0.0f)), neg, pos); }
+/* 1 when some lane of a is greater than the same lane of b */
+static inline int v_any_gt(vf a, vf b) { return vmaxvq_u32(vcgtq_f32(a, b)) != 0; }
 /* Horizontal reductions, fixed order (determinism): pairwise. */
 static inline float v_hsum(vf v) { return vaddvq_f32(v); }
 static inline float v_hmax(vf v) { return vmaxvq_f32(v); }
@@ -63,6 +65,9 @@ static inline vf v_pow2i(vf n) {
     int32x4_t e = vaddq_s32(vcvtq_s32_f32(n), vdupq_n_s32(127));
     return vreinterpretq_f32_s32(vshlq_n_s32(e, 23));
 }
+/* the float whose bits are t's shifted left by 23: moves a biased exponent held in t's low bits
+ * into the exponent field */
+static inline vf v_shl23(vf t) { return vreinterpretq_f32_u32(vshlq_n_u32(vreinterpretq_u32_f32(t), 23)); }
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
 static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     transpose_neon(dst, dst_ld, src, src_ld, rows, cols);

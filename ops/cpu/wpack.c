@@ -77,8 +77,8 @@ static int grow(mx_wpack *w) {
     return 0;
 }
 
-float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t source_bytes) {
-    size_t extra = bytes > source_bytes ? bytes - source_bytes : 0;
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem) {
+    size_t extra = panel_elem > source_elem ? bytes / panel_elem * (panel_elem - source_elem) : 0;
     if (bytes == 0 || extra > w->extra_budget - w->extra) return NULL;
     if (2 * (w->used + 1) > w->cap && grow(w)) return NULL;
     wpack_entry *e = slot_of(w->slots, w->cap, key);

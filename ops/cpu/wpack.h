@@ -6,10 +6,10 @@
  * unchanged at their addresses while the context lives.
  * Memory: the panels replace their weight (with sources_mapped, the weights being pages of a
  * read-only file mapping, a weight's pages are handed back to the kernel once packed,
- * MADV_PAGEOUT; it reads them back from the file if ever needed), so what counts is what they
- * take beyond it: bf16 pairs of fp16 weights take the same, fp32 panels of fp16 weights twice.
- * That excess, summed over the entries, stays within `extra_budget` bytes; a weight past it is
- * packed per call as without a cache. */
+ * MADV_PAGEOUT; it reads them back from the file if ever needed), so what counts is what
+ * widening adds: bf16 pairs of fp16 weights add nothing, fp32 panels of fp16 weights one more
+ * weight (the panels' edge padding, ~1 %, is not counted). That excess, summed over the entries,
+ * stays within `extra_budget` bytes; a weight past it is packed per call as without a cache. */
 #ifndef MX_OPS_CPU_WPACK_H
 #define MX_OPS_CPU_WPACK_H
 
@@ -34,10 +34,10 @@ void mx_wpack_destroy(mx_wpack *w);
 
 /* The panels stored under key, or NULL. */
 const float *mx_wpack_find(const mx_wpack *w, const mx_wpack_key *key);
-/* A new entry of `bytes` (64-byte aligned) under key, for the caller to fill at once from a weight
- * of source_bytes; NULL when its excess would pass the budget or no memory could be had (the
- * caller packs per call then). */
-float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t source_bytes);
+/* A new entry of `bytes` (64-byte aligned) under key, for the caller to fill at once, of panels
+ * whose elements take panel_elem bytes from weights whose elements take source_elem; NULL when
+ * its excess would pass the budget or no memory could be had (the caller packs per call then). */
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem);
 /* Called once an entry is filled from source[0 .. source_bytes): hands the source's whole
  * pages back to the kernel when the weights are mapped from a file. */
 void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes);

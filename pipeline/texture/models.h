@@ -53,10 +53,12 @@ void mx_models_free(mx_models *m);
  * mapped pages given back), taking at most MX_MODELS_PACK_EXTRA bytes beyond the weights. Only
  * for a context made for this set and destroyed after it: the packed copies are keyed by address. */
 int mx_models_pack_weights(mx_ctx *c, mx_status *st);
-/* bf16 pairs take what the fp16 weights took; the layers the precision policy keeps in fp32
- * (about 0.4 GB of fp32 panels beyond their fp16 weights in SD1.5, VAE included) are packed
- * once while this lasts, the rest per call: the peak RSS stays within the weights + 1 GB. */
-#define MX_MODELS_PACK_EXTRA ((size_t)256 << 20)
+/* None: bf16 pairs take what the fp16 weights took and are kept; fp32 panels of fp16 weights (the
+ * layers the precision policy keeps in fp32, the whole of a --precision fp32 run) would take
+ * twice and are packed per call. Measured on a 2-step default run: 256 MB of room for those
+ * raised the peak RSS from the weights + 0.89 GB (before packing) to + 1.24 GB, past the goal of
+ * weights + 1 GB. */
+#define MX_MODELS_PACK_EXTRA ((size_t)0)
 /* The same check for a model set already open (needs: MX_MODELS_NEED_*). */
 int mx_models_check(const mx_models *m, int needs, mx_status *st);
 /* The weight file's path. */
