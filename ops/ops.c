@@ -56,14 +56,18 @@ static void op_end(const mx_ctx *c) {
         const mx_kernels *k_ = op_begin(c);                                                                  \
         if (k_) {                                                                                            \
             double t0_ = c && c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;                       \
+            double w0_ = c && c->prof ? mx_profile_clock(CLOCK_MONOTONIC) : 0;                                \
             k_->call;                                                                                        \
-            if (c && c->prof) profile_op(c->prof, id, mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0_);      \
+            if (c && c->prof)                                                                                \
+                profile_op(c->prof, id, mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0_,                     \
+                           mx_profile_clock(CLOCK_MONOTONIC) - w0_);                                          \
             op_end(c);                                                                                       \
         }                                                                                                    \
     } while (0)
 
-static void profile_op(mx_profile *p, int id, double secs) {
+static void profile_op(mx_profile *p, int id, double secs, double wall) {
     p->op_secs[id] += secs;
+    p->op_wall[id] += wall;
     p->op_calls[id]++;
 }
 

@@ -29,6 +29,7 @@ enum { MX_GEMM_LINEAR, MX_GEMM_CONV, MX_GEMM_USERS };
 
 typedef struct mx_profile {
     double op_secs[MX_OP_COUNT]; /* process CPU seconds inside each op */
+    double op_wall[MX_OP_COUNT]; /* wall seconds inside each op (threads × wall − CPU: idle) */
     long op_calls[MX_OP_COUNT];
     double gemm_secs[MX_GEMM_USERS][MX_GEMM_PARTS]; /* thread seconds, summed over threads */
     double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls */

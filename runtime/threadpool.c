@@ -3,7 +3,15 @@
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
+#include <time.h>
 #include <unistd.h>
+
+/* How long a worker waits for the next job, and the caller for the workers to finish, by
+ * polling before it sleeps on a condition variable. A GEMM issues a job per K block and
+ * outer block (thousands per UNet call, each a few hundred µs); waking a sleeping thread
+ * takes tens of µs on a VM (an IPI to a halted vCPU), so without polling the threads sat
+ * idle for ~6 % of a UNet call. Polling is bounded, so an idle pool still sleeps. */
+#define POLL_NS 200000
 
 struct mx_pool {
     int nthreads;
@@ -17,8 +25,9 @@ struct mx_pool {
     /* (generation << 32) | next task: a worker still holding an older job can never claim
      * a task of the current one (it would run it with the old job's fn and ctx) */
     atomic_ullong next_task;
-    int active_workers;
-    unsigned long generation;
+    /* changed under mu; atomic so that the polling loops can read them without it */
+    atomic_int active_workers;
+    atomic_ulong generation;
     int quit;
 };
 
@@ -38,6 +47,39 @@ static void run_tasks(mx_pool *p, mx_task_fn fn, void *ctx, int ntasks, unsigned
     }
 }
 
+static long long now_ns(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static inline void cpu_relax(void) {
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#elif defined(__aarch64__)
+    __asm__ __volatile__("yield");
+#endif
+}
+
+/* Polls until *v differs from old, for at most POLL_NS; the caller then checks again under
+ * the mutex. */
+static void poll_until_changed(atomic_ulong *v, unsigned long old) {
+    long long end = now_ns() + POLL_NS;
+    for (int i = 0; atomic_load_explicit(v, memory_order_relaxed) == old; i++) {
+        cpu_relax();
+        if ((i & 255) == 255 && now_ns() > end) return;
+    }
+}
+
+/* Polls until *v is 0, for at most POLL_NS. */
+static void poll_until_zero(atomic_int *v) {
+    long long end = now_ns() + POLL_NS;
+    for (int i = 0; atomic_load_explicit(v, memory_order_relaxed) != 0; i++) {
+        cpu_relax();
+        if ((i & 255) == 255 && now_ns() > end) return;
+    }
+}
+
 static void *worker_main(void *arg) {
     worker_arg *wa = arg;
     mx_pool *p = wa->pool;
@@ -46,6 +88,11 @@ static void *worker_main(void *arg) {
     unsigned long seen = 0;
     pthread_mutex_lock(&p->mu);
     for (;;) {
+        if (!p->quit && p->generation == seen) {
+            pthread_mutex_unlock(&p->mu);
+            poll_until_changed(&p->generation, seen);
+            pthread_mutex_lock(&p->mu);
+        }
         while (!p->quit && p->generation == seen) pthread_cond_wait(&p->work_cv, &p->mu);
         if (p->quit) break;
         seen = p->generation;
@@ -132,6 +179,7 @@ void mx_pool_for(mx_pool *p, int ntasks, mx_task_fn fn, void *ctx) {
     pthread_mutex_unlock(&p->mu);
     run_tasks(p, fn, ctx, ntasks, gen, 0);
     /* wait until every worker that picked up this generation has finished */
+    poll_until_zero(&p->active_workers);
     pthread_mutex_lock(&p->mu);
     while (p->active_workers > 0) pthread_cond_wait(&p->done_cv, &p->mu);
     pthread_mutex_unlock(&p->mu);

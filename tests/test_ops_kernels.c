@@ -158,6 +158,10 @@ static void test_gemm_ops(const levels *lv) {
     test_linear_case(lv, 130, 100, 17, MX_F32, 0);
     test_linear_case(lv, 4200, 45, 21, MX_F32, 1); /* crosses the 4096-row outer block */
     test_linear_case(lv, 3, 4133, 19, MX_F16, 1);  /* crosses the 4096-column outer block */
+    /* the splits of gemm.c (choose_split): COLUMNS, then ROWS (many row blocks, few columns) */
+    test_linear_case(lv, 50, 3000, 700, MX_F16, 1);
+    test_linear_case(lv, 800, 20, 700, MX_F16, 1);
+    test_conv_case(lv, 2, 80, 5, 6, 700, 3, 1, 1, MX_F16); /* and over batch items and K blocks */
     test_conv_case(lv, 1, 3, 9, 11, 5, 3, 1, 1, MX_F32);
     test_conv_case(lv, 2, 7, 13, 10, 17, 3, 2, 1, MX_F16);
     test_conv_case(lv, 2, 33, 1, 1, 19, 1, 1, 0, MX_BF16);

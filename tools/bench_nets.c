@@ -111,12 +111,21 @@ static void part(const char *name, double secs, double whole) {
 
 /* The GEMM line of a user (linear or conv2d): the op's share of the CPU time, its parts, and
  * the micro-kernel's own rate (FLOPs over its CPU seconds, per `threads` cores). */
+/* An op's threads idle while it ran: threads × its wall time − its CPU time, as a share of the
+ * former (waits at the joins of its parallel loops, serial parts, preemption). */
+static void op_idle(const mx_profile *pr, int op, int threads) {
+    double tw = threads * pr->op_wall[op];
+    if (tw > 0) printf(", idle %.1f%%", 100 * (tw - pr->op_secs[op]) / tw);
+}
+
 static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int threads, double peak) {
     static const char *const user_name[MX_GEMM_USERS] = {"linear", "conv2d"};
     const double *s = pr->gemm_secs[user];
     double busy = 0, whole = cpu;
     for (int q = 0; q < MX_GEMM_PARTS; q++) busy += s[q];
-    printf("  %-18s %5.1f%% (%ld calls):", user_name[user], 100 * pr->op_secs[op] / cpu, pr->op_calls[op]);
+    printf("  %-18s %5.1f%% (%ld calls", user_name[user], 100 * pr->op_secs[op] / cpu, pr->op_calls[op]);
+    op_idle(pr, op, threads);
+    printf("):");
     part("micro", s[MX_GEMM_MICRO], whole);
     part(user == MX_GEMM_CONV ? "pack-A(weights)" : "pack-A(x)", s[MX_GEMM_PACK_A], whole);
     part(user == MX_GEMM_CONV ? "pack-B(input)" : "pack-B(weights)", s[MX_GEMM_PACK_B], whole);
@@ -145,7 +154,9 @@ static void report_profile(const net_time *t, int p, double peak, int threads) {
             if (!done[op] && (best < 0 || pr->op_secs[op] > pr->op_secs[best])) best = op;
         if (best < 0 || pr->op_secs[best] < 1e-3 * cpu) break;
         done[best] = 1;
-        printf("  %-18s %5.1f%% (%ld calls)\n", mx_op_name(best), 100 * pr->op_secs[best] / cpu, pr->op_calls[best]);
+        printf("  %-18s %5.1f%% (%ld calls", mx_op_name(best), 100 * pr->op_secs[best] / cpu, pr->op_calls[best]);
+        op_idle(pr, best, threads);
+        printf(")\n");
     }
     printf("  %-18s %5.1f%%\n", "outside ops", 100 * (cpu - in_ops) / cpu);
 }

@@ -2,7 +2,9 @@
  * C[M,N] (row stride ldc) = A[M,K] · B[K,N] (+ bias). For each block of kc columns of K,
  * B is packed into NR-column panels by all threads, then tasks over MC×NC tiles of C run the
  * register-blocked micro-kernel on every MR×NR sub-tile; each thread packs the MC-row block
- * of A it works on into its own buffer (MR-row panels; it stays in the thread's L2). Panels
+ * of A it works on into its own buffer (MR-row panels; it stays in the thread's L2). Where A
+ * is small or a weight (conv) it is packed once for all, and the tasks are whole columns of C
+ * (each thread packs the B panels it uses) or whole row blocks (gemm.c's gemm_split). Panels
  * are k-major and zero-padded at the edges. Packing is pluggable, so conv2d packs its B panels
  * straight from (a padded band of) the image, never a full im2col copy. Every split depends on the
  * problem size only, so results do not depend on the thread count.
