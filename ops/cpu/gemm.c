@@ -364,6 +364,13 @@ static void plan_tiles(gemm_job *j) {
     j->nnb = ceil_div(j->npanels, j->nc_panels);
 }
 
+/* The length of the K blocks (the last one may be shorter): the problem's own, or blocks as
+ * equal as can be of at most KC_MAX. */
+static int k_block_length(const mx_gemm_problem *p) {
+    if (p->kc_block > 0) return min_int(p->kc_block, KC_MAX);
+    return max_int(1, ceil_div(p->K, max_int(1, ceil_div(p->K, KC_MAX))));
+}
+
 /* ---- a weight's panels packed once (wpack.h) ----
  * Layout: the panels of K block kb, as one call packs them (panel i at i · words(kc) · width),
  * start at kb · panels · words(kc_max) · width floats. */
@@ -391,10 +398,20 @@ static void fill_task(void *arg, int task, int thread) {
         f->pack(f->p, f->g, block + (size_t)i * words * f->width, i * f->width, f->width, k0, kc);
 }
 
+/* Packs f's panels of every K block by all threads; the CPU time (all threads: nothing else
+ * runs in the process meanwhile) goes to the profile's part of that operand. */
+static void fill_blocks(const mx_ctx *c, weight_fill *f, int operand_b) {
+    double t0 = c && c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;
+    f->tasks_per_block = ceil_div(ceil_div(f->rows, f->width), PACK_PANELS_PER_TASK);
+    mx_par_for(c, ceil_div(f->p->K, f->kc_max) * f->tasks_per_block, fill_task, f);
+    if (c && c->prof)
+        c->prof->gemm_secs[f->p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR][operand_b ? MX_GEMM_PACK_B : MX_GEMM_PACK_A] +=
+            mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0;
+}
+
 /* The panels of the weight operand (B with operand_b, else A) for every K block: from the
  * context's cache, packed into it by all threads on first use. NULL without a cache or room in
- * it (the caller packs per call). The packing's CPU time (all threads: nothing else runs in the
- * process meanwhile) goes to the profile's part of that operand. */
+ * it (the caller packs per call). */
 static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p,
                                      int operand_b, int kc_max) {
     if (!c || !c->wpack || !(operand_b ? p->b_weight : p->a_weight)) return NULL;
@@ -411,14 +428,24 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float),
                          g->to_pairs ? 2 : 4, mx_dtype_size(w.dtype));
     if (!f.dst) return NULL;
-    double t0 = c->prof ? mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) : 0;
-    f.tasks_per_block = ceil_div(ceil_div(f.rows, f.width), PACK_PANELS_PER_TASK);
-    mx_par_for(c, nkb * f.tasks_per_block, fill_task, &f);
-    if (c->prof)
-        c->prof->gemm_secs[p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR][operand_b ? MX_GEMM_PACK_B : MX_GEMM_PACK_A] +=
-            mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0;
+    fill_blocks(c, &f, operand_b);
     mx_wpack_release_source(c->wpack, w.data, source_bytes);
     return f.dst;
+}
+
+size_t mx_gemm_a_panels_floats(const mx_gemm_kernel *g, const mx_gemm_problem *p) {
+    int kc_max = k_block_length(p);
+    return cached_block_offset(g, g->mr, p->M, kc_max, ceil_div(p->K, kc_max));
+}
+
+const float *mx_gemm_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst) {
+    if (p->M <= 0 || p->K <= 0) return NULL;
+    const float *cached = pack_weight_once(c, g, p, 0, k_block_length(p));
+    if (cached || !dst) return cached;
+    weight_fill f = {.g = g, .p = p, .pack = p->pack_a, .dst = dst, .width = g->mr, .rows = p->M,
+                     .kc_max = k_block_length(p)};
+    fill_blocks(c, &f, 0);
+    return dst;
 }
 
 /* One K block: for every batch item and outer block of columns, B is packed by all threads,
@@ -476,11 +503,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     if (p->M <= 0 || p->N <= 0 || p->batch <= 0) return 0;
     /* outer blocks end on whole panels */
     int nb_max = OUTER_MAX / g->nr * g->nr, nb = min_int(p->N, nb_max);
-    int nkb = max_int(1, ceil_div(p->K, KC_MAX)), kc_max = max_int(1, ceil_div(p->K, nkb));
-    if (p->kc_block > 0) { /* the problem's own K blocks */
-        kc_max = min_int(p->kc_block, KC_MAX);
-        nkb = ceil_div(p->K, kc_max);
-    }
+    int kc_max = k_block_length(p), nkb = ceil_div(p->K, kc_max);
     int nthreads = mx_par_threads(c);
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
     size_t words = mx_gemm_panel_words(g, kc_max);
@@ -490,7 +513,8 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
      * thread (per batch item) instead of once: pack all of A's K block up front then (M < 3072
      * rows here, so ≤ 7.5 MiB at kc = 640; e.g. every conv, M = Cout). */
     int mpanels = ceil_div(p->M, g->mr), shared_a = ceil_div(mpanels, max_int(1, MC_ROWS / g->mr)) < TASKS_WANTED;
-    const float *a_cached = pack_weight_once(c, g, p, 0, kc_max), *b_cached = pack_weight_once(c, g, p, 1, kc_max);
+    const float *a_cached = p->a_panels ? p->a_panels : pack_weight_once(c, g, p, 0, kc_max);
+    const float *b_cached = pack_weight_once(c, g, p, 1, kc_max);
     if (a_cached) shared_a = 1;
     if (shared_a) ablock_n = a_cached ? 0 : (size_t)mpanels * g->mr * words;
     gemm_split split = choose_split(g, p, shared_a, b_cached != NULL, kc_max);

@@ -77,6 +77,8 @@ struct mx_gemm_problem {
     /* 1: the operand is a weight (a_mat of conv, b_mat of linear), the same on every call: its
      * panels are packed once into the context's cache when it has one (wpack.h) */
     int a_weight, b_weight;
+    /* A's panels of every K block (mx_gemm_a_panels), or NULL: the engine packs or finds them */
+    const float *a_panels;
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
@@ -111,6 +113,13 @@ static inline size_t mx_gemm_panel_words(const mx_gemm_kernel *g, int kc) {
     size_t kp = (size_t)(kc + 1) / 2, align = g->pair_align > 1 ? (size_t)g->pair_align : 1;
     return (kp + align - 1) / align * align;
 }
+
+/* A's panels of every K block, for a caller that runs one problem over many B (conv2d's blocks
+ * of output rows; set problem.a_panels): the context's cached ones for a weight it holds or
+ * takes now, else packed by all threads into dst (mx_gemm_a_panels_floats of them; NULL dst:
+ * returns NULL). */
+size_t mx_gemm_a_panels_floats(const mx_gemm_kernel *g, const mx_gemm_problem *p);
+const float *mx_gemm_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst);
 
 /* Returns -1 (and writes nothing) when no memory for the packed panels could be had. */
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);

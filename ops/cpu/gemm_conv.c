@@ -283,7 +283,8 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     int span = group * k_per_word(g) * taps; /* K blocks of whole groups, where a group fits one */
     /* no padding: the input rows are already a band (fp32; on pairs a 1×1 stride-1 conv) */
     int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1));
-    mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo,
+    /* image: prepare_band points it at each band; set before for the profile's conv parts */
+    mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo, .image = x,
                          .c_batch_stride = (size_t)Cout * Ho * Wo, .pack_a = mx_gemm_pack_a_conv,
                          .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .a_ld = (size_t)Cin * taps, .a_weight = 1,
                          .bias = bias, .bias_per_row = 1, .Cin = Cin,
@@ -292,12 +293,19 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                          .kc_block = span <= MX_GEMM_KC_MAX ? span : MX_GEMM_KC_MAX};
     int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
     size_t band_words = direct ? 0 : (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
-    size_t nsecs = c && c->prof ? (size_t)nthreads : 0;
+    size_t nsecs = c && c->prof ? (size_t)nthreads : 0, a_floats = 0;
+    /* several blocks of output rows run one problem each: A (the weights) packed once for all
+     * of them, unless the context's cache holds it (else every block repacked it: 64 times
+     * for a 512×512 VAE conv) */
+    if (rows < Ho && !mx_gemm_a_panels(c, g, &p, NULL)) a_floats = mx_gemm_a_panels_floats(g, &p);
+    a_floats += a_floats & 1; /* the doubles after them stay 8-byte aligned */
     mx_scratch s;
-    double *mem = mx_scratch_take(c, nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
+    float *mem = mx_scratch_take(c, a_floats * sizeof(float) + nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
     int failed = !mem;
-    band_job j = {.g = g, .x = x, .B = B, .band = direct ? NULL : (uint32_t *)(void *)(mem + nsecs), .Cin = Cin, .H = H, .W = W,
-                  .pad = pad, .chans = chans, .width = width, .secs = nsecs ? mem : NULL};
+    double *secs = mem ? (double *)(void *)(mem + a_floats) : NULL;
+    band_job j = {.g = g, .x = x, .B = B, .band = direct || !mem ? NULL : (uint32_t *)(void *)(secs + nsecs), .Cin = Cin,
+                  .H = H, .W = W, .pad = pad, .chans = chans, .width = width, .secs = nsecs ? secs : NULL};
+    if (rows < Ho && mem) p.a_panels = mx_gemm_a_panels(c, g, &p, a_floats ? mem : NULL);
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
         prepare_band(c, &j, &p, oy0, min_int(rows, Ho - oy0), B);
         p.C = y + (size_t)oy0 * Wo;
