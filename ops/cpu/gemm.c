@@ -6,12 +6,6 @@
 
 #include "wpack.h"
 
-/* Largest block of K packed at once. Each thread keeps its MC×kc block of A in L2 (240 KiB at
- * 640) and streams kc×NR panels of B; a longer block means fewer passes over C and fewer
- * pack/compute rounds (K = 5120: 8 instead of 16). On this Zen 5 (48 KiB L1, 1 MiB L2) 640
- * was a little faster than 320 on the K ≥ 1280 shapes and no slower on K = 320; 1024 was no
- * better (the shared machine is too noisy to separate a few percent). */
-#define KC_MAX MX_GEMM_KC_MAX
 /* Rows of A per compute task (rounded down to whole MR panels). */
 #define MC_ROWS 96
 /* Compute tasks wanted, so that a few threads stay busy; the row blocks of a tall GEMM
@@ -24,7 +18,7 @@ static int min_int(int a, int b) { return a < b ? a : b; }
 static int max_int(int a, int b) { return a > b ? a : b; }
 static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 
-/* 16-bit weight rows widened per transpose call (8 × KC_MAX floats of stack). */
+/* 16-bit weight rows widened per transpose call (8 × MX_GEMM_KC_MAX floats of stack). */
 #define WIDEN_ROWS 8
 
 void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dstv, int width, int valid, int kc) {
@@ -50,7 +44,7 @@ void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int
 
 /* One row of src (element (r, k) at r*ld + k) as kc/2 words of pairs (16-bit weights widened). */
 static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int r, int k0, int kc) {
-    float row[KC_MAX];
+    float row[MX_GEMM_KC_MAX];
     size_t off = (size_t)r * ld + (size_t)k0;
     const float *f = (const float *)src.data + off;
     if (src.dtype != MX_F32) {
@@ -79,7 +73,7 @@ static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_
  * then transposed as 32-bit words into dst[kp][width]. */
 static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
                             int total, int width, int k0, int kc) {
-    enum { WORDS = KC_MAX / 2 };
+    enum { WORDS = MX_GEMM_KC_MAX / 2 };
     uint32_t tmp[WIDEN_ROWS * WORDS];
     int kp = (kc + 1) / 2;
     for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
@@ -111,13 +105,13 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
     if (src.dtype == MX_F32)
         g->transpose(dst, (size_t)width, (const float *)src.data + base, ld, valid, kc);
     else {
-        float tmp[WIDEN_ROWS * KC_MAX];
+        float tmp[WIDEN_ROWS * MX_GEMM_KC_MAX];
         for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
             int n = min_int(WIDEN_ROWS, valid - r0);
             mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
             for (int i = 0; i < n; i++)
-                g->widen(tmp + (size_t)i * KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
-            g->transpose(dst + r0, (size_t)width, tmp, KC_MAX, n, kc);
+                g->widen(tmp + (size_t)i * MX_GEMM_KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
+            g->transpose(dst + r0, (size_t)width, tmp, MX_GEMM_KC_MAX, n, kc);
         }
     }
     mx_gemm_zero_panel_tail(g, dst, width, valid, kc);
@@ -365,10 +359,10 @@ static void plan_tiles(gemm_job *j) {
 }
 
 /* The length of the K blocks (the last one may be shorter): the problem's own, or blocks as
- * equal as can be of at most KC_MAX. */
+ * equal as can be of at most MX_GEMM_KC_MAX. */
 static int k_block_length(const mx_gemm_problem *p) {
-    if (p->kc_block > 0) return min_int(p->kc_block, KC_MAX);
-    return max_int(1, ceil_div(p->K, max_int(1, ceil_div(p->K, KC_MAX))));
+    if (p->kc_block > 0) return min_int(p->kc_block, MX_GEMM_KC_MAX);
+    return max_int(1, ceil_div(p->K, max_int(1, ceil_div(p->K, MX_GEMM_KC_MAX))));
 }
 
 /* ---- a weight's panels packed once (wpack.h) ----

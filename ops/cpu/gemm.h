@@ -44,7 +44,12 @@ typedef struct mx_gemm_kernel {
 
 /* Widest panel (MR or NR) of any kernel: bounds the packers' stack buffers. */
 #define MX_GEMM_PANEL_MAX 32
-/* Longest K block the engine packs (gemm.c's KC_MAX): bounds the packers' row buffers. */
+/* Longest K block the engine packs; also bounds the packers' row buffers. Each thread keeps
+ * its MC×kc block of A in L2 (240 KiB at 640) and streams kc×NR panels of B; a longer block
+ * means fewer passes over C and fewer pack/compute rounds (K = 5120: 8 instead of 16). On
+ * Zen 5 (48 KiB L1, 1 MiB L2) 640 was a little faster than 320 on the K ≥ 1280 shapes and no
+ * slower on K = 320; 1024 was no better; with 2 threads and column tasks 320 was no faster on
+ * the UNet either (the shared machine is too noisy to separate a few percent). */
 #define MX_GEMM_KC_MAX 640
 
 typedef struct mx_gemm_problem mx_gemm_problem;
