@@ -35,6 +35,8 @@ for t in "$@" tests/cli_*.sh; do
         fail=$((fail + 1))
         failed="$failed $(basename "$t")"
         echo "FAIL $(basename "$t") (exit $rc, ${secs}s)"
+        # the failed checks first (a long script's last lines may all be "ok"), then the end
+        grep '^FAIL' "$t.log.tmp" | head -10 | sed 's/^/    /'
         sed 's/^/    /' "$t.log.tmp" | tail -40
     fi
     rm -f "$t.log.tmp"
