@@ -170,8 +170,11 @@ check "trailing slash: complete" complete "$T/slash"
 
 # ---- SIGINT / SIGTERM during start-up: a signal already pending when matex starts (blocked by
 # perl, then exec: as one arriving before main could install a handler) is taken by the handler
-# once installed: exit 130, "interrupted", nothing written (without that, the run ignored it) ----
-pending() { sig=$1; shift; perl -MPOSIX -e 'sigprocmask(SIG_BLOCK, POSIX::SigSet->new(SIGINT, SIGTERM));
+# once installed: exit 130, "interrupted", nothing written (without that, the run ignored it).
+# The default disposition first: a suite started in the background by a shell without job
+# control inherits SIGINT ignored, and an ignored signal is never pending ----
+pending() { sig=$1; shift; perl -MPOSIX -e '$SIG{INT} = $SIG{TERM} = "DEFAULT";
+    sigprocmask(SIG_BLOCK, POSIX::SigSet->new(SIGINT, SIGTERM));
     kill shift(@ARGV), $$; exec @ARGV or exit 127' "$sig" "$@"; }
 if perl -MPOSIX -e 1 2> /dev/null; then
     for sig in INT TERM; do
