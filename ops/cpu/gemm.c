@@ -18,8 +18,6 @@ static int min_int(int a, int b) { return a < b ? a : b; }
 static int max_int(int a, int b) { return a > b ? a : b; }
 static int ceil_div(int a, int b) { return (a + b - 1) / b; }
 
-/* 16-bit weight rows widened per transpose call (8 × MX_GEMM_KC_MAX floats of stack). */
-#define WIDEN_ROWS 8
 
 void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dstv, int width, int valid, int kc) {
     int rows = g->to_pairs ? (kc + 1) / 2 : kc;
@@ -69,16 +67,16 @@ static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_
     }
 }
 
-/* bf16 pairs, k-major: each row converted to kc/2 words of pairs, WIDEN_ROWS rows at a time,
+/* bf16 pairs, k-major: each row converted to kc/2 words of pairs, MX_GEMM_WIDEN_ROWS rows at a time,
  * then transposed as 32-bit words into dst[kp][width]. */
 static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
                             int total, int width, int k0, int kc) {
     enum { WORDS = MX_GEMM_KC_MAX / 2 };
-    uint32_t tmp[WIDEN_ROWS * WORDS];
+    uint32_t tmp[MX_GEMM_WIDEN_ROWS * WORDS];
     int kp = (kc + 1) / 2;
-    for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
-        int n = min_int(WIDEN_ROWS, valid - r0);
-        mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
+    for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
+        int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
+        mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(MX_GEMM_WIDEN_ROWS, total - r0 - n), k0, kc);
         for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
@@ -87,7 +85,7 @@ static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src,
 }
 
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
- * weights are widened WIDEN_ROWS rows at a time first, the next rows (of the `total` rows the
+ * weights are widened MX_GEMM_WIDEN_ROWS rows at a time first, the next rows (of the `total` rows the
  * matrix has from `first` on: into the next panel) fetched meanwhile. bf16 kernels:
  * pack_rows_pairs, or pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
 static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int total,
@@ -105,10 +103,10 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
     if (src.dtype == MX_F32)
         g->transpose(dst, (size_t)width, (const float *)src.data + base, ld, valid, kc);
     else {
-        float tmp[WIDEN_ROWS * MX_GEMM_KC_MAX];
-        for (int r0 = 0; r0 < valid; r0 += WIDEN_ROWS) {
-            int n = min_int(WIDEN_ROWS, valid - r0);
-            mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(WIDEN_ROWS, total - r0 - n), k0, kc);
+        float tmp[MX_GEMM_WIDEN_ROWS * MX_GEMM_KC_MAX];
+        for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
+            int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
+            mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(MX_GEMM_WIDEN_ROWS, total - r0 - n), k0, kc);
             for (int i = 0; i < n; i++)
                 g->widen(tmp + (size_t)i * MX_GEMM_KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
             g->transpose(dst + r0, (size_t)width, tmp, MX_GEMM_KC_MAX, n, kc);
@@ -432,10 +430,12 @@ size_t mx_gemm_a_panels_floats(const mx_gemm_kernel *g, const mx_gemm_problem *p
     return cached_block_offset(g, g->mr, p->M, kc_max, ceil_div(p->K, kc_max));
 }
 
-const float *mx_gemm_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst) {
+const float *mx_gemm_cached_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
+    return p->M > 0 && p->K > 0 ? pack_weight_once(c, g, p, 0, k_block_length(p)) : NULL;
+}
+
+const float *mx_gemm_pack_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst) {
     if (p->M <= 0 || p->K <= 0) return NULL;
-    const float *cached = pack_weight_once(c, g, p, 0, k_block_length(p));
-    if (cached || !dst) return cached;
     weight_fill f = {.g = g, .p = p, .pack = p->pack_a, .dst = dst, .width = g->mr, .rows = p->M,
                      .kc_max = k_block_length(p)};
     fill_blocks(c, &f, 0);

@@ -42,6 +42,9 @@ typedef struct mx_gemm_kernel {
     int pair_align, a_rows;
 } mx_gemm_kernel;
 
+/* Weight rows widened (or gathered, conv) before one packing transpose: MX_GEMM_WIDEN_ROWS ×
+ * MX_GEMM_KC_MAX floats of the packers' stack. */
+#define MX_GEMM_WIDEN_ROWS 8
 /* Widest panel (MR or NR) of any kernel: bounds the packers' stack buffers. */
 #define MX_GEMM_PANEL_MAX 32
 /* Longest K block the engine packs; also bounds the packers' row buffers. Each thread keeps
@@ -121,10 +124,10 @@ static inline size_t mx_gemm_panel_words(const mx_gemm_kernel *g, int kc) {
 
 /* A's panels of every K block, for a caller that runs one problem over many B (conv2d's blocks
  * of output rows; set problem.a_panels): the context's cached ones for a weight it holds or
- * takes now, else packed by all threads into dst (mx_gemm_a_panels_floats of them; NULL dst:
- * returns NULL). */
+ * takes now (else NULL), or packed by all threads into dst (mx_gemm_a_panels_floats of them). */
+const float *mx_gemm_cached_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);
 size_t mx_gemm_a_panels_floats(const mx_gemm_kernel *g, const mx_gemm_problem *p);
-const float *mx_gemm_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst);
+const float *mx_gemm_pack_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst);
 
 /* Returns -1 (and writes nothing) when no memory for the packed panels could be had. */
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);

@@ -18,12 +18,8 @@
 /* Bound of the band (all batch items): at least one output row's input rows are prepared, so
  * a block is smaller only for images of more than BAND_BYTES_MAX / (kh · channels · 4) columns. */
 #define BAND_BYTES_MAX ((size_t)8 << 20)
-/* Weight values widened per call of the kernel's widen when gathering a row of A. */
-#define WIDEN_MAX 2304
 /* Band channels (all their rows) per task of the band's preparation. */
 #define BAND_TASK_CHANS 16
-/* Rows of A gathered before a transpose (the same as gemm.c's WIDEN_ROWS). */
-#define GATHER_ROWS 8
 
 static int min_int(int a, int b) { return a < b ? a : b; }
 static int max_int(int a, int b) { return a > b ? a : b; }
@@ -91,8 +87,8 @@ static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float 
 void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int rows,
                          int k0, int kc) {
     enum { KC = MX_GEMM_KC_MAX };
-    float tmp[GATHER_ROWS * KC];
-    uint32_t words_tmp[GATHER_ROWS * KC / 2];
+    float tmp[MX_GEMM_WIDEN_ROWS * KC];
+    uint32_t words_tmp[MX_GEMM_WIDEN_ROWS * KC / 2];
     int valid = min_int(rows, p->M - first), kp = (kc + 1) / 2;
     size_t words = mx_gemm_panel_words(g, kc);
     uint32_t *dst = dstv;
@@ -100,10 +96,10 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
      * (into the next panel's rows at the end) */
     int taps = p->kh * p->kw, group = p->group_words * k_per_word(g), c0 = k0 / (group * taps) * group;
     int run = max_int(0, min_int(group, p->Cin - c0)) * taps;
-    for (int r0 = 0; r0 < valid; r0 += GATHER_ROWS) {
-        int n = min_int(GATHER_ROWS, valid - r0);
+    for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
+        int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
         mx_gemm_prefetch_rows(p->a_mat, (size_t)p->Cin * taps, first + r0 + n,
-                              min_int(GATHER_ROWS, p->M - first - r0 - n), c0 * taps, run);
+                              min_int(MX_GEMM_WIDEN_ROWS, p->M - first - r0 - n), c0 * taps, run);
         for (int i = 0; i < n; i++) weight_row(p, g, tmp + (size_t)i * KC, first + r0 + i, k0, kc);
         if (!g->to_pairs) {
             g->transpose((float *)dstv + r0, (size_t)rows, tmp, KC, n, kc);
@@ -297,7 +293,8 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     /* several blocks of output rows run one problem each: A (the weights) packed once for all
      * of them, unless the context's cache holds it (else every block repacked it: 64 times
      * for a 512×512 VAE conv) */
-    if (rows < Ho && !mx_gemm_a_panels(c, g, &p, NULL)) a_floats = mx_gemm_a_panels_floats(g, &p);
+    const float *cached_a = rows < Ho ? mx_gemm_cached_a_panels(c, g, &p) : NULL;
+    if (rows < Ho && !cached_a) a_floats = mx_gemm_a_panels_floats(g, &p);
     a_floats += a_floats & 1; /* the doubles after them stay 8-byte aligned */
     mx_scratch s;
     float *mem = mx_scratch_take(c, a_floats * sizeof(float) + nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
@@ -305,7 +302,7 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     double *secs = mem ? (double *)(void *)(mem + a_floats) : NULL;
     band_job j = {.g = g, .x = x, .B = B, .band = direct || !mem ? NULL : (uint32_t *)(void *)(secs + nsecs), .Cin = Cin,
                   .H = H, .W = W, .pad = pad, .chans = chans, .width = width, .secs = nsecs ? secs : NULL};
-    if (rows < Ho && mem) p.a_panels = mx_gemm_a_panels(c, g, &p, a_floats ? mem : NULL);
+    p.a_panels = a_floats && mem ? mx_gemm_pack_a_panels(c, g, &p, mem) : cached_a;
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
         prepare_band(c, &j, &p, oy0, min_int(rows, Ho - oy0), B);
         p.C = y + (size_t)oy0 * Wo;
