@@ -13,19 +13,21 @@ set -u
 B=${GPU_CHECK_BIN:-build-cuda/gpu}
 O=${GPU_CHECK_OUT:-gpu-check-out}
 mkdir -p "$O"
-LOG="$O/log.txt"
+LOG=${GPU_CHECK_LOG:-$O/log.txt} # a device run points it into the folder that comes back
 W="$O/sd15_fast.mxw"
 MESH=tests/data/assets/spot/spot_triangulated.obj
 PROMPT="a cow with brown and white patches"
 SAN=${COMPUTE_SANITIZER:-/usr/local/cuda/bin/compute-sanitizer}
 failed=0
 say() { printf '\n==== %s (%s)\n' "$*" "$(date -u +%H:%M:%S)" | tee -a "$LOG"; }
-# run NAME CMD...: runs CMD with its output in the log; counts a failure; prints its wall time.
+# run NAME SECONDS CMD...: runs CMD (killed after SECONDS: one hung step must not take the whole
+# device call) with its output in the log; counts a failure; prints its wall time.
 run() {
     name=$1
-    shift
+    limit=$2
+    shift 2
     t0=$(date +%s.%N)
-    "$@" >>"$LOG" 2>&1
+    timeout "$limit" "$@" >>"$LOG" 2>&1
     rc=$?
     t1=$(date +%s.%N)
     printf '%-58s rc=%d  %.1f s\n' "$name" "$rc" "$(echo "$t1 - $t0" | bc)" | tee -a "$LOG"
@@ -39,61 +41,63 @@ stages() { # report.json -> its stage and work times, one line each
 : >"$LOG"
 if [ ! -x "$B/matex" ]; then
     say "no prebuilt binaries in $B: make cuda"
-    run "make cuda" make -j"$(nproc)" cuda || exit 1
+    run "make cuda" 600 make -j"$(nproc)" cuda || exit 1
     B=build-cuda
 fi
 M="$B/matex"
 [ -d "$B/data" ] && export MATEX_TESTDATA="$B/data" # the goldens packed beside the binaries
 
 say "GPU"
-run "nvidia-smi" nvidia-smi
+run "nvidia-smi" 30 nvidia-smi
 nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv | tee -a "$LOG"
 "$M" --version | tee -a "$LOG"
 
-say "make test-cuda (op tests, network goldens, tiny pipelines)"
-run "test-cuda" env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 sh tests/cuda/run.sh "$B/tests/cuda/test_cuda_ops" \
-    "$B"/tests/test_nn_*
+say "make test-cuda (op tests, network goldens, tiny pipelines; MATEX_CUDA_SYNC=1 names a faulting op)"
+run "test-cuda" 180 env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh \
+    "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
 grep -E "FAIL|SKIP|rel_l2=.*FAIL|device|not TESTED|all checks" "$LOG" | sort | uniq -c | sort -rn | head -40
 
 say "compute-sanitizer memcheck: tiny pipeline"
-run "memcheck tiny pipeline" env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck --error-exitcode 99 \
+run "memcheck tiny pipeline" 120 env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck --error-exitcode 99 \
     "$B/tests/test_nn_pipeline"
 
 say "SD1.5-size random weights (fp16, with LCM-LoRA and TAESD)"
-run "make_sd15_weights --fast" sh tools/make_sd15_weights.sh "$M" "$W" --fast || exit 1
+run "make_sd15_weights --fast" 180 sh tools/make_sd15_weights.sh "$M" "$W" --fast || exit 1
 
-say "compute-sanitizer memcheck: SD1.5-size networks"
-CN_IN="${MATEX_TESTDATA:-../shared}/golden/sd15_controlnet/inputs.safetensors" # 2 MB: carry it
-if [ -f "$CN_IN" ]; then
-    run "memcheck one UNet call" "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net unet --device cuda \
-        --weights "$W" --inputs "$CN_IN" --out "$O/unet_out.safetensors"
-    run "memcheck one ControlNet call" "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net controlnet \
-        --device cuda --weights "$W" --prefix controlnet_depth. --inputs "$CN_IN" --out "$O/cn_out.safetensors"
-else
-    echo "NOT RUN: the UNet and ControlNet calls need golden/sd15_controlnet/inputs.safetensors (carry it)" | tee -a "$LOG"
-    failed=$((failed + 1))
-fi
-run "memcheck guided steps, two ControlNets (texture 2 views, 1 step)" "$SAN" --tool memcheck --error-exitcode 99 \
-    "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --views 2 --steps 1 --texture-size 512 \
-    --render-size 512 -o "$O/memcheck_step" --force
-
+# The timed runs and the parity first, the slow SD1.5-size memchecks last: a device call that runs
+# out of time still brings back the speed and the PSNR.
 say "timed: default texture on the GPU (6 views, 10 steps, 1024^2)"
-run "texture --device cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --seed 1 -o "$O/gpu_default" --force &&
-    stages "$O/gpu_default/report.json"
+run "texture --device cuda" 120 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --seed 1 \
+    -o "$O/gpu_default" --force && stages "$O/gpu_default/report.json"
 say "timed: texture --fast on the GPU"
-run "texture --fast --device cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --fast --seed 1 \
+run "texture --fast --device cuda" 60 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --fast --seed 1 \
     -o "$O/gpu_fast" --force && stages "$O/gpu_fast/report.json"
 
 say "same seed, CPU (fp32) vs GPU: PSNR of the textures (2 views, 4 steps, 512^2 texture)"
 small="--seed 7 --views 2 --steps 4 --texture-size 512 --render-size 512"
 # shellcheck disable=SC2086
-run "texture small, cuda" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda $small -o "$O/par_gpu" --force
+run "texture small, cuda" 60 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda $small -o "$O/par_gpu" --force
 # shellcheck disable=SC2086
-run "texture small, cpu fp32" "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cpu --precision fp32 $small \
-    -o "$O/par_cpu" --force
+run "texture small, cpu fp32" 240 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cpu --precision fp32 \
+    $small -o "$O/par_cpu" --force
 [ -f "$O/par_gpu/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
-    run "psnr cpu vs gpu (goal >= 40 dB)" "$M" info "$O/par_cpu/texture.png" --compare "$O/par_gpu/texture.png" &&
+    run "psnr cpu vs gpu (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" --compare "$O/par_gpu/texture.png" &&
     tail -1 "$LOG"
+
+say "compute-sanitizer memcheck: SD1.5-size networks"
+CN_IN="${MATEX_TESTDATA:-../shared}/golden/sd15_controlnet/inputs.safetensors" # 2 MB: carry it
+if [ -f "$CN_IN" ]; then
+    run "memcheck one UNet call" 180 "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net unet --device cuda \
+        --weights "$W" --inputs "$CN_IN" --out "$O/unet_out.safetensors"
+    run "memcheck one ControlNet call" 120 "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net controlnet \
+        --device cuda --weights "$W" --prefix controlnet_depth. --inputs "$CN_IN" --out "$O/cn_out.safetensors"
+else
+    echo "NOT RUN: the UNet and ControlNet calls need golden/sd15_controlnet/inputs.safetensors (carry it)" | tee -a "$LOG"
+    failed=$((failed + 1))
+fi
+run "memcheck guided steps, two ControlNets (texture 2 views, 1 step)" 240 "$SAN" --tool memcheck \
+    --error-exitcode 99 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --views 2 --steps 1 \
+    --texture-size 512 --render-size 512 -o "$O/memcheck_step" --force
 
 rm -f "$W"
 say "gpu-check: $failed step(s) failed; the whole log: $LOG"
