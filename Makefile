@@ -11,7 +11,9 @@ WARN     = -Wall -Wextra -Werror
 CFLAGS   = -std=c11 $(OPT) -g $(WARN) -pthread -D_GNU_SOURCE -ffp-contract=off -MMD -MP
 CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR -I/usr/include/Imath
 LDLIBS   = -lm -lpthread
-IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lstdc++
+IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lz -lstdc++
+# matex-lite: the file adapter without OpenImageIO (PNG through zlib, pipeline/io/io_lite.c)
+LITE_IOLIBS = -lOpenMeshCore -lOpenEXR -lIex -lImath -lz -lstdc++
 
 SANITIZERS = address,undefined
 ifeq ($(SAN),1)
@@ -65,7 +67,9 @@ WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
 TEX_SRC     = $(wildcard pipeline/texture/*.c)
-IO_SRC      = $(wildcard pipeline/io/*.cpp)
+IO_SRC      = $(wildcard pipeline/io/*.cpp) pipeline/io/io_write.c
+LITE_IO_SRC = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/io_write.c pipeline/io/png_zlib.c \
+              pipeline/io/io_lite.c
 TOOL_SRC    = $(wildcard tools/cmd_*.c tools/cli_*.c)
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(patsubst %.cpp,$(BUILD)/%.o,$(1)))
@@ -289,6 +293,11 @@ arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TEST
 $(BUILD)/matex-core: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+# matex with the file adapter but without OpenImageIO (PNG only, through zlib): what `make
+# gpu-check-pack` carries to a GPU machine, which has none of OpenImageIO's ~250 libraries.
+$(BUILD)/matex-lite: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+                     $(call obj,$(LITE_IO_SRC)) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(LITE_IOLIBS) $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
 $(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
@@ -369,17 +378,23 @@ cuda-run-tests:
 	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 
 # `make gpu-check` on a machine with a GPU: the evidence of tools/gpu_check.sh (docs/cuda-notes.md).
-# `make gpu-check-pack` here first: stripped binaries and the small SD1.5 goldens into
-# $(CUDA_BUILD)/gpu (~35 MB), the one folder a device run carries; gpu-check then builds nothing.
+# `make gpu-check-pack` here first: stripped binaries (matex-lite as matex, with the few libraries
+# it needs that a GPU machine lacks, in lib/) and the small SD1.5 goldens into $(CUDA_BUILD)/gpu
+# (~40 MB) and its archive gpu.tar.gz (~20 MB): the one file a device run carries (a run carries at
+# most 64 MiB with the repository); gpu-check unpacks it and then builds nothing.
 GPU_PACK = $(CUDA_BUILD)/gpu
 MATEX_TESTDATA ?= ../shared
 GPU_PACK_DATA = golden/sd15_controlnet/inputs.safetensors golden/sd15_controlnet/config.json golden/sd15_vae golden/sd15_clip
 gpu-check:
 	sh tools/gpu_check.sh
 gpu-check-pack: cuda
-	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/data/golden/sd15_controlnet
-	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex
+	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 $(CUDA_BUILD)/matex-lite
+	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/lib $(GPU_PACK)/data/golden/sd15_controlnet
+	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex-lite
 	strip -o $(GPU_PACK)/tests/cuda/test_cuda_ops $(CUDA_BUILD)/tests/cuda/test_cuda_ops
 	for t in $(CUDA_NN_TESTS); do strip -o $(GPU_PACK)/tests/$$t $(CUDA_BUILD)/tests/$$t || exit 1; done
+	ldd $(CUDA_BUILD)/matex-lite | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \
+	    while read -r lib; do cp -L "$$lib" $(GPU_PACK)/lib/ || exit 1; done
 	for d in $(GPU_PACK_DATA); do cp -r $(MATEX_TESTDATA)/$$d $(GPU_PACK)/data/$$d || exit 1; done
-	du -sh $(GPU_PACK)
+	tar -C $(CUDA_BUILD) -czf $(GPU_PACK).tar.gz gpu
+	du -sh $(GPU_PACK) $(GPU_PACK).tar.gz

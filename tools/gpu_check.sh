@@ -30,7 +30,7 @@ run() {
     timeout "$limit" "$@" >>"$LOG" 2>&1
     rc=$?
     t1=$(date +%s.%N)
-    printf '%-58s rc=%d  %.1f s\n' "$name" "$rc" "$(echo "$t1 - $t0" | bc)" | tee -a "$LOG"
+    printf '%-58s rc=%d  %s s\n' "$name" "$rc" "$(awk "BEGIN { printf \"%.1f\", $t1 - $t0 }")" | tee -a "$LOG"
     [ $rc -eq 0 ] || failed=$((failed + 1))
     return $rc
 }
@@ -39,12 +39,16 @@ stages() { # report.json -> its stage and work times, one line each
 }
 
 : >"$LOG"
+if [ -f "$B.tar.gz" ]; then # the archive of make gpu-check-pack, what a device run carries
+    rm -rf "$B" && tar -C "$(dirname "$B")" -xzf "$B.tar.gz" || exit 1
+fi
 if [ ! -x "$B/matex" ]; then
     say "no prebuilt binaries in $B: make cuda"
     run "make cuda" 600 make -j"$(nproc)" cuda || exit 1
     B=build-cuda
 fi
 M="$B/matex"
+[ -d "$B/lib" ] && export LD_LIBRARY_PATH="$B/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" # matex-lite's libraries
 [ -d "$B/data" ] && export MATEX_TESTDATA="$B/data" # the goldens packed beside the binaries
 
 say "GPU"

@@ -1,11 +1,8 @@
-// Image adapter: OpenImageIO for reading (PNG/JPEG/TIFF/...) and PNG writing, OpenEXR for
-// float EXR output. No colour conversion anywhere: 8-bit code values map to [0,1] as is.
+// Image adapter: OpenImageIO for reading (PNG/JPEG/TIFF/...) and PNG writing (EXR output is
+// exrio.cpp). No colour conversion anywhere: 8-bit code values map to [0,1] as is.
 #include "io.h"
+#include "io_write.h"
 
-#include <OpenEXR/ImfChannelList.h>
-#include <OpenEXR/ImfFrameBuffer.h>
-#include <OpenEXR/ImfHeader.h>
-#include <OpenEXR/ImfOutputFile.h>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
@@ -289,38 +286,14 @@ int decode_memory(const char *name, const unsigned char *data, size_t len, const
     return read_opened(*in, what, out, st);
 }
 
-int check_writable(const mx_image *img, const char *what, mx_status *st) {
-    if (!img || !img->data || img->w <= 0 || img->h <= 0 || (img->c != 1 && img->c != 3 && img->c != 4))
-        return mx_fail(st, MX_EINPUT, "%s: nothing to write (empty image or %d channels)", what,
-                       img ? img->c : 0);
-    return 0;
-}
-
-std::vector<unsigned char> to_8bit(const mx_image *img) {
-    size_t n = (size_t)img->w * img->h * img->c;
-    std::vector<unsigned char> px(n);
-    for (size_t i = 0; i < n; i++) {
-        float v = img->data[i];
-        v = v != v ? 0.f : v < 0.f ? 0.f : v > 1.f ? 1.f : v;
-        px[i] = (unsigned char)lrintf(v * 255.f);
-    }
-    return px;
-}
-
 // Writes PNG through an already created output (file or memory proxy).
 int write_png_to(OIIO::ImageOutput &out, const std::string &name, const mx_image *img, mx_status *st) {
     OIIO::ImageSpec spec(img->w, img->h, img->c, OIIO::TypeDesc::UINT8);
-    std::vector<unsigned char> px = to_8bit(img);
-    if (!out.open(name, spec) || !out.write_image(OIIO::TypeDesc::UINT8, px.data()) || !out.close())
-        return mx_fail(st, MX_EIO, "%s: cannot write PNG: %s", name.c_str(), out.geterror().c_str());
-    return 0;
-}
-
-int rename_into_place(const std::string &tmp, const char *path, mx_status *st) {
-    if (std::rename(tmp.c_str(), path) != 0) {
-        std::remove(tmp.c_str());
-        return mx_fail(st, MX_EIO, "%s: cannot rename the temporary file into place", path);
-    }
+    unsigned char *px = mx_io_to_8bit(img);
+    if (!px) return mx_fail(st, MX_ENOMEM, "%s: out of memory", name.c_str());
+    bool ok = out.open(name, spec) && out.write_image(OIIO::TypeDesc::UINT8, px) && out.close();
+    free(px);
+    if (!ok) return mx_fail(st, MX_EIO, "%s: cannot write PNG: %s", name.c_str(), out.geterror().c_str());
     return 0;
 }
 
@@ -367,7 +340,7 @@ extern "C" int mx_io_decode_image(const void *data, size_t len, const char *what
 }
 
 extern "C" int mx_io_write_png(const char *path, const mx_image *img, mx_status *st) {
-    if (check_writable(img, path, st)) return -1;
+    if (mx_io_check_writable(img, path, st)) return -1;
     std::string tmp = std::string(path) + ".tmp";
     try {
         auto out = OIIO::ImageOutput::create("png");
@@ -380,13 +353,13 @@ extern "C" int mx_io_write_png(const char *path, const mx_image *img, mx_status 
         std::remove(tmp.c_str());
         return mx_fail(st, MX_EIO, "%s: cannot write PNG: %s", path, e.what());
     }
-    return rename_into_place(tmp, path, st);
+    return mx_io_rename_into_place(tmp.c_str(), path, st);
 }
 
 extern "C" int mx_io_encode_png(const mx_image *img, unsigned char **data, size_t *len, mx_status *st) {
     *data = nullptr;
     *len = 0;
-    if (check_writable(img, "PNG encoder", st)) return -1;
+    if (mx_io_check_writable(img, "PNG encoder", st)) return -1;
     try {
         std::vector<unsigned char> bytes;
         OIIO::Filesystem::IOVecOutput vec(bytes);
@@ -403,29 +376,4 @@ extern "C" int mx_io_encode_png(const mx_image *img, unsigned char **data, size_
     } catch (const std::exception &e) {
         return mx_fail(st, MX_EIO, "PNG encoder: %s", e.what());
     }
-}
-
-extern "C" int mx_io_write_exr(const char *path, const mx_image *img, mx_status *st) {
-    if (check_writable(img, path, st)) return -1;
-    static const char *const names[4][4] = {{"Y"}, {}, {"R", "G", "B"}, {"R", "G", "B", "A"}};
-    std::string tmp = std::string(path) + ".tmp";
-    try {
-        Imf::Header header(img->w, img->h);
-        header.compression() = Imf::ZIP_COMPRESSION;
-        Imf::FrameBuffer fb;
-        size_t xs = sizeof(float) * img->c, ys = xs * img->w;
-        for (int k = 0; k < img->c; k++) {
-            header.channels().insert(names[img->c - 1][k], Imf::Channel(Imf::FLOAT));
-            fb.insert(names[img->c - 1][k], Imf::Slice(Imf::FLOAT, (char *)(img->data + k), xs, ys));
-        }
-        {
-            Imf::OutputFile file(tmp.c_str(), header);
-            file.setFrameBuffer(fb);
-            file.writePixels(img->h);
-        }
-    } catch (const std::exception &e) {
-        std::remove(tmp.c_str());
-        return mx_fail(st, MX_EIO, "%s: cannot write EXR: %s", path, e.what());
-    }
-    return rename_into_place(tmp, path, st);
 }

@@ -1,0 +1,232 @@
+/* 8-bit PNG on zlib (png_zlib.h). The format: an 8-byte signature, then chunks of
+ * [length][type][data][CRC-32 of type+data], IHDR first, IDAT holding one zlib stream of the
+ * filtered rows (each row: a filter byte, then w * channels bytes), IEND last. */
+#include "png_zlib.h"
+
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zlib.h>
+
+#include "io_write.h"
+
+enum { MAX_SIDE = 16384 }; /* as the OpenImageIO adapter: larger images are refused */
+
+static const unsigned char SIGNATURE[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+
+static uint32_t be32(const unsigned char *p) {
+    return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+}
+
+static void put_be32(unsigned char *p, uint32_t v) {
+    p[0] = (unsigned char)(v >> 24);
+    p[1] = (unsigned char)(v >> 16);
+    p[2] = (unsigned char)(v >> 8);
+    p[3] = (unsigned char)v;
+}
+
+/* ---- decoding ---- */
+
+typedef struct {
+    uint32_t w, h;
+    int channels; /* in the file: 1, 2, 3 or 4 */
+} png_header;
+
+static int parse_ihdr(const unsigned char *d, size_t len, const char *what, png_header *hd, mx_status *st) {
+    static const int channels_of_type[7] = {1, 0, 3, 0, 2, 0, 4};
+    if (len != 13) return mx_fail(st, MX_EINPUT, "%s: PNG IHDR of %zu bytes (13 expected)", what, len);
+    hd->w = be32(d);
+    hd->h = be32(d + 4);
+    int depth = d[8], type = d[9], interlace = d[12];
+    if (hd->w == 0 || hd->h == 0 || hd->w > MAX_SIDE || hd->h > MAX_SIDE)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %ux%u (at most %d a side)", what, hd->w, hd->h,
+                       MAX_SIDE);
+    if (d[10] != 0 || d[11] != 0 || interlace > 1 || type > 6)
+        return mx_fail(st, MX_EINPUT, "%s: invalid PNG header", what);
+    hd->channels = channels_of_type[type];
+    if (depth != 8 || hd->channels == 0 || interlace)
+        return mx_fail(st, MX_EINPUT,
+                       "%s: a %d-bit PNG of colour type %d%s: this build (without OpenImageIO) reads only "
+                       "non-interlaced 8-bit grey, grey+alpha, RGB and RGBA; use the full build",
+                       what, depth, type, interlace ? ", interlaced" : "");
+    return 0;
+}
+
+/* Walks the chunks, checking each length and CRC; fills hd and collects the IDAT payload. */
+static int read_chunks(const unsigned char *p, size_t n, const char *what, png_header *hd, unsigned char **idat,
+                       size_t *idat_len, mx_status *st) {
+    int have_header = 0;
+    *idat = NULL;
+    *idat_len = 0;
+    for (size_t pos = 8;;) { /* other chunks (text, gamma, a suggested palette) are skipped */
+        if (n - pos < 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk)", what);
+        size_t len = be32(p + pos);
+        if (len > n - pos - 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG chunk at byte %zu", what, pos);
+        const unsigned char *type = p + pos + 4, *data = p + pos + 8;
+        if (crc32(0L, type, (uInt)(len + 4)) != be32(data + len))
+            return mx_fail(st, MX_EINPUT, "%s: corrupt PNG chunk '%.4s' at byte %zu (CRC mismatch)", what,
+                           (const char *)type, pos);
+        if (!have_header && memcmp(type, "IHDR", 4))
+            return mx_fail(st, MX_EINPUT, "%s: PNG without IHDR first", what);
+        if (!memcmp(type, "IHDR", 4)) {
+            if (have_header++) return mx_fail(st, MX_EINPUT, "%s: PNG with two IHDR chunks", what);
+            if (parse_ihdr(data, len, what, hd, st)) return -1;
+        } else if (!memcmp(type, "IDAT", 4)) {
+            unsigned char *grown = realloc(*idat, *idat_len + len + 1);
+            if (!grown) return mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
+            *idat = grown;
+            memcpy(*idat + *idat_len, data, len);
+            *idat_len += len;
+        } else if (!memcmp(type, "IEND", 4)) {
+            return *idat_len ? 0 : mx_fail(st, MX_EINPUT, "%s: PNG without image data", what);
+        }
+        pos += 12 + len;
+    }
+}
+
+/* Inflates the zlib stream into exactly `size` bytes: a stream that ends early, runs over or is
+ * damaged is an error. */
+static int inflate_exact(const unsigned char *src, size_t src_len, unsigned char *dst, size_t size, const char *what,
+                         mx_status *st) {
+    z_stream z;
+    memset(&z, 0, sizeof z);
+    if (inflateInit(&z) != Z_OK) return mx_fail(st, MX_ENOMEM, "%s: out of memory (zlib)", what);
+    z.next_in = (Bytef *)src;
+    z.avail_in = (uInt)src_len;
+    z.next_out = dst;
+    z.avail_out = (uInt)size;
+    int rc = inflate(&z, Z_FINISH);
+    size_t out = z.total_out;
+    inflateEnd(&z);
+    if (rc != Z_STREAM_END || out != size)
+        return mx_fail(st, MX_EINPUT, "%s: PNG image data %s (%zu of %zu bytes)", what,
+                       rc == Z_STREAM_END || rc == Z_BUF_ERROR ? "of the wrong size" : "damaged", out, size);
+    return 0;
+}
+
+static int paeth(int a, int b, int c) {
+    int p = a + b - c, pa = abs(p - a), pb = abs(p - b), pc = abs(p - c);
+    return pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+}
+
+/* Undoes the per-row filters in place; rows[y] = filter byte + stride bytes. bpp = bytes per pixel. */
+static int unfilter(unsigned char *rows, uint32_t h, size_t stride, int bpp, const char *what, mx_status *st) {
+    const unsigned char *prev = NULL;
+    for (uint32_t y = 0; y < h; y++) {
+        unsigned char *row = rows + y * (stride + 1), filter = row[0], *px = row + 1;
+        if (filter > 4) return mx_fail(st, MX_EINPUT, "%s: PNG row %u has unknown filter %d", what, y, filter);
+        for (size_t i = 0; i < stride; i++) {
+            int a = i >= (size_t)bpp ? px[i - bpp] : 0, b = prev ? prev[i] : 0;
+            int c = prev && i >= (size_t)bpp ? prev[i - bpp] : 0;
+            int predicted = filter == 1 ? a : filter == 2 ? b : filter == 3 ? (a + b) / 2 : filter == 4 ? paeth(a, b, c) : 0;
+            px[i] = (unsigned char)(px[i] + predicted);
+        }
+        prev = px;
+    }
+    return 0;
+}
+
+/* 8-bit rows to float values; grey+alpha widens to RGBA. */
+static int to_image(const unsigned char *rows, const png_header *hd, const char *what, mx_image *out, mx_status *st) {
+    int cin = hd->channels, cout = cin == 2 ? 4 : cin;
+    size_t stride = (size_t)hd->w * cin;
+    float *data = malloc((size_t)hd->w * hd->h * cout * sizeof *data);
+    if (!data) return mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
+    for (uint32_t y = 0; y < hd->h; y++) {
+        const unsigned char *px = rows + y * (stride + 1) + 1;
+        float *dst = data + (size_t)y * hd->w * cout;
+        for (uint32_t x = 0; x < hd->w; x++, px += cin, dst += cout) {
+            if (cin == 2) {
+                dst[0] = dst[1] = dst[2] = px[0] / 255.f;
+                dst[3] = px[1] / 255.f;
+            } else {
+                for (int k = 0; k < cin; k++) dst[k] = px[k] / 255.f;
+            }
+        }
+    }
+    out->w = (int)hd->w;
+    out->h = (int)hd->h;
+    out->c = cout;
+    out->data = data;
+    return 0;
+}
+
+int mx_png_decode(const void *data, size_t len, const char *what, mx_image *out, mx_status *st) {
+    memset(out, 0, sizeof *out);
+    const unsigned char *p = data;
+    if (len < 8 || memcmp(p, SIGNATURE, 8)) return mx_fail(st, MX_EINPUT, "%s: not a PNG file", what);
+    png_header hd = {0, 0, 0};
+    unsigned char *idat, *rows = NULL;
+    size_t idat_len;
+    int rc = read_chunks(p, len, what, &hd, &idat, &idat_len, st);
+    size_t stride = (size_t)hd.w * hd.channels, size = rc ? 0 : (stride + 1) * hd.h;
+    if (!rc && !(rows = malloc(size))) rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
+    if (!rc) rc = inflate_exact(idat, idat_len, rows, size, what, st);
+    if (!rc) rc = unfilter(rows, hd.h, stride, hd.channels, what, st);
+    if (!rc) rc = to_image(rows, &hd, what, out, st);
+    free(idat);
+    free(rows);
+    return rc;
+}
+
+/* ---- encoding ---- */
+
+/* Appends one chunk (length, type, data, CRC) at *pos. */
+static void put_chunk(unsigned char *buf, size_t *pos, const char *type, const unsigned char *data, size_t len) {
+    unsigned char *c = buf + *pos;
+    put_be32(c, (uint32_t)len);
+    memcpy(c + 4, type, 4);
+    if (len && data != c + 8) memcpy(c + 8, data, len); /* IDAT is compressed in place */
+    put_be32(c + 8 + len, (uint32_t)crc32(0L, c + 4, (uInt)(len + 4)));
+    *pos += 12 + len;
+}
+
+/* The filtered rows: each row with the Sub filter (each byte minus the one a pixel before), which
+ * compresses smooth textures well at no search cost. */
+static unsigned char *filtered_rows(const unsigned char *px, const mx_image *img) {
+    size_t stride = (size_t)img->w * img->c;
+    unsigned char *rows = malloc((stride + 1) * img->h);
+    if (!rows) return NULL;
+    for (int y = 0; y < img->h; y++) {
+        const unsigned char *src = px + (size_t)y * stride;
+        unsigned char *dst = rows + (size_t)y * (stride + 1);
+        dst[0] = 1;
+        for (size_t i = 0; i < stride; i++) dst[1 + i] = (unsigned char)(src[i] - (i >= (size_t)img->c ? src[i - img->c] : 0));
+    }
+    return rows;
+}
+
+int mx_png_encode(const mx_image *img, unsigned char **data, size_t *len, mx_status *st) {
+    static const unsigned char colour_type[5] = {0, 0, 0, 2, 6};
+    *data = NULL;
+    *len = 0;
+    if (mx_io_check_writable(img, "PNG encoder", st)) return -1;
+    if (img->w > MAX_SIDE || img->h > MAX_SIDE)
+        return mx_fail(st, MX_EINPUT, "PNG encoder: image of %dx%d (at most %d a side)", img->w, img->h, MAX_SIDE);
+    unsigned char *px = mx_io_to_8bit(img), *rows = px ? filtered_rows(px, img) : NULL;
+    size_t raw = ((size_t)img->w * img->c + 1) * img->h;
+    uLongf packed = compressBound((uLong)raw);
+    unsigned char *buf = rows ? malloc(8 + 25 + 12 + packed + 12) : NULL, *z = buf ? buf + 8 + 25 + 8 : NULL;
+    int rc = buf ? 0 : mx_fail(st, MX_ENOMEM, "PNG encoder: out of memory");
+    if (!rc && compress2(z, &packed, rows, (uLong)raw, 6) != Z_OK)
+        rc = mx_fail(st, MX_EINTERNAL, "PNG encoder: zlib failed");
+    if (!rc) {
+        unsigned char ihdr[13] = {0};
+        put_be32(ihdr, (uint32_t)img->w);
+        put_be32(ihdr + 4, (uint32_t)img->h);
+        ihdr[8] = 8;
+        ihdr[9] = colour_type[img->c];
+        size_t pos = 8;
+        memcpy(buf, SIGNATURE, 8);
+        put_chunk(buf, &pos, "IHDR", ihdr, sizeof ihdr);
+        put_chunk(buf, &pos, "IDAT", z, packed);
+        put_chunk(buf, &pos, "IEND", NULL, 0);
+        *data = buf;
+        *len = pos;
+        buf = NULL;
+    }
+    free(px);
+    free(rows);
+    free(buf);
+    return rc;
+}

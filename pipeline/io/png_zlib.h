@@ -1,0 +1,21 @@
+/* An 8-bit PNG codec on zlib alone, for the build without OpenImageIO (io_lite.c, `matex-lite`,
+ * which the GPU check carries to machines that lack OpenImageIO's hundreds of libraries).
+ * Decodes non-interlaced 8-bit grey, grey+alpha (widened to RGBA), RGB and RGBA: every PNG this
+ * project writes and what most tools write; palette, 16-bit and interlaced files are refused with
+ * a message that names the full build. Encodes 1, 3 or 4 channels. Every length, CRC and size in
+ * the file is checked before use. */
+#ifndef MX_PNG_ZLIB_H
+#define MX_PNG_ZLIB_H
+
+#include <stddef.h>
+
+#include "../../runtime/status.h"
+#include "../geom/mesh_types.h"
+
+/* The PNG in data[0..len) as float [0,1] values; `what` names it in errors. */
+int mx_png_decode(const void *data, size_t len, const char *what, mx_image *out, mx_status *st);
+
+/* img as an 8-bit PNG in a malloc'ed buffer (*data, *len). */
+int mx_png_encode(const mx_image *img, unsigned char **data, size_t *len, mx_status *st);
+
+#endif
