@@ -312,6 +312,11 @@ BENCH_BINS = $(patsubst tools/%.c,$(BUILD)/tools/%,$(BENCH_SRC))
 $(BUILD)/tools/bench_%: $(BUILD)/tools/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ -lopenblas $(IOLIBS) $(LDLIBS)
 
+# The CUDA benchmark needs no file I/O adapter: it links io_none.o and runs where OpenImageIO is not.
+$(BUILD)/tools/bench_cuda: $(BUILD)/tools/bench_cuda.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+                           $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+
 bench: all $(BENCH_BINS)
 	sh tools/bench.sh $(BUILD)
 
@@ -370,7 +375,7 @@ endif
 .PHONY: test-cuda cuda-all cuda-run-tests gpu-check gpu-check-pack
 cuda:
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
-cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
+cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)) $(BUILD)/tools/bench_cuda
 test-cuda: cuda
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-run-tests
 cuda-run-tests:
@@ -391,6 +396,7 @@ gpu-check-pack: cuda
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 $(CUDA_BUILD)/matex-lite
 	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/lib $(GPU_PACK)/data/golden/sd15_controlnet
 	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex-lite
+	strip -o $(GPU_PACK)/bench_cuda $(CUDA_BUILD)/tools/bench_cuda
 	strip -o $(GPU_PACK)/tests/cuda/test_cuda_ops $(CUDA_BUILD)/tests/cuda/test_cuda_ops
 	for t in $(CUDA_NN_TESTS); do strip -o $(GPU_PACK)/tests/$$t $(CUDA_BUILD)/tests/$$t || exit 1; done
 	ldd $(CUDA_BUILD)/matex-lite | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \

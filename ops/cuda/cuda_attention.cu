@@ -224,7 +224,7 @@ int mx_cuda_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k
     if (q_stride < H * D || kv_stride < H * D || out_stride < H * D)
         return mx_fail(st, MX_EINPUT, "cuda attention: a row stride is below heads x head size (%d)", H * D);
     attn_args a = {out, q, k, v, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal, scale};
-    if ((long long)Tk * D < (1LL << 31) && (long long)Tq * D < (1LL << 31)) {
+    if (!c->attn_fp32 && (long long)Tk * D < (1LL << 31) && (long long)Tq * D < (1LL << 31)) { /* fp32 stays fp32 */
         int rc = attention_tc(c, a, B, st);
         if (rc <= 0) return rc;
     }

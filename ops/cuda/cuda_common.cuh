@@ -29,6 +29,7 @@ struct mx_cuda_ctx {
     size_t staging_bytes;        /* of each half; 0: no staging, plain copies */
     int staging_next;
     unsigned long long half_products; /* GEMMs run on fp16/bf16 inputs (mx_cuda_half_products) */
+    int attn_fp32; /* the last linear had fp32 weights: attention (fed by it) in fp32 */
     struct mx_cuda_gemm_plans *gemm_plans; /* cuBLASLt plans by shape (cuda_gemm.cu), made on first use */
 };
 

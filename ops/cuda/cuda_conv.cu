@@ -61,32 +61,34 @@ static long long tile_pixels(const mx_cuda_ctx *c, long long kc, size_t esize, i
     return pc >= 64 ? pc / 64 * 64 : pc;
 }
 
-/* The whole batch: per tile of output pixels, one im2col launch over every item and one
- * strided-batched GEMM whose weight operand has batch stride 0 (the same w for every item, read
- * once from DRAM: the SD weights of one conv fit the L2). */
+/* Item by item, tiles sized for one item: item b's GEMMs are the same calls (shape, plan, algorithm)
+ * whatever B, so its output is the same bits alone or in a batch. Per tile: im2col, one GEMM. */
 static int conv_batched(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr w, int Cout, const conv_shape *s,
                         mx_status *st) {
     long long P = (long long)s->Ho * s->Wo, kc = (long long)s->Cin * s->kh * s->kw;
     long long in_plane = (long long)s->Cin * s->H * s->W, out_plane = (long long)Cout * P;
     size_t esize = mx_dtype_size(w.dtype);
     int direct = s->kh == 1 && s->kw == 1 && s->stride == 1 && s->pad == 0;
-    if (direct && w.dtype == MX_F32) /* x_b is already the [Cin, P] matrix */
-        return mx_cuda_gemm_batched(c, w.dtype, 0, 0, (int)P, Cout, (int)kc, x, P, in_plane, w.data, kc, 0, y, P,
-                                    out_plane, B, "cuda conv2d", st);
-    long long pc = tile_pixels(c, kc, esize, B, P);
+    for (int b = 0; direct && w.dtype == MX_F32 && b < B; b++) /* x_b is already the [Cin, P] matrix */
+        if (mx_cuda_gemm_batched(c, w.dtype, 0, 0, (int)P, Cout, (int)kc, x + b * in_plane, P, 0, w.data, kc, 0,
+                                 y + b * out_plane, P, 0, 1, "cuda conv2d", st))
+            return -1;
+    if (direct && w.dtype == MX_F32) return 0;
+    long long pc = tile_pixels(c, kc, esize, 1, P);
     if (pc < 1)
         return mx_fail(st, MX_ENOMEM, "cuda conv2d: scratch too small for one im2col column (%lld bytes)",
-                       (long long)(kc * esize * B));
+                       (long long)(kc * esize));
     size_t mark = c->scratch_used;
-    void *col = mx_cuda_scratch(c, (size_t)(kc * pc * B) * esize, "cuda conv2d im2col tile", st);
+    void *col = mx_cuda_scratch(c, (size_t)(kc * pc) * esize, "cuda conv2d im2col tile", st);
     int rc = col ? 0 : -1;
-    for (long long p0 = 0; rc == 0 && p0 < P; p0 += pc) {
-        int n = (int)(P - p0 < pc ? P - p0 : pc);
-        rc = im2col_tile(c, col, w.dtype, x, B, s, p0, n, st);
-        if (rc == 0)
-            rc = mx_cuda_gemm_batched(c, w.dtype, 0, 0, n, Cout, (int)kc, col, n, kc * n, w.data, kc, 0, y + p0, P,
-                                      out_plane, B, "cuda conv2d", st);
-    }
+    for (int b = 0; rc == 0 && b < B; b++)
+        for (long long p0 = 0; rc == 0 && p0 < P; p0 += pc) {
+            int n = (int)(P - p0 < pc ? P - p0 : pc);
+            rc = im2col_tile(c, col, w.dtype, x + b * in_plane, 1, s, p0, n, st);
+            if (rc == 0)
+                rc = mx_cuda_gemm_batched(c, w.dtype, 0, 0, n, Cout, (int)kc, col, n, 0, w.data, kc, 0,
+                                          y + b * out_plane + p0, P, 0, 1, "cuda conv2d", st);
+        }
     c->scratch_used = mark;
     return rc;
 }

@@ -11,17 +11,18 @@ static cudaDataType_t cuda_type(mx_dtype dt) {
     return CUDA_R_32F;
 }
 
-/* Largest power of two (<= 256) that divides the address: cuBLASLt picks kernels by alignment. */
+/* Largest power of two (<= 16) that divides the address: cuBLASLt picks kernels by alignment. Capped:
+ * buffers of the 64-byte arena at 64/128/256 get one plan, not another algorithm (sum order). */
 static uint32_t pointer_alignment(const void *p) {
     uintptr_t a = (uintptr_t)p;
-    uint32_t al = 256;
+    uint32_t al = 16;
     while (al > 1 && (a & (al - 1))) al >>= 1;
     return al;
 }
 
 /* One matrix product's shape: what a plan depends on (the pointers only through their alignment). */
 typedef struct gemm_key {
-    int ab, transa, transb, m, n, k, batch;
+    int ab, transa, transb, m, n, k, batch, pin_n; /* pin_n > 0: the algorithm is the one for n = pin_n */
     long long lda, ldb, ldd, sa, sb, sd; /* leading dimensions, batch strides (elements) */
     uint32_t al_a, al_b, al_d;
 } gemm_key;
@@ -79,8 +80,9 @@ static int layout_make(cublasLtMatrixLayout_t *l, cudaDataType_t t, int rows, in
                : 0;
 }
 
-/* The heuristic's best algorithm for the plan's shape, within the context's workspace. */
-static int plan_algo(gemm_plan *p, mx_cuda_ctx *c, const char *what, mx_status *st) {
+/* The heuristic's best algorithm for layouts b and d, within the context's workspace. */
+static int plan_algo(gemm_plan *p, mx_cuda_ctx *c, cublasLtMatrixLayout_t b, cublasLtMatrixLayout_t d,
+                     const char *what, mx_status *st) {
     const gemm_key *k = &p->key;
     cublasLtMatmulPreference_t pref = NULL;
     cublasLtMatmulHeuristicResult_t h = {};
@@ -97,7 +99,7 @@ static int plan_algo(gemm_plan *p, mx_cuda_ctx *c, const char *what, mx_status *
                                                         sizeof k->al_d), what, "alignment C", st) ||
              lt_ok(cublasLtMatmulPreferenceSetAttribute(pref, CUBLASLT_MATMUL_PREF_MIN_ALIGNMENT_D_BYTES, &k->al_d,
                                                         sizeof k->al_d), what, "alignment D", st) ||
-             lt_ok(cublasLtMatmulAlgoGetHeuristic(c->lt, p->op, p->a, p->b, p->d, p->d, pref, 1, &h, &found), what,
+             lt_ok(cublasLtMatmulAlgoGetHeuristic(c->lt, p->op, p->a, b, d, d, pref, 1, &h, &found), what,
                    "heuristic", st)
                  ? -1
                  : 0;
@@ -122,8 +124,22 @@ static int plan_make(gemm_plan *p, mx_cuda_ctx *c, const gemm_key *k, const char
                     "layout A", st) ||
         layout_make(&p->b, t, k->transb ? k->n : k->k, k->transb ? k->k : k->n, k->ldb, k->batch, k->sb, what,
                     "layout B", st) ||
-        layout_make(&p->d, CUDA_R_32F, k->m, k->n, k->ldd, k->batch, k->sd, what, "layout D", st) ||
-        plan_algo(p, c, what, st)) {
+        layout_make(&p->d, CUDA_R_32F, k->m, k->n, k->ldd, k->batch, k->sd, what, "layout D", st)) {
+        gemm_plan_free(p);
+        return -1;
+    }
+    int rc = 1; /* pinned: the n = pin_n problem's algorithm, when it runs this shape */
+    if (k->pin_n && k->batch == 1) {
+        cublasLtMatrixLayout_t b = NULL, d = NULL;
+        cublasLtMatmulHeuristicResult_t r = {};
+        rc = layout_make(&b, t, k->transb ? k->pin_n : k->k, k->transb ? k->k : k->pin_n, k->ldb, 1, 0, what, "B", st) ||
+             layout_make(&d, CUDA_R_32F, k->m, k->pin_n, k->ldd, 1, 0, what, "D", st) || plan_algo(p, c, b, d, what, st) ||
+             cublasLtMatmulAlgoCheck(c->lt, p->op, p->a, p->b, p->d, p->d, &p->algo, &r) ||
+             r.workspaceSize > c->workspace_bytes;
+        if (d) cublasLtMatrixLayoutDestroy(d);
+        if (b) cublasLtMatrixLayoutDestroy(b);
+    }
+    if (rc && plan_algo(p, c, p->b, p->d, what, st)) {
         gemm_plan_free(p);
         return -1;
     }
@@ -168,11 +184,12 @@ static uint32_t batch_alignment(const void *p, long long stride, size_t elem, in
     return al;
 }
 
-int mx_cuda_gemm_batched(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
-                         long long lda, long long sa, const void *B, long long ldb, long long sb, float *D,
-                         long long ldd, long long sd, int batch, const char *what, mx_status *st) {
+static int gemm_run(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
+                    long long lda, long long sa, const void *B, long long ldb, long long sb, float *D, long long ldd,
+                    long long sd, int batch, int pin_n, const char *what, mx_status *st) {
     gemm_key key;
     memset(&key, 0, sizeof key);
+    key.pin_n = pin_n;
     size_t es = ab == MX_F32 ? 4 : 2;
     key.ab = (int)ab, key.transa = transa, key.transb = transb, key.m = m, key.n = n, key.k = k;
     key.batch = batch > 1 ? batch : 1;
@@ -195,8 +212,14 @@ int mx_cuda_gemm_batched(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, in
 
 int mx_cuda_gemm(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
                  long long lda, const void *B, long long ldb, float *D, long long ldd, const char *what,
-                 mx_status *st) {
-    return mx_cuda_gemm_batched(c, ab, transa, transb, m, n, k, A, lda, 0, B, ldb, 0, D, ldd, 0, 1, what, st);
+                 mx_status *st) { /* n (a linear's B·T rows) does not choose the algorithm: batch-independent */
+    return gemm_run(c, ab, transa, transb, m, n, k, A, lda, 0, B, ldb, 0, D, ldd, 0, 1, 1024, what, st);
+}
+
+int mx_cuda_gemm_batched(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, int m, int n, int k, const void *A,
+                         long long lda, long long sa, const void *B, long long ldb, long long sb, float *D,
+                         long long ldd, long long sd, int batch, const char *what, mx_status *st) {
+    return gemm_run(c, ab, transa, transb, m, n, k, A, lda, sa, B, ldb, sb, D, ldd, sd, batch, 0, what, st);
 }
 
 template <typename T> __device__ __forceinline__ T from_f32(float v);

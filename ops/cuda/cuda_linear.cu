@@ -36,6 +36,7 @@ int mx_cuda_linear(mx_cuda_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr 
     const long long dims[3] = {M, N, K};
     if (mx_cuda_check_dims("cuda linear", st, 3, dims) || mx_cuda_check_wdtype(w, "cuda linear weight", st))
         return -1;
+    c->attn_fp32 = w.dtype == MX_F32; /* the attention this linear feeds computes in its precision */
     int rc = w.dtype == MX_F32 ? mx_cuda_gemm(c, MX_F32, 1, 0, N, M, K, w.data, K, x, K, y, N, "cuda linear", st)
                                : linear_half(c, y, x, w, M, N, K, st);
     if (rc) return -1;
