@@ -140,10 +140,13 @@ static void test_conv2d(env *e, mx_dtype dt, int B, int Cin, int H, int W, int C
     free(want);
 }
 
-static void test_group_norm(env *e, int fuse_silu) {
-    const int B = 2, C = 12, HW = 37, G = 4;
+/* Groups of more than 4096 values run in several chunks per group (cuda_norm.cu): the larger
+ * shapes cover that, with a short last chunk. */
+static void test_group_norm(env *e, int B, int C, int HW, int G, int fuse_silu) {
     size_t n = (size_t)B * C * HW;
-    const char *name = fuse_silu ? "group_norm+silu fp16 affine" : "group_norm fp32 affine";
+    char name[96];
+    snprintf(name, sizeof name, "group_norm%s %dx%dx%d/%d", fuse_silu ? "+silu fp16 affine" : " fp32 affine", B, C, HW,
+             G);
     mx_dtype dt = fuse_silu ? MX_F16 : MX_F32;
     float *x = rnd(n, 31, -2, 3), *want = malloc(n * sizeof *want);
     test_weight g = make_weight(e, C, 32, dt), b = make_weight(e, C, 33, dt);
@@ -242,22 +245,39 @@ static void test_geglu(env *e) {
     free(want);
 }
 
-static void test_binary(env *e, mx_binop op) {
-    static const char *names[] = {"binary add broadcast", "binary sub broadcast", "binary mul broadcast"};
-    const int64_t as[4] = {2, 3, 1, 5}, bs[4] = {1, 3, 7, 1};
-    size_t na = 30, nb = 21, ny = 2 * 3 * 7 * 5;
-    float *a = rnd(na, 91, -1, 1), *b = rnd(nb, 92, -1, 1), *want = malloc(ny * sizeof *want);
-    e->cpu.k->binary(&e->cpu, op, want, a, as, b, bs, 4);
-    float *da = dev_copy(e, a, na * sizeof *a), *db = dev_copy(e, b, nb * sizeof *b);
+/* a op b of shapes as and bs (4 dims), a read from `offset` floats into its buffer (an offset of
+ * 1 takes the same-shape kernel off its 16-byte vector path). One IEEE operation per element: the
+ * results equal the CPU's exactly. */
+static void test_binary(env *e, mx_binop op, const int64_t *as, const int64_t *bs, int offset) {
+    static const char *ops[] = {"add", "sub", "mul"};
+    size_t na = 1, nb = 1, ny = 1;
+    for (int d = 0; d < 4; d++) {
+        na *= (size_t)as[d];
+        nb *= (size_t)bs[d];
+        ny *= (size_t)(as[d] > bs[d] ? as[d] : bs[d]);
+    }
+    char name[96];
+    snprintf(name, sizeof name, "binary %s %lldx%lldx%lldx%lld %s, offset %d", ops[op], (long long)as[0],
+             (long long)as[1], (long long)as[2], (long long)as[3], na == nb ? "same shape" : "broadcast", offset);
+    float *a = rnd(na + offset, 91, -1, 1), *b = rnd(nb, 92, -1, 1), *want = malloc(ny * sizeof *want);
+    e->cpu.k->binary(&e->cpu, op, want, a + offset, as, b, bs, 4);
+    float *da = dev_copy(e, a, (na + offset) * sizeof *a), *db = dev_copy(e, b, nb * sizeof *b);
     float *dy = dev_zero(e, ny * sizeof *dy);
-    if (da && db && dy && !gpu_ok(e, mx_cuda_binary(e->gpu, op, dy, da, as, db, bs, 4, &e->st), names[op]))
-        compare_dev(e, names[op], dy, want, ny, FP32_BOUND);
+    if (da && db && dy && !gpu_ok(e, mx_cuda_binary(e->gpu, op, dy, da + offset, as, db, bs, 4, &e->st), name))
+        compare_dev(e, name, dy, want, ny, 0.0);
     mx_cuda_free(da);
     mx_cuda_free(db);
     mx_cuda_free(dy);
     free(a);
     free(b);
     free(want);
+}
+
+static void test_binary_ops(env *e) {
+    static const int64_t as[4] = {2, 3, 1, 5}, bs[4] = {1, 3, 7, 1}, same[4] = {2, 3, 7, 97};
+    for (int op = MX_BIN_ADD; op <= MX_BIN_MUL; op++) test_binary(e, (mx_binop)op, as, bs, 0);
+    test_binary(e, MX_BIN_ADD, same, same, 0); /* 4074 values: 1018 vectors and a tail of 2 */
+    test_binary(e, MX_BIN_MUL, same, same, 1);
 }
 
 static void test_scale(env *e) {
@@ -375,8 +395,10 @@ static void test_small_scratch(env *e) {
 }
 
 static void test_norm_ops(env *e) {
-    test_group_norm(e, 0);
-    test_group_norm(e, 1);
+    test_group_norm(e, 2, 12, 37, 4, 0);
+    test_group_norm(e, 2, 12, 37, 4, 1);
+    test_group_norm(e, 2, 96, 9797, 32, 0); /* 29391 values a group: 8 chunks */
+    test_group_norm(e, 1, 64, 128 * 128, 32, 1);
     test_layer_norm(e);
 }
 
@@ -480,9 +502,7 @@ static void test_other_ops(env *e) {
     test_concat_one_side(e);
     test_activations(e);
     test_geglu(e);
-    test_binary(e, MX_BIN_ADD);
-    test_binary(e, MX_BIN_SUB);
-    test_binary(e, MX_BIN_MUL);
+    test_binary_ops(e);
     test_scale(e);
     test_upsample(e);
     test_concat(e);
