@@ -168,6 +168,7 @@ $(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_GEOM
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/test_io_%: $(BUILD)/tests/test_io_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/tests/test_io_png: $(BUILD)/pipeline/io/png_zlib.o # matex-lite's codec, against the full adapter
 $(BUILD)/tests/test_texture_%: $(BUILD)/tests/test_texture_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/test_tools_%: $(BUILD)/tests/test_tools_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)

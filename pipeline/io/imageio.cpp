@@ -267,8 +267,9 @@ int open_as(const char *format, const char *name, OIIO::Filesystem::IOProxy *pro
         std::string err = OIIO::geterror();
         return mx_fail(st, MX_EINPUT, "%s: unsupported image format: %s", what, err.c_str());
     }
-    OIIO::ImageSpec spec;
-    if ((proxy && !in->set_ioproxy(proxy)) || !in->open(name, spec)) {
+    OIIO::ImageSpec spec, config;
+    config.attribute("oiio:UnassociatedAlpha", 1); // code values as stored: no premultiplied colour
+    if ((proxy && !in->set_ioproxy(proxy)) || !in->open(name, spec, config)) {
         std::string err = in->geterror();
         in.reset();
         return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, err.c_str());
@@ -289,6 +290,7 @@ int decode_memory(const char *name, const unsigned char *data, size_t len, const
 // Writes PNG through an already created output (file or memory proxy).
 int write_png_to(OIIO::ImageOutput &out, const std::string &name, const mx_image *img, mx_status *st) {
     OIIO::ImageSpec spec(img->w, img->h, img->c, OIIO::TypeDesc::UINT8);
+    spec.attribute("oiio:UnassociatedAlpha", 1); // the values are written as given, never divided by alpha
     unsigned char *px = mx_io_to_8bit(img);
     if (!px) return mx_fail(st, MX_ENOMEM, "%s: out of memory", name.c_str());
     bool ok = out.open(name, spec) && out.write_image(OIIO::TypeDesc::UINT8, px) && out.close();

@@ -137,10 +137,10 @@ static int to_image(const unsigned char *rows, const png_header *hd, const char 
         float *dst = data + (size_t)y * hd->w * cout;
         for (uint32_t x = 0; x < hd->w; x++, px += cin, dst += cout) {
             if (cin == 2) {
-                dst[0] = dst[1] = dst[2] = px[0] / 255.f;
-                dst[3] = px[1] / 255.f;
+                dst[0] = dst[1] = dst[2] = px[0] * (1.0f / 255.0f);
+                dst[3] = px[1] * (1.0f / 255.0f);
             } else {
-                for (int k = 0; k < cin; k++) dst[k] = px[k] / 255.f;
+                for (int k = 0; k < cin; k++) dst[k] = px[k] * (1.0f / 255.0f);
             }
         }
     }
