@@ -370,7 +370,8 @@ $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB
 	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
 ifeq ($(CUDA),1)
-$(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): $(LIB_CUDA) # relinked when the kernels change
+$(BUILD)/matex $(BUILD)/matex-lite $(BUILD)/tools/bench_cuda $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): \
+    $(LIB_CUDA) # relinked when the kernels change
 endif
 
 .PHONY: test-cuda cuda-all cuda-run-tests gpu-check gpu-check-pack
