@@ -9,14 +9,11 @@
  *
  * Shared memory: Q tile [QPW*4][D], K tile [32][D+1] (the +1 keeps the lanes' rows on different
  * banks for the even D of SD: 40, 64, 80, 160, 512), V tile [32][D].
- * This fp32 kernel runs where the projections feeding the attention had fp32 weights
- * (c->attn_fp32: fp32 networks keep fp32 arithmetic). Otherwise the attention runs on tensor
- * cores: for head sizes up to 160 in one fused kernel (flash_mma_kernel, below); for larger heads
- * (the VAE's one head of 512) as q, k, v rounded to fp16 and packed per head, S = Q·Kᵀ and
- * O = P·V as strided-batched cuBLASLt products over the heads (fp32 accumulation, O written
- * straight into `out`), and between them a softmax kernel with fp32 statistics (max, sum) that
- * writes P in fp16. Its queries go in chunks whose score rows fit the scratch; when not even 16
- * fit, the fp32 kernel runs. */
+ * This fp32 kernel is the fallback; the default path is on tensor cores (below, attention_tc):
+ * q, k, v rounded to fp16 and packed per head, S = Q·Kᵀ and O = P·V as strided-batched cuBLASLt
+ * products over the heads (fp32 accumulation, O written straight into `out`), and between them a
+ * softmax kernel with fp32 statistics (max, sum) that writes P in fp16. Queries go in chunks whose
+ * score rows fit the scratch; when not even 16 fit, the fp32 kernel runs. */
 #include "cuda_common.cuh"
 
 #define ATTN_WARPS 4
@@ -121,164 +118,7 @@ template <int QPW, int DPL> static int attn_launch(mx_cuda_ctx *c, const attn_ar
     return mx_cuda_launched("cuda attention", st);
 }
 
-/* ---- tensor cores, fused: flash attention on mma.sync (fp16 operands, fp32 accumulators) ----
- *
- * The path for head sizes up to 160 (all of SD1.5's UNet and ControlNets, CLIP): a block of 4 warps
- * takes 64 queries of one (batch, head), each warp 16 of them. Keys and values stream through
- * shared memory in tiles of 64, converted to fp16 on the way in (V transposed, so both products
- * read their B operand as 32-bit pairs). Per tile a warp computes its 16 x 64 scores with
- * m16n8k16 products (the head dimension padded with zeros to DP, a multiple of 16), keeps them in
- * registers, updates the streaming softmax (running max and sum in fp32, exp2 of scores scaled by
- * scale·log2 e), and multiplies P (rounded to fp16, its accumulator fragments reused as the A
- * operand) by the value tile into its 16 x DP output accumulators. Nothing of size Tq x Tk is
- * written: the products read Q, K and V once per query block and write O once.
- * Fragment layouts (PTX ISA, mma.m16n8k16, g = lane / 4, t = lane % 4): A holds rows g and g + 8,
- * columns 2t, 2t+1 and 2t+8, 2t+9; B holds rows (k) 2t, 2t+1 and 2t+8, 2t+9 of column g; the
- * accumulator rows g and g + 8, columns 2t and 2t+1. Shared rows are padded by 8 halves, so the
- * 32 lanes' 32-bit loads fall on 32 different banks. */
-#define FA_WARPS 4
-#define FA_BQ (16 * FA_WARPS) /* queries per block */
-#define FA_BK 64              /* keys per tile */
-#define FA_MAX_D 160
-
-__device__ __forceinline__ void mma_16816(float c[4], const unsigned a[4], unsigned b0, unsigned b1) {
-    asm volatile("mma.sync.aligned.m16n8k16.row.col.f32.f16.f16.f32 {%0,%1,%2,%3}, {%4,%5,%6,%7}, {%8,%9}, "
-                 "{%0,%1,%2,%3};\n"
-                 : "+f"(c[0]), "+f"(c[1]), "+f"(c[2]), "+f"(c[3])
-                 : "r"(a[0]), "r"(a[1]), "r"(a[2]), "r"(a[3]), "r"(b0), "r"(b1));
-}
-
-/* Two floats as one register of two fp16 (lo in the low half, the lower column index). */
-__device__ __forceinline__ unsigned half2_bits(float lo, float hi) {
-    __half2 h = __floats2half2_rn(lo, hi);
-    return *reinterpret_cast<unsigned *>(&h);
-}
-
-__device__ __forceinline__ unsigned smem_pair(const __half *p) { return *reinterpret_cast<const unsigned *>(p); }
-
-/* rows x DP halves of a [rows][DP + 8] tile from fp32 rows `stride` apart (row r at src + r·stride,
- * valid while r < nvalid, else 0; columns from D to DP 0); transposed: written as [DP][rows + 8]. */
-template <int DP, int ROWS, bool TRANSPOSED>
-__device__ __forceinline__ void fa_load_tile(__half *dst, const float *src, long long stride, int nvalid, int D) {
-    for (int idx = threadIdx.x; idx < ROWS * DP; idx += blockDim.x) {
-        int r = idx / DP, d = idx % DP;
-        float v = r < nvalid && d < D ? src[(long long)r * stride + d] : 0.0f;
-        dst[TRANSPOSED ? d * (ROWS + 8) + r : r * (DP + 8) + d] = __float2half_rn(v);
-    }
-}
-
-template <int DP> __global__ void __launch_bounds__(32 * FA_WARPS) flash_mma_kernel(attn_args a) {
-    extern __shared__ __half fa_smem[];
-    __half *Qs = fa_smem, *Ks = Qs + FA_BQ * (DP + 8), *Vt = Ks + FA_BK * (DP + 8);
-    const int b = blockIdx.y / a.H, h = blockIdx.y % a.H, q0 = blockIdx.x * FA_BQ;
-    const int warp = threadIdx.x >> 5, lane = threadIdx.x & 31, g = lane >> 2, t = lane & 3;
-    const float sl2 = a.scale * 1.4426950408889634f; /* softmax(scale·s) = 2^(sl2·s) / sum */
-    const int row0 = q0 + warp * 16 + g, row1 = row0 + 8;
-    fa_load_tile<DP, FA_BQ, false>(Qs, a.q + ((long long)b * a.Tq + q0) * a.q_stride + (long long)h * a.D, a.q_stride,
-                                  a.Tq - q0, a.D);
-    __syncthreads();
-    unsigned qf[DP / 16][4]; /* this warp's 16 query rows as A fragments, for every key tile */
-    const __half *qw = Qs + warp * 16 * (DP + 8);
-    for (int kk = 0; kk < DP / 16; kk++) {
-        qf[kk][0] = smem_pair(qw + g * (DP + 8) + kk * 16 + 2 * t);
-        qf[kk][1] = smem_pair(qw + (g + 8) * (DP + 8) + kk * 16 + 2 * t);
-        qf[kk][2] = smem_pair(qw + g * (DP + 8) + kk * 16 + 8 + 2 * t);
-        qf[kk][3] = smem_pair(qw + (g + 8) * (DP + 8) + kk * 16 + 8 + 2 * t);
-    }
-    float o[DP / 8][4], m0 = -INFINITY, m1 = -INFINITY, l0 = 0.0f, l1 = 0.0f;
-    for (int nd = 0; nd < DP / 8; nd++) o[nd][0] = o[nd][1] = o[nd][2] = o[nd][3] = 0.0f;
-    /* With the causal mask no query of this block sees a key at or after q0 + FA_BQ. */
-    const int kend = a.causal && q0 + FA_BQ < a.Tk ? q0 + FA_BQ : a.Tk;
-    const long long kv_base = (long long)b * a.Tk * a.kv_stride + (long long)h * a.D;
-    for (int k0 = 0; k0 < kend; k0 += FA_BK) {
-        __syncthreads(); /* every warp is done with the previous tile */
-        fa_load_tile<DP, FA_BK, false>(Ks, a.k + kv_base + (long long)k0 * a.kv_stride, a.kv_stride, a.Tk - k0, a.D);
-        fa_load_tile<DP, FA_BK, true>(Vt, a.v + kv_base + (long long)k0 * a.kv_stride, a.kv_stride, a.Tk - k0, a.D);
-        __syncthreads();
-        float s[FA_BK / 8][4];
-        for (int nt = 0; nt < FA_BK / 8; nt++) {
-            s[nt][0] = s[nt][1] = s[nt][2] = s[nt][3] = 0.0f;
-            const __half *kr = Ks + (nt * 8 + g) * (DP + 8) + 2 * t;
-            for (int kk = 0; kk < DP / 16; kk++) mma_16816(s[nt], qf[kk], smem_pair(kr + kk * 16), smem_pair(kr + kk * 16 + 8));
-        }
-        float mx0 = -INFINITY, mx1 = -INFINITY;
-        for (int nt = 0; nt < FA_BK / 8; nt++)
-            for (int e = 0; e < 2; e++) {
-                int key = k0 + nt * 8 + 2 * t + e;
-                bool in = key < a.Tk;
-                s[nt][e] = in && (!a.causal || key <= row0) ? s[nt][e] * sl2 : -INFINITY;
-                s[nt][2 + e] = in && (!a.causal || key <= row1) ? s[nt][2 + e] * sl2 : -INFINITY;
-                mx0 = fmaxf(mx0, s[nt][e]);
-                mx1 = fmaxf(mx1, s[nt][2 + e]);
-            }
-        for (int off = 1; off < 4; off <<= 1) { /* the 4 lanes of a row group hold its 64 keys */
-            mx0 = fmaxf(mx0, __shfl_xor_sync(0xffffffffu, mx0, off));
-            mx1 = fmaxf(mx1, __shfl_xor_sync(0xffffffffu, mx1, off));
-        }
-        float n0 = fmaxf(m0, mx0), n1 = fmaxf(m1, mx1);
-        /* a max still -inf: every key so far masked, nothing to add or rescale */
-        float c0 = n0 == -INFINITY ? 1.0f : exp2f(m0 - n0), c1 = n1 == -INFINITY ? 1.0f : exp2f(m1 - n1);
-        m0 = n0;
-        m1 = n1;
-        unsigned pf[FA_BK / 8][2]; /* P rounded to fp16, pairs of the accumulator layout */
-        for (int nt = 0; nt < FA_BK / 8; nt++) {
-            float p0 = n0 == -INFINITY ? 0.0f : exp2f(s[nt][0] - n0), p1 = n0 == -INFINITY ? 0.0f : exp2f(s[nt][1] - n0);
-            float p2 = n1 == -INFINITY ? 0.0f : exp2f(s[nt][2] - n1), p3 = n1 == -INFINITY ? 0.0f : exp2f(s[nt][3] - n1);
-            l0 = l0 * (nt ? 1.0f : c0) + p0 + p1; /* per-lane partial sums; the row's total at the end */
-            l1 = l1 * (nt ? 1.0f : c1) + p2 + p3;
-            pf[nt][0] = half2_bits(p0, p1);
-            pf[nt][1] = half2_bits(p2, p3);
-        }
-        for (int nd = 0; nd < DP / 8; nd++) {
-            o[nd][0] *= c0;
-            o[nd][1] *= c0;
-            o[nd][2] *= c1;
-            o[nd][3] *= c1;
-        }
-        for (int kk = 0; kk < FA_BK / 16; kk++) { /* keys kk·16 .. +15: accumulator tiles 2kk, 2kk+1 as A */
-            unsigned pa[4] = {pf[2 * kk][0], pf[2 * kk][1], pf[2 * kk + 1][0], pf[2 * kk + 1][1]};
-            for (int nd = 0; nd < DP / 8; nd++) {
-                const __half *vr = Vt + (nd * 8 + g) * (FA_BK + 8) + kk * 16 + 2 * t;
-                mma_16816(o[nd], pa, smem_pair(vr), smem_pair(vr + 8));
-            }
-        }
-    }
-    for (int off = 1; off < 4; off <<= 1) {
-        l0 += __shfl_xor_sync(0xffffffffu, l0, off);
-        l1 += __shfl_xor_sync(0xffffffffu, l1, off);
-    }
-    float inv0 = 1.0f / l0, inv1 = 1.0f / l1;
-    float *out0 = a.out + ((long long)b * a.Tq + row0) * a.out_stride + (long long)h * a.D;
-    float *out1 = out0 + 8LL * a.out_stride;
-    for (int nd = 0; nd < DP / 8; nd++)
-        for (int e = 0; e < 2; e++) {
-            int d = nd * 8 + 2 * t + e;
-            if (d >= a.D) continue;
-            if (row0 < a.Tq) out0[d] = o[nd][e] * inv0;
-            if (row1 < a.Tq) out1[d] = o[nd][2 + e] * inv1;
-        }
-}
-
-template <int DP> static int flash_mma_launch(mx_cuda_ctx *c, const attn_args &a, int B, mx_status *st) {
-    size_t smem = sizeof(__half) * ((size_t)(FA_BQ + FA_BK) * (DP + 8) + (size_t)DP * (FA_BK + 8));
-    if (mx_cuda_ok(cudaFuncSetAttribute(flash_mma_kernel<DP>, cudaFuncAttributeMaxDynamicSharedMemorySize, (int)smem),
-                   "cuda attention: shared memory size", st))
-        return -1;
-    dim3 grid((unsigned)((a.Tq + FA_BQ - 1) / FA_BQ), (unsigned)(B * a.H));
-    flash_mma_kernel<DP><<<grid, 32 * FA_WARPS, smem, c->stream>>>(a);
-    c->half_products++;
-    return mx_cuda_launched("cuda attention (tensor cores)", st);
-}
-
-/* The fused tensor-core kernel for head size D (padded to a multiple of 16). */
-static int flash_mma(mx_cuda_ctx *c, const attn_args &a, int B, mx_status *st) {
-    if (a.D <= 48) return flash_mma_launch<48>(c, a, B, st);
-    if (a.D <= 64) return flash_mma_launch<64>(c, a, B, st);
-    if (a.D <= 80) return flash_mma_launch<80>(c, a, B, st);
-    return flash_mma_launch<160>(c, a, B, st);
-}
-
-/* ---- tensor cores, large heads: cuBLASLt products around a softmax ---- */
+/* ---- tensor cores: cuBLASLt products around a softmax ---- */
 
 #define TC_MIN_ROWS 16 /* fewer query rows per chunk than this: the fp32 kernel instead */
 
@@ -384,8 +224,7 @@ int mx_cuda_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k
     if (q_stride < H * D || kv_stride < H * D || out_stride < H * D)
         return mx_fail(st, MX_EINPUT, "cuda attention: a row stride is below heads x head size (%d)", H * D);
     attn_args a = {out, q, k, v, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal, scale};
-    if (!c->attn_fp32 && D <= FA_MAX_D) return flash_mma(c, a, B, st); /* fp32 networks stay in fp32 */
-    if (!c->attn_fp32 && (long long)Tk * D < (1LL << 31) && (long long)Tq * D < (1LL << 31)) {
+    if (!c->attn_fp32 && (long long)Tk * D < (1LL << 31) && (long long)Tq * D < (1LL << 31)) { /* fp32 stays fp32 */
         int rc = attention_tc(c, a, B, st);
         if (rc <= 0) return rc;
     }

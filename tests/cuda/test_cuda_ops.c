@@ -409,8 +409,8 @@ static void test_attention_ops(env *e) {
     test_attention(e, 2, 1, 19, 50, 160, 0);
     test_attention(e, 1, 1, 21, 35, 512, 0);
     test_attention(e, 1, 8, 2048, 2048, 40, 1); /* level-2-like: query chunks of ~640 rows, causal offsets */
-    test_attention(e, 2, 2, 130, 200, 80, 0);   /* several key tiles of 64, the last one partial */
-    test_attention(e, 1, 2, 100, 77, 160, 0);   /* SD's cross-attention: 77 keys, the widest fused head */
+    test_attention(e, 2, 2, 130, 200, 80, 0);   /* two items, two heads, non-square */
+    test_attention(e, 1, 2, 100, 77, 160, 0);   /* SD's cross-attention: 77 keys (rows padded to 80) */
     test_linear(e, MX_F32, 37, 53, 71); /* after an fp32 linear (projection) attention runs in fp32: [fp32] */
     test_attention(e, 2, 3, 37, 45, 40, 0);
     test_attention(e, 1, 1, 21, 35, 512, 0); /* the VAE mid-block's head size on the fp32 kernel */
