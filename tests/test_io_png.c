@@ -64,7 +64,7 @@ static void put_be32(unsigned char *p, uint32_t v) {
 static size_t put_chunk(unsigned char *buf, const char *type, const unsigned char *data, size_t len) {
     put_be32(buf, (uint32_t)len);
     memcpy(buf + 4, type, 4);
-    memcpy(buf + 8, data, len);
+    if (len) memcpy(buf + 8, data, len);
     put_be32(buf + 8 + len, (uint32_t)crc32(0L, buf + 4, (uInt)(len + 4)));
     return 12 + len;
 }
