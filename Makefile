@@ -374,7 +374,7 @@ $(BUILD)/matex $(BUILD)/matex-lite $(BUILD)/tools/bench_cuda $(patsubst %,$(BUIL
     $(LIB_CUDA) # relinked when the kernels change
 endif
 
-.PHONY: test-cuda cuda-all cuda-run-tests gpu-check gpu-check-pack
+.PHONY: test-cuda cuda-all cuda-run-tests gpu-check gpu-check-pack gpu-golden-pack
 cuda:
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
 cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)) $(BUILD)/tools/bench_cuda
@@ -394,6 +394,19 @@ MATEX_TESTDATA ?= ../shared
 GPU_PACK_DATA = golden/sd15_controlnet/inputs.safetensors golden/sd15_controlnet/config.json golden/sd15_vae golden/sd15_clip
 gpu-check:
 	sh tools/gpu_check.sh
+# The goldens too large to travel with the pack (a device call carries at most 64 MiB with the
+# repository): one network test and the one golden folder it reads, per call. E.g.
+#   make gpu-golden-pack GOLDEN=unet_mini TEST=test_nn_unet      (sd15_unet, sd15_controlnet: test_nn_sd15;
+#   controlnet_mini: test_nn_controlnet; vae_mini: test_nn_vae; taesd: test_nn_taesd)
+# then run(command="sh tools/gpu_golden.sh", carry=["build-cuda/gpu-golden.tar.gz"]).
+GOLDEN ?= unet_mini
+TEST ?= test_nn_unet
+gpu-golden-pack: cuda
+	rm -rf $(CUDA_BUILD)/gpu-golden && mkdir -p $(CUDA_BUILD)/gpu-golden/data/golden
+	strip -o $(CUDA_BUILD)/gpu-golden/$(TEST) $(CUDA_BUILD)/tests/$(TEST)
+	cp -r $(MATEX_TESTDATA)/golden/$(GOLDEN) $(CUDA_BUILD)/gpu-golden/data/golden/
+	tar -C $(CUDA_BUILD) -czf $(CUDA_BUILD)/gpu-golden.tar.gz gpu-golden
+	du -sh $(CUDA_BUILD)/gpu-golden.tar.gz
 gpu-check-pack: cuda
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 $(CUDA_BUILD)/matex-lite
 	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/lib $(GPU_PACK)/data/golden/sd15_controlnet
