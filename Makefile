@@ -193,6 +193,7 @@ $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/r
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)
 	$(CXX) $(LDFLAGS) -fsanitize=fuzzer -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/tests/fuzz/fuzz_png $(BUILD)/tests/fuzz/replay_png: $(BUILD)/pipeline/io/png_zlib.o # matex-lite's codec
 .PHONY: fuzz fuzz-ci fuzz-run
 fuzz:
 	$(MAKE) BUILD=build-fuzz CC=clang CXX=clang++ SAN=fuzz OPT=-O1 fuzz-run

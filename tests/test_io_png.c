@@ -150,6 +150,11 @@ static void damaged_files(void) {
     put_be32(copy + 16, 9); /* width 9: the image data is a row short */
     put_be32(copy + 29, (uint32_t)crc32(0L, copy + 12, 17));
     refused(copy, len, "wrong size", "size unlike its data");
+    put_be32(copy + 16, 16384);
+    put_be32(copy + 20, 16384);
+    put_be32(copy + 29, (uint32_t)crc32(0L, copy + 12, 17));
+    refused(copy, len, "holds", "16384² in a tiny file");
+    put_be32(copy + 20, 6);
     put_be32(copy + 16, 100000);
     put_be32(copy + 29, (uint32_t)crc32(0L, copy + 12, 17));
     refused(copy, len, "at most", "100000 pixels wide");

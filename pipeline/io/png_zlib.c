@@ -160,6 +160,11 @@ int mx_png_decode(const void *data, size_t len, const char *what, mx_image *out,
     size_t idat_len;
     int rc = read_chunks(p, len, what, &hd, &idat, &idat_len, st);
     size_t stride = (size_t)hd.w * hd.channels, size = rc ? 0 : (stride + 1) * hd.h;
+    /* deflate packs at most ~1032:1: a tiny file declaring a huge image is refused before the
+     * allocation (as the OpenImageIO adapter's check does) */
+    if (!rc && size / 1032 > idat_len + 64)
+        rc = mx_fail(st, MX_EINPUT, "%s: PNG declares %ux%u pixels but holds %zu bytes of image data", what, hd.w, hd.h,
+                     idat_len);
     if (!rc && !(rows = malloc(size))) rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
     if (!rc) rc = inflate_exact(idat, idat_len, rows, size, what, st);
     if (!rc) rc = unfilter(rows, hd.h, stride, hd.channels, what, st);
