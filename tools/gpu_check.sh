@@ -1,14 +1,15 @@
 #!/bin/sh
 # make gpu-check: one run on a machine with an NVIDIA GPU whose output is the evidence for the CUDA
-# backend (issue 21): the GPU and its driver/runtime, make test-cuda (op tests at their own bounds,
-# the network goldens found in tests/data and $MATEX_TESTDATA), compute-sanitizer memcheck on the
-# tiny pipeline and on SD1.5-size random weights (one UNet call, one ControlNet call, one guided
-# step with two ControlNets), a default and a --fast `matex texture --device cuda` with their
-# per-stage times (report.json stages_s / work_s), and the same seed's texture on the CPU against
-# the GPU (PSNR). Uses the binaries of $GPU_CHECK_BIN (default build-cuda/gpu, made here by `make
-# gpu-check-pack`: stripped, small enough to carry), else builds `make cuda` (minutes).
-# Writes everything under $GPU_CHECK_OUT (default gpu-check-out): log.txt and the reports.
-# Budget: ~6 min on one H100 with 16 cores (weights ~1 min, CPU texture of the parity check ~2 min).
+# backend (issue 21), in this order, each step under its own time limit: the GPU and its
+# driver/runtime, make test-cuda (op tests at their own bounds, the network goldens found in
+# tests/data and $MATEX_TESTDATA), compute-sanitizer memcheck on the tiny pipeline, SD1.5-size
+# random weights, a default and a --fast `matex texture --device cuda` with their per-stage times
+# (report.json stages_s / work_s), the same seed's texture on the CPU against the GPU (PSNR), the
+# card's matrix peak and bench_cuda, then memcheck on the SD1.5-size networks and two guided steps.
+# Uses the binaries of $GPU_CHECK_BIN (default build-cuda/gpu, or its archive build-cuda/gpu.tar.gz:
+# `make gpu-check-pack` here), else builds `make cuda` (minutes). Writes its log to $GPU_CHECK_LOG
+# (default $GPU_CHECK_OUT/log.txt) and the outputs under $GPU_CHECK_OUT (default gpu-check-out).
+# Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s).
 set -u
 B=${GPU_CHECK_BIN:-build-cuda/gpu}
 O=${GPU_CHECK_OUT:-gpu-check-out}

@@ -19,16 +19,16 @@ template <> __device__ __forceinline__ __nv_bfloat16 conv_store<__nv_bfloat16>(f
     return __float2bfloat16_rn(v);
 }
 
-/* col_b[kk, pl] (row-major, width pc; item b at col + b·kc·pc) = x_b[ci, oy*stride - pad + ky,
- * ox*stride - pad + kx] or 0, for kk = (ci, ky, kx) and output pixel p0 + pl = (oy, ox).
- * Grid: x over the tile's pixels, y over kk (< 65536: Cin·kh·kw of SD is at most 11,520), z over
- * the batch: every index is 32-bit, (ci, ky, kx) is computed once per block row. */
+/* col[kk, pl] (row-major, width pc) = x[ci, oy*stride - pad + ky, ox*stride - pad + kx] or 0 for one
+ * item x, for kk = (ci, ky, kx) and output pixel p0 + pl = (oy, ox). Grid: x over the tile's pixels,
+ * y over kk (< 65536: Cin·kh·kw of SD is at most 11,520): every index is 32-bit, (ci, ky, kx) is
+ * computed once per block row. */
 template <typename T>
 __global__ void im2col_tile_kernel(T *col, const float *x, conv_shape s, unsigned p0, unsigned pc) {
-    unsigned kk = blockIdx.y, b = blockIdx.z, khw = (unsigned)(s.kh * s.kw);
+    unsigned kk = blockIdx.y, khw = (unsigned)(s.kh * s.kw);
     unsigned ci = kk / khw, r = kk - ci * khw, ky = r / (unsigned)s.kw, kx = r - ky * (unsigned)s.kw;
-    const float *plane = x + ((size_t)b * s.Cin + ci) * (size_t)s.H * s.W;
-    T *row = col + ((size_t)b * gridDim.y + kk) * pc;
+    const float *plane = x + (size_t)ci * s.H * s.W;
+    T *row = col + (size_t)kk * pc;
     for (unsigned pl = blockIdx.x * blockDim.x + threadIdx.x; pl < pc; pl += gridDim.x * blockDim.x) {
         unsigned p = p0 + pl, oy = p / (unsigned)s.Wo, ox = p - oy * (unsigned)s.Wo;
         int iy = (int)(oy * s.stride + ky) - s.pad, ix = (int)(ox * s.stride + kx) - s.pad;
@@ -37,11 +37,11 @@ __global__ void im2col_tile_kernel(T *col, const float *x, conv_shape s, unsigne
     }
 }
 
-/* The tiles of every batch item for output pixels [p0, p0 + pc). */
-static int im2col_tile(mx_cuda_ctx *c, void *col, mx_dtype dt, const float *x, int B, const conv_shape *s,
-                       long long p0, int pc, mx_status *st) {
+/* The tile of one item x for output pixels [p0, p0 + pc). */
+static int im2col_tile(mx_cuda_ctx *c, void *col, mx_dtype dt, const float *x, const conv_shape *s, long long p0,
+                       int pc, mx_status *st) {
     unsigned kc = (unsigned)(s->Cin * s->kh * s->kw), bx = (unsigned)((pc + 255) / 256);
-    dim3 grid(bx < 1024 ? bx : 1024, kc, (unsigned)B);
+    dim3 grid(bx < 1024 ? bx : 1024, kc);
     if (dt == MX_F16)
         im2col_tile_kernel<__half><<<grid, 256, 0, c->stream>>>((__half *)col, x, *s, (unsigned)p0, (unsigned)pc);
     else if (dt == MX_BF16)
@@ -52,18 +52,18 @@ static int im2col_tile(mx_cuda_ctx *c, void *col, mx_dtype dt, const float *x, i
     return mx_cuda_launched("cuda conv2d im2col", st);
 }
 
-/* Output pixels per im2col tile of all B items: what the free scratch holds, a multiple of 64
- * (aligned GEMM rows). */
-static long long tile_pixels(const mx_cuda_ctx *c, long long kc, size_t esize, int B, long long P) {
+/* Output pixels per im2col tile of one item: what the free scratch holds, a multiple of 64 (aligned
+ * GEMM rows). */
+static long long tile_pixels(const mx_cuda_ctx *c, long long kc, size_t esize, long long P) {
     size_t free_bytes = c->scratch_cap > c->scratch_used + 256 ? c->scratch_cap - c->scratch_used - 256 : 0;
-    long long pc = (long long)(free_bytes / ((size_t)kc * esize * (size_t)B));
+    long long pc = (long long)(free_bytes / ((size_t)kc * esize));
     if (pc >= P) return P;
     return pc >= 64 ? pc / 64 * 64 : pc;
 }
 
 /* Item by item, tiles sized for one item: item b's GEMMs are the same calls (shape, plan, algorithm)
  * whatever B, so its output is the same bits alone or in a batch. Per tile: im2col, one GEMM. */
-static int conv_batched(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr w, int Cout, const conv_shape *s,
+static int conv_items(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr w, int Cout, const conv_shape *s,
                         mx_status *st) {
     long long P = (long long)s->Ho * s->Wo, kc = (long long)s->Cin * s->kh * s->kw;
     long long in_plane = (long long)s->Cin * s->H * s->W, out_plane = (long long)Cout * P;
@@ -74,7 +74,7 @@ static int conv_batched(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr
                                  y + b * out_plane, P, 0, 1, "cuda conv2d", st))
             return -1;
     if (direct && w.dtype == MX_F32) return 0;
-    long long pc = tile_pixels(c, kc, esize, 1, P);
+    long long pc = tile_pixels(c, kc, esize, P);
     if (pc < 1)
         return mx_fail(st, MX_ENOMEM, "cuda conv2d: scratch too small for one im2col column (%lld bytes)",
                        (long long)(kc * esize));
@@ -84,7 +84,7 @@ static int conv_batched(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr
     for (int b = 0; rc == 0 && b < B; b++)
         for (long long p0 = 0; rc == 0 && p0 < P; p0 += pc) {
             int n = (int)(P - p0 < pc ? P - p0 : pc);
-            rc = im2col_tile(c, col, w.dtype, x + b * in_plane, 1, s, p0, n, st);
+            rc = im2col_tile(c, col, w.dtype, x + b * in_plane, s, p0, n, st);
             if (rc == 0)
                 rc = mx_cuda_gemm_batched(c, w.dtype, 0, 0, n, Cout, (int)kc, col, n, 0, w.data, kc, 0,
                                           y + b * out_plane + p0, P, 0, 1, "cuda conv2d", st);
@@ -108,6 +108,6 @@ int mx_cuda_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int
     if ((long long)s.Ho * s.Wo > 0x7fffffffLL || (long long)Cin * kh * kw > 65535)
         return mx_fail(st, MX_EINPUT, "cuda conv2d: %d x %d output pixels or %d x %d x %d taps out of range", s.Ho, s.Wo,
                        Cin, kh, kw);
-    if (conv_batched(c, y, x, B, w, Cout, &s, st)) return -1;
+    if (conv_items(c, y, x, B, w, Cout, &s, st)) return -1;
     return mx_cuda_add_bias(c, y, bias, B, Cout, (long long)s.Ho * s.Wo, "cuda conv2d bias", st);
 }
