@@ -22,15 +22,17 @@ static void test_conv_rule(void) {
     check_conv("controlnet_mid_block", 1);
     check_conv("down_blocks.1.resnets.0.conv_shortcut", 1);
     check_conv("down_blocks.0.downsamplers.0.conv", 1);
-    check_conv("up_blocks.2.upsamplers.0.conv", 1);
     check_conv("down_blocks.2.attentions.1.proj_in", 1);
     check_conv("mid_block.attentions.0.proj_out", 1);
     /* bf16: fed by a GroupNorm */
     check_conv("down_blocks.0.resnets.1.conv1", 0);
     check_conv("mid_block.resnets.1.conv2", 0);
     check_conv("conv_out", 0);
+    /* bf16 by measurement: the upsamplers */
+    check_conv("up_blocks.2.upsamplers.0.conv", 0);
     /* names that only look alike */
     check_conv("conv_input", 0);
+    check_conv("up_blocks.1.my_downsamplers.0.conv", 0);
     check_conv("encoder.layers.3.conv.0", 0); /* TAESD: follows the context */
     CHECK(mx_prec_net_fp32("vae") == 1);
     CHECK(mx_prec_net_fp32("unet") == 0 && mx_prec_net_fp32("taesd") == 0 && mx_prec_net_fp32("clip") == 0);

@@ -8,12 +8,21 @@
 /* The fp32 convolutions of UNet and ControlNet by parameter path: first component... */
 static const char *const fp32_first[] = {"conv_in", "controlnet_cond_embedding", "controlnet_down_blocks",
                                          "controlnet_mid_block"};
-/* ...or last component ("conv": the down/upsamplers', "down_blocks.0.downsamplers.0.conv"). */
-static const char *const fp32_last[] = {"conv_shortcut", "proj_in", "proj_out", "conv"};
+/* ...or last component... */
+static const char *const fp32_last[] = {"conv_shortcut", "proj_in", "proj_out"};
+/* ...or any component ("down_blocks.0.downsamplers.0.conv"). */
+static const char *const fp32_any[] = {"downsamplers"};
 
 static int first_is(const char *path, const char *name) {
     size_t n = strlen(name);
     return !strncmp(path, name, n) && (path[n] == '\0' || path[n] == '.');
+}
+
+static int has_component(const char *path, const char *name) {
+    size_t n = strlen(name);
+    for (const char *p = path; (p = strstr(p, name)) != NULL; p += n)
+        if ((p == path || p[-1] == '.') && (p[n] == '\0' || p[n] == '.')) return 1;
+    return 0;
 }
 
 static int last_is(const char *path, const char *name) {
@@ -26,6 +35,8 @@ int mx_prec_conv_fp32(const char *path) {
         if (first_is(path, fp32_first[i])) return 1;
     for (size_t i = 0; i < sizeof fp32_last / sizeof *fp32_last; i++)
         if (last_is(path, fp32_last[i])) return 1;
+    for (size_t i = 0; i < sizeof fp32_any / sizeof *fp32_any; i++)
+        if (has_component(path, fp32_any[i])) return 1;
     return 0;
 }
 

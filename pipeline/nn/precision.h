@@ -1,10 +1,10 @@
 /* The bf16 precision policy: which layers compute in bf16 when a run's context does (--precision
  * bf16; DESIGN.md §4). Everything not named here follows the context. The one rule:
  *
- *   bf16: linear layers, attention, and the 3×3 convolutions fed by a GroupNorm (the resnets'
- *         conv1 and conv2, the UNet's conv_out): the bulk of the FLOPs;
+ *   bf16: linear layers, attention, the 3×3 convolutions fed by a GroupNorm (the resnets' conv1
+ *         and conv2, the UNet's conv_out) and the UNet's upsamplers: the bulk of the FLOPs;
  *   fp32: the other convolutions of UNet and ControlNet (conv_in, the ControlNet's conditioning
- *         embedding and zero convolutions, the resnets' 1×1 shortcuts, the down/upsamplers,
+ *         embedding and zero convolutions, the resnets' 1×1 shortcuts, the downsamplers,
  *         proj_in and proj_out), and the whole VAE (encoder and decoder);
  *   GroupNorm, LayerNorm, softmax, activations and residual adds are fp32 at every level.
  *   CLIP (text and vision towers) and TAESD follow the context.
@@ -15,9 +15,13 @@
  * and an encode then decode 5.6e-2. In the VAE a single bf16 convolution moves the decode by 1e-3
  * to 7e-3 (the early ones most, measured one layer at a time), so no useful part of it can be bf16;
  * it runs in fp32. In UNet and ControlNet the convolutions fed by unnormalised activations (the
- * residual stream) carry more error per FLOP; in fp32 they cost a few % of the FLOPs. With this
- * rule: UNet tiny/mini/SD1.5 6.1e-3/6.1e-3/5.6e-3, ControlNet mini/SD1.5 8.9e-3/6.7e-3; CLIP,
- * all bf16, SD1.5 6.7e-3. */
+ * residual stream) carry more error per FLOP; in fp32 they cost a few % of the FLOPs. The one
+ * exception, measured: the upsamplers (full-resolution 3×3 convs, 135 GFLOP of the 1607 of a
+ * 64×64 batch-2 UNet call, 0.2 s of it on 2 Zen 5 cores in fp32) move the UNet only from 5.58e-3
+ * to 5.70e-3 (SD1.5), 6.10e-3 to 6.36e-3 (mini) and 6.46e-3 to 6.54e-3 (tiny) in bf16; the
+ * downsamplers, 11 GFLOP, would move the ControlNet's deepest residual from 6.7e-3 to 8.1e-3.
+ * With this rule: UNet tiny/mini/SD1.5 6.5e-3/6.4e-3/5.7e-3, ControlNet mini/SD1.5
+ * 8.9e-3/6.7e-3; CLIP, all bf16, SD1.5 6.7e-3. */
 #ifndef MX_NN_PRECISION_H
 #define MX_NN_PRECISION_H
 
