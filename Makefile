@@ -67,7 +67,7 @@ WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
 TEX_SRC     = $(wildcard pipeline/texture/*.c)
-IO_SRC      = $(wildcard pipeline/io/*.cpp) pipeline/io/io_write.c
+IO_SRC      = $(wildcard pipeline/io/*.cpp) pipeline/io/io_write.c pipeline/io/png_zlib.c
 LITE_IO_SRC = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/io_write.c pipeline/io/png_zlib.c \
               pipeline/io/io_lite.c
 TOOL_SRC    = $(wildcard tools/cmd_*.c tools/cli_*.c)
@@ -168,7 +168,6 @@ $(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_GEOM
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/test_io_%: $(BUILD)/tests/test_io_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
-$(BUILD)/tests/test_io_png: $(BUILD)/pipeline/io/png_zlib.o # matex-lite's codec, against the full adapter
 $(BUILD)/tests/test_texture_%: $(BUILD)/tests/test_texture_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/test_tools_%: $(BUILD)/tests/test_tools_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)
@@ -193,7 +192,6 @@ $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/r
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)
 	$(CXX) $(LDFLAGS) -fsanitize=fuzzer -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
-$(BUILD)/tests/fuzz/fuzz_png $(BUILD)/tests/fuzz/replay_png: $(BUILD)/pipeline/io/png_zlib.o # matex-lite's codec
 .PHONY: fuzz fuzz-ci fuzz-run
 fuzz:
 	$(MAKE) BUILD=build-fuzz CC=clang CXX=clang++ SAN=fuzz OPT=-O1 fuzz-run

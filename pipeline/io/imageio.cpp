@@ -2,6 +2,7 @@
 // exrio.cpp). No colour conversion anywhere: 8-bit code values map to [0,1] as is.
 #include "io.h"
 #include "io_write.h"
+#include "png_zlib.h"
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -19,9 +20,6 @@
 #include <vector>
 
 namespace {
-
-// Larger images than this are refused: 16k x 16k covers every texture we produce or read.
-const long long kMaxSide = 16384;
 
 // Reads all pixels of an opened input as floats (w*h*nchannels). Reading in the file's own
 // format and converting here matters: OIIO's read_image with a type conversion goes through a
@@ -43,7 +41,7 @@ int read_pixels(OIIO::ImageInput &in, std::vector<float> &buf) {
 int read_opened(OIIO::ImageInput &in, const char *what, mx_image *out, mx_status *st) {
     const OIIO::ImageSpec &spec = in.spec();
     int w = spec.width, h = spec.height, nch = spec.nchannels;
-    if (w <= 0 || h <= 0 || nch <= 0 || w > kMaxSide || h > kMaxSide)
+    if (w <= 0 || h <= 0 || nch <= 0 || w > MX_IMAGE_MAX_SIDE || h > MX_IMAGE_MAX_SIDE)
         return mx_fail(st, MX_EINPUT, "%s: unsupported image size %dx%d with %d channels", what, w, h, nch);
     std::vector<float> buf;
     if (read_pixels(in, buf)) return mx_fail(st, MX_EINPUT, "%s: cannot decode image: %s", what, in.geterror().c_str());
@@ -73,53 +71,6 @@ const char *sniff_name(const unsigned char *p, size_t n) {
     if (n >= 3 && p[0] == 0xFF && p[1] == 0xD8 && p[2] == 0xFF) return "embedded.jpg";
     if (n >= 4 && !memcmp(p, "\x76\x2f\x31\x01", 4)) return "embedded.exr";
     return nullptr;
-}
-
-uint32_t be32(const unsigned char *p) { return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3]; }
-
-// Deflate expands at most 1032:1, so the image data of the IDAT chunks bounds the pixels an
-// honest IHDR can declare; a header claiming more (a few hundred bytes "holding" 16k x 16k)
-// would have the reader allocate gigabytes before the data runs out.
-int check_png_size(const unsigned char *ihdr, unsigned long long idat, const char *what, mx_status *st) {
-    static const int channels[7] = {1, 0, 3, 1, 2, 0, 4}; // by colour type
-    unsigned long long w = be32(ihdr), h = be32(ihdr + 4), depth = ihdr[8];
-    int ch = ihdr[9] < 7 ? channels[ihdr[9]] : 0;
-    unsigned long long raw = h * (1 + (w * (unsigned)ch * depth + 7) / 8);
-    if (w > (unsigned long long)kMaxSide || h > (unsigned long long)kMaxSide)
-        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %llux%llu (at most %lld a side)", what, w, h, kMaxSide);
-    if (raw / 1032 > idat + 64)
-        return mx_fail(st, MX_EINPUT, "%s: PNG declares %llux%llu pixels but holds %llu bytes of image data", what, w, h,
-                       idat);
-    return 0;
-}
-
-// Walks the chunks of a PNG (lengths and CRCs) up to IEND. libpng would catch the same damage,
-// but OIIO 2.4's PNG reader leaks its error string whenever libpng bails out; this keeps
-// damaged data away from it and names the broken chunk. Then checks the declared size.
-int check_png_chunks(const unsigned char *p, size_t n, const char *what, mx_status *st) {
-    uint32_t table[256];
-    for (uint32_t i = 0; i < 256; i++) {
-        uint32_t c = i;
-        for (int k = 0; k < 8; k++) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-        table[i] = c;
-    }
-    const unsigned char *ihdr = nullptr;
-    unsigned long long idat = 0;
-    for (size_t pos = 8;;) {
-        if (n - pos < 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk)", what);
-        size_t len = be32(p + pos);
-        if (len > n - pos - 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG chunk at byte %zu", what, pos);
-        uint32_t crc = 0xFFFFFFFFu;
-        for (size_t i = pos + 4; i < pos + 8 + len; i++) crc = table[(crc ^ p[i]) & 0xFF] ^ (crc >> 8);
-        if ((crc ^ 0xFFFFFFFFu) != be32(p + pos + 8 + len))
-            return mx_fail(st, MX_EINPUT, "%s: corrupt PNG chunk '%.4s' at byte %zu (CRC mismatch)", what,
-                           (const char *)p + pos + 4, pos);
-        if (!memcmp(p + pos + 4, "IHDR", 4) && len == 13) ihdr = p + pos + 8;
-        if (!memcmp(p + pos + 4, "IDAT", 4)) idat += len;
-        if (!memcmp(p + pos + 4, "IEND", 4))
-            return ihdr ? check_png_size(ihdr, idat, what, st) : mx_fail(st, MX_EINPUT, "%s: PNG without IHDR", what);
-        pos += 12 + len;
-    }
 }
 
 uint32_t le32(const unsigned char *p) { return (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0]; }
@@ -187,7 +138,7 @@ int check_exr_layout(long long w, long long h, unsigned long long pixel_bytes, i
     long long lines = tile_w ? tile_h : exr_lines_per_chunk(compression);
     if (!lines) return 0; // a compression this check does not know: OpenEXR decides
     long long chunks = tile_w ? ((w + tile_w - 1) / tile_w) * ((h + tile_h - 1) / tile_h) : (h + lines - 1) / lines;
-    if (tile_w > kMaxSide || tile_h > kMaxSide)
+    if (tile_w > MX_IMAGE_MAX_SIDE || tile_h > MX_IMAGE_MAX_SIDE)
         return mx_fail(st, MX_EINPUT, "%s: unsupported EXR tile size %lldx%lld", what, tile_w, tile_h);
     if ((unsigned long long)(tile_w ? tile_w : w) * pixel_bytes * lines > (1ull << 28))
         return mx_fail(st, MX_EINPUT, "%s: unsupported EXR layout (%llu bytes a pixel, %lld lines a block)", what,
@@ -249,9 +200,9 @@ int check_exr_header(const unsigned char *p, size_t n, const char *what, mx_stat
         pos += size;
     }
     // before OpenEXR sizes its line buffers by the width (a 4M x 1 image: 512 MB for 234 bytes)
-    if (xmax - xmin >= kMaxSide || ymax - ymin >= kMaxSide)
-        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %lldx%lld (at most %lld a side)", what,
-                       xmax - xmin + 1, ymax - ymin + 1, kMaxSide);
+    if (xmax - xmin >= MX_IMAGE_MAX_SIDE || ymax - ymin >= MX_IMAGE_MAX_SIDE)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %lldx%lld (at most %d a side)", what,
+                       xmax - xmin + 1, ymax - ymin + 1, MX_IMAGE_MAX_SIDE);
     if (multipart || xmax < xmin || ymax < ymin || (tiled && (tile_w <= 0 || tile_h <= 0))) return 0; // OpenEXR checks
     return check_exr_layout(xmax - xmin + 1, ymax - ymin + 1, pixel_bytes, compression, tiled ? tile_w : 0, tile_h,
                             n - pos, what, st);
@@ -280,7 +231,7 @@ int open_as(const char *format, const char *name, OIIO::Filesystem::IOProxy *pro
 // Decodes a PNG/JPEG/EXR held in memory (its format already sniffed as `name`).
 int decode_memory(const char *name, const unsigned char *data, size_t len, const char *what, mx_image *out,
                   mx_status *st) {
-    if (!strcmp(name, "embedded.png") && check_png_chunks(data, len, what, st)) return -1;
+    if (!strcmp(name, "embedded.png") && mx_png_check(data, len, what, st)) return -1;
     OIIO::Filesystem::IOMemReader mem(data, len);
     std::unique_ptr<OIIO::ImageInput> in;
     if (open_as(name, name, &mem, what, in, st)) return -1;

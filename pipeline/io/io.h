@@ -26,6 +26,10 @@ extern "C" {
 #include "../../runtime/status.h"
 #include "../geom/mesh_types.h"
 
+/* Images larger than this a side are refused, read or written, by every adapter: 16k × 16k
+ * covers every texture matex produces or reads. */
+#define MX_IMAGE_MAX_SIDE 16384
+
 /* ---- meshes ---- */
 
 /* Reads an .obj, .ply, .off or .stl file (chosen by extension, case-insensitive).

@@ -8,9 +8,8 @@
 #include <string.h>
 #include <zlib.h>
 
+#include "io.h"
 #include "io_write.h"
-
-enum { MAX_SIDE = 16384 }; /* as the OpenImageIO adapter: larger images are refused */
 
 static const unsigned char SIGNATURE[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
 
@@ -32,15 +31,72 @@ typedef struct {
     int channels; /* in the file: 1, 2, 3 or 4 */
 } png_header;
 
-static int parse_ihdr(const unsigned char *d, size_t len, const char *what, png_header *hd, mx_status *st) {
+/* What mx_png_check found: the IHDR's 13 bytes and the total length of the IDAT chunks. */
+typedef struct {
+    const unsigned char *ihdr;
+    size_t idat_len;
+} png_layout;
+
+/* Bytes of the filtered rows an IHDR declares: per row a filter byte and the packed samples. */
+static unsigned long long declared_row_bytes(const unsigned char *ihdr) {
+    static const int samples_of_type[7] = {1, 0, 3, 1, 2, 0, 4}; /* by colour type (3: palette index) */
+    unsigned long long w = be32(ihdr), h = be32(ihdr + 4), depth = ihdr[8];
+    int samples = ihdr[9] < 7 ? samples_of_type[ihdr[9]] : 0;
+    return h * (1 + (w * (unsigned)samples * depth + 7) / 8);
+}
+
+static int check_declared_size(const png_layout *lay, const char *what, mx_status *st) {
+    uint32_t w = be32(lay->ihdr), h = be32(lay->ihdr + 4);
+    if (w == 0 || h == 0 || w > MX_IMAGE_MAX_SIDE || h > MX_IMAGE_MAX_SIDE)
+        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %ux%u (at most %d a side)", what, w, h,
+                       MX_IMAGE_MAX_SIDE);
+    if (declared_row_bytes(lay->ihdr) / 1032 > lay->idat_len + 64)
+        return mx_fail(st, MX_EINPUT, "%s: PNG declares %ux%u pixels but holds %zu bytes of image data", what, w, h,
+                       lay->idat_len);
+    return 0;
+}
+
+/* Walks the chunks up to IEND, checking each length and CRC; other chunks (text, gamma, a
+ * suggested palette) are skipped. */
+static int scan_chunks(const unsigned char *p, size_t n, const char *what, png_layout *lay, mx_status *st) {
+    lay->ihdr = NULL;
+    lay->idat_len = 0;
+    if (n < 8 || memcmp(p, SIGNATURE, 8)) return mx_fail(st, MX_EINPUT, "%s: not a PNG file", what);
+    for (size_t pos = 8;;) {
+        if (n - pos < 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk)", what);
+        size_t len = be32(p + pos);
+        if (len > n - pos - 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG chunk at byte %zu", what, pos);
+        const unsigned char *type = p + pos + 4, *data = p + pos + 8;
+        if (crc32(0L, type, (uInt)(len + 4)) != be32(data + len))
+            return mx_fail(st, MX_EINPUT, "%s: corrupt PNG chunk '%.4s' at byte %zu (CRC mismatch)", what,
+                           (const char *)type, pos);
+        int is_ihdr = !memcmp(type, "IHDR", 4);
+        if (is_ihdr != (pos == 8))
+            return mx_fail(st, MX_EINPUT, "%s: %s", what, is_ihdr ? "PNG with two IHDR chunks" : "PNG without IHDR first");
+        if (is_ihdr && len != 13) return mx_fail(st, MX_EINPUT, "%s: PNG IHDR of %zu bytes (13 expected)", what, len);
+        if (is_ihdr) lay->ihdr = data;
+        if (!memcmp(type, "IDAT", 4)) lay->idat_len += len;
+        if (!memcmp(type, "IEND", 4))
+            return lay->idat_len ? 0 : mx_fail(st, MX_EINPUT, "%s: PNG without image data", what);
+        pos += 12 + len;
+    }
+}
+
+static int check_layout(const void *data, size_t len, const char *what, png_layout *lay, mx_status *st) {
+    return scan_chunks(data, len, what, lay, st) || check_declared_size(lay, what, st) ? -1 : 0;
+}
+
+int mx_png_check(const void *data, size_t len, const char *what, mx_status *st) {
+    png_layout lay;
+    return check_layout(data, len, what, &lay, st);
+}
+
+/* The subset this decoder reads, from an IHDR that check_layout accepted. */
+static int parse_ihdr(const unsigned char *d, const char *what, png_header *hd, mx_status *st) {
     static const int channels_of_type[7] = {1, 0, 3, 0, 2, 0, 4};
-    if (len != 13) return mx_fail(st, MX_EINPUT, "%s: PNG IHDR of %zu bytes (13 expected)", what, len);
     hd->w = be32(d);
     hd->h = be32(d + 4);
     int depth = d[8], type = d[9], interlace = d[12];
-    if (hd->w == 0 || hd->h == 0 || hd->w > MAX_SIDE || hd->h > MAX_SIDE)
-        return mx_fail(st, MX_EINPUT, "%s: unsupported image size %ux%u (at most %d a side)", what, hd->w, hd->h,
-                       MAX_SIDE);
     if (d[10] != 0 || d[11] != 0 || interlace > 1 || type > 6)
         return mx_fail(st, MX_EINPUT, "%s: invalid PNG header", what);
     hd->channels = channels_of_type[type];
@@ -52,36 +108,15 @@ static int parse_ihdr(const unsigned char *d, size_t len, const char *what, png_
     return 0;
 }
 
-/* Walks the chunks, checking each length and CRC; fills hd and collects the IDAT payload. */
-static int read_chunks(const unsigned char *p, size_t n, const char *what, png_header *hd, unsigned char **idat,
-                       size_t *idat_len, mx_status *st) {
-    int have_header = 0;
-    *idat = NULL;
-    *idat_len = 0;
-    for (size_t pos = 8;;) { /* other chunks (text, gamma, a suggested palette) are skipped */
-        if (n - pos < 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG (no IEND chunk)", what);
+/* The IDAT payloads of a checked PNG, joined into one malloc'ed buffer of lay->idat_len bytes. */
+static unsigned char *joined_idat(const unsigned char *p, const png_layout *lay) {
+    unsigned char *idat = malloc(lay->idat_len), *dst = idat;
+    if (!idat) return NULL;
+    for (size_t pos = 8; memcmp(p + pos + 4, "IEND", 4); pos += 12 + be32(p + pos)) {
         size_t len = be32(p + pos);
-        if (len > n - pos - 12) return mx_fail(st, MX_EINPUT, "%s: truncated PNG chunk at byte %zu", what, pos);
-        const unsigned char *type = p + pos + 4, *data = p + pos + 8;
-        if (crc32(0L, type, (uInt)(len + 4)) != be32(data + len))
-            return mx_fail(st, MX_EINPUT, "%s: corrupt PNG chunk '%.4s' at byte %zu (CRC mismatch)", what,
-                           (const char *)type, pos);
-        if (!have_header && memcmp(type, "IHDR", 4))
-            return mx_fail(st, MX_EINPUT, "%s: PNG without IHDR first", what);
-        if (!memcmp(type, "IHDR", 4)) {
-            if (have_header++) return mx_fail(st, MX_EINPUT, "%s: PNG with two IHDR chunks", what);
-            if (parse_ihdr(data, len, what, hd, st)) return -1;
-        } else if (!memcmp(type, "IDAT", 4)) {
-            unsigned char *grown = realloc(*idat, *idat_len + len + 1);
-            if (!grown) return mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
-            *idat = grown;
-            memcpy(*idat + *idat_len, data, len);
-            *idat_len += len;
-        } else if (!memcmp(type, "IEND", 4)) {
-            return *idat_len ? 0 : mx_fail(st, MX_EINPUT, "%s: PNG without image data", what);
-        }
-        pos += 12 + len;
+        if (!memcmp(p + pos + 4, "IDAT", 4)) memcpy(dst, p + pos + 8, len), dst += len;
     }
+    return idat;
 }
 
 /* Inflates the zlib stream into exactly `size` bytes: a stream that ends early, runs over or is
@@ -153,20 +188,13 @@ static int to_image(const unsigned char *rows, const png_header *hd, const char 
 
 int mx_png_decode(const void *data, size_t len, const char *what, mx_image *out, mx_status *st) {
     memset(out, 0, sizeof *out);
-    const unsigned char *p = data;
-    if (len < 8 || memcmp(p, SIGNATURE, 8)) return mx_fail(st, MX_EINPUT, "%s: not a PNG file", what);
+    png_layout lay;
     png_header hd = {0, 0, 0};
-    unsigned char *idat, *rows = NULL;
-    size_t idat_len;
-    int rc = read_chunks(p, len, what, &hd, &idat, &idat_len, st);
-    size_t stride = (size_t)hd.w * hd.channels, size = rc ? 0 : (stride + 1) * hd.h;
-    /* deflate packs at most ~1032:1: a tiny file declaring a huge image is refused before the
-     * allocation (as the OpenImageIO adapter's check does) */
-    if (!rc && size / 1032 > idat_len + 64)
-        rc = mx_fail(st, MX_EINPUT, "%s: PNG declares %ux%u pixels but holds %zu bytes of image data", what, hd.w, hd.h,
-                     idat_len);
-    if (!rc && !(rows = malloc(size))) rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
-    if (!rc) rc = inflate_exact(idat, idat_len, rows, size, what, st);
+    if (check_layout(data, len, what, &lay, st) || parse_ihdr(lay.ihdr, what, &hd, st)) return -1;
+    size_t stride = (size_t)hd.w * hd.channels, size = (stride + 1) * hd.h;
+    unsigned char *idat = joined_idat(data, &lay), *rows = idat ? malloc(size) : NULL;
+    int rc = rows ? 0 : mx_fail(st, MX_ENOMEM, "%s: out of memory", what);
+    if (!rc) rc = inflate_exact(idat, lay.idat_len, rows, size, what, st);
     if (!rc) rc = unfilter(rows, hd.h, stride, hd.channels, what, st);
     if (!rc) rc = to_image(rows, &hd, what, out, st);
     free(idat);
@@ -206,8 +234,9 @@ int mx_png_encode(const mx_image *img, unsigned char **data, size_t *len, mx_sta
     *data = NULL;
     *len = 0;
     if (mx_io_check_writable(img, "PNG encoder", st)) return -1;
-    if (img->w > MAX_SIDE || img->h > MAX_SIDE)
-        return mx_fail(st, MX_EINPUT, "PNG encoder: image of %dx%d (at most %d a side)", img->w, img->h, MAX_SIDE);
+    if (img->w > MX_IMAGE_MAX_SIDE || img->h > MX_IMAGE_MAX_SIDE)
+        return mx_fail(st, MX_EINPUT, "PNG encoder: image of %dx%d (at most %d a side)", img->w, img->h,
+                       MX_IMAGE_MAX_SIDE);
     unsigned char *px = mx_io_to_8bit(img), *rows = px ? filtered_rows(px, img) : NULL;
     size_t raw = ((size_t)img->w * img->c + 1) * img->h;
     uLongf packed = compressBound((uLong)raw);

@@ -9,13 +9,28 @@
 
 #include <stddef.h>
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 #include "../../runtime/status.h"
 #include "../geom/mesh_types.h"
+
+/* The structure of the PNG in data[0..len), before any decoder sees it (both adapters call it):
+ * the signature, every chunk's length and CRC up to IEND, one IHDR and first, at most
+ * MX_IMAGE_MAX_SIDE a side, and no more rows than the IDAT bytes can hold (deflate expands at
+ * most 1032:1: a few hundred bytes declaring 16k × 16k would have a decoder allocate gigabytes
+ * before the data runs out). Bit depth, colour type and interlace are the decoder's to judge. */
+int mx_png_check(const void *data, size_t len, const char *what, mx_status *st);
 
 /* The PNG in data[0..len) as float [0,1] values; `what` names it in errors. */
 int mx_png_decode(const void *data, size_t len, const char *what, mx_image *out, mx_status *st);
 
 /* img as an 8-bit PNG in a malloc'ed buffer (*data, *len). */
 int mx_png_encode(const mx_image *img, unsigned char **data, size_t *len, mx_status *st);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif
