@@ -253,6 +253,7 @@ static void test_attention_ops(const levels *lv) {
     test_attention_case(lv, 1, 1, 3, 2, 300, 0);
     test_attention_case(lv, 1, 1, 150, 150, 24, 1);
     test_attention_case(lv, 1, 1, 70, 70, 512, 0);
+    test_attention_case(lv, 1, 2, 67, 333, 40, 0); /* keys over several packing tasks and key blocks */
 }
 
 static void test_group_norm_case(const levels *lv, int B, int C, int HW, int groups, mx_dtype dt, int silu) {
