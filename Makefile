@@ -221,7 +221,10 @@ faults-run: $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 # The network tests run on MX_TEST_DEVICE: cpu-strict by default, so that any access to
 # activation memory from outside the op layer crashes them (docs/DESIGN.md §4).
 MX_TEST_DEVICE ?= cpu-strict
+# Tests run two at a time (tests/run.sh): most keep one core busy.
+TEST_JOBS ?= 2
 TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS) MX_TEST_DEVICE=$(MX_TEST_DEVICE) \
+           MATEX_TEST_JOBS=$(TEST_JOBS) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
            MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
            MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"

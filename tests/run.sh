@@ -4,24 +4,42 @@
 # not run (e.g. the SD1.5-size cases outside `make test-full`) and counts as skipped. A test that
 # passes may have skipped cases whose data is outside the repository ("SKIP REL: ..." lines, see
 # tests/util_test.h): they are counted and the first few shown.
+# MATEX_TEST_JOBS (default 1; the Makefile passes 2) tests run at once: most of them keep one
+# core busy, and each writes only into its own temporary folder. Results are reported in the
+# order given, each as soon as it and every test before it have ended.
+jobs=${MATEX_TEST_JOBS:-1}
 pass=0
 fail=0
 skip=0
 cases_skipped=0
 failed=""
-for t in "$@" tests/cli_*.sh; do
-    [ -e "$t" ] || continue
+running=0
+queue="" # "pid:path" of the tests started and not yet reported, oldest first
+
+# Runs test $1 into $1.log.tmp and writes "exit-code seconds" to $1.rc.tmp.
+run_one() {
     start=$(date +%s)
-    case "$t" in
-    *.sh) sh "$t" > "$t.log.tmp" 2>&1 ;;
-    *) "$t" > "$t.log.tmp" 2>&1 ;;
+    case "$1" in
+    *.sh) sh "$1" > "$1.log.tmp" 2>&1 ;;
+    *) "$1" > "$1.log.tmp" 2>&1 ;;
     esac
-    rc=$?
-    secs=$(( $(date +%s) - start ))
-    if [ $rc -eq 77 ]; then
+    echo "$? $(( $(date +%s) - start ))" > "$1.rc.tmp"
+}
+
+# Waits for the oldest running test and reports it.
+report_oldest() {
+    entry=${queue%% *}
+    queue=${queue#"$entry"}
+    queue=${queue# }
+    running=$((running - 1))
+    t=${entry#*:}
+    wait "${entry%%:*}"
+    rc=1 secs=0 # a test killed before writing its exit code failed
+    [ -s "$t.rc.tmp" ] && read -r rc secs < "$t.rc.tmp"
+    if [ "$rc" -eq 77 ]; then
         skip=$((skip + 1))
         echo "SKIP $(basename "$t") ($(tail -n 1 "$t.log.tmp"))"
-    elif [ $rc -eq 0 ]; then
+    elif [ "$rc" -eq 0 ]; then
         pass=$((pass + 1))
         n=$(grep -c '^SKIP ' "$t.log.tmp")
         if [ "$n" -gt 0 ]; then
@@ -39,8 +57,17 @@ for t in "$@" tests/cli_*.sh; do
         grep '^FAIL' "$t.log.tmp" | head -10 | sed 's/^/    /'
         sed 's/^/    /' "$t.log.tmp" | tail -40
     fi
-    rm -f "$t.log.tmp"
+    rm -f "$t.log.tmp" "$t.rc.tmp"
+}
+
+for t in "$@" tests/cli_*.sh; do
+    [ -e "$t" ] || continue
+    run_one "$t" &
+    queue="${queue:+$queue }$!:$t"
+    running=$((running + 1))
+    [ $running -ge "$jobs" ] && report_oldest
 done
+while [ -n "$queue" ]; do report_oldest; done
 [ -n "$failed" ] && echo "failed:$failed"
 [ $cases_skipped -gt 0 ] && echo "$cases_skipped case(s) skipped inside passing tests: their data is outside the repository (MATEX_TESTDATA)"
 echo "$pass passed, $fail failed, $skip skipped"
