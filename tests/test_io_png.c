@@ -160,6 +160,8 @@ static void damaged_files(void) {
     refused(copy, len, "at most", "100000 pixels wide");
     len = make_png(buf, px, 4, 6, 3, 2, 16);
     refused(buf, len, "full build", "16-bit");
+    len = make_png(buf, px, 4, 6, 1, 3, 8); /* palette indices (and no PLTE): the full build's */
+    refused(buf, len, "colour type 3", "palette");
     refused((const unsigned char *)"GIF89a........", 14, "not a PNG", "not a PNG");
 }
 

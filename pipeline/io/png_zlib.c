@@ -37,11 +37,13 @@ typedef struct {
     size_t idat_len;
 } png_layout;
 
+/* Samples per pixel by colour type: 0 grey, 2 RGB, 3 palette index, 4 grey+alpha, 6 RGBA. */
+static const int SAMPLES_OF_TYPE[7] = {1, 0, 3, 1, 2, 0, 4};
+
 /* Bytes of the filtered rows an IHDR declares: per row a filter byte and the packed samples. */
 static unsigned long long declared_row_bytes(const unsigned char *ihdr) {
-    static const int samples_of_type[7] = {1, 0, 3, 1, 2, 0, 4}; /* by colour type (3: palette index) */
     unsigned long long w = be32(ihdr), h = be32(ihdr + 4), depth = ihdr[8];
-    int samples = ihdr[9] < 7 ? samples_of_type[ihdr[9]] : 0;
+    int samples = ihdr[9] < 7 ? SAMPLES_OF_TYPE[ihdr[9]] : 0;
     return h * (1 + (w * (unsigned)samples * depth + 7) / 8);
 }
 
@@ -93,13 +95,12 @@ int mx_png_check(const void *data, size_t len, const char *what, mx_status *st) 
 
 /* The subset this decoder reads, from an IHDR that check_layout accepted. */
 static int parse_ihdr(const unsigned char *d, const char *what, png_header *hd, mx_status *st) {
-    static const int channels_of_type[7] = {1, 0, 3, 0, 2, 0, 4};
     hd->w = be32(d);
     hd->h = be32(d + 4);
     int depth = d[8], type = d[9], interlace = d[12];
     if (d[10] != 0 || d[11] != 0 || interlace > 1 || type > 6)
         return mx_fail(st, MX_EINPUT, "%s: invalid PNG header", what);
-    hd->channels = channels_of_type[type];
+    hd->channels = type == 3 ? 0 : SAMPLES_OF_TYPE[type]; /* a palette is not read here */
     if (depth != 8 || hd->channels == 0 || interlace)
         return mx_fail(st, MX_EINPUT,
                        "%s: a %d-bit PNG of colour type %d%s: this build (without OpenImageIO) reads only "
