@@ -218,16 +218,6 @@ static const float *thread_a_block(const gemm_job *j, int mb, int thread) {
     return buf;
 }
 
-static void add_bias(const mx_gemm_problem *p, const float *bias, int m0, int m1, int n0, int n1) {
-    for (int m = m0; m < m1; m++) {
-        float *row = p->C + (size_t)m * p->ldc;
-        if (p->bias_per_row)
-            for (int n = n0; n < n1; n++) row[n] += bias[m];
-        else
-            for (int n = n0; n < n1; n++) row[n] += bias[n];
-    }
-}
-
 /* The problem of batch item b: its own C and image. */
 static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
     mx_gemm_problem q = *p;
@@ -250,7 +240,9 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
                         n, !j->first_block);
             /* the bias while the tile is still in L1 (a pass over C afterwards read it back from
              * memory: 2-3 % of a VAE decode); the same sums, so the same results */
-            if (j->last_block && j->bias) add_bias(p, j->bias, m0, m0 + m, n0, n0 + n);
+            if (j->last_block && j->bias)
+                j->g->add_bias(p->C + (size_t)m0 * p->ldc + n0, p->ldc, m, n, p->bias_per_row ? j->bias + m0 : j->bias + n0,
+                               p->bias_per_row);
         }
     }
 }
@@ -541,7 +533,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     for (int b = 0; b < p->batch && p->K <= 0; b++) { /* empty sum: C = bias or 0 */
         mx_gemm_problem item = batch_item(p, b);
         for (int m = 0; m < p->M; m++) memset(item.C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
-        if (j.bias) add_bias(&item, j.bias, 0, p->M, 0, p->N);
+        if (j.bias) j.g->add_bias(item.C, p->ldc, p->M, p->N, j.bias, p->bias_per_row);
     }
     for (int kb = 0; kb < nkb && p->K > 0; kb++) {
         j.k0 = kb * kc_max;

@@ -28,6 +28,9 @@ typedef struct mx_gemm_kernel {
      * first m rows and n columns are written (m <= mr, n <= nr). With to_pairs the panels are
      * a[(kc+1)/2][mr] and b[(kc+1)/2][nr] words of bf16 pairs. */
     void (*micro)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, int accumulate);
+    /* c[i][j] += bias[i] (per_row) or bias[j], for i < m, j < n: the bias on a finished tile
+     * (gemm_bias_simd.inc). */
+    void (*add_bias)(float *c, size_t ldc, int m, int n, const float *bias, int per_row);
     /* y[i] = widened x[i] for a weight row (fp32, fp16 or bf16). */
     void (*widen)(float *y, mx_wptr x, size_t offset, size_t n);
     /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols (the packing transpose). */
@@ -108,6 +111,11 @@ void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int
  * valid..width of the kc rows (or pair rows), and the pair_align padding rows. */
 void mx_gemm_zero_panel_tail(const mx_gemm_kernel *g, void *dst, int width, int valid, int kc);
 
+/* The bias epilogues (gemm_bias_simd.inc) of the AVX2, AVX-512 (also the bf16 and AMX levels) and
+ * NEON (also neonbf16) files. */
+void mx_gemm_add_bias_avx2(float *c, size_t ldc, int m, int n, const float *bias, int per_row);
+void mx_gemm_add_bias_avx512(float *c, size_t ldc, int m, int n, const float *bias, int per_row);
+void mx_gemm_add_bias_neon(float *c, size_t ldc, int m, int n, const float *bias, int per_row);
 /* The AVX-512 weight widening (gemm_avx512.c), also used by the bf16 levels. */
 void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);
 /* The NEON weight widening (gemm_neon.c), also used by the neonbf16 level. */

@@ -3,6 +3,7 @@
 #include <immintrin.h>
 
 #include "gemm.h"
+#include "simd_avx2.h"
 
 #define MR 6
 #define NR 16
@@ -66,7 +67,9 @@ static void widen_avx2(float *y, mx_wptr w, size_t off, size_t n) {
     for (; i < n; i++) y[i] = mx_w_get(w, off + i);
 }
 
-static const mx_gemm_kernel kernel_avx2 = {MR, NR, micro_6x16, widen_avx2, mx_gemm_transpose, NULL, NULL, 0, 0};
+#include "gemm_bias_simd.inc"
+
+static const mx_gemm_kernel kernel_avx2 = {MR, NR, micro_6x16, mx_gemm_add_bias_avx2, widen_avx2, mx_gemm_transpose, NULL, NULL, 0, 0};
 
 void mx_linear_avx2(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx2, y, x, w, bias, M, N, K);

@@ -4,6 +4,7 @@
 #include <immintrin.h>
 
 #include "gemm.h"
+#include "simd_avx512.h"
 
 #define MICRO_NAME micro_12x32
 #define MICRO_STEPS(kc) (kc)
@@ -29,7 +30,9 @@ void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
     for (; i < n; i++) y[i] = mx_w_get(w, off + i);
 }
 
-static const mx_gemm_kernel kernel_avx512 = {MR, NR, micro_12x32, mx_gemm_widen_avx512, mx_gemm_transpose, NULL, NULL, 0, 0};
+#include "gemm_bias_simd.inc"
+
+static const mx_gemm_kernel kernel_avx512 = {MR, NR, micro_12x32, mx_gemm_add_bias_avx512, mx_gemm_widen_avx512, mx_gemm_transpose, NULL, NULL, 0, 0};
 
 void mx_linear_avx512(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512, y, x, w, bias, M, N, K);

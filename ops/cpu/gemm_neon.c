@@ -4,6 +4,7 @@
 #include <arm_neon.h>
 
 #include "gemm.h"
+#include "simd_neon.h"
 #include "transpose_neon.h"
 
 #define MICRO_NAME micro_8x12
@@ -23,7 +24,9 @@ void mx_gemm_widen_neon(float *y, mx_wptr w, size_t off, size_t n) {
     for (; i < n; i++) y[i] = mx_w_get(w, off + i);
 }
 
-static const mx_gemm_kernel kernel_neon = {MR, NR, micro_8x12, mx_gemm_widen_neon, transpose_neon, NULL, NULL, 0, 0};
+#include "gemm_bias_simd.inc"
+
+static const mx_gemm_kernel kernel_neon = {MR, NR, micro_8x12, mx_gemm_add_bias_neon, mx_gemm_widen_neon, transpose_neon, NULL, NULL, 0, 0};
 
 void mx_linear_neon(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_neon, y, x, w, bias, M, N, K);
