@@ -25,7 +25,7 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st); /* ops/cuda/cuda_ba
 static void *host_alloc(mx_backend *be, size_t bytes, mx_status *st) {
     (void)be;
     size_t n = (bytes + MX_ARENA_ALIGN - 1) / MX_ARENA_ALIGN * MX_ARENA_ALIGN;
-    void *p = n >= bytes ? aligned_alloc(MX_ARENA_ALIGN, n ? n : MX_ARENA_ALIGN) : NULL;
+    void *p = n >= bytes ? mx_host_block(n ? n : MX_ARENA_ALIGN) : NULL;
     if (!p) mx_fail(st, MX_ENOMEM, "out of memory (%zu bytes)", bytes);
     return p;
 }

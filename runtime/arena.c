@@ -3,8 +3,19 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 
 static size_t round_up(size_t n) { return (n + MX_ARENA_ALIGN - 1) & ~(size_t)(MX_ARENA_ALIGN - 1); }
+
+void *mx_host_block(size_t n) {
+    const uintptr_t huge = (uintptr_t)2 << 20;
+    void *p = aligned_alloc(MX_ARENA_ALIGN, n);
+#ifdef MADV_HUGEPAGE
+    uintptr_t lo = ((uintptr_t)p + huge - 1) & ~(huge - 1), hi = ((uintptr_t)p + n) & ~(huge - 1);
+    if (p && n >= 4 * huge && hi > lo) (void)madvise((void *)lo, hi - lo, MADV_HUGEPAGE); /* advice only */
+#endif
+    return p;
+}
 
 int mx_arena_create(mx_arena *a, size_t cap, mx_status *st) { return mx_arena_create_on(a, NULL, cap, st); }
 
@@ -19,7 +30,7 @@ int mx_arena_create_on(mx_arena *a, mx_backend *be, size_t cap, mx_status *st) {
         a->owns = 1;
         return 0;
     }
-    a->base = aligned_alloc(MX_ARENA_ALIGN, cap);
+    a->base = mx_host_block(cap);
     if (!a->base) return mx_fail(st, MX_ENOMEM, "arena: cannot allocate %zu bytes", cap);
     a->cap = cap;
     a->owns = 1;

@@ -22,6 +22,13 @@ typedef struct mx_arena {
     mx_backend *be;      /* the backend whose memory base is (NULL: host heap) */
 } mx_arena;
 
+/* n bytes of host memory (n a multiple of MX_ARENA_ALIGN, not 0) aligned to it, for free(), or
+ * NULL. The whole 2 MiB pages inside a block of 8 MiB or more are advised to transparent huge
+ * pages: activation arenas and step caches are written afresh by every denoising request of a
+ * texture job, and one page fault per 4 KiB of them was most of a --fast job's 1.2 M faults
+ * (~15 s of system time on the VMs measured). */
+void *mx_host_block(size_t n);
+
 int mx_arena_create(mx_arena *a, size_t cap, mx_status *st);
 /* An arena in a backend's memory (be NULL: the host heap, as mx_arena_create). Only ops may
  * read or write what it hands out. */
