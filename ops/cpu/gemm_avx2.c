@@ -30,8 +30,9 @@
 static void micro_6x16(int kc, const void *ap, const void *bp, float *c, size_t ldc, int m, int n, int accumulate) {
     const float *a = ap, *b = bp;
     ALL_ROWS(ROW_DECL)
-    /* the C tile is read at the end: start fetching it now (it is usually outside L2) */
-    for (int i = 0; accumulate && i < m; i++) {
+    /* the C tile is read (accumulate, bias) or written at the end: start fetching it now (it is
+     * usually outside L2; the bias epilogue waited on lines the stores had missed) */
+    for (int i = 0; i < m; i++) {
         _mm_prefetch((const char *)(c + (size_t)i * ldc), _MM_HINT_T0);
         _mm_prefetch((const char *)(c + (size_t)i * ldc + NR - 1), _MM_HINT_T0);
     }
