@@ -57,6 +57,10 @@ static inline vf v_pow2i(vf n) {
 /* the float whose bits are t's shifted left by 23: moves a biased exponent held in t's low bits
  * into the exponent field */
 static inline vf v_shl23(vf t) { return _mm512_castsi512_ps(_mm512_slli_epi32(_mm512_castps_si512(t), 23)); }
+/* a · 2^n for integral n (vscalefps): exact, 0 below the range, inf above; lets v_exp2 skip
+ * building 2^n from bits and its upper clamp */
+#define V_HAS_SCALEF 1
+static inline vf v_scalef(vf a, vf n) { return _mm512_scalef_ps(a, n); }
 /* dst[c*dst_ld + r] = src[r*src_ld + c] for r < rows, c < cols. */
 static inline void v_transpose(float *dst, size_t dst_ld, const float *src, size_t src_ld, int rows, int cols) {
     transpose_avx(dst, dst_ld, src, src_ld, rows, cols);
