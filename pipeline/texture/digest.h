@@ -9,8 +9,12 @@
 
 #include <stdint.h>
 
-/* Writes 16 hex digits + NUL into out (at least 17 bytes); "unreadable" when the file can't be read. */
-void mx_file_digest_hex(const char *path, char out[32]);
+#include "../../runtime/threadpool.h"
+
+/* Writes 16 hex digits + NUL into out (at least 17 bytes); "unreadable" when the file can't be
+ * read. The lanes are split over the pool's threads (NULL: this thread), the value the same. */
+void mx_file_digest_hex(mx_pool *pool, const char *path, char out[32]);
 uint64_t mx_digest64(const void *data, uint64_t len);
+uint64_t mx_digest64_on(mx_pool *pool, const void *data, uint64_t len);
 
 #endif

@@ -154,7 +154,7 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
         mx_models_free(m);
         return -1;
     }
-    mx_file_digest_hex(path, m->digest);
+    mx_file_digest_hex(c ? c->pool : NULL, path, m->digest);
     return 0;
 }
 

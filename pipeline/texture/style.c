@@ -128,7 +128,7 @@ int mx_style_load(mx_style *s, const matex_options *o, mx_status *st) {
         const char *path = o->style_images[i];
         if (mx_io_read_image(path, &s->img[s->n], st)) return mx_fail_prefix(st, "style image");
         s->path[s->n] = path;
-        mx_file_digest_hex(path, s->digest[s->n]);
+        mx_file_digest_hex(NULL, path, s->digest[s->n]);
         s->n++;
         if (too_many_pixels(path, s->img[s->n - 1].w, s->img[s->n - 1].h, st)) return -1;
     }

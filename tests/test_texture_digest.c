@@ -1,0 +1,84 @@
+/* The weight-file digest (pipeline/texture/digest.h, "mxd64"): the value against a plain
+ * word-by-word reading of its definition, on every length around the 8-word rounds; the lanes
+ * split over pools of 1, 2, 3, 5 and 8 threads give the same value; a file's digest is its
+ * bytes' digest, and a file that can't be read says so. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "../pipeline/texture/digest.h"
+#include "util_test.h"
+
+static uint64_t mix(uint64_t z) {
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+/* The definition of digest.h, word by word in file order. */
+static uint64_t digest_by_definition(const unsigned char *p, uint64_t len) {
+    uint64_t h[8];
+    for (int k = 0; k < 8; k++) h[k] = (len + (uint64_t)k) * 0x9E3779B97F4A7C15ull;
+    for (uint64_t i = 0; i * 8 < len; i++) {
+        uint64_t w = 0;
+        for (uint64_t b = 0; b < 8 && i * 8 + b < len; b++) w |= (uint64_t)p[i * 8 + b] << (8 * b);
+        uint64_t x = h[i % 8] ^ mix(w + i);
+        h[i % 8] = ((x << 27) | (x >> 37)) * 0x94D049BB133111EBull;
+    }
+    uint64_t d = 0;
+    for (int k = 0; k < 8; k++) d = mix(d ^ h[k]);
+    return d;
+}
+
+static void test_lengths_and_pools(const unsigned char *buf, size_t big) {
+    int threads[] = {1, 2, 3, 5, 8};
+    for (size_t t = 0; t < sizeof threads / sizeof *threads; t++) {
+        mx_status st = {0};
+        mx_pool *pool = mx_pool_create(threads[t], &st);
+        CHECK(pool != NULL);
+        for (uint64_t len = 0; len <= 200; len++) {
+            uint64_t want = digest_by_definition(buf, len);
+            CHECK(mx_digest64(buf, len) == want);
+            CHECK(mx_digest64_on(pool, buf, len) == want);
+        }
+        CHECK(mx_digest64_on(pool, buf, big) == digest_by_definition(buf, big));
+        mx_pool_destroy(pool);
+    }
+}
+
+static void test_file(const unsigned char *buf, size_t n) {
+    char dir[] = "/tmp/matex_test_digest.XXXXXX", path[64], hex[32], want[32];
+    CHECK(mkdtemp(dir) != NULL);
+    snprintf(path, sizeof path, "%s/w.bin", dir);
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(buf, 1, n, f) == n);
+    if (f) fclose(f);
+    mx_status st = {0};
+    mx_pool *pool = mx_pool_create(2, &st);
+    snprintf(want, sizeof want, "%016llx", (unsigned long long)digest_by_definition(buf, n));
+    mx_file_digest_hex(pool, path, hex);
+    CHECK(!strcmp(hex, want));
+    mx_file_digest_hex(NULL, path, hex);
+    CHECK(!strcmp(hex, want));
+    unlink(path);
+    mx_file_digest_hex(pool, path, hex);
+    CHECK(!strcmp(hex, "unreadable"));
+    rmdir(dir);
+    mx_pool_destroy(pool);
+}
+
+int main(void) {
+    size_t big = (size_t)1 << 20 | 13; /* past many rounds, and not a whole one */
+    unsigned char *buf = malloc(big);
+    CHECK(buf != NULL);
+    if (!buf) return 1;
+    uint32_t s = 12345;
+    for (size_t i = 0; i < big; i++) buf[i] = (unsigned char)((s = s * 1664525u + 1013904223u) >> 24);
+    test_lengths_and_pools(buf, big);
+    test_file(buf, 4099);
+    free(buf);
+    if (mx_test_failures) fprintf(stderr, "test_texture_digest: %d failures\n", mx_test_failures);
+    else printf("test_texture_digest: all checks passed\n");
+    return mx_test_failures != 0;
+}
