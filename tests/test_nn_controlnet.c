@@ -211,7 +211,14 @@ static void check_step_cache(const mx_ctx *c) {
     CHECK(same_residuals(res, 3, 1, &x, &k.cfg));
     CHECK(golden_run_controlnet_cached(c, k.m, &in[2], &cache, res[4], res[4][n], 0) == 0); /* replays */
     CHECK(same_residuals(res, 4, 1, &x, &k.cfg) && !same_residuals(res, 4, 2, &x, &k.cfg));
-    printf("controlnet_tiny step cache: %zu floats, bit-identical, replayed\n", floats);
+    /* a replayed step's FLOPs (bench_nets) leave out the cached work: the hint embedding's last conv at least */
+    double full = mx_controlnet_flops(k.m, x.in.B, x.in.H, x.in.W, x.in.T, 0),
+           replayed = mx_controlnet_flops(k.m, x.in.B, x.in.H, x.in.W, x.in.T, 1),
+           hint_out = 2.0 * x.in.B * x.in.H * x.in.W * k.cfg.block_out_channels[0] * 9 *
+                      k.cfg.cond_emb_channels[k.cfg.n_cond_emb - 1];
+    CHECK(replayed > 0 && full - replayed >= hint_out);
+    printf("controlnet_tiny step cache: %zu floats, bit-identical, replayed; %.3g of %.3g FLOPs per replayed step\n",
+           floats, replayed, full);
     mx_dev_free(c, cache.mem);
     for (int i = 0; i < 5; i++) free_residuals(res[i], &k.cfg);
     free(sample2);

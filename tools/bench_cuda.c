@@ -107,8 +107,8 @@ static void print_profile(const mx_profile *p, double wall) {
 static int bench_net(bench *b, int net, int calls, int profile, mx_status *st) {
     static const char *const names[3] = {"ControlNet 64x64 batch 2", "UNet 64x64 batch 2 (+residuals)",
                                          "VAE decode 64x64 batch 1"};
-    double flops = net == 0 ? mx_controlnet_flops(b->m.cn_depth, B, H, W, T)
-                 : net == 1 ? mx_unet_flops(b->m.unet, B, H, W, T)
+    double flops = net == 0 ? mx_controlnet_flops(b->m.cn_depth, B, H, W, T, 0)
+                 : net == 1 ? mx_unet_flops(b->m.unet, B, H, W, T, 0)
                             : mx_vae_decode_flops(b->m.vae, 1, H, W);
     double secs[MAX_CALLS];
     for (int i = 0; i < 2; i++)

@@ -212,15 +212,17 @@ int mx_controlnet_cache_floats(const mx_controlnet *m, int B, int H, int W, int 
     return 0;
 }
 
-double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T) {
+double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T, int replayed) {
     mx_arena a;
     mx_status st;
+    mx_step_cache replay = {.recorded = 1};
     float *out[MX_UNET_MAX_RES + 1];
     dry_outputs(out, MX_UNET_MAX_RES + 1);
     mx_arena_measure(&a);
     mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f};
     mx_run r;
     mx_run_init(&r, NULL, &a, &st);
+    r.cache = replayed ? &replay : NULL;
     if (check_cond_sizes(&m->enc.cfg, &in, &st) || controlnet_run(&r, m, &in, out, out[MX_UNET_MAX_RES], 0))
         return 0.0;
     return r.flops;

@@ -13,10 +13,10 @@ void mx_step_cache_end(mx_step_cache *k, int real_and_ok) {
 
 int mx_step_cache_slot(mx_step_cache *k, size_t n, float *placeholder, float **slot, mx_status *st) {
     size_t align = MX_ARENA_ALIGN / sizeof(float), step = (n + align - 1) / align * align;
-    if (!k->mem) { /* sizing */
+    if (!k->mem) { /* sizing, or a dry replay when marked recorded */
         k->cursor += step;
         *slot = placeholder;
-        return 0;
+        return k->recorded;
     }
     if (k->cursor > k->cap || step > k->cap - k->cursor)
         return mx_fail(st, MX_EINTERNAL, "step cache: %zu floats are too few for this forward", k->cap);

@@ -9,7 +9,9 @@
  * cache's memory; every later forward reads them back in the same order instead of computing
  * them. The results are those of the same ops on the same inputs, so outputs are bit-identical
  * to forwards without a cache. Sizing: a dry run (measuring arena) with a cache whose memory
- * is NULL counts the floats it needs (mx_unet_cache_floats, mx_controlnet_cache_floats). */
+ * is NULL counts the floats it needs (mx_unet_cache_floats, mx_controlnet_cache_floats); one
+ * whose memory is NULL but marked recorded makes a dry run skip the cached work as a replaying
+ * forward does (the FLOPs of a later step: mx_controlnet_flops, mx_unet_flops). */
 #ifndef MX_STEP_CACHE_H
 #define MX_STEP_CACHE_H
 

@@ -275,13 +275,15 @@ int mx_unet_cache_floats(const mx_unet *u, int B, int H, int W, int T, size_t *f
     return 0;
 }
 
-double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T) {
+double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int replayed) {
     mx_arena a;
     mx_status st;
+    mx_step_cache replay = {.recorded = 1};
     mx_arena_measure(&a);
     mx_unet_input in = {.B = B, .H = H, .W = W, .T = T};
     mx_run r;
     mx_run_init(&r, NULL, &a, &st);
+    r.cache = replayed ? &replay : NULL;
     if (mx_unet_check_sizes(&u->enc.cfg, B, H, W, T, &st) || unet_run(&r, u, &in, NULL)) return 0.0;
     return r.flops;
 }

@@ -79,8 +79,9 @@ int mx_unet_forward(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, 
  * K/V are computed by its first forward and reused by the next (NULL: mx_unet_forward). */
 int mx_unet_forward_cached(const mx_ctx *c, const mx_unet *u, const mx_unet_input *in, mx_step_cache *cache,
                            float *out, mx_arena *a, mx_status *st);
-/* Multiply-add count ×2 of one forward (for benchmarks). */
-double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T);
+/* Multiply-add count ×2 of one forward (for benchmarks); replayed: of a later step of a view,
+ * whose step cache replays the prompt's K/V (step_cache.h). */
+double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int replayed);
 
 /* The registry's entry points (registry.h): config parse + load, the run-net adapter, and the name
  * of residual i in run-net's tensors (down_block_res_sample.{i}, then mid_block_res_sample). */
