@@ -8,10 +8,10 @@
  * weights are device copies (mx_dev_weight, mapped read-only, outside the per-op mprotect), and
  * an op handed a weight that is not one (a host pointer, bound through a host binder) is refused
  * without running, its message kept and reported by the next download, as a CUDA kernel fault is. */
+#include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
-#include <pthread.h>
 #include <string.h>
 #include <sys/mman.h>
 
