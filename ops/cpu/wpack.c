@@ -1,6 +1,6 @@
 /* The packed-weight cache (wpack.h): an open-addressing table of keys and their panels. The
- * panels are cut one after the other from chunks of at least WPACK_CHUNK bytes mapped with
- * transparent huge pages where the kernel offers them: a first call packs ~1.6 GB (bf16 UNet),
+ * panels are cut one after the other from chunks of at least WPACK_CHUNK bytes, host blocks
+ * advised to transparent huge pages (mx_host_block): a first call packs ~1.6 GB (bf16 UNet),
  * and one fault per 4 KiB page of it cost seconds of system time on the VMs measured (1.45 M
  * faults in a UNet bench). One 2 MiB page per entry instead would hold up to 2 MiB more per
  * entry (+700 MB for the SD1.5 set, measured); cut from shared chunks nothing is rounded but
@@ -14,13 +14,14 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include "../../runtime/arena.h"
+
 typedef struct {
     mx_wpack_key key;
     float *panels; /* NULL: an empty slot */
 } wpack_entry;
 
 #define WPACK_CHUNK ((size_t)256 << 20)
-#define WPACK_HUGE ((size_t)2 << 20)
 
 typedef struct {
     char *base;
@@ -52,7 +53,7 @@ int mx_wpack_create(mx_wpack **out, size_t extra_budget, int sources_mapped, mx_
 
 void mx_wpack_destroy(mx_wpack *w) {
     if (!w) return;
-    for (int i = 0; i < w->nchunks; i++) munmap(w->chunks[i].base, w->chunks[i].size);
+    for (int i = 0; i < w->nchunks; i++) free(w->chunks[i].base);
     free(w->chunks);
     free(w->slots);
     free(w);
@@ -104,12 +105,9 @@ static int add_chunk(mx_wpack *w, size_t bytes) {
         w->chunks = c;
         w->chunk_cap = cap;
     }
-    size_t size = bytes > WPACK_CHUNK ? (bytes + WPACK_HUGE - 1) / WPACK_HUGE * WPACK_HUGE : WPACK_CHUNK;
-    void *p = mmap(NULL, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) return -1;
-#ifdef MADV_HUGEPAGE
-    (void)madvise(p, size, MADV_HUGEPAGE); /* advice only: without it, 4 KiB pages */
-#endif
+    size_t size = bytes > WPACK_CHUNK ? bytes : WPACK_CHUNK; /* bytes: a multiple of 64 */
+    char *p = mx_host_block(size);
+    if (!p) return -1;
     w->chunks[w->nchunks++] = (wpack_chunk){.base = p, .size = size};
     return 0;
 }
