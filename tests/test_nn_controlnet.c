@@ -43,7 +43,7 @@ static int read_inputs(cn_inputs *x, const char *net) {
     int ok = x->sample && x->ehs && x->ts && x->cond && s && e;
     if (ok) {
         mx_controlnet_input in = {x->sample, x->ts, x->ehs, x->cond, (int)s->shape[0], (int)s->shape[2],
-                                  (int)s->shape[3], (int)e->shape[1], 1.0f};
+                                  (int)s->shape[3], (int)e->shape[1], 1.0f, 0};
         x->in = in;
     }
     mx_st_close(&f);
@@ -213,7 +213,7 @@ static void check_step_cache(const mx_ctx *c) {
     CHECK(same_residuals(res, 4, 1, &x, &k.cfg) && !same_residuals(res, 4, 2, &x, &k.cfg));
     /* a replayed step's FLOPs (bench_nets) leave out the cached work: the hint embedding's last conv at least */
     double full = mx_controlnet_flops(k.m, x.in.B, x.in.H, x.in.W, x.in.T, 0),
-           replayed = mx_controlnet_flops(k.m, x.in.B, x.in.H, x.in.W, x.in.T, 1),
+           replayed = mx_controlnet_flops(k.m, x.in.B, x.in.H, x.in.W, x.in.T, MX_FLOPS_REPLAYED),
            hint_out = 2.0 * x.in.B * x.in.H * x.in.W * k.cfg.block_out_channels[0] * 9 *
                       k.cfg.cond_emb_channels[k.cfg.n_cond_emb - 1];
     CHECK(replayed > 0 && full - replayed >= hint_out);
@@ -227,6 +227,42 @@ static void check_step_cache(const mx_ctx *c) {
     free_cn(&k);
 }
 
+/* CFG's batch of one latent (halves_equal, unet.h): the residuals equal the unshared call's bit for
+ * bit, in fewer FLOPs; with halves that differ, item 1 moves (the flag is taken). */
+static void check_halves_equal(const mx_ctx *c, const char *what) {
+    cn_case k;
+    cn_inputs x;
+    CHECK(load_cn(&k, c, "controlnet_tiny", "diffusion_pytorch_model.safetensors") == 0);
+    CHECK(read_inputs(&x, "controlnet_tiny") == 0);
+    if (!k.m || !x.sample) return;
+    CHECK(x.in.B == 2);
+    int f = 1 << (k.cfg.n_cond_emb - 1);
+    size_t ns = (size_t)k.cfg.in_channels * x.in.H * x.in.W;
+    size_t nc = (size_t)k.cfg.conditioning_channels * x.in.H * f * x.in.W * f;
+    memcpy(x.sample + ns, x.sample, ns * sizeof(float));
+    memcpy(x.cond + nc, x.cond, nc * sizeof(float));
+    x.ts[1] = x.ts[0];
+    float **res[2] = {alloc_residuals(&k.cfg, 2, x.in.H, x.in.W), alloc_residuals(&k.cfg, 2, x.in.H, x.in.W)};
+    int n = mx_unet_num_residuals(&k.cfg);
+    mx_controlnet_input in = x.in;
+    CHECK(golden_run_controlnet(c, k.m, &in, res[0], res[0][n], 0) == 0);
+    in.halves_equal = 1;
+    CHECK(golden_run_controlnet(c, k.m, &in, res[1], res[1][n], 0) == 0);
+    CHECK(same_residuals(res, 0, 1, &x, &k.cfg));
+    mx_fill_random(x.sample + ns, ns, 61, -1.5f, 1.5f); /* halves that differ: item 1 moves */
+    CHECK(golden_run_controlnet(c, k.m, &in, res[1], res[1][n], 0) == 0);
+    in.halves_equal = 0;
+    CHECK(golden_run_controlnet(c, k.m, &in, res[0], res[0][n], 0) == 0);
+    CHECK(!same_residuals(res, 0, 1, &x, &k.cfg));
+    double full = mx_controlnet_flops(k.m, 2, x.in.H, x.in.W, x.in.T, 0),
+           half = mx_controlnet_flops(k.m, 2, x.in.H, x.in.W, x.in.T, MX_FLOPS_HALVES_EQUAL);
+    CHECK(half > 0.5 * full && half < full);
+    printf("controlnet_tiny %s halves_equal: bit-identical; %.4g of %.4g FLOPs\n", what, half, full);
+    for (int i = 0; i < 2; i++) free_residuals(res[i], &k.cfg);
+    free_inputs(&x);
+    free_cn(&k);
+}
+
 int main(void) {
     mx_ctx c;
     if (golden_ctx(&c)) return 1;
@@ -234,6 +270,7 @@ int main(void) {
     check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors");
     check_unet_fp16w_chain(&c, "controlnet_tiny", "unet_tiny");
     check_step_cache(&c);
+    check_halves_equal(&c, "fp32");
     int mini = golden_have("controlnet_mini", "inputs.safetensors"); /* outside the repository */
     if (mini) {
         check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
@@ -244,6 +281,7 @@ int main(void) {
     if (golden_bf16_ctx(&c, "test_nn_controlnet") == 0) { /* bf16 arithmetic against the fp32 goldens */
         check_golden(&c, "controlnet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
         if (mini) check_golden(&c, "controlnet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors");
+        check_halves_equal(&c, "bf16");
         mx_ctx_destroy(&c);
     }
     return mx_test_finish("test_nn_controlnet");

@@ -102,7 +102,7 @@ static void sd15_controlnet(const mx_ctx *c) {
     float *sample = golden_f32(&in, "sample", NULL), *ehs = golden_f32(&in, "encoder_hidden_states", NULL);
     float *tsteps = golden_f32(&in, "timestep", NULL), *cond = golden_f32(&in, "controlnet_cond", NULL);
     mx_controlnet_input ci = {sample, tsteps, ehs, cond, (int)ts->shape[0], (int)ts->shape[2], (int)ts->shape[3],
-                              (int)te->shape[1], 1.0f};
+                              (int)te->shape[1], 1.0f, 0};
     int n = mx_unet_num_residuals(&cfg), C, h, w;
     float *res[MX_UNET_MAX_RES + 1];
     for (int i = 0; i <= n; i++) {

@@ -87,43 +87,100 @@ static void check_golden(const mx_ctx *c, const char *net, const char *wfile, co
     free_unet(&k);
 }
 
-/* Golden-free: item 1 of a batch of 2 equals the same item run alone, on a non-square latent
- * (8×16); and the result does not depend on the thread count. */
-static void check_batch_independence(const mx_ctx *c) {
+/* unet_tiny with random inputs of a batch of 2 on a non-square latent (8×16), 5 tokens. */
+typedef struct pair_case {
     unet_case k;
-    CHECK(load_unet(&k, c, "unet_tiny", "diffusion_pytorch_model.safetensors") == 0);
-    if (!k.u) return;
-    int H = 8, W = 16, T = 5, C = k.cfg.in_channels, D = k.cfg.cross_attention_dim;
-    size_t ns = (size_t)C * H * W, ne = (size_t)T * D, no = (size_t)k.cfg.out_channels * H * W;
-    float *sample = malloc(2 * ns * sizeof(float)), *ehs = malloc(2 * ne * sizeof(float));
-    float *out2 = malloc(2 * no * sizeof(float)), *out1 = malloc(no * sizeof(float)), *out_st = malloc(no * sizeof(float));
-    float ts[2] = {999.0f, 250.0f};
-    mx_fill_random(sample, 2 * ns, 11, -1.5f, 1.5f);
-    mx_fill_random(ehs, 2 * ne, 12, -2.0f, 2.0f);
-    mx_unet_input both = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = 2, .H = H, .W = W, .T = T};
-    mx_unet_input one = {.sample = sample + ns, .timesteps = ts + 1, .encoder_hidden_states = ehs + ne,
-                         .B = 1, .H = H, .W = W, .T = T};
-    CHECK(golden_run_unet(c, k.u, &both, out2) == 0);
-    CHECK(golden_run_unet(c, k.u, &one, out1) == 0);
-    mx_check_close("unet_tiny 8x16: batch item 1 vs alone", out1, out2 + no, no, 1e-6);
+    int H, W, T;
+    size_t ns, ne, no;              /* floats per item of sample, encoder_hidden_states, output */
+    float *sample, *ehs, *out, *out2; /* 2 items each */
+} pair_case;
+
+static int pair_open(pair_case *p, const mx_ctx *c, uint64_t seed) {
+    memset(p, 0, sizeof *p);
+    if (load_unet(&p->k, c, "unet_tiny", "diffusion_pytorch_model.safetensors") || !p->k.u) return -1;
+    p->H = 8, p->W = 16, p->T = 5;
+    p->ns = (size_t)p->k.cfg.in_channels * p->H * p->W;
+    p->ne = (size_t)p->T * p->k.cfg.cross_attention_dim;
+    p->no = (size_t)p->k.cfg.out_channels * p->H * p->W;
+    p->sample = malloc(2 * p->ns * sizeof(float)), p->ehs = malloc(2 * p->ne * sizeof(float));
+    p->out = malloc(2 * p->no * sizeof(float)), p->out2 = malloc(2 * p->no * sizeof(float));
+    if (!p->sample || !p->ehs || !p->out || !p->out2) return -1;
+    mx_fill_random(p->sample, 2 * p->ns, seed, -1.5f, 1.5f);
+    mx_fill_random(p->ehs, 2 * p->ne, seed + 1, -2.0f, 2.0f);
+    return 0;
+}
+
+static void pair_close(pair_case *p) {
+    free(p->sample);
+    free(p->ehs);
+    free(p->out);
+    free(p->out2);
+    free_unet(&p->k);
+}
+
+/* Golden-free: item 1 of a batch of 2 equals the same item run alone, on a non-square latent;
+ * and the result does not depend on the thread count. */
+static void check_batch_independence(const mx_ctx *c) {
+    pair_case p;
+    CHECK(pair_open(&p, c, 11) == 0);
+    if (!p.out2) {
+        pair_close(&p);
+        return;
+    }
+    size_t no = p.no;
+    float *out1 = p.out2, *out_st = p.out2 + no, ts[2] = {999.0f, 250.0f};
+    mx_unet_input both = {.sample = p.sample, .timesteps = ts, .encoder_hidden_states = p.ehs, .B = 2, .H = p.H,
+                          .W = p.W, .T = p.T};
+    mx_unet_input one = {.sample = p.sample + p.ns, .timesteps = ts + 1, .encoder_hidden_states = p.ehs + p.ne,
+                         .B = 1, .H = p.H, .W = p.W, .T = p.T};
+    CHECK(golden_run_unet(c, p.k.u, &both, p.out) == 0);
+    CHECK(golden_run_unet(c, p.k.u, &one, out1) == 0);
+    mx_check_close("unet_tiny 8x16: batch item 1 vs alone", out1, p.out + no, no, 1e-6);
     mx_ctx serial = *c;
     serial.pool = NULL;
-    CHECK(golden_run_unet(&serial, k.u, &one, out_st) == 0);
+    CHECK(golden_run_unet(&serial, p.k.u, &one, out_st) == 0);
     CHECK(memcmp(out_st, out1, no * sizeof(float)) == 0);
     double ss = 0;
     for (size_t i = 0; i < no; i++) ss += (double)out1[i] * out1[i];
     CHECK(isfinite(ss) && ss > 0);
     /* a latent that is not a multiple of 2 (tiny has 2 levels) is refused with a message */
     mx_status st;
-    mx_unet_input bad = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = 1, .H = 7, .W = 16, .T = T};
     size_t bytes;
-    CHECK(mx_unet_arena_bytes(k.u, bad.B, bad.H, bad.W, bad.T, &bytes, &st) == -1 && strstr(st.msg, "multiple"));
-    free(sample);
-    free(ehs);
-    free(out2);
-    free(out1);
-    free(out_st);
-    free_unet(&k);
+    CHECK(mx_unet_arena_bytes(p.k.u, 1, 7, 16, p.T, &bytes, &st) == -1 && strstr(st.msg, "multiple"));
+    pair_close(&p);
+}
+
+/* CFG's batch of one latent (halves_equal): the output equals the unshared call's bit for bit, in
+ * fewer FLOPs. With halves that differ the flag shows it is taken: item 1 is then computed from
+ * item 0's sample until the first cross-attention, so its output moves. */
+static void check_halves_equal(const mx_ctx *c, const char *what) {
+    pair_case p;
+    CHECK(pair_open(&p, c, 21) == 0); /* the uncond and cond prompts differ */
+    if (!p.out2) {
+        pair_close(&p);
+        return;
+    }
+    size_t no = p.no;
+    float *plain = p.out, *shared = p.out2, ts[2] = {500.0f, 500.0f};
+    memcpy(p.sample + p.ns, p.sample, p.ns * sizeof(float));
+    mx_unet_input in = {.sample = p.sample, .timesteps = ts, .encoder_hidden_states = p.ehs, .B = 2, .H = p.H,
+                        .W = p.W, .T = p.T};
+    CHECK(golden_run_unet(c, p.k.u, &in, plain) == 0);
+    in.halves_equal = 1;
+    CHECK(golden_run_unet(c, p.k.u, &in, shared) == 0);
+    CHECK(memcmp(plain, shared, 2 * no * sizeof(float)) == 0);
+    CHECK(memcmp(plain, plain + no, no * sizeof(float)) != 0); /* the prompts part the items */
+    mx_fill_random(p.sample + p.ns, p.ns, 23, -1.5f, 1.5f);   /* halves that differ: the flag is taken */
+    in.halves_equal = 0;
+    CHECK(golden_run_unet(c, p.k.u, &in, plain) == 0);
+    in.halves_equal = 1;
+    CHECK(golden_run_unet(c, p.k.u, &in, shared) == 0);
+    CHECK(memcmp(plain, shared, no * sizeof(float)) == 0 && memcmp(plain + no, shared + no, no * sizeof(float)) != 0);
+    double full = mx_unet_flops(p.k.u, 2, p.H, p.W, p.T, 0);
+    double half = mx_unet_flops(p.k.u, 2, p.H, p.W, p.T, MX_FLOPS_HALVES_EQUAL);
+    CHECK(half > 0.5 * full && half < full);
+    printf("unet_tiny %s halves_equal: bit-identical; %.4g of %.4g FLOPs\n", what, half, full);
+    pair_close(&p);
 }
 
 /* use_linear_projection: a linear proj_in/proj_out with the 1×1 conv weights (same memory
@@ -269,12 +326,14 @@ int main(void) {
         check_golden(&c, "unet_mini", "diffusion_pytorch_model.fp16.safetensors", "outputs_fp16w.safetensors", 0);
     }
     check_batch_independence(&c);
+    check_halves_equal(&c, "fp32");
     check_linear_projection(&c);
     check_step_cache(&c);
     mx_ctx_destroy(&c);
     if (golden_bf16_ctx(&c, "test_nn_unet") == 0) { /* bf16 arithmetic against the fp32 goldens */
         check_golden(&c, "unet_tiny", "diffusion_pytorch_model.safetensors", "outputs.safetensors", 1);
         if (mini) check_golden(&c, "unet_mini", "diffusion_pytorch_model.safetensors", "outputs.safetensors", 1);
+        check_halves_equal(&c, "bf16");
         mx_ctx_destroy(&c);
     }
     return mx_test_finish("test_nn_unet");

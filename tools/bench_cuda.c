@@ -69,7 +69,7 @@ static int setup_buffers(bench *b, mx_status *st) {
 static int run_net(bench *b, int net, mx_status *st) {
     int rc;
     if (net == 0) {
-        mx_controlnet_input ci = {b->sample, b->ts, b->ehs, b->cond, B, H, W, T, 0.8f};
+        mx_controlnet_input ci = {b->sample, b->ts, b->ehs, b->cond, B, H, W, T, 0.8f, 0};
         rc = mx_controlnet_forward(&b->c, b->m.cn_depth, &ci, b->res, b->res[b->nres], 0, &b->a, st);
     } else if (net == 1) {
         mx_unet_input ui = {.sample = b->sample, .timesteps = b->ts, .encoder_hidden_states = b->ehs, .B = B, .H = H,

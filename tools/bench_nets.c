@@ -237,26 +237,34 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     float *cond = bench_filled((size_t)B * 3 * H * 8 * W * 8, 0, 1, 3);
     float *img = malloc((size_t)3 * H * 8 * W * 8 * sizeof *img);
     net_time nt_cn = {.what = "ControlNet 64x64 batch 2", .flops = mx_controlnet_flops(cn[0], B, H, W, T, 0)};
-    net_time nt_cn_step = {.what = "  same, step cache replayed", .flops = mx_controlnet_flops(cn[0], B, H, W, T, 1)};
+    /* a job's CFG call: both items one latent at one timestep, the prompts differ */
+    float *sample_cfg = malloc(ns * sizeof *sample_cfg), ts_cfg[2] = {981, 981};
+    memcpy(sample_cfg, sample, ns / 2 * sizeof *sample);
+    memcpy(sample_cfg + ns / 2, sample, ns / 2 * sizeof *sample);
+    net_time nt_cn_step = {.what = "  a later CFG step (cache, halves)",
+                           .flops = mx_controlnet_flops(cn[0], B, H, W, T, MX_FLOPS_REPLAYED | MX_FLOPS_HALVES_EQUAL)};
     net_time nt_unet = {.what = "UNet 64x64 batch 2 (+residuals)", .flops = mx_unet_flops(u, B, H, W, T, 0)};
+    net_time nt_unet_cfg = {.what = "  same, CFG halves shared",
+                            .flops = mx_unet_flops(u, B, H, W, T, MX_FLOPS_HALVES_EQUAL)};
     size_t cache_floats = 0;
     if (!o->skip_cn && mx_controlnet_cache_floats(cn[0], B, H, W, T, &cache_floats, st)) return -1;
     float *cache_mem = cache_floats ? malloc(cache_floats * sizeof(float)) : NULL;
     net_time nt_vae = {.what = "VAE decode 64x64 batch 1", .flops = mx_vae_decode_flops(v, 1, H, W)};
     for (int p = 0; p < nprec && !o->skip_cn; p++) {
-        mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f};
+        mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f, 0};
+        mx_controlnet_input ci_cfg = {sample_cfg, ts_cfg, ehs, cond, B, H, W, T, 0.8f, 1};
         nt_cn.first[p] = mx_now();
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
         nt_cn.first[p] = mx_now() - nt_cn.first[p];
         clock_net(&nt_cn, &c[p], p, 0, o->profile);
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
         clock_net(&nt_cn, &c[p], p, 1, o->profile);
-        /* a job's later step: the first call records the step cache, the timed one replays it */
+        /* a job's later CFG step: the first call records the step cache, the timed one replays it */
         mx_step_cache k = {.mem = cache_mem, .cap = cache_floats};
         if (!cache_mem) return mx_fail(st, MX_ENOMEM, "bench_nets: no memory for the step cache");
-        if (mx_controlnet_forward_cached(&c[p], cn[0], &ci, &k, res, res[nres], 0, &a, st)) return -1;
+        if (mx_controlnet_forward_cached(&c[p], cn[0], &ci_cfg, &k, res, res[nres], 0, &a, st)) return -1;
         clock_net(&nt_cn_step, &c[p], p, 0, o->profile);
-        if (mx_controlnet_forward_cached(&c[p], cn[0], &ci, &k, res, res[nres], 0, &a, st)) return -1;
+        if (mx_controlnet_forward_cached(&c[p], cn[0], &ci_cfg, &k, res, res[nres], 0, &a, st)) return -1;
         clock_net(&nt_cn_step, &c[p], p, 1, o->profile);
     }
     free(cache_mem);
@@ -270,6 +278,11 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         clock_net(&nt_unet, &c[p], p, 0, o->profile);
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
         clock_net(&nt_unet, &c[p], p, 1, o->profile);
+        mx_unet_input ui_cfg = ui;
+        ui_cfg.sample = sample_cfg, ui_cfg.timesteps = ts_cfg, ui_cfg.halves_equal = 1;
+        clock_net(&nt_unet_cfg, &c[p], p, 0, o->profile);
+        if (mx_unet_forward(&c[p], u, &ui_cfg, out, &a, st)) return -1;
+        clock_net(&nt_unet_cfg, &c[p], p, 1, o->profile);
     }
     for (int p = 0; p < nprec && !o->skip_vae; p++) {
         nt_vae.first[p] = mx_now();
@@ -289,6 +302,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     if (!o->skip_cn) report(&nt_cn, peak, nth);
     if (!o->skip_cn) report(&nt_cn_step, peak, nth);
     report(&nt_unet, peak, nth);
+    report(&nt_unet_cfg, peak, nth);
     if (!o->skip_vae) report(&nt_vae, peak, nth);
     report_first_calls((const net_time *[]){o->skip_cn ? NULL : &nt_cn, &nt_unet, o->skip_vae ? NULL : &nt_vae}, c, nprec);
     if (o->profile) {
@@ -297,6 +311,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
             if (!o->skip_cn) report_profile(&nt_cn, p, peak[p], nth);
             if (!o->skip_cn) report_profile(&nt_cn_step, p, peak[p], nth);
             report_profile(&nt_unet, p, peak[p], nth);
+            report_profile(&nt_unet_cfg, p, peak[p], nth);
             if (!o->skip_vae) report_profile(&nt_vae, p, peak[p], nth);
         }
     }
@@ -328,6 +343,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     for (int i = 0; i <= nres; i++) free(res[i]);
     free(cond);
     free(sample);
+    free(sample_cfg);
     free(ehs);
     free(out);
     mx_arena_destroy(&a);

@@ -19,11 +19,13 @@
 #define VIEWS 4
 
 
-/* FLOPs of one denoising step (CFG batch 2) and of one decode, for one image of h x w latents. */
+/* FLOPs of one denoising step (CFG batch 2 of one latent: its halves shared until the first
+ * cross-attention) and of one decode, for one image of h x w latents. */
 static void step_flops(const mx_models *m, int h, int w, int n_controlnets, double *step, double *decode) {
-    *step = mx_unet_flops(m->unet, 2, h, w, 77, 0);
-    if (n_controlnets > 0) *step += mx_controlnet_flops(m->cn_depth, 2, h, w, 77, 0);
-    if (n_controlnets > 1) *step += mx_controlnet_flops(m->cn_inpaint, 2, h, w, 77, 0);
+    int how = MX_FLOPS_HALVES_EQUAL;
+    *step = mx_unet_flops(m->unet, 2, h, w, 77, how);
+    if (n_controlnets > 0) *step += mx_controlnet_flops(m->cn_depth, 2, h, w, 77, how);
+    if (n_controlnets > 1) *step += mx_controlnet_flops(m->cn_inpaint, 2, h, w, 77, how);
     *decode = mx_vae_decode_flops(m->vae, 1, h, w);
 }
 

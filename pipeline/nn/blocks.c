@@ -29,6 +29,10 @@ int mx_run_cached(mx_run *r, size_t n, float **slot) {
     return r->cache ? mx_step_cache_slot(r->cache, n, mx_act_placeholder(), slot, r->st) : 0;
 }
 
+int mx_run_batch(const mx_run *r, int B) { return r->shared ? 1 : B; }
+
+void mx_run_copy_item(mx_run *r, float *x, size_t per) { mx_copy(r->c, x + per, x, per); }
+
 /* ---- parameter groups ---- */
 
 static int path_join(char *buf, size_t cap, const char *path, const char *leaf, mx_status *st) {
@@ -239,13 +243,18 @@ static int tblock_run(mx_run *r, const mx_tblock *p, float *hs, int B, int HW, c
     float *k = mx_run_alloc(r, kvd), *v = mx_run_alloc(r, kvd);
     if (!n || !q || !a || !k || !v) return -1;
 
-    mx_ln_run(r, &p->norm1, n, hs, N);
-    mx_lin_run(r, &p->q1, q, n, N);
-    mx_lin_run(r, &p->k1, k, n, N);
-    mx_lin_run(r, &p->v1, v, n, N);
-    run_attention(r, a, q, k, v, B, p->heads, HW, HW, D, dim, dim, dim);
-    mx_lin_run(r, &p->o1, n, a, N);
-    run_add(r, hs, hs, n, nd);
+    int Bs = mx_run_batch(r, B), Ns = Bs * HW; /* self-attention: item 0 alone of a shared batch */
+    mx_ln_run(r, &p->norm1, n, hs, Ns);
+    mx_lin_run(r, &p->q1, q, n, Ns);
+    mx_lin_run(r, &p->k1, k, n, Ns);
+    mx_lin_run(r, &p->v1, v, n, Ns);
+    run_attention(r, a, q, k, v, Bs, p->heads, HW, HW, D, dim, dim, dim);
+    mx_lin_run(r, &p->o1, n, a, Ns);
+    run_add(r, hs, hs, n, (size_t)Ns * dim);
+    if (r->shared) { /* the cross-attention below is where the items part */
+        mx_run_copy_item(r, hs, (size_t)HW * dim);
+        r->shared = 0;
+    }
 
     mx_ln_run(r, &p->norm2, n, hs, N);
     mx_lin_run(r, &p->q2, q, n, N);
@@ -317,14 +326,15 @@ int mx_transformer_run(mx_run *r, const mx_transformer *p, float *y, const float
     size_t n = (size_t)B * HW * (C > inner ? C : inner);
     float *t = mx_run_alloc(r, n), *hs = mx_run_alloc(r, n);
     if (!t || !hs) return -1;
-    mx_gn_run(r, &p->norm, t, x, B, HW, 0);
+    int b = mx_run_batch(r, B); /* x is whole; of a shared batch the first block copies hs */
+    mx_gn_run(r, &p->norm, t, x, b, HW, 0);
     /* proj_in: 1×1 conv in NCHW then to tokens, or tokens then linear (use_linear_projection). */
     if (p->linear_proj) {
-        mx_transpose_chw_hwc(r->c, y, t, B, C, HW);
-        mx_lin_run(r, &p->proj_in_lin, hs, y, B * HW);
+        mx_transpose_chw_hwc(r->c, y, t, b, C, HW);
+        mx_lin_run(r, &p->proj_in_lin, hs, y, b * HW);
     } else {
-        mx_conv_run(r, &p->proj_in_conv, y, t, B, H, W);
-        mx_transpose_chw_hwc(r->c, hs, y, B, inner, HW);
+        mx_conv_run(r, &p->proj_in_conv, y, t, b, H, W);
+        mx_transpose_chw_hwc(r->c, hs, y, b, inner, HW);
     }
     for (int i = 0; i < p->nblocks; i++)
         if (tblock_run(r, &p->blocks[i], hs, B, HW, context, T, ip)) return -1;

@@ -23,6 +23,10 @@ typedef struct mx_run {
     mx_status *st;
     double flops;
     mx_step_cache *cache; /* NULL, or where results constant over the steps are kept (step_cache.h) */
+    /* 1 while a batch of 2 holds two equal items: CFG's [uncond; cond] of one latent, which differ
+     * only from the first cross-attention on. Until it, the layers compute item 0 alone
+     * (mx_run_batch) and the first cross-attention copies it to item 1 (mx_run_share_out). */
+    int shared;
 } mx_run;
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
@@ -34,6 +38,10 @@ float *mx_run_alloc(mx_run *r, size_t n);
  * caller computes it into *slot; *slot is NULL without a cache (compute into your own buffer);
  * -1 on error (st). */
 int mx_run_cached(mx_run *r, size_t n, float **slot);
+/* The items a layer computes of a batch of B: 1 while r->shared, else B. */
+int mx_run_batch(const mx_run *r, int B);
+/* Item 0 of x (items of `per` floats) copied to item 1: the end of the shared part. */
+void mx_run_copy_item(mx_run *r, float *x, size_t per);
 
 typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad, fp32; } mx_conv; /* fp32: precision.h */
 typedef struct { mx_wptr w, b; int in, out; } mx_lin;

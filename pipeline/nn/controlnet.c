@@ -169,6 +169,7 @@ int mx_controlnet_forward_cached(const mx_ctx *c, const mx_controlnet *m, const 
     mx_run r;
     mx_run_init(&r, c, a, st);
     r.cache = cache;
+    r.shared = in->halves_equal && in->B == 2;
     mx_step_cache_begin(cache);
     size_t mark = mx_arena_mark(a);
     int rc = controlnet_run(&r, m, in, down, mid, accumulate);
@@ -194,7 +195,7 @@ static int controlnet_dry_run(const mx_controlnet *m, int B, int H, int W, int T
     float *out[MX_UNET_MAX_RES + 1];
     dry_outputs(out, MX_UNET_MAX_RES + 1);
     mx_arena_measure(&a);
-    mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f};
+    mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f, 0};
     if (mx_controlnet_forward_cached(NULL, m, &in, cache, out, out[MX_UNET_MAX_RES], 0, &a, st)) return -1;
     *bytes = a.peak + 4 * MX_ARENA_ALIGN;
     return 0;
@@ -212,17 +213,18 @@ int mx_controlnet_cache_floats(const mx_controlnet *m, int B, int H, int W, int 
     return 0;
 }
 
-double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T, int replayed) {
+double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T, int how) {
     mx_arena a;
     mx_status st;
     mx_step_cache replay = {.recorded = 1};
     float *out[MX_UNET_MAX_RES + 1];
     dry_outputs(out, MX_UNET_MAX_RES + 1);
     mx_arena_measure(&a);
-    mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f};
+    mx_controlnet_input in = {NULL, NULL, NULL, NULL, B, H, W, T, 1.0f, 0};
     mx_run r;
     mx_run_init(&r, NULL, &a, &st);
-    r.cache = replayed ? &replay : NULL;
+    r.cache = how & MX_FLOPS_REPLAYED ? &replay : NULL;
+    r.shared = (how & MX_FLOPS_HALVES_EQUAL) && B == 2;
     if (check_cond_sizes(&m->enc.cfg, &in, &st) || controlnet_run(&r, m, &in, out, out[MX_UNET_MAX_RES], 0))
         return 0.0;
     return r.flops;

@@ -20,6 +20,7 @@ typedef struct mx_controlnet_input {
                                            (2^(len(cond_emb_channels)-1) × the latent size) */
     int B, H, W, T;
     float scale;                        /* conditioning scale */
+    int halves_equal;                   /* as mx_unet_input's, cond included */
 } mx_controlnet_input;
 
 /* cfg must come from a ControlNetModel config (cfg->is_controlnet). */
@@ -41,9 +42,9 @@ int mx_controlnet_forward(const mx_ctx *c, const mx_controlnet *m, const mx_cont
 int mx_controlnet_forward_cached(const mx_ctx *c, const mx_controlnet *m, const mx_controlnet_input *in,
                                  mx_step_cache *cache, float *const *down, float *mid, int accumulate, mx_arena *a,
                                  mx_status *st);
-/* Multiply-add count ×2 of one forward (for benchmarks); replayed: of a later step of a view,
- * whose step cache replays the hint embedding and the prompt's K/V (step_cache.h). */
-double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T, int replayed);
+/* Multiply-add count ×2 of one forward (for benchmarks); how: MX_FLOPS_* (unet.h; a replayed
+ * step cache holds the hint embedding and the prompt's K/V). */
+double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T, int how);
 
 /* The registry's entry points (registry.h): config parse + load, the run-net adapter. */
 int mx_controlnet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b,

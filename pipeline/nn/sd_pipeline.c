@@ -98,7 +98,7 @@ static int check_request(const mx_sd_request *rq, const mx_ctx *c, int n, int h,
 
 /* The UNet call of latent i (its image tokens in wk->ip, when it has some). */
 static mx_unet_input unet_call(const mx_sd_request *rq, const sd_dims *d, const sd_work *wk, int i) {
-    mx_unet_input in = {.B = d->B, .H = d->h, .W = d->w, .T = d->T};
+    mx_unet_input in = {.B = d->B, .H = d->h, .W = d->w, .T = d->T, .halves_equal = d->B == 2};
     if (d->ip_sets) {
         in.ip = rq->image->adapter;
         in.ip_n = rq->image->n_tokens;
@@ -225,7 +225,7 @@ static int run_controlnets(const mx_sd_request *rq, const mx_ctx *c, const sd_di
         if (weight == 0.0f) continue;
         float *cond = wk->cond[k] + (size_t)i * d->B * control_numel(ctl->net, d->h, d->w);
         mx_controlnet_input in = {wk->x_in, wk->timesteps, wk->text + (size_t)i * d->B * d->text, cond, d->B, d->h,
-                                  d->w, d->T, weight};
+                                  d->w, d->T, weight, d->B == 2};
         mx_step_cache *cache = &wk->caches[i * (1 + rq->n_controls) + 1 + k];
         if (mx_controlnet_forward_cached(c, ctl->net, &in, cache, wk->res, wk->res[d->n_res], ran, &wk->arena, st))
             return mx_fail_prefix(st, "ControlNet %d: ", k), -1;

@@ -236,6 +236,7 @@ int mx_unet_forward_cached(const mx_ctx *c, const mx_unet *u, const mx_unet_inpu
     mx_run r;
     mx_run_init(&r, c, a, st);
     r.cache = cache;
+    r.shared = in->halves_equal && in->B == 2;
     mx_step_cache_begin(cache);
     size_t mark = mx_arena_mark(a);
     int rc = unet_run(&r, u, in, out);
@@ -275,7 +276,7 @@ int mx_unet_cache_floats(const mx_unet *u, int B, int H, int W, int T, size_t *f
     return 0;
 }
 
-double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int replayed) {
+double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int how) {
     mx_arena a;
     mx_status st;
     mx_step_cache replay = {.recorded = 1};
@@ -283,7 +284,8 @@ double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int replayed)
     mx_unet_input in = {.B = B, .H = H, .W = W, .T = T};
     mx_run r;
     mx_run_init(&r, NULL, &a, &st);
-    r.cache = replayed ? &replay : NULL;
+    r.cache = how & MX_FLOPS_REPLAYED ? &replay : NULL;
+    r.shared = (how & MX_FLOPS_HALVES_EQUAL) && B == 2;
     if (mx_unet_check_sizes(&u->enc.cfg, B, H, W, T, &st) || unet_run(&r, u, &in, NULL)) return 0.0;
     return r.flops;
 }

@@ -105,19 +105,33 @@ int mx_unet_check_sizes(const mx_unet_config *cfg, int B, int H, int W, int T, m
     return 0;
 }
 
+/* The end of a shared batch (blocks.h) before a transformer: the skips res[0..k] so far, and the
+ * transformer's input x (xn floats per item) when it is not one of them, copied to item 1. */
+static void unshare(mx_run *r, const mx_unet_config *c, float *const *res, int k, float *x, size_t xn, int H, int W) {
+    if (!r->shared) return;
+    for (int i = 0; i <= k; i++) {
+        int C, h, w;
+        mx_unet_residual_shape(c, i, H, W, &C, &h, &w);
+        mx_run_copy_item(r, res[i], (size_t)C * h * w);
+    }
+    if (x) mx_run_copy_item(r, x, xn);
+}
+
 int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample, const float *add, int B, int H,
                         int W, const float *temb_silu, const float *context, int T, const mx_ip_guide *ip,
                         float *const *res, float *mid) {
     const mx_unet_config *c = &e->cfg;
-    mx_conv_run(r, &e->conv_in, res[0], sample, B, H, W);
-    if (add) mx_add(r->c, res[0], res[0], add, (size_t)B * c->block_out_channels[0] * H * W);
+    int b = mx_run_batch(r, B); /* items computed: 1 while the batch is shared */
+    mx_conv_run(r, &e->conv_in, res[0], sample, b, H, W);
+    if (add) mx_add(r->c, res[0], res[0], add, (size_t)b * c->block_out_channels[0] * H * W);
     int k = 0, h = H, w = W;
     for (int i = 0; i < c->nlevels; i++) {
         const mx_down_level *lv = &e->levels[i];
         for (int j = 0; j < c->layers_per_block; j++) {
             float *dst = res[k + 1];
-            if (mx_resnet_run(r, &lv->res[j], dst, res[k], B, h, w, temb_silu)) return -1;
+            if (mx_resnet_run(r, &lv->res[j], dst, res[k], mx_run_batch(r, B), h, w, temb_silu)) return -1;
             if (lv->cross) {
+                unshare(r, c, res, k + 1, NULL, 0, H, W);
                 size_t mark = mx_arena_mark(r->a);
                 float *t = mx_run_alloc(r, (size_t)B * lv->cout * h * w);
                 if (!t || mx_transformer_run(r, &lv->attn[j], t, dst, B, h, w, context, T, ip)) return -1;
@@ -127,7 +141,7 @@ int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample
             k++;
         }
         if (lv->has_down) {
-            if (mx_down_run(r, &lv->down, res[k + 1], res[k], B, h, w)) return -1;
+            if (mx_down_run(r, &lv->down, res[k + 1], res[k], mx_run_batch(r, B), h, w)) return -1;
             k++;
             h /= 2;
             w /= 2;
@@ -137,9 +151,10 @@ int mx_unet_encoder_run(mx_run *r, const mx_unet_encoder *e, const float *sample
     size_t mark = mx_arena_mark(r->a);
     int ch = c->block_out_channels[c->nlevels - 1];
     float *t = mx_run_alloc(r, (size_t)B * ch * h * w);
-    if (!t) return -1;
-    if (mx_resnet_run(r, &e->mid.res0, mid, res[k], B, h, w, temb_silu) ||
-        mx_transformer_run(r, &e->mid.attn, t, mid, B, h, w, context, T, ip) ||
+    if (!t || mx_resnet_run(r, &e->mid.res0, mid, res[k], mx_run_batch(r, B), h, w, temb_silu)) return -1;
+    unshare(r, c, res, k, mid, (size_t)ch * h * w, H, W);
+    r->shared = 0;
+    if (mx_transformer_run(r, &e->mid.attn, t, mid, B, h, w, context, T, ip) ||
         mx_resnet_run(r, &e->mid.res1, mid, t, B, h, w, temb_silu))
         return -1;
     mx_arena_reset(r->a, mark);
