@@ -1,7 +1,7 @@
 /* The weight-file digest (pipeline/texture/digest.h, "mxd64"): the value against a plain
  * word-by-word reading of its definition, on every length around the 8-word rounds; the lanes
  * split over pools of 1, 2, 3, 5 and 8 threads give the same value; a file's digest is its
- * bytes' digest, and a file that can't be read says so. */
+ * bytes' digest (one chunk, and several), and a file that can't be read says so. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -69,14 +69,16 @@ static void test_file(const unsigned char *buf, size_t n) {
 }
 
 int main(void) {
-    size_t big = (size_t)1 << 20 | 13; /* past many rounds, and not a whole one */
-    unsigned char *buf = malloc(big);
+    size_t big = (size_t)1 << 20 | 13;  /* past many rounds, and not a whole one */
+    size_t file = (size_t)3 << 20 | 13; /* a file read in 4 chunks (digest.c), the last one short */
+    unsigned char *buf = malloc(file);
     CHECK(buf != NULL);
     if (!buf) return 1;
     uint32_t s = 12345;
-    for (size_t i = 0; i < big; i++) buf[i] = (unsigned char)((s = s * 1664525u + 1013904223u) >> 24);
+    for (size_t i = 0; i < file; i++) buf[i] = (unsigned char)((s = s * 1664525u + 1013904223u) >> 24);
     test_lengths_and_pools(buf, big);
     test_file(buf, 4099);
+    test_file(buf, file);
     free(buf);
     if (mx_test_failures) fprintf(stderr, "test_texture_digest: %d failures\n", mx_test_failures);
     else printf("test_texture_digest: all checks passed\n");

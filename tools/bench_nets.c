@@ -15,7 +15,8 @@
  * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
  * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
  * (well under 1 % here); --no-profile runs without.
- * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--no-profile] */
+ * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--no-profile]
+ *                   [--batch 1|2] (2, the default: a default job's CFG calls; 1: --fast's) */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -165,6 +166,7 @@ static void report_profile(const net_time *t, int p, double peak, int threads) {
 
 typedef struct bench_opts {
     int threads, skip_vae, skip_cn, profile;
+    int batch; /* 2: CFG's calls (the default job); 1: --fast's */
     const char *weights;
 } bench_opts;
 
@@ -213,7 +215,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     printf("threads %d, kernels %s%s%s\n", mx_pool_threads(c[0].pool), mx_isa_name(c[0].k->isa),
            nprec == 2 ? " and " : " (bf16 not available on this CPU)", nprec == 2 ? mx_isa_name(c[1].k->isa) : "");
     double peak[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
-    int B = 2, H = 64, W = 64, T = 77, D = ucfg.cross_attention_dim;
+    int B = o->batch, H = 64, W = 64, T = 77, D = ucfg.cross_attention_dim, cfg = B == 2;
     size_t ns = (size_t)B * ucfg.in_channels * H * W;
     float *sample = bench_filled(ns, -1, 1, 1), *ehs = bench_filled((size_t)B * T * D, -1, 1, 2), ts[2] = {981, 37};
     float *out = malloc(ns * sizeof *out);
@@ -236,14 +238,18 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     }
     float *cond = bench_filled((size_t)B * 3 * H * 8 * W * 8, 0, 1, 3);
     float *img = malloc((size_t)3 * H * 8 * W * 8 * sizeof *img);
-    net_time nt_cn = {.what = "ControlNet 64x64 batch 2", .flops = mx_controlnet_flops(cn[0], B, H, W, T, 0)};
+    char cn_what[40], unet_what[40];
+    snprintf(cn_what, sizeof cn_what, "ControlNet 64x64 batch %d", B);
+    snprintf(unet_what, sizeof unet_what, "UNet 64x64 batch %d (+residuals)", B);
+    net_time nt_cn = {.what = cn_what, .flops = mx_controlnet_flops(cn[0], B, H, W, T, 0)};
     /* a job's CFG call: both items one latent at one timestep, the prompts differ */
     float *sample_cfg = malloc(ns * sizeof *sample_cfg), ts_cfg[2] = {981, 981};
     memcpy(sample_cfg, sample, ns / 2 * sizeof *sample);
     memcpy(sample_cfg + ns / 2, sample, ns / 2 * sizeof *sample);
-    net_time nt_cn_step = {.what = "  a later CFG step (cache, halves)",
-                           .flops = mx_controlnet_flops(cn[0], B, H, W, T, MX_FLOPS_REPLAYED | MX_FLOPS_HALVES_EQUAL)};
-    net_time nt_unet = {.what = "UNet 64x64 batch 2 (+residuals)", .flops = mx_unet_flops(u, B, H, W, T, 0)};
+    int step_how = MX_FLOPS_REPLAYED | (cfg ? MX_FLOPS_HALVES_EQUAL : 0);
+    net_time nt_cn_step = {.what = cfg ? "  a later CFG step (cache, halves)" : "  a later step (cache replayed)",
+                           .flops = mx_controlnet_flops(cn[0], B, H, W, T, step_how)};
+    net_time nt_unet = {.what = unet_what, .flops = mx_unet_flops(u, B, H, W, T, 0)};
     net_time nt_unet_cfg = {.what = "  same, CFG halves shared",
                             .flops = mx_unet_flops(u, B, H, W, T, MX_FLOPS_HALVES_EQUAL)};
     size_t cache_floats = 0;
@@ -253,6 +259,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     for (int p = 0; p < nprec && !o->skip_cn; p++) {
         mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f, 0};
         mx_controlnet_input ci_cfg = {sample_cfg, ts_cfg, ehs, cond, B, H, W, T, 0.8f, 1};
+        if (!cfg) ci_cfg = ci;
         nt_cn.first[p] = mx_now();
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
         nt_cn.first[p] = mx_now() - nt_cn.first[p];
@@ -278,6 +285,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         clock_net(&nt_unet, &c[p], p, 0, o->profile);
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
         clock_net(&nt_unet, &c[p], p, 1, o->profile);
+        if (!cfg) continue;
         mx_unet_input ui_cfg = ui;
         ui_cfg.sample = sample_cfg, ui_cfg.timesteps = ts_cfg, ui_cfg.halves_equal = 1;
         clock_net(&nt_unet_cfg, &c[p], p, 0, o->profile);
@@ -302,7 +310,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     if (!o->skip_cn) report(&nt_cn, peak, nth);
     if (!o->skip_cn) report(&nt_cn_step, peak, nth);
     report(&nt_unet, peak, nth);
-    report(&nt_unet_cfg, peak, nth);
+    if (cfg) report(&nt_unet_cfg, peak, nth);
     if (!o->skip_vae) report(&nt_vae, peak, nth);
     report_first_calls((const net_time *[]){o->skip_cn ? NULL : &nt_cn, &nt_unet, o->skip_vae ? NULL : &nt_vae}, c, nprec);
     if (o->profile) {
@@ -311,7 +319,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
             if (!o->skip_cn) report_profile(&nt_cn, p, peak[p], nth);
             if (!o->skip_cn) report_profile(&nt_cn_step, p, peak[p], nth);
             report_profile(&nt_unet, p, peak[p], nth);
-            report_profile(&nt_unet_cfg, p, peak[p], nth);
+            if (cfg) report_profile(&nt_unet_cfg, p, peak[p], nth);
             if (!o->skip_vae) report_profile(&nt_vae, p, peak[p], nth);
         }
     }
@@ -364,7 +372,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
 
 int main(int argc, char **argv) {
     char cached[1100];
-    bench_opts o = {.profile = 1};
+    bench_opts o = {.profile = 1, .batch = 2};
     setvbuf(stdout, NULL, _IOLBF, 0); /* progress lines show up as they happen */
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
@@ -372,9 +380,10 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--skip-vae")) o.skip_vae = 1;
         else if (!strcmp(argv[i], "--skip-controlnet")) o.skip_cn = 1;
         else if (!strcmp(argv[i], "--no-profile")) o.profile = 0;
+        else if (!strcmp(argv[i], "--batch") && i + 1 < argc && (o.batch = atoi(argv[++i])) >= 1 && o.batch <= 2) continue;
         else {
             fprintf(stderr, "usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] "
-                            "[--no-profile]\n");
+                            "[--no-profile] [--batch 1|2]\n");
             return 2;
         }
     }
