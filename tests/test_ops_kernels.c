@@ -184,6 +184,12 @@ static void test_gemm_ops(const levels *lv) {
     test_conv_case(lv, 1, 40, 11, 12, 5, 5, 1, 2, MX_BF16);  /* 5×5: groups of 25 taps */
     test_conv_case(lv, 1, 2, 20, 20, 3, 19, 1, 9, MX_F16);   /* 361 taps: past a K block on pairs */
     test_conv_case(lv, 1, 512, 4, 1100, 3, 3, 1, 1, MX_F32); /* band of 1 output row (8 MiB bound) */
+    /* B panels read in place (micro_rows, on the column tasks: ≥ 8 of them), each half of a
+     * panel within one output row */
+    test_conv_case(lv, 2, 24, 40, 64, 40, 3, 1, 1, MX_F16); /* two panels per row */
+    test_conv_case(lv, 8, 40, 16, 16, 50, 3, 1, 1, MX_F16); /* a panel's halves in two rows */
+    test_conv_case(lv, 8, 8, 9, 48, 20, 3, 1, 1, MX_F32);   /* 48 wide: halves in one row or two */
+    test_conv_case(lv, 8, 33, 5, 64, 14, 1, 1, 0, MX_BF16); /* 1×1 unpadded: the input is the band */
 }
 
 #ifndef MX_NO_X86_SIMD

@@ -168,6 +168,10 @@ typedef struct {
     size_t bpack_stride;
     /* with a profile (c->prof): thread t's seconds of each part at part_secs[t·MX_GEMM_PARTS + part] */
     double *part_secs;
+    /* column tasks of a conv whose B panels of one output row are read in place (micro_rows) at
+     * these offsets (gemm_conv.c), not packed */
+    int rows_in_place;
+    int32_t offs[MX_GEMM_KC_MAX + MX_GEMM_ROWS_AHEAD];
 } gemm_job;
 
 /* The clock of the profiled parts, the thread's CPU time: 0 (never read) without a profile. */
@@ -234,10 +238,16 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
     size_t words = mx_gemm_panel_words(j->g, j->kc);
     for (int np = np0; np < np1; np++, b += words * nr) {
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
+        const uint32_t *half[2];
+        int in_place = j->rows_in_place && mx_gemm_conv_panel_in_place(p, j->g, n0, half);
         for (int mp = mp0; mp < mp1; mp++) {
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
-            j->g->micro(j->kc, a + (size_t)(mp - mp0) * words * mr, b, p->C + (size_t)m0 * p->ldc + n0, p->ldc, m,
-                        n, !j->first_block);
+            const float *ap = a + (size_t)(mp - mp0) * words * mr;
+            float *cp = p->C + (size_t)m0 * p->ldc + n0;
+            if (in_place)
+                j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, !j->first_block);
+            else
+                j->g->micro(j->kc, ap, b, cp, p->ldc, m, n, !j->first_block);
             /* the bias while the tile is still in L1 (a pass over C afterwards read it back from
              * memory: 2-3 % of a VAE decode); the same sums, so the same results */
             if (j->last_block && j->bias)
@@ -277,8 +287,10 @@ static void column_task(void *arg, int task, int thread) {
     size_t words = mx_gemm_panel_words(j->g, j->kc);
     float *bbuf = j->bpack + (size_t)thread * j->bpack_stride;
     double t0 = part_clock(j);
+    const uint32_t *half[2];
     for (int np = np0; np < np1; np++)
-        item.pack_b(&item, j->g, bbuf + (size_t)(np - np0) * words * nr, j->n_off + np * nr, nr, j->k0, j->kc);
+        if (!j->rows_in_place || !mx_gemm_conv_panel_in_place(&item, j->g, j->n_off + np * nr, half))
+            item.pack_b(&item, j->g, bbuf + (size_t)(np - np0) * words * nr, j->n_off + np * nr, nr, j->k0, j->kc);
     double t1 = part_clock(j);
     add_part(j, thread, MX_GEMM_PACK_B, t0, t1);
     for (int mp0 = 0; mp0 < j->mpanels; mp0 += j->mc_panels)
@@ -452,6 +464,7 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
         plan_tiles(j);
         if (j->split == GEMM_COLUMNS) {
             j->nc_panels = column_panels(g, j->kc_max);
+            j->rows_in_place = p->image && mx_gemm_conv_rows_in_place(p, g, j->k0, j->kc, j->offs);
             mx_par_for(c, p->batch * ceil_div(j->npanels, j->nc_panels), column_task, j);
         } else {
             mx_par_for(c, p->batch * ceil_div(j->npanels, PACK_PANELS_PER_TASK), pack_b_items_task, j);

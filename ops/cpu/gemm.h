@@ -43,7 +43,16 @@ typedef struct mx_gemm_kernel {
     /* With to_pairs: pair rows of a panel padded with zeros to a multiple of this (0 or 1: none);
      * a_rows: A panels are a[mr][words] (each row's pairs together) instead of a[words][mr]. */
     int pair_align, a_rows;
+    /* NULL, or micro over a B panel read in place instead of packed: step s (a k, or a k-pair) is
+     * the nr/2 words at half[0] + offs[s], then the nr/2 at half[1] + offs[s]; n = nr. offs holds
+     * MX_GEMM_ROWS_AHEAD entries past the block's steps, addresses to fetch ahead (gemm_conv.c:
+     * halves of a panel that each lie in one output row, read from the band). */
+    void (*micro_rows)(int kc, const void *a, const uint32_t *const half[2], const int32_t *offs, float *c,
+                       size_t ldc, int m, int accumulate);
 } mx_gemm_kernel;
+
+/* Steps of B rows fetched ahead by micro_rows (and the entries past a K block's steps in offs). */
+#define MX_GEMM_ROWS_AHEAD 16
 
 /* Weight rows widened (or gathered, conv) before one packing transpose: MX_GEMM_WIDEN_ROWS ×
  * MX_GEMM_KC_MAX floats of the packers' stack. */
@@ -105,6 +114,16 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
                          int k0, int kc);
 void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
                          int k0, int kc);
+/* conv, B read in place by the kernel's micro_rows (stride 1; not on a band of fp32 inputs
+ * paired per panel): offs[s] for the steps s of the K block k0..k0+kc, the word offset of B's
+ * row s in a panel from the panel's address (+ MX_GEMM_ROWS_AHEAD copies of the last); 0 where
+ * B must be packed. */
+int mx_gemm_conv_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int k0, int kc, int32_t *offs);
+/* 1 when each half of the panel of columns first..first+nr is pixels of one output row: half[h]
+ * is then its address in the band (row s of B: nr/2 words at half[0] + offs[s], nr/2 at
+ * half[1] + offs[s]); else 0. */
+int mx_gemm_conv_panel_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first,
+                                const uint32_t *half[2]);
 /* Starts fetching rows first..first+n-1, columns k0..k0+kc-1, of a row-major weight matrix. */
 void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc);
 /* Zeros what a packer left of a k-major panel dst[words][width] for a K block of kc: columns

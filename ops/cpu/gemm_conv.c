@@ -10,6 +10,7 @@
  * the bf16 levels (the pair of a padding channel is zero in both A and B). */
 #include "gemm.h"
 
+#include <stdint.h>
 #include <string.h>
 
 /* Output columns per block: within gemm.c's outer block of columns (4096), so one block is one
@@ -183,6 +184,32 @@ void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
         for (int r = 0; r < nruns; r++) copy_run(d + runs[r].j, src + runs[r].off, runs[r].len, p->stride);
     }
     mx_gemm_zero_panel_tail(g, dst, cols, valid, kc);
+}
+
+/* ---- B read in place (the kernel's micro_rows): a panel of one output row needs no copy ---- */
+
+int mx_gemm_conv_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int k0, int kc, int32_t *offs) {
+    if (!g->micro_rows || p->stride != 1 || p->band_fp32 || p->band_plane * (size_t)p->chans > INT32_MAX) return 0;
+    int nq = (kc + k_per_word(g) - 1) / k_per_word(g);
+    k_pos at = k_pos_of(p, k0 / k_per_word(g));
+    for (int q = 0; q < nq; q++, k_pos_next(p, &at)) {
+        int cp = at.group * p->group_words + at.word, ky = at.tap / p->kw, kx = at.tap % p->kw;
+        offs[q] = (int32_t)((size_t)cp * p->band_plane + (size_t)ky * p->band_width + (size_t)kx);
+    }
+    for (int q = nq; q < nq + MX_GEMM_ROWS_AHEAD; q++) offs[q] = offs[nq - 1];
+    return 1;
+}
+
+int mx_gemm_conv_panel_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first,
+                                const uint32_t *half[2]) {
+    int w = g->nr / 2;
+    if (first + g->nr > p->N) return 0;
+    for (int h = 0; h < 2; h++) { /* e.g. a 16-wide image: a panel is two rows */
+        int pix = first + h * w, ox = pix % p->Wo;
+        if (ox + w > p->Wo) return 0;
+        half[h] = (const uint32_t *)(const void *)p->image + (size_t)(pix / p->Wo) * p->band_width + (size_t)ox;
+    }
+    return 1;
 }
 
 /* ---- the band: input rows of a block of output rows, padded, in the kernel's words ---- */

@@ -25,7 +25,7 @@ static void to_pairs_neonbf16(uint32_t *dst, const float *even, const float *odd
 }
 
 static const mx_gemm_kernel kernel_neonbf16 = {MR, NR, micro_8x12_bf16, mx_gemm_add_bias_neon, mx_gemm_widen_neon, transpose_neon,
-                                               to_pairs_neonbf16, bf16_pairs_row, 1, 0};
+                                               to_pairs_neonbf16, bf16_pairs_row, 1, 0, NULL};
 
 void mx_linear_neonbf16(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_neonbf16, y, x, w, bias, M, N, K);
