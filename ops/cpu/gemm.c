@@ -327,6 +327,13 @@ static void pack_b_items_task(void *arg, int task, int thread) {
     add_part(j, thread, MX_GEMM_PACK_B, t0, part_clock(j));
 }
 
+/* Convs read their B panels in place (micro_rows) only up to this many A panels (Cout 264 on
+ * 12-row panels): a packed panel is copied once and then read by every A panel's micro call,
+ * one read in place costs a little in each of them (its rows lie scattered over the band, no
+ * stream prefetch). Zen 5, 2 threads, 3×3 convs: Cout 128 at 256² and 512², +8-13 % (fp32 and
+ * bf16); 256, +3-8 %; 320-1280 (the UNet's), no gain within the noise. */
+#define ROWS_IN_PLACE_PANELS_MAX 22
+
 /* B panels per column task: a block that stays in L2 beside an MC-row block of A. */
 #define COLUMN_BLOCK_BYTES (384 << 10)
 
@@ -464,7 +471,8 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
         plan_tiles(j);
         if (j->split == GEMM_COLUMNS) {
             j->nc_panels = column_panels(g, j->kc_max);
-            j->rows_in_place = p->image && mx_gemm_conv_rows_in_place(p, g, j->k0, j->kc, j->offs);
+            j->rows_in_place = p->image && j->mpanels <= ROWS_IN_PLACE_PANELS_MAX &&
+                               mx_gemm_conv_rows_in_place(p, g, j->k0, j->kc, j->offs);
             mx_par_for(c, p->batch * ceil_div(j->npanels, j->nc_panels), column_task, j);
         } else {
             mx_par_for(c, p->batch * ceil_div(j->npanels, PACK_PANELS_PER_TASK), pack_b_items_task, j);
