@@ -152,13 +152,13 @@ $(BUILD)/tests/test_runtime_%: $(BUILD)/tests/test_runtime_%.o $(TEST_UTIL) $(LI
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_ops_%: $(BUILD)/tests/test_ops_%.o $(TEST_UTIL) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
-# The AMX GEMM on the software emulation of its tile operations (ops/cpu/amx_tiles.h), linked
-# into test_ops_kernels: its packing, tiling and edges are tested on any AVX512_BF16 CPU.
+# The AMX kernels on the software emulation of their tile operations (ops/cpu/amx_tiles.h), linked
+# into test_ops_kernels: their packing, tiling and edges are tested on any AVX512_BF16 CPU.
 ifeq ($(SIMD_SRC),$(X86_SIMD_SRC))
-$(BUILD)/tests/gemm_amx_emu.o: tests/gemm_amx_emu.c
+$(BUILD)/tests/amx_emu.o: tests/amx_emu.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
-$(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/gemm_amx_emu.o
+$(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/amx_emu.o
 endif
 $(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)

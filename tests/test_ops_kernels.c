@@ -3,7 +3,7 @@
  * reported as not tested. The bf16 level (bf16 products, fp32 sums) is compared with the
  * reference run on the same inputs rounded to bf16, so the bound stays the fp32 one wherever
  * only the inputs are rounded. The AMX GEMM is also run on the software emulation of its tiles
- * (tests/gemm_amx_emu.c) wherever AVX512_BF16 is there, so its packing, tiling and edges are
+ * (tests/amx_emu.c) wherever AVX512_BF16 is there, so its packing, tiling and edges are
  * tested on CPUs without AMX. */
 #include <math.h>
 #include <stdio.h>
@@ -193,12 +193,16 @@ static void test_gemm_ops(const levels *lv) {
 }
 
 #ifndef MX_NO_X86_SIMD
-/* The AMX GEMM on emulated tiles (tests/gemm_amx_emu.c). */
+/* The AMX kernels on emulated tiles (tests/amx_emu.c). */
+void mx_attention_amx_emu(const mx_ctx *, float *out, const float *q, const float *k, const float *v, int B, int H,
+                          int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal, float scale);
 void mx_linear_amx_emu(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
 void mx_conv2d_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
                        mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
 
-/* The avx512bf16 table with the emulated AMX GEMM (its packing needs AVX512_BF16). */
+static void test_attention_ops(const levels *lv);
+
+/* The avx512bf16 table with the emulated AMX kernels (their packing needs AVX512_BF16). */
 static void test_amx_emulated(const mx_ctx *ref, mx_pool *pool, mx_arena *scratch) {
     const mx_kernels *bf16 = mx_kernels_for(MX_ISA_AVX512_BF16);
     if (bf16->isa != MX_ISA_AVX512_BF16) {
@@ -208,9 +212,11 @@ static void test_amx_emulated(const mx_ctx *ref, mx_pool *pool, mx_arena *scratc
     mx_kernels emu = *bf16;
     emu.linear = mx_linear_amx_emu;
     emu.conv2d = mx_conv2d_amx_emu;
+    emu.attention = mx_attention_amx_emu;
     mx_ctx simd = {.pool = pool, .k = &emu, .scratch = scratch};
     levels lv = {ref, &simd, "amx (emulated tiles)", 1};
     test_gemm_ops(&lv);
+    test_attention_ops(&lv);
     CHECK(scratch->used == 0);
 }
 #endif
@@ -260,6 +266,8 @@ static void test_attention_ops(const levels *lv) {
     test_attention_case(lv, 1, 1, 150, 150, 24, 1);
     test_attention_case(lv, 1, 1, 70, 70, 512, 0);
     test_attention_case(lv, 1, 2, 67, 333, 40, 0); /* keys over several packing tasks and key blocks */
+    test_attention_case(lv, 2, 1, 65, 64, 40, 1);  /* causal: query blocks that see only part of the keys */
+    test_attention_case(lv, 1, 1, 2, 3, 1100, 0);  /* amx: a head past its buffers, the streaming kernel */
 }
 
 static void test_group_norm_case(const levels *lv, int B, int C, int HW, int groups, mx_dtype dt, int silu) {

@@ -302,8 +302,9 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     }
     double peak_after[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
     for (int p = 0; p < 2; p++) peak[p] = peak[p] > peak_after[p] ? peak[p] : peak_after[p];
-    printf("measured peak of %d threads (best short run of zmm FMA / vdpbf16ps loops, before and after): "
-           "fp32 %.0f GFLOP/s, bf16 %.0f GFLOP/s\n", mx_pool_threads(c[0].pool), peak[0], peak[1]);
+    printf("measured peak of %d threads (best short run of zmm FMA / %s loops, before and after): "
+           "fp32 %.0f GFLOP/s, bf16 %.0f GFLOP/s\n", mx_pool_threads(c[0].pool),
+           nprec == 2 && c[1].k->isa == MX_ISA_AMX ? "TDPBF16PS" : "vdpbf16ps", peak[0], peak[1]);
     int nth = mx_pool_threads(c[0].pool);
     printf("%-32s %6s %7s %7s %5s %7s %7s %5s %6s %6s\n", "network (GFLOP/s over CPU time)", "GFLOP", "fp32 s",
            "GFLOP/s", "peak", "bf16 s", "GFLOP/s", "peak", "wall", "cpu");

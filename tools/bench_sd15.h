@@ -82,6 +82,39 @@ __attribute__((target("avx512f,avx512bf16"))) static inline float peak_dpbf16_lo
     return s;
 }
 
+/* TDPBF16PS on tiles that stay in the TMUL: 4 accumulators of 16×16 fp32, 2 + 2 operand tiles of
+ * 16 × 32 bf16 (zeros), the 2×2 blocking of the AMX GEMM; 16·16·32 multiply-adds each. */
+#define PEAK_AMX_ITERS (PEAK_ITERS / 8)
+
+__attribute__((target("amx-tile,amx-bf16"))) static inline float peak_amx_loop(void) {
+    struct {
+        unsigned char palette, start_row, reserved[14];
+        unsigned short colsb[16];
+        unsigned char rows[16];
+    } cfg = {1, 0, {0}, {0}, {0}};
+    static const float zeros[16 * 16];
+    for (int t = 0; t < 8; t++) cfg.colsb[t] = 64, cfg.rows[t] = 16;
+    _tile_loadconfig(&cfg);
+    _tile_zero(0);
+    _tile_zero(1);
+    _tile_zero(2);
+    _tile_zero(3);
+    _tile_loadd(4, zeros, 64);
+    _tile_loadd(5, zeros, 64);
+    _tile_loadd(6, zeros, 64);
+    _tile_loadd(7, zeros, 64);
+    for (int it = 0; it < PEAK_AMX_ITERS; it++) {
+        _tile_dpbf16ps(0, 4, 6);
+        _tile_dpbf16ps(1, 4, 7);
+        _tile_dpbf16ps(2, 5, 6);
+        _tile_dpbf16ps(3, 5, 7);
+    }
+    float out[16 * 16];
+    _tile_stored(0, out, 64);
+    _tile_release();
+    return out[0];
+}
+
 /* CPU seconds of the calling thread, or of the whole process: on a shared machine the time a
  * computation really had the cores, where wall time also counts other people's work. */
 static inline double bench_cpu_seconds(clockid_t which) {
@@ -92,8 +125,10 @@ static inline double bench_cpu_seconds(clockid_t which) {
 
 #define PEAK_MAX_THREADS 256
 
+typedef enum { PEAK_FP32, PEAK_DPBF16, PEAK_AMX } peak_loop;
+
 typedef struct {
-    int bf16;
+    peak_loop loop;
     volatile float sink;
     double secs[PEAK_MAX_THREADS]; /* CPU seconds of each thread's loop */
 } peak_job;
@@ -102,22 +137,26 @@ static inline void peak_task(void *arg, int task, int thread) {
     (void)task;
     peak_job *j = arg;
     double t0 = bench_cpu_seconds(CLOCK_THREAD_CPUTIME_ID);
-    j->sink = j->bf16 ? peak_dpbf16_loop() : peak_fma_loop();
+    j->sink = j->loop == PEAK_AMX ? peak_amx_loop() : j->loop == PEAK_DPBF16 ? peak_dpbf16_loop() : peak_fma_loop();
     if (thread < PEAK_MAX_THREADS) j->secs[thread] = bench_cpu_seconds(CLOCK_THREAD_CPUTIME_ID) - t0;
 }
 
-/* Peak GFLOP/s of the pool's threads on cores of their own: zmm FMAs (16 multiply-adds per
- * instruction) or vdpbf16ps (32 per instruction), each thread's rate over its own CPU time
- * (so other people's load on a shared machine does not count), summed; the best of PEAK_RUNS
- * runs. 0 when the CPU lacks the instructions. */
+/* Peak GFLOP/s of the pool's threads on cores of their own, for the level of c's kernels: zmm FMAs
+ * (16 multiply-adds per instruction) for fp32, vdpbf16ps (32) for bf16, TDPBF16PS (8192) for
+ * bf16 on the amx level; each thread's rate over its own CPU time (so other people's load on a
+ * shared machine does not count), summed; the best of PEAK_RUNS runs. 0 when the CPU lacks the
+ * instructions. */
 static inline double bench_peak_gflops(const mx_ctx *c, int bf16) {
     mx_isa need = bf16 ? MX_ISA_AVX512_BF16 : MX_ISA_AVX512;
     if (mx_cpu_best_isa() < need) return 0;
+    peak_loop loop = !bf16 ? PEAK_FP32 : c->k->isa == MX_ISA_AMX ? PEAK_AMX : PEAK_DPBF16;
     int n = mx_pool_threads(c->pool);
     if (n > PEAK_MAX_THREADS) n = PEAK_MAX_THREADS;
-    double best = 0, flop = 2.0 * (bf16 ? 32 : 16) * PEAK_CHAINS * (double)PEAK_ITERS;
+    double flop = loop == PEAK_AMX ? 2.0 * 16 * 16 * 32 * 4 * (double)PEAK_AMX_ITERS
+                                   : 2.0 * (bf16 ? 32 : 16) * PEAK_CHAINS * (double)PEAK_ITERS;
+    double best = 0;
     for (int r = 0; r < PEAK_RUNS; r++) {
-        peak_job j = {bf16, 0, {0}};
+        peak_job j = {loop, 0, {0}};
         mx_pool_for(c->pool, n, peak_task, &j);
         double g = 0;
         for (int t = 0; t < n; t++) g += j.secs[t] > 0 ? flop / j.secs[t] * 1e-9 : 0;

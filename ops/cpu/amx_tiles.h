@@ -1,6 +1,6 @@
 /* The AMX tile operations the AMX GEMM (gemm_amx.inc) uses, as a thin macro layer over either
  * the intrinsics (gemm_amx.c, built with -mamx-tile -mamx-bf16) or, with MX_AMX_EMULATE defined,
- * a software emulation of exactly the same semantics (tests/gemm_amx_emu.c), so that packing,
+ * a software emulation of exactly the same semantics (tests/amx_emu.c), so that packing,
  * tiling and edge handling are tested on CPUs without AMX. Semantics (Intel SDM vol. 2,
  * LDTILECFG / TILELOADD / TILESTORED / TILEZERO / TDPBF16PS / TILERELEASE):
  *   - the 64-byte config: byte 0 palette (1: 8 tiles of at most 16 rows × 64 bytes), byte 1

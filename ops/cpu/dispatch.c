@@ -42,8 +42,9 @@
     MX_AVX512_KERNELS .linear = mx_linear_avx512bf16, .conv2d = mx_conv2d_avx512bf16,                          \
     .attention = mx_attention_avx512bf16,
 
-/* amx: the GEMMs on AMX-BF16 tiles; attention is not a GEMM and stays avx512bf16. */
-#define MX_AMX_KERNELS MX_AVX512BF16_KERNELS .linear = mx_linear_amx, .conv2d = mx_conv2d_amx,
+/* amx: the GEMMs and attention's two products on AMX-BF16 tiles. */
+#define MX_AMX_KERNELS                                                                                       \
+    MX_AVX512BF16_KERNELS .linear = mx_linear_amx, .conv2d = mx_conv2d_amx, .attention = mx_attention_amx,
 
 /* neon (aarch64 Advanced SIMD): the avx2 set of kernels on 4-float vectors. */
 #define MX_NEON_KERNELS                                                                                      \
