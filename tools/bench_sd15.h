@@ -94,6 +94,7 @@ __attribute__((target("amx-tile,amx-bf16"))) static inline float peak_amx_loop(v
     } cfg = {1, 0, {0}, {0}, {0}};
     static const float zeros[16 * 16];
     for (int t = 0; t < 8; t++) cfg.colsb[t] = 64, cfg.rows[t] = 16;
+    __asm__ volatile("" : : "m"(cfg) : "memory"); /* GCC 12 does not see the config read: store it first */
     _tile_loadconfig(&cfg);
     _tile_zero(0);
     _tile_zero(1);

@@ -132,19 +132,28 @@ static inline void mx_amx_emu_dpbf16ps(mx_amx_emu *s, int d, int a, int b) {
     for (int m = M; m < MX_AMX_ROWS; m++) memset(s->t[d][m], 0, MX_AMX_COLSB);
 }
 
-/* The state lives in the function that uses the tiles (as the real one lives in the thread). */
-#define AMX_STATE mx_amx_emu amx_emu_
-#define AMX_LOADCONFIG(cfg) mx_amx_emu_loadconfig(&amx_emu_, (cfg))
-#define AMX_LOADD(t, base, stride) mx_amx_emu_loadd(&amx_emu_, (t), (base), (stride))
-#define AMX_STORED(t, base, stride) mx_amx_emu_stored(&amx_emu_, (t), (base), (stride))
-#define AMX_ZERO(t) mx_amx_emu_zero(&amx_emu_, (t))
-#define AMX_DPBF16PS(d, a, b) mx_amx_emu_dpbf16ps(&amx_emu_, (d), (a), (b))
-#define AMX_RELEASE() ((void)amx_emu_)
+/* TILERELEASE: back to the init state, no tile configured (a use before the next config faults). */
+static inline void mx_amx_emu_release(mx_amx_emu *s) { memset(s, 0, sizeof *s); }
+
+/* The state lives in the thread, as the real one does: a config loaded in one function holds in
+ * the functions it calls until released. */
+static _Thread_local mx_amx_emu mx_amx_emu_state;
+#define AMX_LOADCONFIG(cfg) mx_amx_emu_loadconfig(&mx_amx_emu_state, (cfg))
+#define AMX_LOADD(t, base, stride) mx_amx_emu_loadd(&mx_amx_emu_state, (t), (base), (stride))
+#define AMX_STORED(t, base, stride) mx_amx_emu_stored(&mx_amx_emu_state, (t), (base), (stride))
+#define AMX_ZERO(t) mx_amx_emu_zero(&mx_amx_emu_state, (t))
+#define AMX_DPBF16PS(d, a, b) mx_amx_emu_dpbf16ps(&mx_amx_emu_state, (d), (a), (b))
+#define AMX_RELEASE() mx_amx_emu_release(&mx_amx_emu_state)
 #else
 #include <immintrin.h>
 
-#define AMX_STATE
-#define AMX_LOADCONFIG(cfg) _tile_loadconfig(cfg)
+/* The barrier makes the config's stores happen first: GCC 12 does not see _tile_loadconfig read
+ * its 64 bytes and dropped the stores of rows and colsb (a #GP on the real CPU). */
+#define AMX_LOADCONFIG(cfg)                                                                                  \
+    do {                                                                                                     \
+        __asm__ volatile("" : : "m"(*(const mx_amx_cfg *)(cfg)) : "memory");                                 \
+        _tile_loadconfig(cfg);                                                                               \
+    } while (0)
 #define AMX_LOADD(t, base, stride) _tile_loadd(t, base, stride)
 #define AMX_STORED(t, base, stride) _tile_stored(t, base, stride)
 #define AMX_ZERO(t) _tile_zero(t)

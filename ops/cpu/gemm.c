@@ -236,6 +236,7 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
                          const float *b, int np0, int np1) {
     int mr = j->g->mr, nr = j->g->nr;
     size_t words = mx_gemm_panel_words(j->g, j->kc);
+    if (j->g->begin) j->g->begin();
     for (int np = np0; np < np1; np++, b += words * nr) {
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
         const uint32_t *half[2];
@@ -255,6 +256,7 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
                                p->bias_per_row);
         }
     }
+    if (j->g->end) j->g->end();
 }
 
 /* One MC×NC tile of C with the shared B panels of the outer block and the A panels of the

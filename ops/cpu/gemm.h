@@ -49,6 +49,11 @@ typedef struct mx_gemm_kernel {
      * halves of a panel that each lie in one output row, read from the band). */
     void (*micro_rows)(int kc, const void *a, const uint32_t *const half[2], const int32_t *offs, float *c,
                        size_t ldc, int m, int accumulate);
+    /* NULL, or called by a thread before and after a run of micro calls (a tile of C): the AMX
+     * level loads its tile configuration once there instead of in every micro call (LDTILECFG and
+     * TILERELEASE cost a fifth of a 32×32 call's time) */
+    void (*begin)(void);
+    void (*end)(void);
 } mx_gemm_kernel;
 
 /* Steps of B rows fetched ahead by micro_rows (and the entries past a K block's steps in offs). */

@@ -70,7 +70,8 @@ static void widen_avx2(float *y, mx_wptr w, size_t off, size_t n) {
 
 #include "gemm_bias_simd.inc"
 
-static const mx_gemm_kernel kernel_avx2 = {MR, NR, micro_6x16, mx_gemm_add_bias_avx2, widen_avx2, mx_gemm_transpose, NULL, NULL, 0, 0, NULL};
+static const mx_gemm_kernel kernel_avx2 = {.mr = MR, .nr = NR, .micro = micro_6x16, .add_bias = mx_gemm_add_bias_avx2,
+                                          .widen = widen_avx2, .transpose = mx_gemm_transpose};
 
 void mx_linear_avx2(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx2, y, x, w, bias, M, N, K);

@@ -32,8 +32,9 @@ void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
 
 #include "gemm_bias_simd.inc"
 
-static const mx_gemm_kernel kernel_avx512 = {MR, NR, micro_12x32, mx_gemm_add_bias_avx512, mx_gemm_widen_avx512, mx_gemm_transpose, NULL, NULL, 0, 0,
-                                            micro_12x32_rows};
+static const mx_gemm_kernel kernel_avx512 = {.mr = MR, .nr = NR, .micro = micro_12x32, .add_bias = mx_gemm_add_bias_avx512,
+                                            .widen = mx_gemm_widen_avx512, .transpose = mx_gemm_transpose,
+                                            .micro_rows = micro_12x32_rows};
 
 void mx_linear_avx512(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512, y, x, w, bias, M, N, K);

@@ -26,7 +26,8 @@ void mx_gemm_widen_neon(float *y, mx_wptr w, size_t off, size_t n) {
 
 #include "gemm_bias_simd.inc"
 
-static const mx_gemm_kernel kernel_neon = {MR, NR, micro_8x12, mx_gemm_add_bias_neon, mx_gemm_widen_neon, transpose_neon, NULL, NULL, 0, 0, NULL};
+static const mx_gemm_kernel kernel_neon = {.mr = MR, .nr = NR, .micro = micro_8x12, .add_bias = mx_gemm_add_bias_neon,
+                                          .widen = mx_gemm_widen_neon, .transpose = transpose_neon};
 
 void mx_linear_neon(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_neon, y, x, w, bias, M, N, K);

@@ -24,8 +24,9 @@ static void to_pairs_neonbf16(uint32_t *dst, const float *even, const float *odd
     for (; c < n; c++) dst[c] = (uint32_t)mx_float_to_bf16(even[c]) | (uint32_t)(odd ? mx_float_to_bf16(odd[c]) : 0) << 16;
 }
 
-static const mx_gemm_kernel kernel_neonbf16 = {MR, NR, micro_8x12_bf16, mx_gemm_add_bias_neon, mx_gemm_widen_neon, transpose_neon,
-                                               to_pairs_neonbf16, bf16_pairs_row, 1, 0, NULL};
+static const mx_gemm_kernel kernel_neonbf16 = {.mr = MR, .nr = NR, .micro = micro_8x12_bf16, .add_bias = mx_gemm_add_bias_neon,
+                                               .widen = mx_gemm_widen_neon, .transpose = transpose_neon,
+                                               .to_pairs = to_pairs_neonbf16, .row_pairs = bf16_pairs_row, .pair_align = 1};
 
 void mx_linear_neonbf16(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_neonbf16, y, x, w, bias, M, N, K);
