@@ -170,6 +170,7 @@ static void test_gemm_ops(const levels *lv) {
     test_conv_case(lv, 1, 2, 70, 71, 3, 3, 1, 1, MX_F32); /* 4970 pixels: two outer blocks */
     test_conv_case(lv, 2, 80, 70, 60, 13, 3, 1, 1, MX_F16); /* batch × K blocks (K = 720) × outer blocks */
     test_linear_case(lv, 40, 37, 1500, MX_F32, 1);          /* three K blocks */
+    test_linear_case(lv, 20, 33, 4500, MX_F16, 1);          /* several K blocks of the AMX level too */
     test_linear_case(lv, 25, 70, 641, MX_F16, 1);           /* two K blocks of odd length (321, 320) */
     test_conv_case(lv, 1, 3, 8, 8, 33, 3, 1, 1, MX_F32);    /* K = 27: an odd last k-pair */
     test_linear_case(lv, 64, 64, 64, MX_F32, 1);            /* whole AMX tiles (32×32 blocks, 16 k-pairs) */

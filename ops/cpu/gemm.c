@@ -370,10 +370,11 @@ static void plan_tiles(gemm_job *j) {
 }
 
 /* The length of the K blocks (the last one may be shorter): the problem's own, or blocks as
- * equal as can be of at most MX_GEMM_KC_MAX. */
-static int k_block_length(const mx_gemm_problem *p) {
-    if (p->kc_block > 0) return min_int(p->kc_block, MX_GEMM_KC_MAX);
-    return max_int(1, ceil_div(p->K, max_int(1, ceil_div(p->K, MX_GEMM_KC_MAX))));
+ * equal as can be of at most the kernel's. */
+static int k_block_length(const mx_gemm_kernel *g, const mx_gemm_problem *p) {
+    int most = mx_gemm_kc(g);
+    if (p->kc_block > 0) return min_int(p->kc_block, most);
+    return max_int(1, ceil_div(p->K, max_int(1, ceil_div(p->K, most))));
 }
 
 /* ---- a weight's panels packed once (wpack.h) ----
@@ -439,18 +440,18 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
 }
 
 size_t mx_gemm_a_panels_floats(const mx_gemm_kernel *g, const mx_gemm_problem *p) {
-    int kc_max = k_block_length(p);
+    int kc_max = k_block_length(g, p);
     return cached_block_offset(g, g->mr, p->M, kc_max, ceil_div(p->K, kc_max));
 }
 
 const float *mx_gemm_cached_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
-    return p->M > 0 && p->K > 0 ? pack_weight_once(c, g, p, 0, k_block_length(p)) : NULL;
+    return p->M > 0 && p->K > 0 ? pack_weight_once(c, g, p, 0, k_block_length(g, p)) : NULL;
 }
 
 const float *mx_gemm_pack_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p, float *dst) {
     if (p->M <= 0 || p->K <= 0) return NULL;
     weight_fill f = {.g = g, .p = p, .pack = p->pack_a, .dst = dst, .width = g->mr, .rows = p->M,
-                     .kc_max = k_block_length(p)};
+                     .kc_max = k_block_length(g, p)};
     fill_blocks(c, &f, 0);
     return dst;
 }
@@ -512,7 +513,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     if (p->M <= 0 || p->N <= 0 || p->batch <= 0) return 0;
     /* outer blocks end on whole panels */
     int nb_max = OUTER_MAX / g->nr * g->nr, nb = min_int(p->N, nb_max);
-    int kc_max = k_block_length(p), nkb = ceil_div(p->K, kc_max);
+    int kc_max = k_block_length(g, p), nkb = ceil_div(p->K, kc_max);
     int nthreads = mx_par_threads(c);
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
     size_t words = mx_gemm_panel_words(g, kc_max);

@@ -54,6 +54,8 @@ typedef struct mx_gemm_kernel {
      * TILERELEASE cost a fifth of a 32×32 call's time) */
     void (*begin)(void);
     void (*end)(void);
+    /* K blocks of at most this many k (≤ MX_GEMM_KC_MAX); 0: MX_GEMM_KC_SIMD (mx_gemm_kc) */
+    int kc_max;
 } mx_gemm_kernel;
 
 /* Steps of B rows fetched ahead by micro_rows (and the entries past a K block's steps in offs). */
@@ -64,13 +66,19 @@ typedef struct mx_gemm_kernel {
 #define MX_GEMM_WIDEN_ROWS 8
 /* Widest panel (MR or NR) of any kernel: bounds the packers' stack buffers. */
 #define MX_GEMM_PANEL_MAX 32
-/* Longest K block the engine packs; also bounds the packers' row buffers. Each thread keeps
- * its MC×kc block of A in L2 (240 KiB at 640) and streams kc×NR panels of B; a longer block
- * means fewer passes over C and fewer pack/compute rounds (K = 5120: 8 instead of 16). On
- * Zen 5 (48 KiB L1, 1 MiB L2) 640 was a little faster than 320 on the K ≥ 1280 shapes and no
- * slower on K = 320; 1024 was no better; with 2 threads and column tasks 320 was no faster on
- * the UNet either (the shared machine is too noisy to separate a few percent). */
-#define MX_GEMM_KC_MAX 640
+/* K block of the SIMD levels. Each thread keeps its MC×kc block of A in L2 (240 KiB at 640) and
+ * streams kc×NR panels of B; a longer block means fewer passes over C and fewer pack/compute
+ * rounds (K = 5120: 8 instead of 16). On Zen 5 (48 KiB L1, 1 MiB L2) 640 was a little faster than
+ * 320 on the K ≥ 1280 shapes and no slower on K = 320; 1024 was no better; with 2 threads and
+ * column tasks 320 was no faster on the UNet either (the shared machine is too noisy to separate
+ * a few percent). */
+#define MX_GEMM_KC_SIMD 640
+/* Longest K block of any kernel (the AMX level's: gemm_amx.inc); also bounds the packers' row
+ * buffers on the stack. */
+#define MX_GEMM_KC_MAX 2048
+
+/* The K block length of kernel g. */
+static inline int mx_gemm_kc(const mx_gemm_kernel *g) { return g->kc_max > 0 ? g->kc_max : MX_GEMM_KC_SIMD; }
 
 typedef struct mx_gemm_problem mx_gemm_problem;
 /* dst[k][r] for k < kc, r < rows: a panel starting at row (A) or column (B) `first`, rows past
@@ -98,7 +106,7 @@ struct mx_gemm_problem {
     int band_fp32; /* bf16 levels, 1×1 stride 1 unpadded: the band is the fp32 input, paired per panel */
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
-    int kc_block;     /* K blocks of this length (≤ MX_GEMM_KC_MAX), the last one shorter; 0: the engine's */
+    int kc_block;     /* K blocks of this length (≤ mx_gemm_kc), the last one shorter; 0: the engine's */
     /* 1: the operand is a weight (a_mat of conv, b_mat of linear), the same on every call: its
      * panels are packed once into the context's cache when it has one (wpack.h) */
     int a_weight, b_weight;

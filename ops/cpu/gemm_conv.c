@@ -256,13 +256,13 @@ static void prepare_band_task(void *arg, int task, int thread) {
     if (j->secs) j->secs[thread] += mx_profile_clock(CLOCK_THREAD_CPUTIME_ID) - t0;
 }
 
-/* Channel words per K group: all of them when K fits one K block of the engine, else groups as
- * equal as can be of at most MX_GEMM_KC_MAX k values (e.g. 3×3, Cin 320, bf16: 5 groups of 32
+/* Channel words per K group: all of them when K fits one K block of the kernel (kc), else groups
+ * as equal as can be of at most kc k values (e.g. 3×3, Cin 320, bf16: 5 groups of 32
  * pairs, K blocks of 576); groups of one word where even that is longer (then split over K
  * blocks). Groups of half that (B panels of 160 words, 20 KiB, that stay in L1 beside A) were
  * measured no faster on Zen 5. */
-static int group_words(int chans, int k_word, int taps) {
-    int most = MX_GEMM_KC_MAX / (taps * k_word);
+static int group_words(int chans, int k_word, int taps, int kc) {
+    int most = kc / (taps * k_word);
     if (most < 1 || chans < 1) return 1;
     int groups = (chans + most - 1) / most;
     return (chans + groups - 1) / groups;
@@ -302,7 +302,7 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
     if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
-    int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps);
+    int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps, mx_gemm_kc(g));
     int span = group * k_per_word(g) * taps; /* K blocks of whole groups, where a group fits one */
     /* no padding: the input rows are already a band (fp32; on pairs a 1×1 stride-1 conv) */
     int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1));
@@ -313,7 +313,7 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                          .bias = bias, .bias_per_row = 1, .Cin = Cin,
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
                          .band_width = width, .band_fp32 = direct && g->to_pairs,
-                         .kc_block = span <= MX_GEMM_KC_MAX ? span : MX_GEMM_KC_MAX};
+                         .kc_block = span <= mx_gemm_kc(g) ? span : mx_gemm_kc(g)};
     int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
     size_t band_words = direct ? 0 : (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
     size_t nsecs = c && c->prof ? (size_t)nthreads : 0, a_floats = 0;
