@@ -304,7 +304,7 @@ static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
     strict_state *s = calloc(1, sizeof *s);
     if (!s) return mx_fail(st, MX_ENOMEM, "backend: out of memory");
     s->inner[0] = mx_kernels_for(isa);
-    s->inner[1] = mx_kernels_for(mx_isa_fp32_level(s->inner[0]->isa));
+    s->inner[1] = mx_kernels_fp32_of(s->inner[0]);
     strict_table(&s->checked[0], s->inner[0]);
     strict_table(&s->checked[1], s->inner[1]);
     be->impl = s;

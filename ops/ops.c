@@ -194,7 +194,7 @@ mx_ctx mx_ctx_fp32(const mx_ctx *c) {
     if (!c) return f;
     f = *c;
     if (c->k && mx_isa_precision(c->k->isa) == MX_PREC_BF16)
-        f.k = c->be && c->be->k_fp32 ? c->be->k_fp32 : mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32));
+        f.k = c->be && c->be->k_fp32 ? c->be->k_fp32 : mx_kernels_fp32_of(c->k);
     return f;
 }
 

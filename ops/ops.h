@@ -73,10 +73,14 @@ struct mx_kernels {
 
 /* The table for an ISA level (clamped to what this CPU supports). */
 const mx_kernels *mx_kernels_for(mx_isa isa);
-/* c computing in fp32: a copy whose table is the fp32 level below c's when c's computes in bf16
+/* c computing in fp32: a copy whose table is mx_kernels_fp32_of c's when c's computes in bf16
  * (avx512bf16 -> avx512), c's own otherwise (CUDA keeps its table). Same pool, scratch,
  * backend. For the layers the precision policy keeps in fp32 (pipeline/nn/precision.h). */
 mx_ctx mx_ctx_fp32(const mx_ctx *c);
+/* The table of the layers a bf16 level keeps in fp32: its fp32 level's (avx512bf16 -> avx512),
+ * but for amx the avx512 table with linear and conv2d as three bf16 products on the tiles
+ * (ops/cpu/gemm.h: mx_gemm_linear_x3), near fp32 accuracy at the tiles' speed. */
+const mx_kernels *mx_kernels_fp32_of(const mx_kernels *k);
 /* The scalar reference table (the test oracle). */
 const mx_kernels *mx_kernels_scalar(void);
 /* The table of a level as compiled in, whether or not this CPU runs it (NULL: not compiled in,

@@ -73,7 +73,7 @@ struct mx_backend {
     const struct mx_kernels *k; /* the kernels that run every op */
     int host_visible;           /* 1: weights in host memory serve as they are (no upload) */
     /* The kernels of the fp32 level below k when k computes in bf16 (mx_ctx_fp32); NULL: the
-     * CPU table mx_kernels_for(mx_cpu_isa_for(MX_PREC_FP32)). */
+     * CPU table mx_kernels_fp32_of(k). */
     const struct mx_kernels *k_fp32;
     /* Device memory, 64-byte aligned; NULL with a message in st when out of memory. */
     void *(*alloc)(mx_backend *be, size_t bytes, mx_status *st);

@@ -197,6 +197,9 @@ static void test_gemm_ops(const levels *lv) {
 /* The AMX kernels on emulated tiles (tests/amx_emu.c). */
 void mx_attention_amx_emu(const mx_ctx *, float *out, const float *q, const float *k, const float *v, int B, int H,
                           int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal, float scale);
+void mx_linear_x3_amx_emu(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
+void mx_conv2d_x3_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                          mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
 void mx_linear_amx_emu(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
 void mx_conv2d_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
                        mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
@@ -218,6 +221,10 @@ static void test_amx_emulated(const mx_ctx *ref, mx_pool *pool, mx_arena *scratc
     levels lv = {ref, &simd, "amx (emulated tiles)", 1};
     test_gemm_ops(&lv);
     test_attention_ops(&lv);
+    emu.linear = mx_linear_x3_amx_emu;
+    emu.conv2d = mx_conv2d_x3_amx_emu;
+    levels x3 = {ref, &simd, "amx fp32 (3 bf16 products, emulated tiles)", 0};
+    test_gemm_ops(&x3);
     CHECK(scratch->used == 0);
 }
 #endif
@@ -441,6 +448,12 @@ static void test_simd_levels(void) {
         test_attention_ops(&lv);
         test_elementwise_ops(&lv);
         CHECK(scratch.used == 0);
+        if (isa == MX_ISA_AMX) { /* its fp32 layers: the GEMMs as three bf16 products, at the fp32 bounds */
+            mx_ctx fp32 = mx_ctx_fp32(&simd);
+            levels x3 = {&ref, &fp32, "amx fp32 (3 bf16 products)", 0};
+            test_gemm_ops(&x3);
+            CHECK(scratch.used == 0);
+        }
     }
 #ifndef MX_NO_X86_SIMD
     test_amx_emulated(&ref, pool, &scratch);

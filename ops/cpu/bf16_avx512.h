@@ -18,6 +18,26 @@ static inline __m512i bf16_pairs16(const float *src, int n) {
     return (__m512i)_mm512_cvtne2ps_pbh(hi, lo);
 }
 
+/* x - bf16(x) for 16 lanes, bf16 by vcvtneps2bf16 (nearest even, denormals as zero): the part a
+ * bf16 rounding drops, the low operand of a split product (gemm.h: mx_gemm_linear_x3); 0 where
+ * bf16(x) is not finite. */
+static inline __m512 bf16_lo_part(__m512 x) {
+    __m512i h = _mm512_cvtepu16_epi32((__m256i)_mm512_cvtneps_pbh(x));
+    __m512 hi = _mm512_castsi512_ps(_mm512_slli_epi32(h, 16));
+    __mmask16 finite = _mm512_cmp_ps_mask(_mm512_abs_ps(hi), _mm512_set1_ps(__builtin_inff()), _CMP_LT_OQ);
+    return _mm512_maskz_sub_ps(finite, x, hi);
+}
+
+/* dst[0 .. (n+1)/2) = pairs of the low parts of src[0 .. n) (bf16_lo_part). */
+static inline void bf16_pairs_row_lo(uint32_t *dst, const float *src, int n) {
+    for (int i = 0; i < n; i += 32) {
+        __m512 lo = bf16_lo_part(_mm512_maskz_loadu_ps(bf16_mask(n - i), src + i));
+        __m512 hi = n - i > 16 ? bf16_lo_part(_mm512_maskz_loadu_ps(bf16_mask(n - i - 16), src + i + 16))
+                               : _mm512_setzero_ps();
+        _mm512_mask_storeu_epi32(dst + i / 2, bf16_mask((n - i + 1) / 2), (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
+    }
+}
+
 /* dst[0 .. (n+1)/2) = pairs of src[0 .. n) (an odd last value paired with zero). */
 static inline void bf16_pairs_row(uint32_t *dst, const float *src, int n) {
     for (int i = 0; i < n; i += 32)

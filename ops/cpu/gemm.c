@@ -40,8 +40,10 @@ void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int
     }
 }
 
-/* One row of src (element (r, k) at r*ld + k) as kc/2 words of pairs (16-bit weights widened). */
-static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int r, int k0, int kc) {
+/* One row of src (element (r, k) at r*ld + k) as kc/2 words of pairs (16-bit weights widened),
+ * of its low part with lo. */
+static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int r, int k0, int kc,
+                         int lo) {
     float row[MX_GEMM_KC_MAX];
     size_t off = (size_t)r * ld + (size_t)k0;
     const float *f = (const float *)src.data + off;
@@ -49,18 +51,18 @@ static void row_to_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, si
         g->widen(row, src, off, (size_t)kc);
         f = row;
     }
-    g->row_pairs(dst, f, kc);
+    (lo ? g->row_pairs_lo : g->row_pairs)(dst, f, kc);
 }
 
 /* bf16 pairs, row-major (a_rows): dst[r][words], each row's pairs then zeros. */
 static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first,
-                                     int valid, int width, int k0, int kc) {
+                                     int valid, int width, int k0, int kc, int lo) {
     size_t words = mx_gemm_panel_words(g, kc), kp = (size_t)(kc + 1) / 2;
     for (int r = 0; r < width; r++) {
         uint32_t *d = dst + (size_t)r * words;
         size_t done = 0;
         if (r < valid) {
-            row_to_pairs(g, d, src, ld, first + r, k0, kc);
+            row_to_pairs(g, d, src, ld, first + r, k0, kc, lo);
             done = kp;
         }
         memset(d + done, 0, (words - done) * sizeof *d);
@@ -70,14 +72,14 @@ static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_
 /* bf16 pairs, k-major: each row converted to kc/2 words of pairs, MX_GEMM_WIDEN_ROWS rows at a time,
  * then transposed as 32-bit words into dst[kp][width]. */
 static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
-                            int total, int width, int k0, int kc) {
+                            int total, int width, int k0, int kc, int lo) {
     enum { WORDS = MX_GEMM_KC_MAX / 2 };
     uint32_t tmp[MX_GEMM_WIDEN_ROWS * WORDS];
     int kp = (kc + 1) / 2;
     for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
         int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
         mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(MX_GEMM_WIDEN_ROWS, total - r0 - n), k0, kc);
-        for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc);
+        for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc, lo);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
         g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
     }
@@ -87,15 +89,16 @@ static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src,
 /* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
  * weights are widened MX_GEMM_WIDEN_ROWS rows at a time first, the next rows (of the `total` rows the
  * matrix has from `first` on: into the next panel) fetched meanwhile. bf16 kernels:
- * pack_rows_pairs, or pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels). */
+ * pack_rows_pairs, or pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels),
+ * of the rows' low parts with lo (bf16 kernels only). */
 static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int total,
-                      int width, int k0, int kc, int row_major) {
+                      int width, int k0, int kc, int row_major, int lo) {
     int valid = min_int(width, total);
     if (g->to_pairs) {
         if (row_major)
-            pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc);
+            pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc, lo);
         else
-            pack_rows_pairs(g, dstv, src, ld, first, valid, total, width, k0, kc);
+            pack_rows_pairs(g, dstv, src, ld, first, valid, total, width, k0, kc, lo);
         return;
     }
     float *dst = dstv;
@@ -117,12 +120,22 @@ static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t l
 
 void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->a_mat, p->a_ld, first, p->M - first, rows, k0, kc, g->a_rows);
+    pack_rows(g, dst, p->a_mat, p->a_ld, first, p->M - first, rows, k0, kc, g->a_rows, 0);
 }
 
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc) {
-    pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0);
+    pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0, 0);
+}
+
+void mx_gemm_pack_a_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                            int k0, int kc) {
+    pack_rows(g, dst, p->a_mat, p->a_ld, first, p->M - first, rows, k0, kc, g->a_rows, 1);
+}
+
+void mx_gemm_pack_b_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                            int k0, int kc) {
+    pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0, 1);
 }
 
 /* Outer blocks of columns bound the shared B buffer (≤ OUTER_MAX columns per K block, ~5 MiB),
@@ -245,10 +258,11 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
             const float *ap = a + (size_t)(mp - mp0) * words * mr;
             float *cp = p->C + (size_t)m0 * p->ldc + n0;
+            int accumulate = !j->first_block || p->accumulate;
             if (in_place)
-                j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, !j->first_block);
+                j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, accumulate);
             else
-                j->g->micro(j->kc, ap, b, cp, p->ldc, m, n, !j->first_block);
+                j->g->micro(j->kc, ap, b, cp, p->ldc, m, n, accumulate);
             /* the bias while the tile is still in L1 (a pass over C afterwards read it back from
              * memory: 2-3 % of a VAE decode); the same sums, so the same results */
             if (j->last_block && j->bias)
@@ -554,7 +568,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
         j.bias = bias;
     }
-    for (int b = 0; b < p->batch && p->K <= 0; b++) { /* empty sum: C = bias or 0 */
+    for (int b = 0; b < p->batch && p->K <= 0 && !p->accumulate; b++) { /* empty sum: C = bias or 0 */
         mx_gemm_problem item = batch_item(p, b);
         for (int m = 0; m < p->M; m++) memset(item.C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
         if (j.bias) j.g->add_bias(item.C, p->ldc, p->M, p->N, j.bias, p->bias_per_row);
@@ -571,8 +585,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     return 0;
 }
 
-void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
-                    int M, int N, int K) {
+static mx_gemm_problem linear_problem(float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_problem p = {.M = M, .N = N, .K = K, .batch = 1, .C = y, .ldc = (size_t)N};
     p.pack_a = mx_gemm_pack_a_rows;
     p.pack_b = mx_gemm_pack_b_rows;
@@ -582,5 +595,26 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     p.b_ld = (size_t)K;
     p.b_weight = 1;
     p.bias = bias;
+    return p;
+}
+
+void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+                    int M, int N, int K) {
+    mx_gemm_problem p = linear_problem(y, x, w, bias, M, N, K);
     if (mx_gemm_run(c, g, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
+}
+
+void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+                       int M, int N, int K) {
+    mx_gemm_problem p = linear_problem(y, x, w, bias, M, N, K);
+    p.b_weight = 0; /* packed per call, as for conv2d (gemm_conv.c) */
+    int failed = mx_gemm_run(c, g, &p) != 0; /* hi·hi + bias */
+    p.bias = mx_w_none();
+    p.accumulate = 1;
+    p.pack_b = mx_gemm_pack_b_rows_lo; /* + hi(x)·lo(w) */
+    failed = failed || mx_gemm_run(c, g, &p) != 0;
+    p.pack_a = mx_gemm_pack_a_rows_lo; /* + lo(x)·hi(w) */
+    p.pack_b = mx_gemm_pack_b_rows;
+    failed = failed || mx_gemm_run(c, g, &p) != 0;
+    if (failed) mx_linear_ref(c, y, x, w, bias, M, N, K); /* it writes all of y */
 }

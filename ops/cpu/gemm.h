@@ -40,6 +40,10 @@ typedef struct mx_gemm_kernel {
     void (*to_pairs)(uint32_t *dst, const float *even, const float *odd, int n);
     /* With to_pairs: dst[0 .. (n+1)/2) = pairs of the row src[0 .. n). */
     void (*row_pairs)(uint32_t *dst, const float *src, int n);
+    /* NULL, or to_pairs and row_pairs of the values' low parts, bf16(x - bf16(x)): the second
+     * operands of the split products of mx_gemm_*_x3 */
+    void (*to_pairs_lo)(uint32_t *dst, const float *even, const float *odd, int n);
+    void (*row_pairs_lo)(uint32_t *dst, const float *src, int n);
     /* With to_pairs: pair rows of a panel padded with zeros to a multiple of this (0 or 1: none);
      * a_rows: A panels are a[mr][words] (each row's pairs together) instead of a[words][mr]. */
     int pair_align, a_rows;
@@ -112,6 +116,8 @@ struct mx_gemm_problem {
     int a_weight, b_weight;
     /* A's panels of every K block (mx_gemm_a_panels), or NULL: the engine packs or finds them */
     const float *a_panels;
+    /* 1: C += the product (a later part of a split product, mx_gemm_*_x3) */
+    int accumulate;
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
@@ -121,6 +127,18 @@ void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
                          int k0, int kc);
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc);
+/* The same packers for the low part of the operand (kernels with to_pairs_lo): pairs of
+ * bf16(x - bf16(x)), the second operand of a split product (distinct functions, so a weight's
+ * packed-once panels of either part have their own key). */
+void mx_gemm_pack_a_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                            int k0, int kc);
+void mx_gemm_pack_b_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                            int k0, int kc);
+void mx_gemm_pack_a_conv_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                            int k0, int kc);
+void mx_gemm_pack_b_conv_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
+                            int k0, int kc);
+
 /* conv (gemm_conv.c), K in the order (ky, kx, ci): A from the weights, B columns [first,
  * first+cols) (output pixels) copied from the band. */
 void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
@@ -152,8 +170,9 @@ void mx_gemm_add_bias_neon(float *c, size_t ldc, int m, int n, const float *bias
 void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n);
 /* The NEON weight widening (gemm_neon.c), also used by the neonbf16 level. */
 void mx_gemm_widen_neon(float *y, mx_wptr w, size_t off, size_t n);
-/* The AVX512_BF16 to_pairs (gemm_avx512bf16.c), also used by the AMX level. */
+/* The AVX512_BF16 to_pairs and to_pairs_lo (gemm_avx512bf16.c), also used by the AMX level. */
 void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *even, const float *odd, int n);
+void mx_gemm_to_pairs_lo_avx512bf16(uint32_t *dst, const float *even, const float *odd, int n);
 /* 32-bit words per row (A) or column (B) of a packed panel for a K block of kc: kc for fp32
  * panels, (kc+1)/2 k-pairs rounded up to pair_align for bf16 ones. */
 static inline size_t mx_gemm_panel_words(const mx_gemm_kernel *g, int kc) {
@@ -178,6 +197,14 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                     int M, int N, int K);
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+/* The same as three products on a bf16 kernel: each operand split as hi = bf16(x) and lo =
+ * bf16(x - hi), x·w ≈ hi·hi + lo·hi + hi·lo (lo·lo, ~2^-16 of it, dropped), summed in fp32: near
+ * fp32 accuracy (~5e-6 relative L2 per product, fp32 ~5e-7, bf16 ~2.4e-3) at three times the bf16
+ * work. The AMX level's fp32 layers (dispatch.c), where the tiles outrun fp32 FMAs 15 to 1. */
+void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+                       int M, int N, int K);
+void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                       int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
 
 #ifdef __AVX__
 #include <immintrin.h>

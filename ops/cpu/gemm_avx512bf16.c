@@ -27,6 +27,16 @@ void mx_gemm_to_pairs_avx512bf16(uint32_t *dst, const float *even, const float *
     }
 }
 
+/* The same of the low parts (bf16_lo_part), for the AMX level's split products. */
+void mx_gemm_to_pairs_lo_avx512bf16(uint32_t *dst, const float *even, const float *odd, int n) {
+    for (int c = 0; c < n; c += 16) {
+        __mmask16 m = bf16_mask(n - c);
+        __m512 e = bf16_lo_part(_mm512_maskz_loadu_ps(m, even + c));
+        __m512 o = odd ? bf16_lo_part(_mm512_maskz_loadu_ps(m, odd + c)) : _mm512_setzero_ps();
+        _mm512_mask_storeu_epi32(dst + c, m, bf16_pairs_of_rows(e, o));
+    }
+}
+
 static const mx_gemm_kernel kernel_avx512bf16 = {.mr = MR, .nr = NR, .micro = micro_12x32_bf16,
                                                  .add_bias = mx_gemm_add_bias_avx512, .widen = mx_gemm_widen_avx512,
                                                  .transpose = mx_gemm_transpose, .to_pairs = mx_gemm_to_pairs_avx512bf16,

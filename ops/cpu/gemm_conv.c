@@ -85,8 +85,9 @@ static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float 
     }
 }
 
-void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int rows,
-                         int k0, int kc) {
+/* The A packer of conv, of the weights' low parts with lo (bf16 kernels). */
+static void pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int rows, int k0,
+                        int kc, int lo) {
     enum { KC = MX_GEMM_KC_MAX };
     float tmp[MX_GEMM_WIDEN_ROWS * KC];
     uint32_t words_tmp[MX_GEMM_WIDEN_ROWS * KC / 2];
@@ -108,7 +109,7 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
         }
         for (int i = 0; i < n; i++) {
             uint32_t *d = g->a_rows ? dst + (size_t)(r0 + i) * words : words_tmp + (size_t)i * (KC / 2);
-            g->row_pairs(d, tmp + (size_t)i * KC, kc);
+            (lo ? g->row_pairs_lo : g->row_pairs)(d, tmp + (size_t)i * KC, kc);
             if (g->a_rows) memset(d + kp, 0, (words - (size_t)kp) * sizeof *d);
         }
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
@@ -120,6 +121,21 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
         return;
     }
     mx_gemm_zero_panel_tail(g, dst, rows, valid, kc);
+}
+
+void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows, int k0,
+                         int kc) {
+    pack_a_conv(p, g, dst, first, rows, k0, kc, 0);
+}
+
+void mx_gemm_pack_a_conv_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                            int k0, int kc) {
+    pack_a_conv(p, g, dst, first, rows, k0, kc, 1);
+}
+
+/* dst[c] = the pair (even[c], odd[c]) for c < n (odd NULL: zeros), of their low parts with lo. */
+static void to_pairs_part(const mx_gemm_kernel *g, uint32_t *dst, const float *even, const float *odd, int n, int lo) {
+    (lo ? g->to_pairs_lo : g->to_pairs)(dst, even, odd, n);
 }
 
 /* ---- B: panels copied from the band ---- */
@@ -157,15 +173,17 @@ static void copy_run(uint32_t *d, const uint32_t *s, int len, int stride) {
 /* Word row of channel pair cp, straight from the fp32 input (band_fp32): each value of a 1×1
  * conv is converted once either way, so a band of pairs would only add a copy. */
 static void pair_row_from_input(const mx_gemm_problem *p, const mx_gemm_kernel *g, uint32_t *d, int cp,
-                                const pixel_run *runs, int nruns) {
+                                const pixel_run *runs, int nruns, int lo) {
     const float *even = p->image + (size_t)2 * cp * p->band_plane;
     const float *odd = 2 * cp + 1 < p->Cin ? even + p->band_plane : NULL;
     for (int r = 0; r < nruns; r++)
-        g->to_pairs(d + runs[r].j, even + runs[r].off, odd ? odd + runs[r].off : NULL, runs[r].len);
+        to_pairs_part(g, d + runs[r].j, even + runs[r].off, odd ? odd + runs[r].off : NULL, runs[r].len, lo);
 }
 
-void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int cols,
-                         int k0, int kc) {
+/* The B packer of conv; lo: the inputs' low parts where it converts them (band_fp32; a band is
+ * converted when prepared). */
+static void pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int cols, int k0,
+                        int kc, int lo) {
     pixel_run runs[MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
     int valid, nruns = panel_runs(p, runs, first, cols, &valid);
     int nq = (kc + k_per_word(g) - 1) / k_per_word(g);
@@ -178,12 +196,22 @@ void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
         const uint32_t *src = band + (size_t)cp * plane + (size_t)ky * p->band_width + (size_t)kx;
         uint32_t *d = dst + (size_t)q * cols;
         if (p->band_fp32) {
-            pair_row_from_input(p, g, d, cp, runs, nruns);
+            pair_row_from_input(p, g, d, cp, runs, nruns, lo);
             continue;
         }
         for (int r = 0; r < nruns; r++) copy_run(d + runs[r].j, src + runs[r].off, runs[r].len, p->stride);
     }
     mx_gemm_zero_panel_tail(g, dst, cols, valid, kc);
+}
+
+void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols, int k0,
+                         int kc) {
+    pack_b_conv(p, g, dst, first, cols, k0, kc, 0);
+}
+
+void mx_gemm_pack_b_conv_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
+                            int k0, int kc) {
+    pack_b_conv(p, g, dst, first, cols, k0, kc, 1);
 }
 
 /* ---- B read in place (the kernel's micro_rows): a panel of one output row needs no copy ---- */
@@ -220,6 +248,7 @@ typedef struct {
     uint32_t *band; /* [B][chans][rows][width]; NULL: the input is the band (problem.band_fp32 on pairs) */
     int B, Cin, H, W, pad, chans, rows, width;
     int iy0;      /* input row of band row 0 (negative in the top padding) */
+    int lo;       /* bf16 levels: the band of the inputs' low parts (mx_gemm_conv2d_x3) */
     double *secs; /* with a profile: each thread's CPU seconds */
 } band_job;
 
@@ -238,7 +267,7 @@ static void prepare_band_channel(const band_job *j, int b, int cp) {
         const float *row = chan + (size_t)iy * j->W;
         memset(d, 0, (size_t)j->pad * sizeof *d);
         if (pairs)
-            j->g->to_pairs(d + j->pad, row, ci + 1 < j->Cin ? row + plane : NULL, j->W);
+            to_pairs_part(j->g, d + j->pad, row, ci + 1 < j->Cin ? row + plane : NULL, j->W, j->lo);
         else
             memcpy(d + j->pad, row, (size_t)j->W * sizeof *d);
         memset(d + j->pad + j->W, 0, (size_t)(j->width - j->pad - j->W) * sizeof *d);
@@ -298,8 +327,31 @@ static void prepare_band(const mx_ctx *c, band_job *j, mx_gemm_problem *p, int o
     p->band_plane = (size_t)j->rows * j->width;
 }
 
-void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
-                    int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+/* The two other parts of a split product on the band p was run on (its hi·hi + bias in C):
+ * + lo(w)·hi(x) (A's panels lo_a), then + hi(w)·lo(x) on the band of the inputs' low parts. */
+static int add_lo_parts(const mx_ctx *c, const mx_gemm_kernel *g, band_job *j, const mx_gemm_problem *p,
+                        const float *lo_a, int oy0, int rows, int B) {
+    mx_gemm_problem q = *p;
+    q.bias = mx_w_none();
+    q.accumulate = 1;
+    q.pack_a = mx_gemm_pack_a_conv_lo;
+    q.a_panels = lo_a;
+    if (mx_gemm_run(c, g, &q) != 0) return -1;
+    q.pack_a = p->pack_a;
+    q.a_panels = p->a_panels;
+    if (j->band) {
+        j->lo = 1;
+        prepare_band(c, j, &q, oy0, rows, B);
+        j->lo = 0;
+    } else {
+        q.pack_b = mx_gemm_pack_b_conv_lo; /* the fp32 input is the band: converted per panel */
+    }
+    return mx_gemm_run(c, g, &q) != 0 ? -1 : 0;
+}
+
+/* conv2d, as one product, or (x3) as the three of mx_gemm_conv2d_x3. */
+static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H, int W,
+                   mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad, int x3) {
     int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
     if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
     int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps, mx_gemm_kc(g));
@@ -314,14 +366,22 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
                          .band_width = width, .band_fp32 = direct && g->to_pairs,
                          .kc_block = span <= mx_gemm_kc(g) ? span : mx_gemm_kc(g)};
+    /* x3: the weights are packed per call, as the fp32 ones were: a cache entry of one part
+     * gives its weight's pages back (wpack.h) while the other part, past the budget, would read
+     * them again on every call */
+    p.a_weight = !x3;
+    mx_gemm_problem lo = p; /* the weights' low parts (x3) */
+    lo.pack_a = mx_gemm_pack_a_conv_lo;
     int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
     size_t band_words = direct ? 0 : (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
     size_t nsecs = c && c->prof ? (size_t)nthreads : 0, a_floats = 0;
     /* several blocks of output rows run one problem each: A (the weights) packed once for all
      * of them, unless the context's cache holds it (else every block repacked it: 64 times
      * for a 512×512 VAE conv) */
-    const float *cached_a = rows < Ho ? mx_gemm_cached_a_panels(c, g, &p) : NULL;
-    if (rows < Ho && !cached_a) a_floats = mx_gemm_a_panels_floats(g, &p);
+    size_t per_a = rows < Ho ? mx_gemm_a_panels_floats(g, &p) : 0;
+    const float *cached_a = per_a ? mx_gemm_cached_a_panels(c, g, &p) : NULL;
+    const float *cached_lo = per_a && x3 ? mx_gemm_cached_a_panels(c, g, &lo) : NULL;
+    a_floats = (cached_a ? 0 : per_a) + (x3 && !cached_lo ? per_a : 0);
     a_floats += a_floats & 1; /* the doubles after them stay 8-byte aligned */
     mx_scratch s;
     float *mem = mx_scratch_take(c, a_floats * sizeof(float) + nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
@@ -329,12 +389,25 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     double *secs = mem ? (double *)(void *)(mem + a_floats) : NULL;
     band_job j = {.g = g, .x = x, .B = B, .band = direct || !mem ? NULL : (uint32_t *)(void *)(secs + nsecs), .Cin = Cin,
                   .H = H, .W = W, .pad = pad, .chans = chans, .width = width, .secs = nsecs ? secs : NULL};
-    p.a_panels = a_floats && mem ? mx_gemm_pack_a_panels(c, g, &p, mem) : cached_a;
+    p.a_panels = per_a && !cached_a && mem ? mx_gemm_pack_a_panels(c, g, &p, mem) : cached_a;
+    lo.a_panels = per_a && x3 && !cached_lo && mem ? mx_gemm_pack_a_panels(c, g, &lo, mem + (cached_a ? 0 : per_a))
+                                                   : cached_lo;
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
-        prepare_band(c, &j, &p, oy0, min_int(rows, Ho - oy0), B);
+        int n = min_int(rows, Ho - oy0);
+        prepare_band(c, &j, &p, oy0, n, B);
         p.C = y + (size_t)oy0 * Wo;
-        failed = mx_gemm_run(c, g, &p) != 0;
+        failed = mx_gemm_run(c, g, &p) != 0 || (x3 && add_lo_parts(c, g, &j, &p, lo.a_panels, oy0, n, B) != 0);
     }
     if (mem) mx_scratch_release(c, &s);
     if (failed) mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+}
+
+void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                    int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad, 0);
+}
+
+void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                       int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad, 1);
 }
