@@ -76,6 +76,9 @@ def watch():
         bare = bpy.data.objects["Bare"]
         bpy.context.view_layer.objects.active = bare
         state.update(phase="cancel", statuses=set(), uvs=len(bare.data.uv_layers), t0=time.time())
+        # a run long enough to be cancelled: at 40 steps a Xeon with AMX finished it in 0.9 s,
+        # between two timer ticks (~0.6 s apart under software OpenGL), before any cancel
+        bpy.context.scene.matex.steps = 200
         check("second run invoked", invoke(bpy.ops.matex.texture_selected) == {"RUNNING_MODAL"})
         return 0.02
     bare = bpy.data.objects["Bare"]
