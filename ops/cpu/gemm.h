@@ -128,8 +128,8 @@ void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc);
 /* The same packers for the low part of the operand (kernels with to_pairs_lo): pairs of
- * bf16(x - bf16(x)), the second operand of a split product (distinct functions, so a weight's
- * packed-once panels of either part have their own key). */
+ * bf16(x - bf16(x)), the second operand of a split product (mx_gemm_*_x3, which never keeps a
+ * weight packed once: a_weight and b_weight are 0 there). */
 void mx_gemm_pack_a_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                             int k0, int kc);
 void mx_gemm_pack_b_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,

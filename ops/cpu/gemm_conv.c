@@ -379,9 +379,8 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
      * of them, unless the context's cache holds it (else every block repacked it: 64 times
      * for a 512×512 VAE conv) */
     size_t per_a = rows < Ho ? mx_gemm_a_panels_floats(g, &p) : 0;
-    const float *cached_a = per_a ? mx_gemm_cached_a_panels(c, g, &p) : NULL;
-    const float *cached_lo = per_a && x3 ? mx_gemm_cached_a_panels(c, g, &lo) : NULL;
-    a_floats = (cached_a ? 0 : per_a) + (x3 && !cached_lo ? per_a : 0);
+    const float *cached_a = per_a ? mx_gemm_cached_a_panels(c, g, &p) : NULL; /* NULL with x3 */
+    a_floats = (cached_a ? 0 : per_a) + (x3 ? per_a : 0);
     a_floats += a_floats & 1; /* the doubles after them stay 8-byte aligned */
     mx_scratch s;
     float *mem = mx_scratch_take(c, a_floats * sizeof(float) + nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
@@ -390,8 +389,7 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
     band_job j = {.g = g, .x = x, .B = B, .band = direct || !mem ? NULL : (uint32_t *)(void *)(secs + nsecs), .Cin = Cin,
                   .H = H, .W = W, .pad = pad, .chans = chans, .width = width, .secs = nsecs ? secs : NULL};
     p.a_panels = per_a && !cached_a && mem ? mx_gemm_pack_a_panels(c, g, &p, mem) : cached_a;
-    lo.a_panels = per_a && x3 && !cached_lo && mem ? mx_gemm_pack_a_panels(c, g, &lo, mem + (cached_a ? 0 : per_a))
-                                                   : cached_lo;
+    lo.a_panels = per_a && x3 && mem ? mx_gemm_pack_a_panels(c, g, &lo, mem + per_a) : NULL;
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
         int n = min_int(rows, Ho - oy0);
         prepare_band(c, &j, &p, oy0, n, B);
