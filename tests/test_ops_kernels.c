@@ -276,6 +276,9 @@ static void test_attention_ops(const levels *lv) {
     test_attention_case(lv, 1, 2, 67, 333, 40, 0); /* keys over several packing tasks and key blocks */
     test_attention_case(lv, 2, 1, 65, 64, 40, 1);  /* causal: query blocks that see only part of the keys */
     test_attention_case(lv, 1, 1, 2, 3, 1100, 0);  /* amx: a head past its buffers, the streaming kernel */
+    /* amx: blocks of 128 queries (two threads) over several key chunks, maxima rising between them */
+    test_attention_case(lv, 1, 1, 600, 700, 40, 0);
+    test_attention_case(lv, 1, 1, 1100, 1100, 40, 1);
 }
 
 static void test_group_norm_case(const levels *lv, int B, int C, int HW, int groups, mx_dtype dt, int silu) {
