@@ -12,6 +12,7 @@
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st) {
     memset(r, 0, sizeof *r);
     r->c = mx_run_ctx(c, a);
+    r->given = r->c;
     r->fp32 = mx_ctx_fp32(r->c);
     r->a = a;
     r->st = st;
@@ -61,7 +62,7 @@ int mx_conv_load(mx_conv *p, mx_binder *b, const char *path, int cin, int cout, 
     p->k = k;
     p->stride = stride;
     p->pad = pad;
-    p->fp32 = mx_prec_conv_fp32(path);
+    p->prec = mx_prec_conv_fp32(path) ? MX_CONV_PREC_FP32 : MX_CONV_PREC_RUN;
     p->b = mx_w_none();
     if (bind_param(b, &p->w, path, "weight", 4, shape, st)) return -1;
     return bias ? bind_vec(b, &p->b, path, "bias", cout, st) : 0;
@@ -98,7 +99,8 @@ int mx_conv_out_size(const mx_conv *p, int n) { return (n + 2 * p->pad - p->k) /
 void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
     int Ho = mx_conv_out_size(p, H), Wo = mx_conv_out_size(p, W);
     r->flops += 2.0 * B * p->cout * Ho * Wo * (double)p->cin * p->k * p->k;
-    mx_conv2d(p->fp32 ? &r->fp32 : r->c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
+    const mx_ctx *c = p->prec == MX_CONV_PREC_FP32 ? &r->fp32 : p->prec == MX_CONV_PREC_GIVEN ? r->given : r->c;
+    mx_conv2d(c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
 }
 
 void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M) {

@@ -19,6 +19,9 @@
 typedef struct mx_run {
     const mx_ctx *c;
     mx_ctx fp32; /* c computing in fp32 (mx_ctx_fp32): the layers precision.h keeps in fp32 */
+    /* the context the run was given: c, unless the whole network runs in fp32 (mx_run_init_net);
+     * the layers precision.h computes in bf16 even there take it */
+    const mx_ctx *given;
     mx_arena *a;
     mx_status *st;
     double flops;
@@ -43,7 +46,10 @@ int mx_run_batch(const mx_run *r, int B);
 /* Item 0 of x (items of `per` floats) copied to item 1: the end of the shared part. */
 void mx_run_copy_item(mx_run *r, float *x, size_t per);
 
-typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad, fp32; } mx_conv; /* fp32: precision.h */
+/* Where a convolution's precision comes from (precision.h): the run's context, fp32 always, or the
+ * run's given context even inside a network that otherwise runs in fp32. */
+typedef enum { MX_CONV_PREC_RUN, MX_CONV_PREC_FP32, MX_CONV_PREC_GIVEN } mx_conv_prec;
+typedef struct { mx_wptr w, b; int cin, cout, k, stride, pad; mx_conv_prec prec; } mx_conv;
 typedef struct { mx_wptr w, b; int in, out; } mx_lin;
 typedef struct { mx_wptr g, b; int c, groups; float eps; } mx_gn;
 typedef struct { mx_wptr g, b; int c; float eps; } mx_ln;
