@@ -35,10 +35,10 @@ static void test_conv_rule(void) {
     check_conv("up_blocks.1.my_downsamplers.0.conv", 0);
     check_conv("encoder.layers.3.conv.0", 0); /* TAESD: follows the context */
     CHECK(mx_prec_net_fp32("vae") == 1);
-    /* ...but for the resnets of its decoder's two full-resolution up blocks */
-    CHECK(mx_prec_vae_up_resnet_bf16(3, 4) && mx_prec_vae_up_resnet_bf16(2, 4));
-    CHECK(!mx_prec_vae_up_resnet_bf16(1, 4) && !mx_prec_vae_up_resnet_bf16(0, 4));
-    CHECK(mx_prec_vae_up_resnet_bf16(1, 3) && !mx_prec_vae_up_resnet_bf16(0, 3));
+    /* ...but for the 3×3 convolutions of its decoder's two full-resolution up blocks */
+    CHECK(mx_prec_vae_up_block_bf16(3, 4) && mx_prec_vae_up_block_bf16(2, 4));
+    CHECK(!mx_prec_vae_up_block_bf16(1, 4) && !mx_prec_vae_up_block_bf16(0, 4));
+    CHECK(mx_prec_vae_up_block_bf16(1, 3) && !mx_prec_vae_up_block_bf16(0, 3));
     CHECK(mx_prec_net_fp32("unet") == 0 && mx_prec_net_fp32("taesd") == 0 && mx_prec_net_fp32("clip") == 0);
 }
 

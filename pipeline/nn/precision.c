@@ -40,7 +40,7 @@ int mx_prec_conv_fp32(const char *path) {
     return 0;
 }
 
-int mx_prec_vae_up_resnet_bf16(int level, int nlevels) { return level >= nlevels - 2; }
+int mx_prec_vae_up_block_bf16(int level, int nlevels) { return level >= nlevels - 2; }
 
 int mx_prec_net_fp32(const char *net) {
     const mx_net_def *d = mx_net_named(net);

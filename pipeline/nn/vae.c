@@ -95,10 +95,11 @@ static int decoder_load(vae_half *d, mx_binder *b, const mx_vae_config *c, mx_st
             snprintf(path, sizeof path, "decoder.up_blocks.%d.resnets.%d", i, j);
             if (mx_resnet_load(&lv->res[j], b, path, j ? out : prev, out, 0, c->norm_num_groups, VAE_EPS, 1.0f, st))
                 return -1;
-            if (mx_prec_vae_up_resnet_bf16(i, n)) lv->res[j].conv1.prec = lv->res[j].conv2.prec = MX_CONV_PREC_GIVEN;
+            if (mx_prec_vae_up_block_bf16(i, n)) lv->res[j].conv1.prec = lv->res[j].conv2.prec = MX_CONV_PREC_GIVEN;
         }
         snprintf(path, sizeof path, "decoder.up_blocks.%d.upsamplers.0", i);
         if (lv->has_resample && mx_up_load(&lv->up, b, path, out, st)) return -1;
+        if (lv->has_resample && mx_prec_vae_up_block_bf16(i, n)) lv->up.conv.prec = MX_CONV_PREC_GIVEN;
         prev = out;
     }
     if (mx_gn_load(&d->norm_out, b, "decoder.conv_norm_out", ch[0], c->norm_num_groups, VAE_EPS, st)) return -1;
