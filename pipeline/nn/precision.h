@@ -28,7 +28,11 @@
  * exception, measured: the upsamplers (full-resolution 3×3 convs, 135 GFLOP of the 1607 of a
  * 64×64 batch-2 UNet call, 0.2 s of it on 2 Zen 5 cores in fp32) move the UNet only from 5.58e-3
  * to 5.70e-3 (SD1.5), 6.10e-3 to 6.36e-3 (mini) and 6.46e-3 to 6.54e-3 (tiny) in bf16; the
- * downsamplers, 11 GFLOP, would move the ControlNet's deepest residual from 6.7e-3 to 8.1e-3.
+ * downsamplers, 11 GFLOP, would move the ControlNet's deepest residual from 6.7e-3 to 8.1e-3;
+ * proj_in, fed by a GroupNorm too, takes the ControlNet mini's mid residual from 7.2e-3 to
+ * 1.002e-2 (AMX); and the fp32 layers on AMX as two of their three bf16 products (hi·hi +
+ * hi(w)·lo(x): only the weights rounded to bf16) take it to 1.09e-2, an encode then decode of
+ * vae_mini to 3.6e-2.
  * With this rule: UNet tiny/mini/SD1.5 6.5e-3/6.4e-3/5.7e-3, ControlNet mini/SD1.5
  * 8.9e-3/6.7e-3; CLIP, all bf16, SD1.5 6.7e-3. */
 #ifndef MX_NN_PRECISION_H
