@@ -16,7 +16,7 @@
  * Why (relative L2 against the fp32 goldens): bf16 rounds both operands of a product to 8 bits
  * (~1.6e-3 per layer) and the errors of the layers add up. With every layer in bf16 the
  * ControlNet's deepest residual reached 1.29e-2 (mini) / 1.03e-2 (SD1.5), the VAE decode 2.07e-2
- * and an encode then decode 5.6e-2. In the VAE the decode moves by 2e-3 to 8e-3 for each group of
+ * and an encode then decode 5.6e-2. In the VAE the decode moves by 2e-3 to 1e-2 for each group of
  * layers put in bf16 alone, the early ones most (measured on vae_mini: the resnets of the mid
  * block 9.6e-3, of up block 0 7.5e-3, 1 6.6e-3, 2 6.2e-3, 3 4.0e-3; its upsamplers 5.5e-3, 5.1e-3,
  * 3.3e-3; conv_out alone 2.1e-3; up blocks 1-3's resnets together 1.00e-2, with up block 1's
@@ -24,8 +24,8 @@
  * tiny/mini/SD1.5 7.8e-3/8.2e-3/7.5e-3 (avx512bf16 7.6e-3/8.3e-3/7.5e-3), an encode then decode
  * 8.0e-3/8.7e-3/7.9e-3 (their resnets alone: decode 6.8e-3/7.3e-3/6.9e-3), for 31 % less time per
  * decode on AMX (2 Xeon cores, 512²: 4.9 -> 3.4 s). In UNet and ControlNet the convolutions fed
- * by unnormalised activations (the residual stream) carry more error per FLOP; in fp32 they cost a few % of the FLOPs. The one
- * exception, measured: the upsamplers (full-resolution 3×3 convs, 135 GFLOP of the 1607 of a
+ * by unnormalised activations (the residual stream) carry more error per FLOP; in fp32 they cost
+ * a few % of the FLOPs. The one exception, measured: the upsamplers (full-resolution 3×3 convs, 135 GFLOP of the 1607 of a
  * 64×64 batch-2 UNet call, 0.2 s of it on 2 Zen 5 cores in fp32) move the UNet only from 5.58e-3
  * to 5.70e-3 (SD1.5), 6.10e-3 to 6.36e-3 (mini) and 6.46e-3 to 6.54e-3 (tiny) in bf16; the
  * downsamplers, 11 GFLOP, would move the ControlNet's deepest residual from 6.7e-3 to 8.1e-3;
