@@ -76,9 +76,6 @@ def watch():
         bare = bpy.data.objects["Bare"]
         bpy.context.view_layer.objects.active = bare
         state.update(phase="cancel", statuses=set(), uvs=len(bare.data.uv_layers), t0=time.time())
-        # a run long enough to be cancelled: at 40 steps a Xeon with AMX finished it in 0.9 s,
-        # between two timer ticks (~0.6 s apart under software OpenGL), before any cancel
-        bpy.context.scene.matex.steps = 200
         check("second run invoked", invoke(bpy.ops.matex.texture_selected) == {"RUNNING_MODAL"})
         return 0.02
     bare = bpy.data.objects["Bare"]
@@ -94,7 +91,10 @@ def main():
     bpy.ops.preferences.addon_enable(module="matex_texture")
     bpy.context.preferences.addons["matex_texture"].preferences.matex_path = os.environ["MATEX"]
     s = bpy.context.scene.matex
-    s.weights, s.prompt, s.steps, s.views, s.texture_size = os.environ["MATEX_DEMO_WEIGHTS"], "a monkey", 40, 4, 256
+    # runs long enough to be watched and cancelled: at 40 steps a Xeon with AMX finished the job in
+    # 0.9 s, between two timer ticks (~0.6 s apart under software OpenGL), so the ticks could miss
+    # every "step" status, and the second run ended before any cancel
+    s.weights, s.prompt, s.steps, s.views, s.texture_size = os.environ["MATEX_DEMO_WEIGHTS"], "a monkey", 200, 4, 256
     s.extra_args = "--image-size 64 --render-size 256 --candidates 8"
     for name, loc in (("Suzanne", (0, 0, 0)), ("Bare", (3, 0, 0))):
         bpy.ops.mesh.primitive_monkey_add(location=loc)
