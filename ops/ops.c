@@ -50,8 +50,9 @@ static void op_end(const mx_ctx *c) {
     if (c && c->be && c->be->leave) c->be->leave(c->be);
 }
 
-/* Op id's call through the kernel table, timed (process CPU time) when c carries a profile. */
-#define RUN_OP(c, id, call)                                                                                  \
+/* Op id's call through the kernel table, timed (process CPU time) and costed when c carries a
+ * profile. */
+#define RUN_OP(c, id, call, cost)                                                                            \
     do {                                                                                                     \
         const mx_kernels *k_ = op_begin(c);                                                                  \
         if (k_) {                                                                                            \
@@ -60,19 +61,59 @@ static void op_end(const mx_ctx *c) {
             k_->call;                                                                                        \
             if (c && c->prof)                                                                                \
                 profile_op(c->prof, id, mx_profile_clock(CLOCK_PROCESS_CPUTIME_ID) - t0_,                     \
-                           mx_profile_clock(CLOCK_MONOTONIC) - w0_);                                          \
+                           mx_profile_clock(CLOCK_MONOTONIC) - w0_, cost);                                    \
             op_end(c);                                                                                       \
         }                                                                                                    \
     } while (0)
 
-static void profile_op(mx_profile *p, int id, double secs, double wall) {
+static void profile_op(mx_profile *p, int id, double secs, double wall, mx_op_cost cost) {
     p->op_secs[id] += secs;
     p->op_wall[id] += wall;
     p->op_calls[id]++;
+    p->op_flops[id] += cost.flops;
+    p->op_bytes[id] += cost.bytes;
+    if (p->peak_flops > 0 && p->bandwidth > 0) p->op_floor[id] += fmax(cost.flops / p->peak_flops, cost.bytes / p->bandwidth);
+}
+
+/* ---- the costs of op_list.h ---- */
+
+static mx_op_cost mx_cost(double flops, double bytes) { return (mx_op_cost){flops, bytes}; }
+
+/* n outputs at one FLOP each, `arrays` arrays of n floats read or written. */
+static mx_op_cost mx_cost_elementwise(double n, int arrays) { return mx_cost(n, 4.0 * n * arrays); }
+
+static double weight_bytes(mx_wptr w, double n) { return n * (double)mx_dtype_size(w.dtype); }
+
+static mx_op_cost mx_cost_linear(mx_wptr w, int M, int N, int K) {
+    return mx_cost(2.0 * M * N * K, 4.0 * M * ((double)K + N) + weight_bytes(w, (double)N * K));
+}
+
+static mx_op_cost mx_cost_conv2d(int B, int Cin, int H, int W, mx_wptr w, int Cout, int kh, int kw, int stride,
+                                 int pad) {
+    double out = (double)((H + 2 * pad - kh) / stride + 1) * ((W + 2 * pad - kw) / stride + 1);
+    return mx_cost(2.0 * B * Cout * out * Cin * kh * kw,
+                   4.0 * B * ((double)Cin * H * W + Cout * out) + weight_bytes(w, (double)Cout * Cin * kh * kw));
+}
+
+/* q·kᵀ and p·v; q, k, v read and the output written once (the scores never leave the cache). */
+static mx_op_cost mx_cost_attention(int B, int H, int Tq, int Tk, int D) {
+    return mx_cost(4.0 * B * H * Tq * (double)Tk * D, 4.0 * B * H * D * (2.0 * Tq + 2.0 * Tk));
+}
+
+static double shape_count(const int64_t *shape, int ndim) {
+    double n = 1;
+    for (int d = 0; d < ndim; d++) n *= (double)shape[d];
+    return n;
+}
+
+static mx_op_cost mx_cost_binary(const int64_t *ashape, const int64_t *bshape, int ndim) {
+    double y = 1;
+    for (int d = 0; d < ndim; d++) y *= (double)(ashape[d] > bshape[d] ? ashape[d] : bshape[d]);
+    return mx_cost(y, 4.0 * (shape_count(ashape, ndim) + shape_count(bshape, ndim) + y));
 }
 
 const char *mx_op_name(int op) {
-#define MX_NAME_(name, guard, params, args) #name,
+#define MX_NAME_(name, guard, params, args, cost) #name,
     static const char *const names[MX_OP_COUNT] = {MX_OPS(MX_NAME_)};
 #undef MX_NAME_
     return op >= 0 && op < MX_OP_COUNT ? names[op] : "?";
@@ -86,9 +127,9 @@ int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim) {
 
 /* Every wrapper has the same shape (op_list.h): no work unless the guard holds, else the table
  * entry. None needs more checking: the kernels take any sizes the guards let through. */
-#define MX_WRAPPER_DEF_(name, guard, params, args)                                                          \
+#define MX_WRAPPER_DEF_(name, guard, params, args, cost)                                                          \
     void mx_##name(const mx_ctx *c, MX_SPLICE params) {                                                      \
-        if (guard) RUN_OP(c, MX_OP_ID_##name, name(c, MX_SPLICE args));                                                      \
+        if (guard) RUN_OP(c, MX_OP_ID_##name, name(c, MX_SPLICE args), cost);                                 \
     }
 MX_OPS(MX_WRAPPER_DEF_)
 
@@ -98,7 +139,7 @@ void mx_add(const mx_ctx *c, float *y, const float *a, const float *b, size_t n)
 }
 
 const char *mx_kernels_missing(const mx_kernels *k) {
-#define MX_MISSING_(name, guard, params, args)                                                               \
+#define MX_MISSING_(name, guard, params, args, cost)                                                               \
     if (!k->name) return #name;
     MX_OPS(MX_MISSING_)
 #undef MX_MISSING_

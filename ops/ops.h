@@ -65,7 +65,7 @@ typedef enum { MX_BIN_ADD = 0, MX_BIN_SUB = 1, MX_BIN_MUL = 2 } mx_binop;
 
 /* The dispatch table: one field per op of op_list.h, each with exactly the semantics of the
  * wrapper of the same name. A backend's table is full: mx_kernels_check at context creation. */
-#define MX_KERNEL_FIELD_(name, guard, params, args) void (*name)(const mx_ctx *c, MX_SPLICE params);
+#define MX_KERNEL_FIELD_(name, guard, params, args, cost) void (*name)(const mx_ctx *c, MX_SPLICE params);
 struct mx_kernels {
     mx_isa isa;
     MX_OPS(MX_KERNEL_FIELD_)
@@ -95,7 +95,7 @@ const mx_kernels *mx_kernels_best(void);
 /* 1 when every dim of both shapes (ndim of each) is positive: the guard of mx_binary. */
 int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim);
 
-#define MX_WRAPPER_DECL_(name, guard, params, args) void mx_##name(const mx_ctx *c, MX_SPLICE params);
+#define MX_WRAPPER_DECL_(name, guard, params, args, cost) void mx_##name(const mx_ctx *c, MX_SPLICE params);
 MX_OPS(MX_WRAPPER_DECL_)
 /* Same-shape shortcut of mx_binary: y = a + b over n floats. */
 void mx_add(const mx_ctx *c, float *y, const float *a, const float *b, size_t n);

@@ -13,7 +13,7 @@
 #include "op_list.h"
 
 /* The op ids, in list order: MX_OP_ID_linear, ... (profile slots and names). */
-#define MX_OP_ID_(name, guard, params, args) MX_OP_ID_##name,
+#define MX_OP_ID_(name, guard, params, args, cost) MX_OP_ID_##name,
 enum { MX_OPS(MX_OP_ID_) };
 #undef MX_OP_ID_
 
@@ -27,10 +27,20 @@ typedef enum {
 /* The GEMM users that are told apart (0: linear, 1: conv2d). */
 enum { MX_GEMM_LINEAR, MX_GEMM_CONV, MX_GEMM_USERS };
 
+/* What one op call costs at least (op_list.h's cost): its FLOPs and the bytes it moves. */
+typedef struct {
+    double flops, bytes;
+} mx_op_cost;
+
 typedef struct mx_profile {
     double op_secs[MX_OP_COUNT]; /* process CPU seconds inside each op */
     double op_wall[MX_OP_COUNT]; /* wall seconds inside each op (threads × wall − CPU: idle) */
     long op_calls[MX_OP_COUNT];
+    /* The roofline: the machine's peak FLOP/s and memory bandwidth in bytes/s (set by the caller;
+     * 0: no floors) and per op the sums of its calls' FLOPs, bytes and floors, a call's floor
+     * being the longer of its FLOPs at the peak and its bytes at the bandwidth, in seconds. */
+    double peak_flops, bandwidth;
+    double op_flops[MX_OP_COUNT], op_bytes[MX_OP_COUNT], op_floor[MX_OP_COUNT];
     double gemm_secs[MX_GEMM_USERS][MX_GEMM_PARTS]; /* thread seconds, summed over threads */
     double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls */
 } mx_profile;

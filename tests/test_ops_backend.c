@@ -32,7 +32,7 @@ static void test_names(void) {
 /* One table: every op of the list present (a failure names the op and the table). */
 static void check_table_full(const mx_kernels *k, const char *table) {
     int present = 0;
-#define COUNT_PRESENT_(name, guard, params, args) present += k->name != NULL;
+#define COUNT_PRESENT_(name, guard, params, args, cost) present += k->name != NULL;
     MX_OPS(COUNT_PRESENT_)
 #undef COUNT_PRESENT_
     const char *missing = mx_kernels_missing(k);

@@ -1,7 +1,9 @@
 /* The profile (ops/profile.h): a context with one counts each op's calls and time, and the GEMM
  * engine's FLOPs and part times (linear and conv2d told apart, K split into several blocks); the
  * results are bit-identical with and without it; a context without one records nothing; the op
- * names are the list's. */
+ * names are the list's; each call's cost (op_list.h: FLOPs, bytes) and roofline floor. */
+#include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -73,7 +75,50 @@ done:
     mx_ctx_destroy(&c);
 }
 
+/* The costs of op_list.h on calls whose FLOPs and bytes are counted here by hand: a linear with
+ * fp16 weights (2 bytes each), a strided conv, a broadcast add, attention; and each call's floor
+ * is the longer of its FLOPs at the peak and its bytes at the bandwidth. */
+static void test_costs(void) {
+    enum { LM = 3, LN = 5, LK = 7, CI = 2, CO = 3, CH = 9, CW = 6, BA = 2, HD = 2, TQ = 5, TK = 4, D = 3 };
+    static float x[LM * LK], y[LM * LN], img[CI * CH * CW], cw[CO * CI * 9], cy[CO * 5 * 3], a[4 * 6], b[6], ay[4 * 6];
+    static float q[BA * TQ * HD * D], k[BA * TK * HD * D], v[BA * TK * HD * D], o[BA * TQ * HD * D];
+    static uint16_t w16[LN * LK];
+    mx_ctx c;
+    mx_status st = {0};
+    if (mx_ctx_create(&c, 1, MX_ISA_SCALAR, (size_t)1 << 20, &st)) {
+        printf("FAIL: context: %s\n", st.msg);
+        CHECK(0);
+        return;
+    }
+    mx_profile pr;
+    memset(&pr, 0, sizeof pr);
+    pr.peak_flops = 1e3;
+    pr.bandwidth = 1e3; /* 1 FLOP per byte: a call's floor is max(FLOPs, bytes) ms */
+    c.prof = &pr;
+    mx_wptr wh = {w16, MX_F16};
+    mx_linear(&c, y, x, wh, mx_w_none(), LM, LN, LK);
+    CHECK(pr.op_flops[MX_OP_ID_linear] == 2.0 * LM * LN * LK);
+    CHECK(pr.op_bytes[MX_OP_ID_linear] == 4.0 * (LM * LK + LM * LN) + 2.0 * LN * LK);
+    mx_conv2d(&c, cy, img, 1, CI, CH, CW, mx_w_f32(cw), mx_w_none(), CO, 3, 3, 2, 1); /* 5×3 outputs */
+    CHECK(pr.op_flops[MX_OP_ID_conv2d] == 2.0 * CO * 5 * 3 * CI * 9);
+    CHECK(pr.op_bytes[MX_OP_ID_conv2d] == 4.0 * (CI * CH * CW + CO * 5 * 3) + 4.0 * CO * CI * 9);
+    int64_t as[2] = {4, 6}, bs[2] = {1, 6};
+    mx_binary(&c, MX_BIN_ADD, ay, a, as, b, bs, 2);
+    CHECK(pr.op_flops[MX_OP_ID_binary] == 24 && pr.op_bytes[MX_OP_ID_binary] == 4.0 * (24 + 6 + 24));
+    mx_attention(&c, o, q, k, v, BA, HD, TQ, TK, D, HD * D, HD * D, HD * D, 0, 1.0f);
+    CHECK(pr.op_flops[MX_OP_ID_attention] == 4.0 * BA * HD * TQ * TK * D);
+    CHECK(pr.op_bytes[MX_OP_ID_attention] == 4.0 * BA * HD * D * (2 * TQ + 2 * TK));
+    for (int op = 0; op < MX_OP_COUNT; op++) {
+        double most = pr.op_flops[op] > pr.op_bytes[op] ? pr.op_flops[op] : pr.op_bytes[op];
+        CHECK(fabs(pr.op_floor[op] - most / 1e3) <= 1e-12 * most);
+    }
+    printf("costs: linear %.0f FLOP %.0f B, conv2d %.0f FLOP %.0f B, floors: ok\n", pr.op_flops[MX_OP_ID_linear],
+           pr.op_bytes[MX_OP_ID_linear], pr.op_flops[MX_OP_ID_conv2d], pr.op_bytes[MX_OP_ID_conv2d]);
+    mx_ctx_destroy(&c);
+}
+
 int main(void) {
+    test_costs();
     CHECK(strcmp(mx_op_name(MX_OP_ID_linear), "linear") == 0);
     CHECK(strcmp(mx_op_name(MX_OP_ID_embed_tokens), "embed_tokens") == 0);
     CHECK(strcmp(mx_op_name(MX_OP_COUNT), "?") == 0 && strcmp(mx_op_name(-1), "?") == 0);

@@ -95,6 +95,16 @@ static void clock_net(net_time *t, mx_ctx *c, int p, int stop, int profile) {
     c->prof = profile && !stop ? &t->prof[p] : NULL;
 }
 
+/* The roofline of every profile of these networks: the peaks measured before the runs and the
+ * memory bandwidth (GFLOP/s, GB/s; 0: none). */
+static void set_roofline(net_time *const *nets, int n, const double peak[2], double bw) {
+    for (int i = 0; i < n; i++)
+        for (int p = 0; p < 2; p++) {
+            nets[i]->prof[p].peak_flops = peak[p] * 1e9;
+            nets[i]->prof[p].bandwidth = bw * 1e9;
+        }
+}
+
 /* The first calls' wall times and the packed weights they left in each context. */
 static void report_first_calls(const net_time *const nets[3], const mx_ctx *c, int nprec) {
     printf("first calls, untimed (they pack the weights and touch the arena), wall s fp32%s:", nprec == 2 ? "/bf16" : "");
@@ -121,6 +131,14 @@ static void op_idle(const mx_profile *pr, int op, int threads) {
     if (tw > 0) printf(", idle %.1f%%", 100 * (tw - pr->op_secs[op]) / tw);
 }
 
+/* An op's roofline floor (ops/profile.h: its calls' FLOPs at the peak or bytes at the bandwidth,
+ * whichever takes longer, summed) as a share of its wall time, and which bound dominates. */
+static void op_floor(const mx_profile *pr, int op) {
+    if (pr->bandwidth <= 0 || pr->op_wall[op] <= 0) return;
+    printf(", floor %.0f%% of its wall (%s)", 100 * pr->op_floor[op] / pr->op_wall[op],
+           pr->op_bytes[op] / pr->bandwidth > pr->op_flops[op] / pr->peak_flops ? "bytes" : "FLOPs");
+}
+
 static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int threads, double peak) {
     static const char *const user_name[MX_GEMM_USERS] = {"linear", "conv2d"};
     const double *s = pr->gemm_secs[user];
@@ -128,6 +146,7 @@ static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int 
     for (int q = 0; q < MX_GEMM_PARTS; q++) busy += s[q];
     printf("  %-18s %5.1f%% (%ld calls", user_name[user], 100 * pr->op_secs[op] / cpu, pr->op_calls[op]);
     op_idle(pr, op, threads);
+    op_floor(pr, op);
     printf("):");
     part("micro", s[MX_GEMM_MICRO], whole);
     part(user == MX_GEMM_CONV ? "pack-A(weights)" : "pack-A(x)", s[MX_GEMM_PACK_A], whole);
@@ -139,6 +158,17 @@ static void report_gemm(const mx_profile *pr, int user, int op, double cpu, int 
     printf("\n");
 }
 
+/* The call's roofline floor: the sum of its ops' floors, and what FLOPs alone and bytes alone
+ * would take; the call's wall time as a multiple of the floor. */
+static void report_floor(const mx_profile *pr, double wall) {
+    if (pr->bandwidth <= 0) return;
+    double floor = 0, flops = 0, bytes = 0;
+    for (int op = 0; op < MX_OP_COUNT; op++) floor += pr->op_floor[op], flops += pr->op_flops[op], bytes += pr->op_bytes[op];
+    printf("  roofline floor %.3f s (%.0f GFLOP alone %.3f s at %.0f GFLOP/s, %.1f GB alone %.3f s at %.1f GB/s): "
+           "the call took %.2fx it\n", floor, flops * 1e-9, flops / pr->peak_flops, pr->peak_flops * 1e-9, bytes * 1e-9,
+           bytes / pr->bandwidth, pr->bandwidth * 1e-9, floor > 0 ? wall / floor : 0);
+}
+
 /* The breakdown of one run: the GEMM users, then every other op with ≥ 0.1 % of the CPU time
  * (largest first), then the time outside any op (the network's own code: arena, loops). */
 static void report_profile(const net_time *t, int p, double peak, int threads) {
@@ -147,6 +177,7 @@ static void report_profile(const net_time *t, int p, double peak, int threads) {
     printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall, %ld minor page faults\n", t->what,
            p ? "bf16" : "fp32", wall, cpu, 100 * (threads * wall - cpu) / (threads * wall), t->faults[p]);
     for (int op = 0; op < MX_OP_COUNT; op++) in_ops += pr->op_secs[op];
+    report_floor(pr, wall);
     report_gemm(pr, MX_GEMM_CONV, MX_OP_ID_conv2d, cpu, threads, peak);
     report_gemm(pr, MX_GEMM_LINEAR, MX_OP_ID_linear, cpu, threads, peak);
     int done[MX_OP_COUNT] = {0};
@@ -159,6 +190,7 @@ static void report_profile(const net_time *t, int p, double peak, int threads) {
         done[best] = 1;
         printf("  %-18s %5.1f%% (%ld calls", mx_op_name(best), 100 * pr->op_secs[best] / cpu, pr->op_calls[best]);
         op_idle(pr, best, threads);
+        op_floor(pr, best);
         printf(")\n");
     }
     printf("  %-18s %5.1f%%\n", "outside ops", 100 * (cpu - in_ops) / cpu);
@@ -214,6 +246,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     if (mx_ctx_pack_weights(&c[0], wbytes, 1, st) || (nprec == 2 && mx_models_pack_weights(&c[1], st))) return -1;
     printf("threads %d, kernels %s%s%s\n", mx_pool_threads(c[0].pool), mx_isa_name(c[0].k->isa),
            nprec == 2 ? " and " : " (bf16 not available on this CPU)", nprec == 2 ? mx_isa_name(c[1].k->isa) : "");
+    double bw = o->profile ? bench_bandwidth_gbs(&c[0]) : 0;
     double peak[2] = {bench_peak_gflops(&c[0], 0), nprec == 2 ? bench_peak_gflops(&c[1], 1) : 0};
     int B = o->batch, H = 64, W = 64, T = 77, D = ucfg.cross_attention_dim, cfg = B == 2;
     size_t ns = (size_t)B * ucfg.in_channels * H * W;
@@ -256,6 +289,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     if (!o->skip_cn && mx_controlnet_cache_floats(cn[0], B, H, W, T, &cache_floats, st)) return -1;
     float *cache_mem = cache_floats ? malloc(cache_floats * sizeof(float)) : NULL;
     net_time nt_vae = {.what = "VAE decode 64x64 batch 1", .flops = mx_vae_decode_flops(v, 1, H, W)};
+    set_roofline((net_time *[]){&nt_cn, &nt_cn_step, &nt_unet, &nt_unet_cfg, &nt_vae}, 5, peak, bw);
     for (int p = 0; p < nprec && !o->skip_cn; p++) {
         mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f, 0};
         mx_controlnet_input ci_cfg = {sample_cfg, ts_cfg, ehs, cond, B, H, W, T, 0.8f, 1};
@@ -305,6 +339,8 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     printf("measured peak of %d threads (best short run of zmm FMA / %s loops, before and after): "
            "fp32 %.0f GFLOP/s, bf16 %.0f GFLOP/s\n", mx_pool_threads(c[0].pool),
            nprec == 2 && c[1].k->isa == MX_ISA_AMX ? "TDPBF16PS" : "vdpbf16ps", peak[0], peak[1]);
+    if (bw > 0) printf("memory bandwidth of %d threads (y = x + 1 over 32 MiB, 8 bytes per element, best of 7): %.1f GB/s\n",
+                       mx_pool_threads(c[0].pool), bw);
     int nth = mx_pool_threads(c[0].pool);
     printf("%-32s %6s %7s %7s %5s %7s %7s %5s %6s %6s\n", "network (GFLOP/s over CPU time)", "GFLOP", "fp32 s",
            "GFLOP/s", "peak", "bf16 s", "GFLOP/s", "peak", "wall", "cpu");

@@ -16,7 +16,7 @@
 #endif
 
 /* scalar: every op's reference (the test oracle). */
-#define MX_REF_ENTRY_(name, guard, params, args) .name = mx_##name##_ref,
+#define MX_REF_ENTRY_(name, guard, params, args, cost) .name = mx_##name##_ref,
 #define MX_SCALAR_KERNELS MX_OPS(MX_REF_ENTRY_)
 
 /* avx2 (+FMA): the SIMD templates and the GEMM micro-kernel; the layout ops but the transposes,

@@ -37,7 +37,7 @@ static void run_op(cuda_backend *b, const char *op, int rc) {
 
 /* The table entry of each op of ops/op_list.h: its mx_cuda_<op> on the backend's context (be_: the
  * ops' parameters use the short names). */
-#define CUDA_ENTRY_(name, guard, params, args)                                                             \
+#define CUDA_ENTRY_(name, guard, params, args, cost)                                                             \
     static void k_##name(const mx_ctx *c, MX_SPLICE params) {                                              \
         cuda_backend *be_ = of(c);                                                                         \
         if (!be_->failed) run_op(be_, #name, mx_cuda_##name(be_->cc, MX_SPLICE args, &be_->err));          \
@@ -47,7 +47,7 @@ MX_OPS(CUDA_ENTRY_)
 void mx_cuda_fill_kernels(mx_kernels *k) {
     memset(k, 0, sizeof *k);
     k->isa = MX_ISA_SCALAR; /* not a CPU table */
-#define CUDA_FILL_(name, guard, params, args) k->name = k_##name;
+#define CUDA_FILL_(name, guard, params, args, cost) k->name = k_##name;
     MX_OPS(CUDA_FILL_)
 #undef CUDA_FILL_
 }

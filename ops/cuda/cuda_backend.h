@@ -68,7 +68,7 @@ int mx_cuda_memset_zero(mx_cuda_ctx *ctx, void *dptr, size_t bytes, const char *
  * HOST integers. ---- */
 
 #define MX_CUDA_ATTN_MAX_D 512
-#define MX_CUDA_OP_DECL_(name, guard, params, args) int mx_cuda_##name(mx_cuda_ctx *c, MX_SPLICE params, mx_status *st);
+#define MX_CUDA_OP_DECL_(name, guard, params, args, cost) int mx_cuda_##name(mx_cuda_ctx *c, MX_SPLICE params, mx_status *st);
 MX_OPS(MX_CUDA_OP_DECL_)
 
 /* The CUDA backend of runtime/backend.h on device 0: every op of ops.h through a kernel table of
