@@ -128,6 +128,25 @@ void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
     pack_rows(g, dst, p->b_mat, p->b_ld, first, p->N - first, rows, k0, kc, 0, 0);
 }
 
+/* Both parts of a split kernel's panel: the high part in split_of's format at dst, the low part
+ * right after it. */
+static void pack_split(const mx_gemm_problem *p, const mx_gemm_kernel *g, const mx_gemm_pack_fn part[2], void *dst,
+                       int first, int width, int k0, int kc) {
+    const mx_gemm_kernel *one = g->split_of;
+    part[0](p, one, dst, first, width, k0, kc);
+    part[1](p, one, (uint32_t *)dst + mx_gemm_panel_words(one, kc) * (size_t)width, first, width, k0, kc);
+}
+
+void mx_gemm_pack_a_split(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                          int k0, int kc) {
+    pack_split(p, g, p->split_a, dst, first, rows, k0, kc);
+}
+
+void mx_gemm_pack_b_split(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
+                          int k0, int kc) {
+    pack_split(p, g, p->split_b, dst, first, cols, k0, kc);
+}
+
 void mx_gemm_pack_a_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                             int k0, int kc) {
     pack_rows(g, dst, p->a_mat, p->a_ld, first, p->M - first, rows, k0, kc, g->a_rows, 1);
@@ -240,6 +259,7 @@ static mx_gemm_problem batch_item(const mx_gemm_problem *p, int b) {
     mx_gemm_problem q = *p;
     q.C += (size_t)b * p->c_batch_stride;
     if (q.image) q.image += (size_t)b * p->image_batch_stride;
+    if (q.image_lo) q.image_lo += (size_t)b * p->image_batch_stride;
     return q;
 }
 
@@ -604,17 +624,13 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
     if (mx_gemm_run(c, g, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
 }
 
-void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, mx_wptr w, mx_wptr bias,
                        int M, int N, int K) {
     mx_gemm_problem p = linear_problem(y, x, w, bias, M, N, K);
     p.b_weight = 0; /* packed per call, as for conv2d (gemm_conv.c) */
-    int failed = mx_gemm_run(c, g, &p) != 0; /* hi·hi + bias */
-    p.bias = mx_w_none();
-    p.accumulate = 1;
-    p.pack_b = mx_gemm_pack_b_rows_lo; /* + hi(x)·lo(w) */
-    failed = failed || mx_gemm_run(c, g, &p) != 0;
-    p.pack_a = mx_gemm_pack_a_rows_lo; /* + lo(x)·hi(w) */
-    p.pack_b = mx_gemm_pack_b_rows;
-    failed = failed || mx_gemm_run(c, g, &p) != 0;
-    if (failed) mx_linear_ref(c, y, x, w, bias, M, N, K); /* it writes all of y */
+    p.pack_a = mx_gemm_pack_a_split;
+    p.pack_b = mx_gemm_pack_b_split;
+    p.split_a[0] = mx_gemm_pack_a_rows, p.split_a[1] = mx_gemm_pack_a_rows_lo;
+    p.split_b[0] = mx_gemm_pack_b_rows, p.split_b[1] = mx_gemm_pack_b_rows_lo;
+    if (mx_gemm_run(c, split, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
 }

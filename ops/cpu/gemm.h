@@ -60,6 +60,10 @@ typedef struct mx_gemm_kernel {
     void (*end)(void);
     /* K blocks of at most this many k (≤ MX_GEMM_KC_MAX); 0: MX_GEMM_KC_SIMD (mx_gemm_kc) */
     int kc_max;
+    /* NULL, or the kernel whose panels this one's hold twice, the operand's high parts then its
+     * low parts (each in split_of's format): the split product of mx_gemm_*_x3 in one pass, its
+     * micro-kernel adding hi·lo + hi·hi + lo·hi on the tiles before C is stored once */
+    const struct mx_gemm_kernel *split_of;
 } mx_gemm_kernel;
 
 /* Steps of B rows fetched ahead by micro_rows (and the entries past a K block's steps in offs). */
@@ -108,6 +112,8 @@ struct mx_gemm_problem {
     size_t image_batch_stride, band_plane;
     int Cin, chans, group_words, band_width, kh, kw, stride, Wo;
     int band_fp32; /* bf16 levels, 1×1 stride 1 unpadded: the band is the fp32 input, paired per panel */
+    /* a split kernel's conv on a band: the band of the inputs' low parts (image's layout) */
+    const float *image_lo;
     mx_wptr bias;
     int bias_per_row; /* 1: bias[m] (conv), 0: bias[n] (linear) */
     int kc_block;     /* K blocks of this length (≤ mx_gemm_kc), the last one shorter; 0: the engine's */
@@ -118,6 +124,9 @@ struct mx_gemm_problem {
     const float *a_panels;
     /* 1: C += the product (a later part of a split product, mx_gemm_*_x3) */
     int accumulate;
+    /* a split kernel's packers (pack_a = mx_gemm_pack_a_split, pack_b likewise): the high and
+     * the low part's, in split_of's format */
+    mx_gemm_pack_fn split_a[2], split_b[2];
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
@@ -155,6 +164,12 @@ int mx_gemm_conv_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g
  * half[1] + offs[s]); else 0. */
 int mx_gemm_conv_panel_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first,
                                 const uint32_t *half[2]);
+/* The packers of a split kernel (split_of): the panel's high part by problem.split_a[0] (or
+ * split_b[0]), then its low part by split_a[1] (split_b[1]). */
+void mx_gemm_pack_a_split(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
+                          int k0, int kc);
+void mx_gemm_pack_b_split(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
+                          int k0, int kc);
 /* Starts fetching rows first..first+n-1, columns k0..k0+kc-1, of a row-major weight matrix. */
 void mx_gemm_prefetch_rows(mx_wptr src, size_t ld, int first, int n, int k0, int kc);
 /* Zeros what a packer left of a k-major panel dst[words][width] for a K block of kc: columns
@@ -176,6 +191,7 @@ void mx_gemm_to_pairs_lo_avx512bf16(uint32_t *dst, const float *even, const floa
 /* 32-bit words per row (A) or column (B) of a packed panel for a K block of kc: kc for fp32
  * panels, (kc+1)/2 k-pairs rounded up to pair_align for bf16 ones. */
 static inline size_t mx_gemm_panel_words(const mx_gemm_kernel *g, int kc) {
+    if (g->split_of) return 2 * mx_gemm_panel_words(g->split_of, kc);
     if (!g->to_pairs) return (size_t)kc;
     size_t kp = (size_t)(kc + 1) / 2, align = g->pair_align > 1 ? (size_t)g->pair_align : 1;
     return (kp + align - 1) / align * align;
@@ -200,10 +216,13 @@ void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
 /* The same as three products on a bf16 kernel: each operand split as hi = bf16(x) and lo =
  * bf16(x - hi), x·w ≈ hi·hi + lo·hi + hi·lo (lo·lo, ~2^-16 of it, dropped), summed in fp32: near
  * fp32 accuracy (~5e-6 relative L2 per product, fp32 ~5e-7, bf16 ~2.4e-3) at three times the bf16
- * work. The AMX level's fp32 layers (dispatch.c), where the tiles outrun fp32 FMAs 15 to 1. */
-void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
+ * work. The AMX level's fp32 layers (dispatch.c), where the tiles outrun fp32 FMAs 15 to 1. One
+ * pass of a split kernel (split_of): both parts packed once, the three products added on the
+ * tiles, C written once (three passes of the plain kernel wrote C three times and read it back
+ * twice: 1×1 convs of 320-1280 channels and linear layers of K 512 ~25-35 % slower, 2 Xeon cores). */
+void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, mx_wptr w, mx_wptr bias,
                        int M, int N, int K);
-void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, int B, int Cin, int H,
                        int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
 
 #ifdef __AVX__

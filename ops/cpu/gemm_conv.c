@@ -180,15 +180,15 @@ static void pair_row_from_input(const mx_gemm_problem *p, const mx_gemm_kernel *
         to_pairs_part(g, d + runs[r].j, even + runs[r].off, odd ? odd + runs[r].off : NULL, runs[r].len, lo);
 }
 
-/* The B packer of conv; lo: the inputs' low parts where it converts them (band_fp32; a band is
- * converted when prepared). */
+/* The B packer of conv; lo: the inputs' low parts, converted here (band_fp32) or copied from
+ * the band of them (problem.image_lo). */
 static void pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dstv, int first, int cols, int k0,
                         int kc, int lo) {
     pixel_run runs[MX_GEMM_PANEL_MAX]; /* cols <= the kernel's NR */
     int valid, nruns = panel_runs(p, runs, first, cols, &valid);
     int nq = (kc + k_per_word(g) - 1) / k_per_word(g);
     k_pos at = k_pos_of(p, k0 / k_per_word(g));
-    const uint32_t *band = (const uint32_t *)(const void *)p->image;
+    const uint32_t *band = (const uint32_t *)(const void *)(lo && p->image_lo ? p->image_lo : p->image);
     size_t plane = p->band_plane;
     uint32_t *dst = dstv;
     for (int q = 0; q < nq; q++, k_pos_next(p, &at)) {
@@ -327,37 +327,36 @@ static void prepare_band(const mx_ctx *c, band_job *j, mx_gemm_problem *p, int o
     p->band_plane = (size_t)j->rows * j->width;
 }
 
-/* The two other parts of a split product on the band p was run on (its hi·hi + bias in C):
- * + lo(w)·hi(x) (A's panels lo_a), then + hi(w)·lo(x) on the band of the inputs' low parts. */
-static int add_lo_parts(const mx_ctx *c, const mx_gemm_kernel *g, band_job *j, const mx_gemm_problem *p,
-                        const float *lo_a, int oy0, int rows, int B) {
-    mx_gemm_problem q = *p;
-    q.bias = mx_w_none();
-    q.accumulate = 1;
-    q.pack_a = mx_gemm_pack_a_conv_lo;
-    q.a_panels = lo_a;
-    if (mx_gemm_run(c, g, &q) != 0) return -1;
-    q.pack_a = p->pack_a;
-    q.a_panels = p->a_panels;
-    if (j->band) {
-        j->lo = 1;
-        prepare_band(c, j, &q, oy0, rows, B);
-        j->lo = 0;
-    } else {
-        q.pack_b = mx_gemm_pack_b_conv_lo; /* the fp32 input is the band: converted per panel */
-    }
-    return mx_gemm_run(c, g, &q) != 0 ? -1 : 0;
+/* A split product (x3) in one pass of the split kernel: both parts of each operand packed into
+ * its panels (the inputs' low parts from problem.image_lo where the input is a band). */
+static void use_split_kernel(mx_gemm_problem *p) {
+    p->split_a[0] = mx_gemm_pack_a_conv, p->split_a[1] = mx_gemm_pack_a_conv_lo;
+    p->split_b[0] = mx_gemm_pack_b_conv, p->split_b[1] = mx_gemm_pack_b_conv_lo;
+    p->pack_a = mx_gemm_pack_a_split;
+    p->pack_b = mx_gemm_pack_b_split;
 }
 
-/* conv2d, as one product, or (x3) as the three of mx_gemm_conv2d_x3. */
+/* The band of the inputs' low parts beside p's (a split kernel's), at lo_band. */
+static void prepare_lo_band(const mx_ctx *c, const band_job *j, uint32_t *lo_band, mx_gemm_problem *p, int oy0,
+                            int rows, int B) {
+    band_job jl = *j;
+    jl.band = lo_band;
+    jl.lo = 1;
+    mx_gemm_problem t = *p;
+    prepare_band(c, &jl, &t, oy0, rows, B);
+    p->image_lo = t.image;
+}
+
+/* conv2d as one product of g; with a split kernel (g->split_of), the split product of
+ * mx_gemm_conv2d_x3. */
 static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H, int W,
-                   mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad, int x3) {
+                   mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
     if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
     int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps, mx_gemm_kc(g));
     int span = group * k_per_word(g) * taps; /* K blocks of whole groups, where a group fits one */
     /* no padding: the input rows are already a band (fp32; on pairs a 1×1 stride-1 conv) */
-    int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1));
+    int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1)), split = g->split_of != NULL;
     /* image: prepare_band points it at each band; set before for the profile's conv parts */
     mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo, .image = x,
                          .c_batch_stride = (size_t)Cout * Ho * Wo, .pack_a = mx_gemm_pack_a_conv,
@@ -366,12 +365,12 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
                          .band_width = width, .band_fp32 = direct && g->to_pairs,
                          .kc_block = span <= mx_gemm_kc(g) ? span : mx_gemm_kc(g)};
-    /* x3: the weights are packed per call, as the fp32 ones were: a cache entry of one part
-     * gives its weight's pages back (wpack.h) while the other part, past the budget, would read
-     * them again on every call */
-    p.a_weight = !x3;
-    mx_gemm_problem lo = p; /* the weights' low parts (x3) */
-    lo.pack_a = mx_gemm_pack_a_conv_lo;
+    if (split) {
+        use_split_kernel(&p);
+        /* the weights are packed per call, as the fp32 ones were: panels of both parts would add
+         * the weight's size again to the cache */
+        p.a_weight = 0;
+    }
     int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
     size_t band_words = direct ? 0 : (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
     size_t nsecs = c && c->prof ? (size_t)nthreads : 0, a_floats = 0;
@@ -379,22 +378,24 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
      * of them, unless the context's cache holds it (else every block repacked it: 64 times
      * for a 512×512 VAE conv) */
     size_t per_a = rows < Ho ? mx_gemm_a_panels_floats(g, &p) : 0;
-    const float *cached_a = per_a ? mx_gemm_cached_a_panels(c, g, &p) : NULL; /* NULL with x3 */
-    a_floats = (cached_a ? 0 : per_a) + (x3 ? per_a : 0);
+    const float *cached_a = per_a ? mx_gemm_cached_a_panels(c, g, &p) : NULL; /* NULL when split */
+    a_floats = cached_a ? 0 : per_a;
     a_floats += a_floats & 1; /* the doubles after them stay 8-byte aligned */
     mx_scratch s;
-    float *mem = mx_scratch_take(c, a_floats * sizeof(float) + nsecs * sizeof(double) + band_words * sizeof(uint32_t) + 1, &s);
+    size_t bands = split ? 2 : 1; /* a split kernel's: the high and the low parts' */
+    float *mem = mx_scratch_take(
+        c, a_floats * sizeof(float) + nsecs * sizeof(double) + bands * band_words * sizeof(uint32_t) + 1, &s);
     int failed = !mem;
     double *secs = mem ? (double *)(void *)(mem + a_floats) : NULL;
     band_job j = {.g = g, .x = x, .B = B, .band = direct || !mem ? NULL : (uint32_t *)(void *)(secs + nsecs), .Cin = Cin,
                   .H = H, .W = W, .pad = pad, .chans = chans, .width = width, .secs = nsecs ? secs : NULL};
     p.a_panels = per_a && !cached_a && mem ? mx_gemm_pack_a_panels(c, g, &p, mem) : cached_a;
-    lo.a_panels = per_a && x3 && mem ? mx_gemm_pack_a_panels(c, g, &lo, mem + per_a) : NULL;
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
         int n = min_int(rows, Ho - oy0);
         prepare_band(c, &j, &p, oy0, n, B);
+        if (split && j.band) prepare_lo_band(c, &j, j.band + band_words, &p, oy0, n, B);
         p.C = y + (size_t)oy0 * Wo;
-        failed = mx_gemm_run(c, g, &p) != 0 || (x3 && add_lo_parts(c, g, &j, &p, lo.a_panels, oy0, n, B) != 0);
+        failed = mx_gemm_run(c, g, &p) != 0;
     }
     if (mem) mx_scratch_release(c, &s);
     if (failed) mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
@@ -402,10 +403,10 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
 
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
-    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad, 0);
+    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }
 
-void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, int B, int Cin, int H,
                        int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
-    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad, 1);
+    conv2d(c, split, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }
