@@ -42,7 +42,8 @@ typedef struct mx_profile {
     double peak_flops, bandwidth;
     double op_flops[MX_OP_COUNT], op_bytes[MX_OP_COUNT], op_floor[MX_OP_COUNT];
     double gemm_secs[MX_GEMM_USERS][MX_GEMM_PARTS]; /* thread seconds, summed over threads */
-    double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls */
+    double gemm_flops[MX_GEMM_USERS];               /* 2·M·N·K·batch of the calls, three times that for
+                                                     * a split product's (the fp32 layers on AMX) */
 } mx_profile;
 
 /* CPU seconds of the process (CLOCK_PROCESS_CPUTIME_ID) or the calling thread (…THREAD…). */

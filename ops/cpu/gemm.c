@@ -534,13 +534,15 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
     j->p = p;
 }
 
-/* Adds the threads' part times and the FLOPs of p to the profile (conv: the problems with an image). */
-static void profile_gemm(mx_profile *prof, const mx_gemm_problem *p, const double *part_secs, int nthreads) {
+/* Adds the threads' part times and the FLOPs of p to the profile (conv: the problems with an image);
+ * a split kernel's (split_of) as the three products it computes. */
+static void profile_gemm(mx_profile *prof, const mx_gemm_kernel *g, const mx_gemm_problem *p, const double *part_secs,
+                         int nthreads) {
     int user = p->image ? MX_GEMM_CONV : MX_GEMM_LINEAR;
     for (int t = 0; t < nthreads; t++)
         for (int part = 0; part < MX_GEMM_PARTS; part++)
             prof->gemm_secs[user][part] += part_secs[(size_t)t * MX_GEMM_PARTS + part];
-    prof->gemm_flops[user] += 2.0 * p->M * p->N * (double)p->K * p->batch;
+    prof->gemm_flops[user] += (g->split_of ? 3 : 1) * 2.0 * p->M * p->N * (double)p->K * p->batch;
 }
 
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p) {
@@ -600,7 +602,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
         j.last_block = kb == nkb - 1;
         run_k_block(c, &j, p, nb_max, nthreads);
     }
-    if (part_secs) profile_gemm(c->prof, p, part_secs, nthreads);
+    if (part_secs) profile_gemm(c->prof, g, p, part_secs, nthreads);
     mx_scratch_release(c, &s);
     return 0;
 }
