@@ -269,6 +269,9 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
                          const float *b, int np0, int np1) {
     int mr = j->g->mr, nr = j->g->nr;
     size_t words = mx_gemm_panel_words(j->g, j->kc);
+    /* the kernel starts the sums at a column bias in the first K block (not a later part of a
+     * product: its C has the bias already) */
+    int folded = j->g->micro_bias && !p->bias_per_row && !p->accumulate;
     if (j->g->begin) j->g->begin();
     for (int np = np0; np < np1; np++, b += words * nr) {
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
@@ -279,15 +282,16 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
             const float *ap = a + (size_t)(mp - mp0) * words * mr;
             float *cp = p->C + (size_t)m0 * p->ldc + n0;
             int accumulate = !j->first_block || p->accumulate;
+            const float *bias = j->bias ? (p->bias_per_row ? j->bias + m0 : j->bias + n0) : NULL;
             if (in_place)
                 j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, accumulate);
+            else if (bias && folded && !accumulate)
+                j->g->micro_bias(j->kc, ap, b, cp, p->ldc, m, n, bias);
             else
                 j->g->micro(j->kc, ap, b, cp, p->ldc, m, n, accumulate);
-            /* the bias while the tile is still in L1 (a pass over C afterwards read it back from
-             * memory: 2-3 % of a VAE decode); the same sums, so the same results */
-            if (j->last_block && j->bias)
-                j->g->add_bias(p->C + (size_t)m0 * p->ldc + n0, p->ldc, m, n, p->bias_per_row ? j->bias + m0 : j->bias + n0,
-                               p->bias_per_row);
+            /* else the bias while the tile is still in L1 (a pass over C afterwards read it back
+             * from memory: 2-3 % of a VAE decode); the same sums, so the same results */
+            if (j->last_block && bias && !folded) j->g->add_bias(cp, p->ldc, m, n, bias, p->bias_per_row);
         }
     }
     if (j->g->end) j->g->end();

@@ -28,6 +28,10 @@ typedef struct mx_gemm_kernel {
      * first m rows and n columns are written (m <= mr, n <= nr). With to_pairs the panels are
      * a[(kc+1)/2][mr] and b[(kc+1)/2][nr] words of bf16 pairs. */
     void (*micro)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, int accumulate);
+    /* NULL, or micro with the sums started at a column bias (bias[j] for column j) instead of 0
+     * (not accumulating); the engine then adds no bias afterwards (a kernel with it has no
+     * micro_rows). */
+    void (*micro_bias)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, const float *bias);
     /* c[i][j] += bias[i] (per_row) or bias[j], for i < m, j < n: the bias on a finished tile
      * (gemm_bias_simd.inc). */
     void (*add_bias)(float *c, size_t ldc, int m, int n, const float *bias, int per_row);
