@@ -192,6 +192,7 @@ typedef struct {
     const float *a_cached, *b_cached;
     int kc_max;
     const float *bias; /* widened, or NULL */
+    const float *bias_rows; /* a row bias for micro_bias (MX_GEMM_BIAS_ROW copies of each), or NULL */
     int n_off, n_end; /* the outer block of columns */
     int k0, kc, first_block, last_block;
     int mpanels, npanels, mc_panels, nc_panels, nmb, nnb;
@@ -269,9 +270,9 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
                          const float *b, int np0, int np1) {
     int mr = j->g->mr, nr = j->g->nr;
     size_t words = mx_gemm_panel_words(j->g, j->kc);
-    /* the kernel starts the sums at a column bias in the first K block (not a later part of a
+    /* the kernel starts the sums at the bias in the first K block (not a later part of a
      * product: its C has the bias already) */
-    int folded = j->g->micro_bias && !p->bias_per_row && !p->accumulate;
+    int folded = j->g->micro_bias && !p->accumulate;
     if (j->g->begin) j->g->begin();
     for (int np = np0; np < np1; np++, b += words * nr) {
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
@@ -286,7 +287,8 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
             if (in_place)
                 j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, accumulate);
             else if (bias && folded && !accumulate)
-                j->g->micro_bias(j->kc, ap, b, cp, p->ldc, m, n, bias);
+                j->g->micro_bias(j->kc, ap, b, cp, p->ldc, m, n,
+                                 p->bias_per_row ? j->bias_rows + (size_t)m0 * MX_GEMM_BIAS_ROW : bias, p->bias_per_row);
             else
                 j->g->micro(j->kc, ap, b, cp, p->ldc, m, n, accumulate);
             /* else the bias while the tile is still in L1 (a pass over C afterwards read it back
@@ -556,6 +558,8 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     int kc_max = k_block_length(g, p), nkb = ceil_div(p->K, kc_max);
     int nthreads = mx_par_threads(c);
     size_t bias_n = p->bias.data ? (size_t)(p->bias_per_row ? p->M : p->N) : 0;
+    /* a row bias as micro_bias reads it: each value MX_GEMM_BIAS_ROW times, after the bias */
+    size_t bias_rows_n = bias_n && p->bias_per_row && g->micro_bias ? bias_n * MX_GEMM_BIAS_ROW : 0;
     size_t words = mx_gemm_panel_words(g, kc_max);
     size_t ablock_n = (size_t)max_int(1, MC_ROWS / g->mr) * g->mr * words;
     /* Fewer row blocks than tasks wanted: each row block is split over column blocks (and batch
@@ -572,7 +576,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
     if (split == GEMM_COLUMNS) bpack_n = (size_t)nthreads * column_panels(g, kc_max) * g->nr * words;
     if (split == GEMM_ROWS) bpack_n = (size_t)p->batch * ceil_div(p->N, g->nr) * g->nr * words;
     size_t ablocks = shared_a ? 1 : (size_t)nthreads;
-    size_t floats = ablocks * ablock_n + bpack_n + bias_n;
+    size_t floats = ablocks * ablock_n + bpack_n + bias_n + bias_rows_n;
     size_t nparts = c && c->prof ? (size_t)nthreads * MX_GEMM_PARTS : 0;
     mx_scratch s;
     /* floats, then the profile's doubles (8-byte aligned: floats is rounded up to even), then ints */
@@ -593,6 +597,11 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
         float *bias = j.bpack + bpack_n;
         for (size_t i = 0; i < bias_n; i++) bias[i] = mx_w_get(p->bias, i);
         j.bias = bias;
+        if (bias_rows_n) {
+            float *rows = bias + bias_n;
+            for (size_t i = 0; i < bias_rows_n; i++) rows[i] = bias[i / MX_GEMM_BIAS_ROW];
+            j.bias_rows = rows;
+        }
     }
     for (int b = 0; b < p->batch && p->K <= 0 && !p->accumulate; b++) { /* empty sum: C = bias or 0 */
         mx_gemm_problem item = batch_item(p, b);

@@ -28,10 +28,12 @@ typedef struct mx_gemm_kernel {
      * first m rows and n columns are written (m <= mr, n <= nr). With to_pairs the panels are
      * a[(kc+1)/2][mr] and b[(kc+1)/2][nr] words of bf16 pairs. */
     void (*micro)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, int accumulate);
-    /* NULL, or micro with the sums started at a column bias (bias[j] for column j) instead of 0
-     * (not accumulating); the engine then adds no bias afterwards (a kernel with it has no
-     * micro_rows). */
-    void (*micro_bias)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, const float *bias);
+    /* NULL, or micro with the sums started at the bias instead of 0 (not accumulating): bias[j]
+     * for column j, or with per_row row i's value at bias[i·MX_GEMM_BIAS_ROW ...] (that many
+     * copies of it, laid out so by the engine); the engine then adds no bias afterwards (a
+     * kernel with it has no micro_rows). */
+    void (*micro_bias)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, const float *bias,
+                       int per_row);
     /* c[i][j] += bias[i] (per_row) or bias[j], for i < m, j < n: the bias on a finished tile
      * (gemm_bias_simd.inc). */
     void (*add_bias)(float *c, size_t ldc, int m, int n, const float *bias, int per_row);
@@ -69,6 +71,9 @@ typedef struct mx_gemm_kernel {
      * micro-kernel adding hi·lo + hi·hi + lo·hi on the tiles before C is stored once */
     const struct mx_gemm_kernel *split_of;
 } mx_gemm_kernel;
+
+/* Copies of each row's value in a row bias for micro_bias: one tile row of fp32 (AMX). */
+#define MX_GEMM_BIAS_ROW 16
 
 /* Steps of B rows fetched ahead by micro_rows (and the entries past a K block's steps in offs). */
 #define MX_GEMM_ROWS_AHEAD 16
