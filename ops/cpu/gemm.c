@@ -284,15 +284,17 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
             float *cp = p->C + (size_t)m0 * p->ldc + n0;
             int accumulate = !j->first_block || p->accumulate;
             const float *bias = j->bias ? (p->bias_per_row ? j->bias + m0 : j->bias + n0) : NULL;
+            const float *start = bias && folded && !accumulate
+                                     ? (p->bias_per_row ? j->bias_rows + (size_t)m0 * MX_GEMM_BIAS_ROW : bias)
+                                     : NULL;
             if (in_place)
-                j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, accumulate);
-            else if (bias && folded && !accumulate)
-                j->g->micro_bias(j->kc, ap, b, cp, p->ldc, m, n,
-                                 p->bias_per_row ? j->bias_rows + (size_t)m0 * MX_GEMM_BIAS_ROW : bias, p->bias_per_row);
+                j->g->micro_rows(j->kc, ap, half, j->offs, cp, p->ldc, m, accumulate, start, p->bias_per_row);
+            else if (start)
+                j->g->micro_bias(j->kc, ap, b, cp, p->ldc, m, n, start, p->bias_per_row);
             else
                 j->g->micro(j->kc, ap, b, cp, p->ldc, m, n, accumulate);
             /* else the bias while the tile is still in L1 (a pass over C afterwards read it back
-             * from memory: 2-3 % of a VAE decode); the same sums, so the same results */
+             * from memory: 2-3 % of a VAE decode) */
             if (j->last_block && bias && !folded) j->g->add_bias(cp, p->ldc, m, n, bias, p->bias_per_row);
         }
     }

@@ -30,8 +30,9 @@ typedef struct mx_gemm_kernel {
     void (*micro)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, int accumulate);
     /* NULL, or micro with the sums started at the bias instead of 0 (not accumulating): bias[j]
      * for column j, or with per_row row i's value at bias[i·MX_GEMM_BIAS_ROW ...] (that many
-     * copies of it, laid out so by the engine); the engine then adds no bias afterwards (a
-     * kernel with it has no micro_rows). */
+     * copies of it, laid out so by the engine), and micro_rows then takes the bias the same way
+     * (NULL: none); the engine then adds no bias afterwards, so the sums' order is one for every
+     * split of the work (results never depend on the batch). */
     void (*micro_bias)(int kc, const void *a, const void *b, float *c, size_t ldc, int m, int n, const float *bias,
                        int per_row);
     /* c[i][j] += bias[i] (per_row) or bias[j], for i < m, j < n: the bias on a finished tile
@@ -58,7 +59,7 @@ typedef struct mx_gemm_kernel {
      * MX_GEMM_ROWS_AHEAD entries past the block's steps, addresses to fetch ahead (gemm_conv.c:
      * halves of a panel that each lie in one output row, read from the band). */
     void (*micro_rows)(int kc, const void *a, const uint32_t *const half[2], const int32_t *offs, float *c,
-                       size_t ldc, int m, int accumulate);
+                       size_t ldc, int m, int accumulate, const float *bias, int per_row);
     /* NULL, or called by a thread before and after a run of micro calls (a tile of C): the AMX
      * level loads its tile configuration once there instead of in every micro call (LDTILECFG and
      * TILERELEASE cost a fifth of a 32×32 call's time) */

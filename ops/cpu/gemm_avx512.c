@@ -34,7 +34,7 @@ void mx_gemm_widen_avx512(float *y, mx_wptr w, size_t off, size_t n) {
 
 static const mx_gemm_kernel kernel_avx512 = {.mr = MR, .nr = NR, .micro = micro_12x32, .add_bias = mx_gemm_add_bias_avx512,
                                             .widen = mx_gemm_widen_avx512, .transpose = mx_gemm_transpose,
-                                            .micro_rows = micro_12x32_rows};
+                                            .micro_rows = micro_12x32_rows, .micro_bias = micro_12x32_bias};
 
 void mx_linear_avx512(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512, y, x, w, bias, M, N, K);

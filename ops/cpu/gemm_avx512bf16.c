@@ -41,7 +41,8 @@ static const mx_gemm_kernel kernel_avx512bf16 = {.mr = MR, .nr = NR, .micro = mi
                                                  .add_bias = mx_gemm_add_bias_avx512, .widen = mx_gemm_widen_avx512,
                                                  .transpose = mx_gemm_transpose, .to_pairs = mx_gemm_to_pairs_avx512bf16,
                                                  .row_pairs = bf16_pairs_row, .pair_align = 1,
-                                                 .micro_rows = micro_12x32_bf16_rows};
+                                                 .micro_rows = micro_12x32_bf16_rows,
+                                                 .micro_bias = micro_12x32_bf16_bias};
 
 void mx_linear_avx512bf16(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K) {
     mx_gemm_linear(c, &kernel_avx512bf16, y, x, w, bias, M, N, K);
