@@ -270,9 +270,8 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
                          const float *b, int np0, int np1) {
     int mr = j->g->mr, nr = j->g->nr;
     size_t words = mx_gemm_panel_words(j->g, j->kc);
-    /* the kernel starts the sums at the bias in the first K block (not a later part of a
-     * product: its C has the bias already) */
-    int folded = j->g->micro_bias && !p->accumulate;
+    /* the kernel starts the sums at the bias in the first K block */
+    int folded = j->g->micro_bias != NULL;
     if (j->g->begin) j->g->begin();
     for (int np = np0; np < np1; np++, b += words * nr) {
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
@@ -282,7 +281,7 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
             const float *ap = a + (size_t)(mp - mp0) * words * mr;
             float *cp = p->C + (size_t)m0 * p->ldc + n0;
-            int accumulate = !j->first_block || p->accumulate;
+            int accumulate = !j->first_block;
             const float *bias = j->bias ? (p->bias_per_row ? j->bias + m0 : j->bias + n0) : NULL;
             const float *start = bias && folded && !accumulate
                                      ? (p->bias_per_row ? j->bias_rows + (size_t)m0 * MX_GEMM_BIAS_ROW : bias)
@@ -605,7 +604,7 @@ int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem 
             j.bias_rows = rows;
         }
     }
-    for (int b = 0; b < p->batch && p->K <= 0 && !p->accumulate; b++) { /* empty sum: C = bias or 0 */
+    for (int b = 0; b < p->batch && p->K <= 0; b++) { /* empty sum: C = bias or 0 */
         mx_gemm_problem item = batch_item(p, b);
         for (int m = 0; m < p->M; m++) memset(item.C + (size_t)m * p->ldc, 0, (size_t)p->N * sizeof(float));
         if (j.bias) j.g->add_bias(item.C, p->ldc, p->M, p->N, j.bias, p->bias_per_row);

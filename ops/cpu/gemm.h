@@ -132,8 +132,6 @@ struct mx_gemm_problem {
     int a_weight, b_weight;
     /* A's panels of every K block (mx_gemm_a_panels), or NULL: the engine packs or finds them */
     const float *a_panels;
-    /* 1: C += the product (a later part of a split product, mx_gemm_*_x3) */
-    int accumulate;
     /* a split kernel's packers (pack_a = mx_gemm_pack_a_split, pack_b likewise): the high and
      * the low part's, in split_of's format */
     mx_gemm_pack_fn split_a[2], split_b[2];
