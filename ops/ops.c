@@ -127,9 +127,9 @@ int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim) {
 
 /* Every wrapper has the same shape (op_list.h): no work unless the guard holds, else the table
  * entry. None needs more checking: the kernels take any sizes the guards let through. */
-#define MX_WRAPPER_DEF_(name, guard, params, args, cost)                                                          \
+#define MX_WRAPPER_DEF_(name, guard, params, args, cost)                                                     \
     void mx_##name(const mx_ctx *c, MX_SPLICE params) {                                                      \
-        if (guard) RUN_OP(c, MX_OP_ID_##name, name(c, MX_SPLICE args), cost);                                 \
+        if (guard) RUN_OP(c, MX_OP_ID_##name, name(c, MX_SPLICE args), cost);                                \
     }
 MX_OPS(MX_WRAPPER_DEF_)
 
@@ -139,7 +139,7 @@ void mx_add(const mx_ctx *c, float *y, const float *a, const float *b, size_t n)
 }
 
 const char *mx_kernels_missing(const mx_kernels *k) {
-#define MX_MISSING_(name, guard, params, args, cost)                                                               \
+#define MX_MISSING_(name, guard, params, args, cost)                                                         \
     if (!k->name) return #name;
     MX_OPS(MX_MISSING_)
 #undef MX_MISSING_

@@ -79,7 +79,7 @@ const mx_kernels *mx_kernels_for(mx_isa isa);
 mx_ctx mx_ctx_fp32(const mx_ctx *c);
 /* The table of the layers a bf16 level keeps in fp32: its fp32 level's (avx512bf16 -> avx512),
  * but for amx the avx512 table with linear and conv2d as three bf16 products on the tiles
- * (ops/cpu/gemm.h: mx_gemm_linear_x3), near fp32 accuracy at the tiles' speed. */
+ * (ops/cpu/gemm.h: split kernels), near fp32 accuracy at the tiles' speed. */
 const mx_kernels *mx_kernels_fp32_of(const mx_kernels *k);
 /* The scalar reference table (the test oracle). */
 const mx_kernels *mx_kernels_scalar(void);

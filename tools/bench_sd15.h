@@ -175,8 +175,9 @@ static inline double bench_peak_gflops(const mx_ctx *c, int bf16) {
 
 /* ---- memory bandwidth: y = x + 1 over two buffers of the size of the networks' activations ----
  * (an SD1.5 UNet's at 64×64 are 10-84 MB). Where the last-level cache holds them (a 480 MiB L3 on
- * the Xeons here: 58-64 GB/s on 2 threads at 4-64 MiB, against 20-29 GB/s at 256 MiB), so do the
- * ops' own, and a floor must not assume less. */
+ * the Xeons here: 42-64 GB/s on 2 threads at 4-64 MiB, against 20-29 GB/s at 256 MiB), so do the
+ * ops' own, and a floor must not assume less. Measured before the peak loops: after them the
+ * same loop ran at 34 instead of 45 GB/s. */
 
 #define BW_FLOATS ((size_t)8 << 20) /* 32 MiB per buffer */
 #define BW_RUNS 7

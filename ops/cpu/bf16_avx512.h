@@ -19,7 +19,7 @@ static inline __m512i bf16_pairs16(const float *src, int n) {
 }
 
 /* x - bf16(x) for 16 lanes, bf16 by vcvtneps2bf16 (nearest even, denormals as zero): the part a
- * bf16 rounding drops, the low operand of a split product (gemm.h: mx_gemm_linear_x3); 0 where
+ * bf16 rounding drops, the low operand of a split product (gemm.h: split kernels); 0 where
  * bf16(x) is not finite. */
 static inline __m512 bf16_lo_part(__m512 x) {
     __m512i h = _mm512_cvtepu16_epi32((__m256i)_mm512_cvtneps_pbh(x));

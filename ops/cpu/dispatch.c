@@ -71,7 +71,7 @@ static const mx_kernels avx512_table = {.isa = MX_ISA_AVX512, MX_AVX512_KERNELS}
 static const mx_kernels avx512bf16_table = {.isa = MX_ISA_AVX512_BF16, MX_AVX512BF16_KERNELS};
 static const mx_kernels amx_table = {.isa = MX_ISA_AMX, MX_AMX_KERNELS};
 /* The amx level's fp32 layers (mx_kernels_fp32_of): avx512, but linear and conv2d as three bf16
- * products on the tiles (gemm.h: mx_gemm_*_x3), ~5e-6 relative instead of fp32's ~5e-7. */
+ * products on the tiles (gemm.h: split kernels), ~5e-6 relative instead of fp32's ~5e-7. */
 static const mx_kernels amx_fp32_table = {.isa = MX_ISA_AVX512, MX_AVX512_KERNELS .linear = mx_linear_x3_amx,
                                           .conv2d = mx_conv2d_x3_amx};
 #endif

@@ -637,16 +637,12 @@ static mx_gemm_problem linear_problem(float *y, const float *x, mx_wptr w, mx_wp
 void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
                     int M, int N, int K) {
     mx_gemm_problem p = linear_problem(y, x, w, bias, M, N, K);
+    if (g->split_of) { /* the split product: both parts of each operand in its panels */
+        p.b_weight = 0; /* packed per call, as for conv2d (gemm_conv.c) */
+        p.pack_a = mx_gemm_pack_a_split;
+        p.pack_b = mx_gemm_pack_b_split;
+        p.split_a[0] = mx_gemm_pack_a_rows, p.split_a[1] = mx_gemm_pack_a_rows_lo;
+        p.split_b[0] = mx_gemm_pack_b_rows, p.split_b[1] = mx_gemm_pack_b_rows_lo;
+    }
     if (mx_gemm_run(c, g, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
-}
-
-void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, mx_wptr w, mx_wptr bias,
-                       int M, int N, int K) {
-    mx_gemm_problem p = linear_problem(y, x, w, bias, M, N, K);
-    p.b_weight = 0; /* packed per call, as for conv2d (gemm_conv.c) */
-    p.pack_a = mx_gemm_pack_a_split;
-    p.pack_b = mx_gemm_pack_b_split;
-    p.split_a[0] = mx_gemm_pack_a_rows, p.split_a[1] = mx_gemm_pack_a_rows_lo;
-    p.split_b[0] = mx_gemm_pack_b_rows, p.split_b[1] = mx_gemm_pack_b_rows_lo;
-    if (mx_gemm_run(c, split, &p) != 0) mx_linear_ref(c, y, x, w, bias, M, N, K);
 }

@@ -48,7 +48,7 @@ typedef struct mx_gemm_kernel {
     /* With to_pairs: dst[0 .. (n+1)/2) = pairs of the row src[0 .. n). */
     void (*row_pairs)(uint32_t *dst, const float *src, int n);
     /* NULL, or to_pairs and row_pairs of the values' low parts, bf16(x - bf16(x)): the second
-     * operands of the split products of mx_gemm_*_x3 */
+     * operands of a split kernel's products (split_of) */
     void (*to_pairs_lo)(uint32_t *dst, const float *even, const float *odd, int n);
     void (*row_pairs_lo)(uint32_t *dst, const float *src, int n);
     /* With to_pairs: pair rows of a panel padded with zeros to a multiple of this (0 or 1: none);
@@ -68,7 +68,7 @@ typedef struct mx_gemm_kernel {
     /* K blocks of at most this many k (≤ MX_GEMM_KC_MAX); 0: MX_GEMM_KC_SIMD (mx_gemm_kc) */
     int kc_max;
     /* NULL, or the kernel whose panels this one's hold twice, the operand's high parts then its
-     * low parts (each in split_of's format): the split product of mx_gemm_*_x3 in one pass, its
+     * low parts (each in split_of's format): the split product of mx_gemm_linear/conv2d in one pass, its
      * micro-kernel adding hi·lo + hi·hi + lo·hi on the tiles before C is stored once */
     const struct mx_gemm_kernel *split_of;
 } mx_gemm_kernel;
@@ -145,7 +145,7 @@ void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
 void mx_gemm_pack_b_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                          int k0, int kc);
 /* The same packers for the low part of the operand (kernels with to_pairs_lo): pairs of
- * bf16(x - bf16(x)), the second operand of a split product (mx_gemm_*_x3, which never keeps a
+ * bf16(x - bf16(x)), the second operand of a split product (a split kernel's, which never keeps a
  * weight packed once: a_weight and b_weight are 0 there). */
 void mx_gemm_pack_a_rows_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,
                             int k0, int kc);
@@ -216,22 +216,18 @@ const float *mx_gemm_pack_a_panels(const mx_ctx *c, const mx_gemm_kernel *g, con
 int mx_gemm_run(const mx_ctx *c, const mx_gemm_kernel *g, const mx_gemm_problem *p);
 
 /* linear and conv2d on top of mx_gemm_run, for a given micro-kernel; they fall back to the
- * scalar reference when mx_gemm_run has no memory. */
+ * scalar reference when mx_gemm_run has no memory. With a split kernel (split_of) they compute
+ * the split product: each operand split as hi = bf16(x) and lo = bf16(x - hi), x·w ≈ hi·hi +
+ * lo·hi + hi·lo (lo·lo, ~2^-16 of it, dropped), summed in fp32: near fp32 accuracy (~5e-6
+ * relative L2 per product, fp32 ~5e-7, bf16 ~2.4e-3) at three times the bf16 work. The AMX
+ * level's fp32 layers (dispatch.c), where the tiles outrun fp32 FMAs 15 to 1: one pass, both
+ * parts packed once, the three products added on the tiles, C written once (three passes of the
+ * plain kernel wrote C three times and read it back twice: 1×1 convs of 320-1280 channels and
+ * linear layers of K 512 ~25-35 % slower, 2 Xeon cores). */
 void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, mx_wptr w, mx_wptr bias,
                     int M, int N, int K);
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
-/* The same as three products on a bf16 kernel: each operand split as hi = bf16(x) and lo =
- * bf16(x - hi), x·w ≈ hi·hi + lo·hi + hi·lo (lo·lo, ~2^-16 of it, dropped), summed in fp32: near
- * fp32 accuracy (~5e-6 relative L2 per product, fp32 ~5e-7, bf16 ~2.4e-3) at three times the bf16
- * work. The AMX level's fp32 layers (dispatch.c), where the tiles outrun fp32 FMAs 15 to 1. One
- * pass of a split kernel (split_of): both parts packed once, the three products added on the
- * tiles, C written once (three passes of the plain kernel wrote C three times and read it back
- * twice: 1×1 convs of 320-1280 channels and linear layers of K 512 ~25-35 % slower, 2 Xeon cores). */
-void mx_gemm_linear_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, mx_wptr w, mx_wptr bias,
-                       int M, int N, int K);
-void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, int B, int Cin, int H,
-                       int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
 
 #ifdef __AVX__
 #include <immintrin.h>

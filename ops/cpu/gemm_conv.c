@@ -248,7 +248,7 @@ typedef struct {
     uint32_t *band; /* [B][chans][rows][width]; NULL: the input is the band (problem.band_fp32 on pairs) */
     int B, Cin, H, W, pad, chans, rows, width;
     int iy0;      /* input row of band row 0 (negative in the top padding) */
-    int lo;       /* bf16 levels: the band of the inputs' low parts (mx_gemm_conv2d_x3) */
+    int lo;       /* bf16 levels: the band of the inputs' low parts (a split kernel's) */
     double *secs; /* with a profile: each thread's CPU seconds */
 } band_job;
 
@@ -347,8 +347,7 @@ static void prepare_lo_band(const mx_ctx *c, const band_job *j, uint32_t *lo_ban
     p->image_lo = t.image;
 }
 
-/* conv2d as one product of g; with a split kernel (g->split_of), the split product of
- * mx_gemm_conv2d_x3. */
+/* conv2d as one product of g; with a split kernel (g->split_of), the split product (gemm.h). */
 static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H, int W,
                    mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
@@ -404,9 +403,4 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
-}
-
-void mx_gemm_conv2d_x3(const mx_ctx *c, const mx_gemm_kernel *split, float *y, const float *x, int B, int Cin, int H,
-                       int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
-    conv2d(c, split, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }

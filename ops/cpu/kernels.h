@@ -38,7 +38,7 @@ void mx_scratch_release(const mx_ctx *c, mx_scratch *s);
 /* The kernels of every op at every CPU level, declared from op_list.h: mx_<op>_<level>(const
  * mx_ctx *c, <the op's params>). Every op has its reference (_ref); a faster level defines only the
  * kernels it lists in dispatch.c, so most of these other names are never defined (nor used). */
-#define MX_KERNEL_DECL_(name, guard, params, args, cost)                                                           \
+#define MX_KERNEL_DECL_(name, guard, params, args, cost)                                                     \
     void mx_##name##_ref(const mx_ctx *c, MX_SPLICE params);                                                 \
     void mx_##name##_avx2(const mx_ctx *c, MX_SPLICE params);                                                \
     void mx_##name##_avx512(const mx_ctx *c, MX_SPLICE params);                                              \

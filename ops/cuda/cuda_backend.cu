@@ -37,7 +37,7 @@ static void run_op(cuda_backend *b, const char *op, int rc) {
 
 /* The table entry of each op of ops/op_list.h: its mx_cuda_<op> on the backend's context (be_: the
  * ops' parameters use the short names). */
-#define CUDA_ENTRY_(name, guard, params, args, cost)                                                             \
+#define CUDA_ENTRY_(name, guard, params, args, cost)                                                         \
     static void k_##name(const mx_ctx *c, MX_SPLICE params) {                                              \
         cuda_backend *be_ = of(c);                                                                         \
         if (!be_->failed) run_op(be_, #name, mx_cuda_##name(be_->cc, MX_SPLICE args, &be_->err));          \
