@@ -70,7 +70,7 @@ TEX_SRC     = $(wildcard pipeline/texture/*.c)
 IO_SRC      = $(wildcard pipeline/io/*.cpp) pipeline/io/io_write.c pipeline/io/png_zlib.c
 LITE_IO_SRC = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/io_write.c pipeline/io/png_zlib.c \
               pipeline/io/io_lite.c
-TOOL_SRC    = $(wildcard tools/cmd_*.c tools/cli_*.c)
+TOOL_SRC    = $(wildcard tools/matex/cmd_*.c tools/matex/cli_*.c)
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(patsubst %.cpp,$(BUILD)/%.o,$(1)))
 
@@ -93,7 +93,7 @@ all: $(LIBMATEX) $(LIB_IO) matex
 matex: $(BUILD)/matex
 	cp $< $@
 
-$(BUILD)/matex: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 
 $(LIB_CORE):    $(call obj,$(CORE_SRC))
@@ -175,17 +175,17 @@ $(BUILD)/tests/test_tools_%: $(BUILD)/tests/test_tools_%.o $(TEST_UTIL) $(TEST_A
 
 # Tiny random networks of the SD1.5 family for the pipeline tests and `make demo`.
 DEMO_WEIGHTS = $(BUILD)/demo/demo.mxw
-$(DEMO_WEIGHTS): $(BUILD)/matex tools/make_demo_weights.sh $(wildcard tests/data/demo/*) \
+$(DEMO_WEIGHTS): $(BUILD)/matex tools/scripts/make_demo_weights.sh $(wildcard tests/data/demo/*) \
                  tests/data/golden/tokenizer/vocab.json tests/data/golden/tokenizer/merges.txt
 	@mkdir -p $(dir $@)
-	sh tools/make_demo_weights.sh $(BUILD)/matex $@
+	sh tools/scripts/make_demo_weights.sh $(BUILD)/matex $@
 
 # ---- fuzzing: one harness per input surface, tests/fuzz/fuzz_<H>.c. `make test` replays its seeds and
 # every crash ever found (tests/fuzz/regress/<H>) through replay_<H>; `make fuzz FUZZ_SECONDS=N` runs
 # each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz, FUZZ_JOBS (2) at a time ----
 FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
 FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
-FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/cli_texture_opts.c tools/cli_args.c tools/cli_progress.c tools/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/matex/cli_texture_opts.c tools/matex/cli_args.c tools/matex/cli_progress.c tools/matex/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
@@ -207,7 +207,7 @@ fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
 # allocation of each allocation site under ASan (FAULTS_SWEEP=sites) ----
 MATEX_FAULTS = $(BUILD)/tests/faults/matex_faults
 FAULT_WRAP   = $(foreach f,malloc calloc realloc aligned_alloc posix_memalign strdup strndup free _Znwm _Znam,-Wl,--wrap=$(f))
-$(MATEX_FAULTS): $(call obj,tools/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
+$(MATEX_FAULTS): $(call obj,tools/matex/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
                  $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS) -ldl
 .PHONY: faults faults-run
@@ -235,11 +235,11 @@ test-deps: $(TEST_DEPS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
-# Every repository path named in the docs and the code exists (tools/check_paths.sh; under a
+# Every repository path named in the docs and the code exists (tools/scripts/check_paths.sh; under a
 # second; `make test` runs it as tests/cli_check_paths.sh).
 .PHONY: check
 check:
-	sh tools/check_paths.sh .
+	sh tools/scripts/check_paths.sh .
 
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: $(TEST_DEPS)
@@ -293,12 +293,12 @@ test-arm64: $(DEMO_WEIGHTS)
 arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
 # matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
 # memory and weight files, for a cross-built core.
-$(BUILD)/matex-core: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 # matex with the file adapter but without OpenImageIO (PNG only, through zlib): what `make
 # gpu-check-pack` carries to a GPU machine, which has none of OpenImageIO's ~250 libraries.
-$(BUILD)/matex-lite: $(call obj,tools/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/matex-lite: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(call obj,$(LITE_IO_SRC)) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(LITE_IOLIBS) $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
@@ -307,21 +307,21 @@ $(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
 
 # The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
 deps:
-	sh tools/deps.sh
+	sh tools/scripts/deps.sh
 
 # ---- benchmarks: OpenBLAS is linked into the benchmark only ----
-BENCH_SRC  = $(wildcard tools/bench_*.c)
-BENCH_BINS = $(patsubst tools/%.c,$(BUILD)/tools/%,$(BENCH_SRC))
-$(BUILD)/tools/bench_%: $(BUILD)/tools/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+BENCH_SRC  = $(wildcard tools/bench/bench_*.c)
+BENCH_BINS = $(patsubst tools/bench/%.c,$(BUILD)/tools/bench/%,$(BENCH_SRC))
+$(BUILD)/tools/bench/bench_%: $(BUILD)/tools/bench/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ -lopenblas $(IOLIBS) $(LDLIBS)
 
 # The CUDA benchmark needs no file I/O adapter: it links io_none.o and runs where OpenImageIO is not.
-$(BUILD)/tools/bench_cuda: $(BUILD)/tools/bench_cuda.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/tools/bench/bench_cuda: $(BUILD)/tools/bench/bench_cuda.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                            $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 bench: all $(BENCH_BINS)
-	sh tools/bench.sh $(BUILD)
+	sh tools/bench/bench.sh $(BUILD)
 
 PREFIX ?= /usr/local
 # matex.pc: the static libraries and what they need (the I/O adapter and libmatex refer to
@@ -372,21 +372,21 @@ $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB
 	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
 ifeq ($(CUDA),1)
-$(BUILD)/matex $(BUILD)/matex-lite $(BUILD)/tools/bench_cuda $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): \
+$(BUILD)/matex $(BUILD)/matex-lite $(BUILD)/tools/bench/bench_cuda $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): \
     $(LIB_CUDA) # relinked when the kernels change
 endif
 
 .PHONY: test-cuda cuda-all cuda-run-tests gpu-check gpu-check-pack gpu-golden-pack
 cuda:
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-all
-cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)) $(BUILD)/tools/bench_cuda
+cuda-all: $(LIB_CUDA) $(CUDA_TEST) $(BUILD)/matex $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)) $(BUILD)/tools/bench/bench_cuda
 test-cuda: cuda
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 cuda-run-tests
 cuda-run-tests:
 	$(TEST_ENV) MX_TEST_DEVICE=cuda MATEX_FULL=1 sh tests/cuda/run.sh $(CUDA_TEST) \
 	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 
-# `make gpu-check` on a machine with a GPU: the evidence of tools/gpu_check.sh (docs/cuda-notes.md).
+# `make gpu-check` on a machine with a GPU: the evidence of tools/scripts/gpu_check.sh (docs/cuda-notes.md).
 # `make gpu-check-pack` here first: stripped binaries (matex-lite as matex, with the few libraries
 # it needs that a GPU machine lacks, in lib/) and the small SD1.5 goldens into $(CUDA_BUILD)/gpu
 # (~40 MB) and its archive gpu.tar.gz (~20 MB): the one file a device run carries (a run carries at
@@ -395,12 +395,12 @@ GPU_PACK = $(CUDA_BUILD)/gpu
 MATEX_TESTDATA ?= ../shared
 GPU_PACK_DATA = golden/sd15_controlnet/inputs.safetensors golden/sd15_controlnet/config.json golden/sd15_vae golden/sd15_clip
 gpu-check:
-	sh tools/gpu_check.sh
+	sh tools/scripts/gpu_check.sh
 # The goldens too large to travel with the pack (a device call carries at most 64 MiB with the
 # repository): one network test and the one golden folder it reads, per call. E.g.
 #   make gpu-golden-pack GOLDEN=unet_mini TEST=test_nn_unet      (sd15_unet, sd15_controlnet: test_nn_sd15;
 #   controlnet_mini: test_nn_controlnet; vae_mini: test_nn_vae; taesd: test_nn_taesd)
-# then run(command="sh tools/gpu_golden.sh", carry=["build-cuda/gpu-golden.tar.gz"]).
+# then run(command="sh tools/scripts/gpu_golden.sh", carry=["build-cuda/gpu-golden.tar.gz"]).
 GOLDEN ?= unet_mini
 TEST ?= test_nn_unet
 gpu-golden-pack: cuda
@@ -413,7 +413,7 @@ gpu-check-pack: cuda
 	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 $(CUDA_BUILD)/matex-lite
 	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/lib $(GPU_PACK)/data/golden/sd15_controlnet
 	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex-lite
-	strip -o $(GPU_PACK)/bench_cuda $(CUDA_BUILD)/tools/bench_cuda
+	strip -o $(GPU_PACK)/bench_cuda $(CUDA_BUILD)/tools/bench/bench_cuda
 	strip -o $(GPU_PACK)/tests/cuda/test_cuda_ops $(CUDA_BUILD)/tests/cuda/test_cuda_ops
 	for t in $(CUDA_NN_TESTS); do strip -o $(GPU_PACK)/tests/$$t $(CUDA_BUILD)/tests/$$t || exit 1; done
 	ldd $(CUDA_BUILD)/matex-lite | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \

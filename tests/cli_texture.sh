@@ -93,7 +93,7 @@ check "texture --fast runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "
 check "--fast report: 4 steps, guidance 1" grep -q '"steps":4,"fast":true,"guidance":1,' "$T/fast/report.json"
 check "--fast ran the LCM timesteps" grep -q "step 4/4 (t=259)" "$T/err"
 # the fast demo weights paint colour noise around mid grey, as the default ones (they painted
-# near black: mean 0.23 on this mesh before tools/make_demo_weights.sh set TAESD's last conv)
+# near black: mean 0.23 on this mesh before tools/scripts/make_demo_weights.sh set TAESD's last conv)
 fast_mean=$(image_mean "$T/fast/texture.png")
 echo "fast demo texture mean: $fast_mean"
 check "--fast texture has content" image_ok "$T/fast/texture.png" 256 256

@@ -1,5 +1,5 @@
 /* The whole method with tiny random weights (MATEX_DEMO_WEIGHTS, made by
- * tools/make_demo_weights.sh) on every test mesh (tests/data/assets; the others in
+ * tools/scripts/make_demo_weights.sh) on every test mesh (tests/data/assets; the others in
  * MATEX_TESTDATA): outputs exist and are valid, coverage, the views chosen (pinned for spot),
  * determinism across thread counts, and bad input. Small sizes keep it fast; render and model
  * image keep the default 2:1 ratio, so the edge erosion (views.h) is the default 1.5 model

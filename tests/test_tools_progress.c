@@ -1,4 +1,4 @@
-/* `--progress json` (tools/cli_progress.c, README "Progress stream"), read as an integration
+/* `--progress json` (tools/matex/cli_progress.c, README "Progress stream"), read as an integration
  * reads it: the matex binary ($MATEX, default build/matex) runs texture, enhance and transfer
  * with the demo weights; every stdout line must parse as one JSON object (runtime/json.h) with
  * every documented key of its kind; steps count 1..steps within a stage, seconds never go back,

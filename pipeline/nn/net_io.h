@@ -1,7 +1,7 @@
 /* The named tensors of one network call as `matex run-net` sees them (a safetensors file in,
  * one out): a network's run-net adapter (mx_net_run_fn, registry.h) asks for its inputs by name
  * with the shape it accepts, declares its outputs, and takes an arena of the size its dry run
- * gave. tools/cmd_run_net.c implements it; every tensor it hands out stays its own (freed after
+ * gave. tools/matex/cmd_run_net.c implements it; every tensor it hands out stays its own (freed after
  * the call). */
 #ifndef MX_NN_NET_IO_H
 #define MX_NN_NET_IO_H

@@ -2,8 +2,8 @@
  * name, value type, valid range, default, help text, the verbs that take it and whether a batch
  * manifest line may set it. Everything else is derived from it: matex_options_default, the range
  * check of the library (mx_options_check), the command-line parser and --help of texture,
- * enhance, transfer and batch (tools/cli_texture_opts.c), and the keys of a batch manifest
- * (tools/cli_batch_manifest.c). */
+ * enhance, transfer and batch (tools/matex/cli_texture_opts.c), and the keys of a batch manifest
+ * (tools/matex/cli_batch_manifest.c). */
 #ifndef MX_OPTIONS_H
 #define MX_OPTIONS_H
 

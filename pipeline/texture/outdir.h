@@ -44,7 +44,7 @@ typedef struct mx_outdir {
  * a folder holding one of them is never an output folder. */
 int mx_outdir_open(mx_outdir *od, const char *dir, int force, const char *const *inputs, int ninputs, mx_status *st);
 /* The staging folder and the lock file mx_outdir_open would use for `dir` in this process (for a
- * signal handler that must remove them: tools/cli_signals.c). */
+ * signal handler that must remove them: tools/matex/cli_signals.c). */
 int mx_outdir_names(const char *dir, char stage[4200], char lock[4200]);
 /* cancel (may be NULL) is checked once more after the files are written, before the move. */
 int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,

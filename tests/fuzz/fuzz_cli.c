@@ -1,11 +1,11 @@
-/* The command-line parser of `matex texture` / `enhance` / `transfer` (tools/cli_texture_opts.c,
+/* The command-line parser of `matex texture` / `enhance` / `transfer` (tools/matex/cli_texture_opts.c,
  * driven by the option table) and the option check that follows it (mx_options_check): the input
  * is argv, NUL-separated, after the verb; the first byte picks the verb (mod 3). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../tools/cli_texture_opts.h"
+#include "../../tools/matex/cli_texture_opts.h"
 #include "fuzz.h"
 
 #define FUZZ_MAX_ARGS 64

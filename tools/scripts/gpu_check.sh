@@ -1,0 +1,125 @@
+#!/bin/sh
+# make gpu-check: one run on a machine with an NVIDIA GPU whose output is the evidence for the CUDA
+# backend (issue 21), in this order, each step under its own time limit: the GPU and its
+# driver/runtime, make test-cuda (op tests at their own bounds, the network goldens found in
+# tests/data and $MATEX_TESTDATA), compute-sanitizer memcheck on the tiny pipeline, SD1.5-size
+# random weights, a default and a --fast `matex texture --device cuda` with their per-stage times
+# (report.json stages_s / work_s), the same seed's texture on the CPU against the GPU (PSNR), the
+# card's matrix peak and bench_cuda, then memcheck on the SD1.5-size networks and two guided steps.
+# Uses the binaries of $GPU_CHECK_BIN (default build-cuda/gpu, or its archive build-cuda/gpu.tar.gz:
+# `make gpu-check-pack` here), else builds `make cuda` (minutes). Writes its log to $GPU_CHECK_LOG
+# (default $GPU_CHECK_OUT/log.txt) and the outputs under $GPU_CHECK_OUT (default gpu-check-out).
+# Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s).
+set -u
+B=${GPU_CHECK_BIN:-build-cuda/gpu}
+O=${GPU_CHECK_OUT:-gpu-check-out}
+mkdir -p "$O"
+LOG=${GPU_CHECK_LOG:-$O/log.txt} # a device run points it into the folder that comes back
+W="$O/sd15_fast.mxw"
+MESH=tests/data/assets/spot/spot_triangulated.obj
+PROMPT="a cow with brown and white patches"
+SAN=${COMPUTE_SANITIZER:-/usr/local/cuda/bin/compute-sanitizer}
+failed=0
+say() { printf '\n==== %s (%s)\n' "$*" "$(date -u +%H:%M:%S)" | tee -a "$LOG"; }
+# run NAME SECONDS CMD...: runs CMD (killed after SECONDS: one hung step must not take the whole
+# device call) with its output in the log; counts a failure; prints its wall time.
+run() {
+    name=$1
+    limit=$2
+    shift 2
+    t0=$(date +%s.%N)
+    timeout "$limit" "$@" >>"$LOG" 2>&1
+    rc=$?
+    t1=$(date +%s.%N)
+    printf '%-58s rc=%d  %s s\n' "$name" "$rc" "$(awk "BEGIN { printf \"%.1f\", $t1 - $t0 }")" | tee -a "$LOG"
+    [ $rc -eq 0 ] || failed=$((failed + 1))
+    return $rc
+}
+stages() { # report.json -> its stage and work times, one line each
+    tr -d '\n ' <"$1" | grep -o '"\(stages_s\|work_s\)":{[^}]*}' | tee -a "$LOG"
+}
+
+: >"$LOG"
+if [ -f "$B.tar.gz" ]; then # the archive of make gpu-check-pack, what a device run carries
+    rm -rf "$B" && tar -C "$(dirname "$B")" -xzf "$B.tar.gz" || exit 1
+fi
+if [ ! -x "$B/matex" ]; then
+    say "no prebuilt binaries in $B: make cuda"
+    run "make cuda" 600 make -j"$(nproc)" cuda || exit 1
+    B=build-cuda
+fi
+M="$B/matex"
+[ -d "$B/lib" ] && export LD_LIBRARY_PATH="$B/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" # matex-lite's libraries
+[ -d "$B/data" ] && export MATEX_TESTDATA="$B/data" # the goldens packed beside the binaries
+
+say "GPU"
+run "nvidia-smi" 30 nvidia-smi
+nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv | tee -a "$LOG"
+"$M" --version | tee -a "$LOG"
+
+say "make test-cuda (op tests, network goldens, tiny pipelines; MATEX_CUDA_SYNC=1 names a faulting op)"
+run "test-cuda" 180 env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh \
+    "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
+grep -E "FAIL|SKIP|rel_l2=.*FAIL|device|not TESTED|all checks" "$LOG" | sort | uniq -c | sort -rn | head -40
+
+say "compute-sanitizer memcheck: tiny pipeline"
+run "memcheck tiny pipeline" 120 env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck --error-exitcode 99 \
+    "$B/tests/test_nn_pipeline"
+
+say "SD1.5-size random weights (fp16, with LCM-LoRA and TAESD)"
+run "make_sd15_weights --fast" 180 sh tools/scripts/make_sd15_weights.sh "$M" "$W" --fast || exit 1
+
+# The timed runs and the parity first, the slow SD1.5-size memchecks last: a device call that runs
+# out of time still brings back the speed and the PSNR.
+say "timed: default texture on the GPU (6 views, 10 steps, 1024^2)"
+run "texture --device cuda" 120 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --seed 1 \
+    -o "$O/gpu_default" --force && stages "$O/gpu_default/report.json"
+say "timed: texture --fast on the GPU"
+run "texture --fast --device cuda" 60 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --fast --seed 1 \
+    -o "$O/gpu_fast" --force && stages "$O/gpu_fast/report.json"
+
+say "same seed, CPU (fp32) vs GPU: PSNR of the textures (2 views, 4 steps, 512^2 texture)"
+small="--seed 7 --views 2 --steps 4 --texture-size 512 --render-size 512"
+# shellcheck disable=SC2086
+run "texture small, cuda" 60 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda $small -o "$O/par_gpu" --force
+# shellcheck disable=SC2086
+run "texture small, cpu fp32" 240 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cpu --precision fp32 \
+    $small -o "$O/par_cpu" --force
+[ -f "$O/par_gpu/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
+    run "psnr cpu vs gpu (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" --compare "$O/par_gpu/texture.png" &&
+    tail -1 "$LOG"
+
+say "the networks at one view step's shapes (tools/bench/bench_cuda.c), and the card's matrix peak as the anchor"
+run "anchor: 8192^3 bf16 matrix product through PyTorch" 60 python3 -c '
+import torch
+a, b = (torch.randn(8192, 8192, device="cuda", dtype=torch.bfloat16) for _ in range(2))
+for _ in range(3): a @ b
+ts = []
+for _ in range(10):
+    s, e = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+    s.record(); a @ b; e.record(); torch.cuda.synchronize(); ts.append(s.elapsed_time(e) / 1e3)
+ts.sort()
+print("anchor: bf16 8192^3 matrix product %.0f TFLOP/s (median of 10)" % (2 * 8192**3 / ts[5] / 1e12))'
+grep "^anchor:" "$LOG"
+run "bench_cuda (11 calls per network)" 120 "$B/bench_cuda" "$W" --calls 11 && grep -E "median|load" "$LOG" | tail -4
+run "bench_cuda --profile, MATEX_CUDA_SYNC=1 (per-op GPU time)" 120 env MATEX_CUDA_SYNC=1 "$B/bench_cuda" "$W" \
+    --calls 3 --profile
+
+say "compute-sanitizer memcheck: SD1.5-size networks"
+run "memcheck ControlNet, UNet, VAE decode (bench_cuda, 1 call each after 2)" 180 "$SAN" --tool memcheck \
+    --error-exitcode 99 "$B/bench_cuda" "$W" --calls 1
+CN_IN="${MATEX_TESTDATA:-../shared}/golden/sd15_controlnet/inputs.safetensors" # 2 MB: carry it
+if [ -f "$CN_IN" ]; then
+    run "memcheck one UNet call" 180 "$SAN" --tool memcheck --error-exitcode 99 "$M" run-net unet --device cuda \
+        --weights "$W" --inputs "$CN_IN" --out "$O/unet_out.safetensors"
+else
+    echo "NOT RUN: the UNet call needs golden/sd15_controlnet/inputs.safetensors (carry it)" | tee -a "$LOG"
+    failed=$((failed + 1))
+fi
+run "memcheck guided steps, two ControlNets (texture 2 views, 1 step)" 240 "$SAN" --tool memcheck \
+    --error-exitcode 99 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --views 2 --steps 1 \
+    --texture-size 512 --render-size 512 -o "$O/memcheck_step" --force
+
+rm -f "$W"
+say "gpu-check: $failed step(s) failed; the whole log: $LOG"
+[ $failed -eq 0 ]
