@@ -18,11 +18,21 @@
  *   [Cout, Cin, kh, kw].
  * - All ops may use ctx->pool for threads and ctx->scratch for temporary memory
  *   (they restore the scratch mark before returning). Results never depend on the thread count.
- *   Scratch the SIMD kernels take per call: linear/conv2d (min(M, 4096) + min(N, 4096) + 44)
- *   · min(K, 320) + max(M, N) floats (conv: M = Cout, N = Ho·Wo, K = Cin·kh·kw; at most ~11 MB);
- *   attention B·H·D·(Tk + 63) + threads·64·(2D + 2) floats; layer norm 2C floats. With less
- *   (or no) scratch they use the heap, so a small arena costs speed, never correctness.
- *   32 MiB covers SD1.5 at 512×512 (UNet with CFG batch 2, VAE mid-block attention).
+ *   Scratch the SIMD kernels take per call (floats; ops/cpu/gemm.c mx_gemm_run, attention_*.inc):
+ *   linear/conv2d (M = Cout, N = Ho·Wo, K = Cin·kh·kw for conv) work in K blocks of
+ *   kc = ceil(K / ceil(K / kc_max)) with kc_max = 640 on the SIMD levels and 2048 on AMX
+ *   (gemm.h MX_GEMM_KC_SIMD, MX_GEMM_KC_MAX); w = a panel row's words (kc fp32, or (kc + 1) / 2
+ *   bf16 pairs, on AMX rounded up to 16, twice that for the fp32-on-AMX split kernel). A: all of
+ *   it, ceil(M / MR)·MR·w, when there are fewer than 32 blocks of 96 rows (every conv), else 96·w
+ *   per thread. B: min(N, 4096)·w for tiles, 384 KiB per thread for column tasks, or batch·N·w
+ *   for row tasks (all rounded up to whole NR panels). Plus the bias (M or N floats; a conv's
+ *   ×17 where the kernel starts its sums at the bias: AVX-512, AMX); a weight
+ *   packed once (wpack.h) takes none of its part. conv2d also prepares a band of input rows of
+ *   at most 8 MiB (gemm_conv.c). attention: one head's packed keys (and values on the
+ *   bf16 levels), about Tk·D, plus a per-thread state per block of queries (about 64 queries ×
+ *   (2D + VL + 1) floats; AMX: up to 128 queries × (256 scores + 2D)); layer norm 2C floats.
+ *   With less (or no) scratch they use the heap (attention: the reference), so a small arena
+ *   costs speed, never correctness.
  * - Output buffers must not alias inputs unless an op says "in place".
  */
 #ifndef MX_OPS_H

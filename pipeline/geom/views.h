@@ -2,8 +2,9 @@
  * (at a small size) into the list of texels its usable pixels look at (foreground, not an
  * internal face, frontal enough); each step then counts, per candidate, the pixels whose
  * texel is not in T^B, and picks the largest. Planning simulates the coverage of the picked
- * views so that a whole sequence can be chosen ahead, and groups views whose untextured
- * texels do not overlap, so that they can be generated in one batch. */
+ * views so that a whole sequence can be chosen ahead, and groups views that overlap little
+ * (MX_VIEW_GROUP_OVERLAP: at most 2 % of a view's untextured texels already claimed by the
+ * group's earlier views), so that they can be generated in one batch. */
 #ifndef MX_VIEWS_H
 #define MX_VIEWS_H
 
@@ -60,8 +61,10 @@ typedef struct mx_view_plan {
  * first, paper stage 0, and passes the budget left): greedy Alg. 1 with simulated
  * coverage (a picked view's texels count as textured), stopping early when the
  * simulated coverage of candidate-visible texels reaches coverage_stop or no candidate
- * has min_pixels untextured pixels left. A view joins the current group when none of its
- * untextured texels is claimed by the group's earlier views. */
+ * has min_pixels untextured pixels left. A view joins the current group when at most
+ * MX_VIEW_GROUP_OVERLAP (2 %) of its texels untextured at the group's start are already claimed by
+ * the group's earlier views (a sliver along silhouettes; the earlier view keeps those texels), else
+ * it starts the next group. */
 int mx_view_plan_make(const mx_view_cache *vc, const uint8_t *known, int budget,
                       double coverage_stop, int64_t min_pixels, mx_view_plan *plan, mx_status *st);
 void mx_view_plan_free(mx_view_plan *plan);
@@ -70,8 +73,8 @@ void mx_view_plan_free(mx_view_plan *plan);
  * `transfer`: each call of mx_view_schedule_next plans from T^B as it is then (the views already
  * backprojected), so the schedule follows what the views really painted. What differs between
  * the commands is a parameter: how many views one step may return (texture: a batch of views
- * whose untextured texels do not overlap, generated together; enhance and transfer: one, each
- * view seeing the one before). A chosen candidate is never chosen again; the schedule ends when
+ * whose untextured texels overlap by at most MX_VIEW_GROUP_OVERLAP, generated together; enhance
+ * and transfer: one, each view seeing the one before). A chosen candidate is never chosen again; the schedule ends when
  * the budget is spent, when the candidates' coverage reaches coverage_stop, or when no
  * candidate left would paint min_gain untextured pixels (at the candidate render size). */
 typedef struct mx_view_schedule_params {

@@ -163,7 +163,8 @@ done:
 }
 
 /* Stage 1 (paper §3.2, Alg. 1): the views the schedule picks from the real T^B, a batch at a
- * time (views whose untextured texels do not overlap are generated together). */
+ * time (views that overlap by at most MX_VIEW_GROUP_OVERLAP of their untextured texels, views.h,
+ * are generated together). */
 static int view_stage(mx_job *j, mx_status *st) {
     const mx_texture_opts *o = j->o;
     double t = mx_now();

@@ -1,9 +1,10 @@
-/* The Make-A-Texture method (paper §3, docs/DESIGN.md §2) as one call: `matex texture` and
- * `matex enhance`.
+/* The Make-A-Texture method (paper §3, docs/DESIGN.md §2) as one call: `matex texture`,
+ * `matex enhance` and `matex transfer` (transfer.c; mx_transfer_run, below, shares the run's
+ * options, result and checks).
  *
  * texture: load mesh (atlas if it has no UVs) -> front+back grid with depth control ->
  * backproject -> automatic view selection (Alg. 1) with depth + inpainting control, views
- * whose untextured texels do not overlap generated in one batch -> backproject into the
+ * overlapping by at most MX_VIEW_GROUP_OVERLAP (views.h) generated in one batch -> backproject into the
  * untextured texels -> UV fill -> export (PNG, EXR, OBJ/MTL, GLB, report.json).
  * enhance: the same views over an already textured mesh; each view's render is VAE-encoded,
  * noised to `strength` (SDEdit), denoised under the prompt and backprojected.
