@@ -235,11 +235,13 @@ test-deps: $(TEST_DEPS)
 test: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
-# Every repository path named in the docs and the code exists (tools/scripts/check_paths.sh; under a
-# second; `make test` runs it as tests/cli_check_paths.sh).
+# Every repository path named in the docs and the code exists (tools/scripts/check_paths.sh), and the
+# counts and names docs/DESIGN.md states match the code (tools/scripts/check_docs.sh); each under a
+# second; `make test` runs them as tests/cli_check_paths.sh and tests/cli_check_docs.sh.
 .PHONY: check
 check:
 	sh tools/scripts/check_paths.sh .
+	sh tools/scripts/check_docs.sh .
 
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: $(TEST_DEPS)
