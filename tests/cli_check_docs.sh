@@ -1,7 +1,8 @@
 #!/bin/sh
 # make check (tools/scripts/check_docs.sh): the op table, the network table, their counts and the
-# files a new op touches, as docs/DESIGN.md states them, match the code; and the checker fails on
-# each kind of wrong claim planted in a copy of the tree (the doc's or the code's side).
+# files a new op touches, as docs/DESIGN.md states them, match the code, and every "DESIGN.md §n"
+# names a section; and the checker fails on each kind of wrong claim planted in a copy of the tree
+# (the doc's or the code's side).
 NAME=check_docs
 . "$(dirname "$0")/lib_cli.sh"
 
@@ -10,7 +11,7 @@ check "DESIGN.md's ops, networks and a new op's files match the code" sh tools/s
 # A copy of what the checker reads, as a tree of its own.
 R="$T/repo"
 mkdir -p "$R/docs" "$R/ops/cpu" "$R/ops/cuda" "$R/weights" "$R/tests/cuda"
-cp docs/DESIGN.md "$R/docs/" && cp ops/op_list.h ops/backend.c "$R/ops/" && cp ops/cpu/*_ref.c "$R/ops/cpu/" &&
+cp docs/DESIGN.md docs/cuda-notes.md "$R/docs/" && cp ops/op_list.h ops/backend.c "$R/ops/" && cp ops/cpu/*_ref.c "$R/ops/cpu/" &&
     cp ops/cuda/*.cu "$R/ops/cuda/" && cp weights/networks.c "$R/weights/" && cp tests/test_ops_*.c "$R/tests/" &&
     cp tests/cuda/*.c "$R/tests/cuda/" || { echo "FAIL copying the tree"; exit 1; }
 check "the copy passes" [ "$(rc_of sh tools/scripts/check_docs.sh "$R")" = 0 ]
@@ -52,4 +53,7 @@ planted docs/DESIGN.md 's/| `taesd` | `AutoencoderTiny` | no |/| `taesd` | `Auto
     'network taesd: in the model set yes in the table, no in' "a wrong model-set flag"
 planted docs/DESIGN.md 's|weights/networks.c lists 7 networks|weights/networks.c lists 6 networks|' \
     'says weights/networks.c lists 6 networks; it lists 7' "a wrong network count"
+# (section 9 spelled apart, so that this file cites none itself)
+planted ops/cpu/norm_ref.c '1s|^|/* the layout: DESIGN.md §''9 */\n|' \
+    'ops/cpu/norm_ref.c:1: DESIGN.md §''9: docs/DESIGN.md has no section 9' "a reference to a section that does not exist"
 exit $fail

@@ -15,7 +15,8 @@
 #   touches `x`, ...: M files ... (the list as `op1` and `op2` touch it)": N and M are the lengths
 #   of the lists, and each named op touches exactly those files (<family> replaced by its family):
 #   the files that hold its list entry, its reference, its CUDA kernel, its strict wrapper, or name
-#   its wrapper, table entry or CUDA kernel in the op tests (tests/test_ops_*.c, tests/cuda/*.c).
+#   its wrapper, table entry or CUDA kernel in the op tests (tests/test_ops_*.c, tests/cuda/*.c);
+# - and, in the docs and the code, every "DESIGN.md §n" (cuda-notes, PERFORMANCE) names a section.
 root=${1:-.}
 cd "$root" || exit 2
 design=docs/DESIGN.md
@@ -171,8 +172,24 @@ if [ -n "$sline" ]; then
     done
 fi
 
+# ---- section references ----
+# "DESIGN.md §4", "docs/cuda-notes.md §3", "cuda-notes §5" in the docs and the code name a heading
+# "## 4." of that file in docs/. README.md is left out until its Speed section, which still cites
+# the GPU timings' old section, gives way to docs/PERFORMANCE.md (issue 41's README rewrite).
+find . -path ./.git -prune -o -path './build*' -prune -o -path ./tests/data -prune -o -type f \
+    \( -name '*.md' -o -name '*.c' -o -name '*.h' -o -name '*.inc' -o -name '*.cpp' -o -name '*.cu' \
+    -o -name '*.cuh' -o -name '*.sh' -o -name Makefile \) ! -path ./README.md -print | sort > "$tmp/files"
+xargs grep -noE '(DESIGN|cuda-notes|PERFORMANCE)(\.md)? §[0-9]+' < "$tmp/files" > "$tmp/refs" 2> /dev/null
+while IFS=: read -r file line ref; do
+    doc=docs/$(printf '%s\n' "$ref" | sed 's/[ .].*//').md
+    sec=${ref##*§}
+    grep -q "^## $sec\." "$doc" 2> /dev/null && continue
+    echo "${file#./}:$line: $ref: $doc has no section $sec"
+    bad=$((bad + 1))
+done < "$tmp/refs"
+
 if [ $bad -gt 0 ]; then
-    echo "check_docs: $bad claims of $design do not match the code"
+    echo "check_docs: $bad claims of the docs do not match the code"
     exit 1
 fi
-echo "check_docs: $design's $nops ops, $nnets networks and a new op's files match the code"
+echo "check_docs: $design's $nops ops, $nnets networks and a new op's files match the code; $(wc -l < "$tmp/refs" | tr -d ' ') section references name a section"
