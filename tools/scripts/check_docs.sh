@@ -70,6 +70,18 @@ table_rows "| network | config class | in the model set |" |
 # the line of the first match of an extended regular expression, and the number in its match
 line_of() { grep -nE "$1" "$design" | head -n 1 | cut -d: -f1; }
 number_in() { grep -oE "$1" "$design" | head -n 1 | grep -oE '[0-9]+' | head -n 1; }
+yes_no() { if [ "$1" = 1 ]; then echo yes; else echo no; fi; }
+# not_in_code KIND FILE COLUMN DOC_ROWS CODE_ROWS: each name in COLUMN of the map's rows ("LINE ...")
+# that is not the first word of a row of the code's is reported
+not_in_code() {
+    awk -v col="$3" 'NR == FNR { have[$1] = 1; next } !($col in have) { print $1, $col }' "$5" "$4" > "$tmp/missing"
+    while read -r line name; do report "$line" "$1 $name is not in $2"; done < "$tmp/missing"
+}
+# count_claim FILE NOUN N: the map's "FILE lists M NOUN" says M = N
+count_claim() {
+    said=$(number_in "$1 lists [0-9]+ $2")
+    [ "$said" = "$3" ] || report "$(line_of "$1 lists [0-9]+ $2")" "says $1 lists ${said:-?} $2; it lists $3"
+}
 
 # ---- ops ----
 while read -r op w; do
@@ -85,16 +97,13 @@ while read -r op w; do
         report "$line" "op $op: family $fam, but ops/cpu/${fam}_ref.c does not define mx_${op}_ref"
     grep -qE "^[A-Za-z].*[^A-Za-z0-9_]mx_cuda_${op}\(" "ops/cuda/cuda_${fam}.cu" 2> /dev/null ||
         report "$line" "op $op: family $fam, but ops/cuda/cuda_${fam}.cu does not define mx_cuda_${op}"
-    [ "$dw" = "$w" ] || report "$line" "op $op: the table says weight operand $([ "$dw" = 1 ] && echo yes || echo no), ops/op_list.h $([ "$w" = 1 ] && echo yes || echo no)"
+    [ "$dw" = "$w" ] || report "$line" "op $op: the table says weight operand $(yes_no "$dw"), ops/op_list.h $(yes_no "$w")"
     [ "$w" = 1 ] && ! grep -q "[^A-Za-z0-9_]strict_${op}(" ops/backend.c &&
         report "$line" "op $op takes a weight but ops/backend.c has no strict wrapper strict_$op"
 done < "$tmp/ops"
-while read -r line fam op dw; do
-    awk -v op="$op" '$1 == op { f = 1 } END { exit !f }' "$tmp/ops" || report "$line" "op $op is not in ops/op_list.h"
-done < "$tmp/doc_ops"
+not_in_code op ops/op_list.h 3 "$tmp/doc_ops" "$tmp/ops"
 nops=$(wc -l < "$tmp/ops" | tr -d ' ')
-said=$(number_in 'ops/op_list.h lists [0-9]+ ops')
-[ "$said" = "$nops" ] || report "$(line_of 'ops/op_list.h lists [0-9]+ ops')" "says ops/op_list.h lists ${said:-?} ops; it lists $nops"
+count_claim ops/op_list.h ops "$nops"
 
 # ---- networks ----
 while read -r name class set; do
@@ -105,14 +114,11 @@ while read -r name class set; do
     fi
     set -- $row # LINE NAME CLASS SET: split on purpose
     [ "$3" = "$class" ] || report "$1" "network $name: config class $3 in the table, $class in weights/networks.c"
-    [ "$4" = "$set" ] || report "$1" "network $name: in the model set $([ "$4" = 1 ] && echo yes || echo no) in the table, $([ "$set" = 1 ] && echo yes || echo no) in weights/networks.c"
+    [ "$4" = "$set" ] || report "$1" "network $name: in the model set $(yes_no "$4") in the table, $(yes_no "$set") in weights/networks.c"
 done < "$tmp/nets"
-while read -r line name class set; do
-    awk -v n="$name" '$1 == n { f = 1 } END { exit !f }' "$tmp/nets" || report "$line" "network $name is not in weights/networks.c"
-done < "$tmp/doc_nets"
+not_in_code network weights/networks.c 2 "$tmp/doc_nets" "$tmp/nets"
 nnets=$(wc -l < "$tmp/nets" | tr -d ' ')
-said=$(number_in 'weights/networks.c lists [0-9]+ networks')
-[ "$said" = "$nnets" ] || report "$(line_of 'weights/networks.c lists [0-9]+ networks')" "says weights/networks.c lists ${said:-?} networks; it lists $nnets"
+count_claim weights/networks.c networks "$nnets"
 
 # ---- the files a new op touches ----
 sline=$(line_of 'A new op touches these')
