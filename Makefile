@@ -159,6 +159,8 @@ $(BUILD)/tests/amx_emu.o: tests/amx_emu.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
 $(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/amx_emu.o
+# The cuDNN path's host-side decisions (plan keys, layouts, fallback) are tested without CUDA.
+$(BUILD)/tests/test_ops_cuda_plan: $(BUILD)/ops/cuda/cudnn_plan.o
 endif
 $(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
@@ -419,5 +421,9 @@ gpu-check-pack: cuda
 	ldd $(CUDA_BUILD)/matex-lite | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \
 	    while read -r lib; do cp -L "$$lib" $(GPU_PACK)/lib/ || exit 1; done
 	for d in $(GPU_PACK_DATA); do cp -r $(MATEX_TESTDATA)/$$d $(GPU_PACK)/data/$$d || exit 1; done
+	# the peer (diffusers' sources, ~4 MB): gpu_check.sh says so and goes on where it is missing
+	if [ -f $(MATEX_TESTDATA)/peer/peer_diffusers.py ]; then mkdir -p $(GPU_PACK)/peer && \
+	    cp $(MATEX_TESTDATA)/peer/peer_diffusers.py $(MATEX_TESTDATA)/peer/*-src.tar.gz $(GPU_PACK)/peer/; \
+	    else echo "gpu-check-pack: no $(MATEX_TESTDATA)/peer: packed without the peer"; fi
 	tar -C $(CUDA_BUILD) -czf $(GPU_PACK).tar.gz gpu
 	du -sh $(GPU_PACK) $(GPU_PACK).tar.gz

@@ -38,6 +38,46 @@ run() {
 stages() { # report.json -> its stage and work times, one line each
     tr -d '\n ' <"$1" | grep -o '"\(stages_s\|work_s\)":{[^}]*}' | tee -a "$LOG"
 }
+# The peer (../shared/peer, packed into $B/peer by make gpu-check-pack): unpacked under $O/peer and run
+# on this machine's python3 with the repository's SD1.5 configs. A missing peer, PyTorch or GPU for
+# PyTorch is said in one line and the check goes on: the peer is a yardstick, not a matex step, so
+# its failure is not counted either.
+peer_run() {
+    P=${GPU_CHECK_PEER:-$B/peer}
+    if [ ! -f "$P/peer_diffusers.py" ]; then
+        echo "peer NOT RUN: no $P/peer_diffusers.py (make gpu-check-pack packs \$(MATEX_TESTDATA)/peer)" | tee -a "$LOG"
+        return 1
+    fi
+    if ! python3 -c 'import torch; assert torch.cuda.is_available()' >>"$LOG" 2>&1; then
+        echo "peer NOT RUN: python3 has no PyTorch that sees the GPU" | tee -a "$LOG"
+        return 1
+    fi
+    rm -rf "$O/peer" && mkdir -p "$O/peer/src/hub" && cp "$P/peer_diffusers.py" "$O/peer/" &&
+        tar -xzf "$P"/diffusers-*-src.tar.gz -C "$O/peer/src" && tar -xzf "$P"/huggingface_hub-*-src.tar.gz -C "$O/peer/src/hub" ||
+        { echo "peer NOT RUN: could not unpack its sources from $P" | tee -a "$LOG"; return 1; }
+    t0=$(date +%s)
+    timeout 330 env PYTHONUNBUFFERED=1 python3 "$O/peer/peer_diffusers.py" tests/data/golden 11 >>"$LOG" 2>&1
+    rc=$?
+    printf '%-58s rc=%d  %s s (not counted)\n' "peer: eager and torch.compile" "$rc" "$(($(date +%s) - t0))" | tee -a "$LOG"
+    [ $rc -eq 0 ] || { echo "peer FAILED (its log is above in $LOG): no ratios" | tee -a "$LOG"; return 1; }
+}
+# ratios "matex: k_ms=v ..." "peer: k_ms=v ...": matex / eager and matex / compiled per network.
+ratios() {
+    printf '%s\n%s\n' "$1" "$2" | awk '
+        $1 == "matex:" { for (i = 2; i <= NF; i++) { split($i, kv, "="); m[kv[1]] = kv[2] } }
+        $1 == "peer:"  { for (i = 2; i <= NF; i++) { split($i, kv, "="); p[kv[1]] = kv[2] } }
+        END {
+            n = split("controlnet_ms unet_ms guided_step_ms vae_decode_ms", k, " ")
+            for (i = 1; i <= n; i++) {
+                if (!(k[i] in m) || !(k[i] in p)) { printf "ratio %-16s missing (matex %s, peer %s)\n", k[i], m[k[i]], p[k[i]]; continue }
+                line = sprintf("ratio %-16s matex %7.2f ms / eager %7.2f ms = %.2f", k[i], m[k[i]], p[k[i]], m[k[i]] / p[k[i]])
+                c = "compiled_" k[i]
+                if (c in p) line = line sprintf("; / compiled %7.2f ms = %.2f", p[c], m[k[i]] / p[c])
+                print line
+            }
+            print "goals: guided step <= 0.80 x compiled, VAE decode <= 0.70 x eager (issue 39)"
+        }'
+}
 
 : >"$LOG"
 if [ -f "$B.tar.gz" ]; then # the archive of make gpu-check-pack, what a device run carries
@@ -104,6 +144,12 @@ grep "^anchor:" "$LOG"
 run "bench_cuda (11 calls per network)" 120 "$B/bench_cuda" "$W" --calls 11 && grep -E "median|load" "$LOG" | tail -4
 run "bench_cuda --profile, MATEX_CUDA_SYNC=1 (per-op GPU time)" 120 env MATEX_CUDA_SYNC=1 "$B/bench_cuda" "$W" \
     --calls 3 --profile
+
+say "the peer beside matex: diffusers 0.35.2 on this machine's PyTorch, same shapes (peer_diffusers.py)"
+if peer_run; then
+    grep -E "^(torch|peer|compile)" "$LOG" | tail -8
+    ratios "$(grep '^matex:' "$LOG" | tail -1)" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
+fi
 
 say "compute-sanitizer memcheck: SD1.5-size networks"
 run "memcheck ControlNet, UNet, VAE decode (bench_cuda, 1 call each after 2)" 180 "$SAN" --tool memcheck \
