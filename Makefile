@@ -359,6 +359,13 @@ CUDA_HOME  ?= /usr/local/cuda
 CUDA_BUILD ?= build-cuda
 NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
 NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
+# CUDNN=1 (the default where the toolkit has cudnn_graph.h): conv2d through cuDNN's graph API,
+# loaded at run time (dlopen libcudnn.so.9, nothing linked) and used only under MATEX_CUDNN=1
+# (cuda_cudnn.cu). CUDNN=0: today's path only.
+CUDNN      ?= $(if $(wildcard $(CUDA_HOME)/include/cudnn_graph.h),1,0)
+ifeq ($(CUDNN),1)
+NVCCFLAGS  += -DMX_WITH_CUDNN
+endif
 CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
@@ -366,7 +373,7 @@ CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt
 CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
                 test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast test_nn_clip_vision
 
-$(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
+$(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC)) $(BUILD)/ops/cuda/cudnn_plan.o
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
 	@mkdir -p $(dir $@)
 	$(NVCC) $(NVCCFLAGS) -c -o $@ $<

@@ -98,6 +98,8 @@ static int cuda_to_host(mx_backend *be, void *dst, const void *src, size_t bytes
 
 unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c) { return c->half_products; }
 
+unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c) { return c->cudnn_convs; }
+
 unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
     mx_cuda_ctx *c = ((cuda_backend *)be->impl)->cc;
     unsigned long long n = c->half_products;

@@ -82,6 +82,9 @@ unsigned long long mx_cuda_half_products(mx_backend *be, int reset);
 /* The same count of one context (never reset): what the op test reads around one op. Attention
  * counts too: it runs on tensor cores in fp16 (cuda_attention.cu) unless the scratch is too small. */
 unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c);
+/* The conv2d calls of a context that cuDNN ran (MATEX_CUDNN=1, cuda_cudnn.cu; never reset): the op
+ * test checks cuDNN really ran where it was asked for, and never where it was not. */
+unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

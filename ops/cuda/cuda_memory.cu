@@ -68,6 +68,7 @@ int mx_cuda_ctx_create(mx_cuda_ctx **out, int device, size_t scratch_bytes, mx_s
     c->scratch_cap = scratch_bytes;
     if (scratch_bytes && mx_cuda_alloc((void **)&c->scratch, scratch_bytes, "cuda scratch", st)) goto fail;
     if (staging_create(c, st)) goto fail;
+    mx_cuda_cudnn_open(c);
     *out = c;
     return 0;
 fail:
@@ -79,6 +80,7 @@ void mx_cuda_ctx_destroy(mx_cuda_ctx *c) {
     if (!c) return;
     if (c->stream) cudaStreamSynchronize(c->stream);
     staging_destroy(c);
+    mx_cuda_cudnn_close(c);
     mx_cuda_gemm_plans_free(c);
     mx_cuda_free(c->scratch);
     mx_cuda_free(c->workspace);

@@ -379,6 +379,71 @@ static void test_gemm_ops(env *e) {
     test_conv2d(e, MX_F16, 2, 9, 7, 5, 6, 1, 1, 0);
 }
 
+/* n floats of dev, waited for (NULL after a counted failure). */
+static float *download(env *e, const float *dev, size_t n, const char *what) {
+    float *h = malloc(n * sizeof *h);
+    if (!h) abort();
+    if (gpu_ok(e, mx_cuda_sync(e->gpu, &e->st), what) ||
+        gpu_ok(e, mx_cuda_download(e->gpu, h, dev, n * sizeof *h, what, &e->st), what)) {
+        free(h);
+        return NULL;
+    }
+    return h;
+}
+
+/* One fp16 conv (SD's 3x3, 320 channels, at 16x16): the same call twice gives the same bytes, and
+ * item 1 of a batch of 2 the same bytes as that item alone (deterministic engines; plans of one item). */
+static void test_conv_repeatable(env *e) {
+    enum { B = 2, C = 320, H = 16, W = 16 };
+    size_t plane = (size_t)C * H * W;
+    float *x = rnd(B * plane, 31, -1, 1);
+    test_weight w = make_weight(e, (size_t)C * C * 9, 32, MX_F16), b = make_weight(e, C, 33, MX_F16);
+    float *dx = dev_copy(e, x, B * plane * sizeof *x), *dy = dev_zero(e, B * plane * sizeof *dy);
+    float *y2 = NULL, *y2again = NULL, *y1 = NULL;
+    if (dx && dy && w.dev.data && b.dev.data &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx, B, C, H, W, w.dev, b.dev, C, 3, 3, 1, 1, &e->st), "conv B=2") &&
+        (y2 = download(e, dy, B * plane, "conv B=2")) &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx, B, C, H, W, w.dev, b.dev, C, 3, 3, 1, 1, &e->st), "conv again") &&
+        (y2again = download(e, dy, B * plane, "conv again")) &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx + plane, 1, C, H, W, w.dev, b.dev, C, 3, 3, 1, 1, &e->st),
+                "conv item 1 alone") &&
+        (y1 = download(e, dy, plane, "conv item 1 alone"))) {
+        int same = !memcmp(y2, y2again, B * plane * sizeof *y2), alone = !memcmp(y2 + plane, y1, plane * sizeof *y1);
+        printf("%-48s %s\n", "conv2d f16 repeated call: same bytes", same ? "ok" : "FAIL");
+        printf("%-48s %s\n", "conv2d f16 item alone = item in batch (bytes)", alone ? "ok" : "FAIL");
+        CHECK(same);
+        CHECK(alone);
+    }
+    free(y1), free(y2), free(y2again);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free_weight(&w);
+    free_weight(&b);
+    free(x);
+}
+
+/* conv2d through cuDNN (ops/cuda/cuda_cudnn.cu) where MATEX_CUDNN=1: fp16 convolutions of SD1.5's
+ * kinds (scaled down) and awkward ones at the half bound, and cuDNN must have run SD's 3x3 (a shape
+ * no cuDNN engine takes goes through im2col, which these checks cover too). Without MATEX_CUDNN=1,
+ * cuDNN must never run. */
+static void test_cudnn_conv(env *e) {
+    const char *env_on = getenv("MATEX_CUDNN");
+    int on = env_on && strcmp(env_on, "1") == 0;
+    unsigned long long before = mx_cuda_ctx_cudnn_convs(e->gpu);
+    test_conv2d(e, MX_F16, 2, 320, 16, 16, 320, 3, 1, 1); /* a resnet conv of the UNet */
+    unsigned long long sd = mx_cuda_ctx_cudnn_convs(e->gpu) - before;
+    test_conv2d(e, MX_F16, 2, 4, 17, 13, 32, 3, 1, 1);  /* conv_in: 4 channels */
+    test_conv2d(e, MX_F16, 1, 3, 33, 31, 16, 3, 1, 1);  /* the ControlNet hint: 3 channels */
+    test_conv2d(e, MX_F16, 1, 64, 15, 15, 64, 3, 2, 1); /* downsample: stride 2, odd size */
+    test_conv2d(e, MX_F16, 2, 40, 9, 9, 24, 1, 1, 0);   /* 1x1 */
+    test_conv2d(e, MX_F16, 1, 13, 11, 7, 5, 3, 1, 0);   /* odd channels, no padding */
+    test_conv_repeatable(e);
+    unsigned long long all = mx_cuda_ctx_cudnn_convs(e->gpu) - before;
+    printf("%-48s %llu of 8 calls (SD 3x3: %llu) %s\n", on ? "conv2d through cuDNN (MATEX_CUDNN=1)" :
+           "conv2d through cuDNN (MATEX_CUDNN unset): none", all, sd, (on ? sd > 0 : all == 0) ? "ok" : "FAIL");
+    CHECK(on ? sd > 0 : all == 0);
+}
+
 /* A context with a 32 KiB scratch: linear and conv2d must split their work into several chunks/tiles,
  * attention falls back to its fp32 kernel. */
 static void test_small_scratch(env *e) {
@@ -574,6 +639,7 @@ int main(void) {
     e.cpu.k = mx_kernels_scalar();
     e.cpu.scratch = &e.cpu_scratch;
     test_gemm_ops(&e);
+    test_cudnn_conv(&e);
     test_small_scratch(&e);
     test_norm_ops(&e);
     test_attention_ops(&e);

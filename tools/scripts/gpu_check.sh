@@ -9,7 +9,12 @@
 # Uses the binaries of $GPU_CHECK_BIN (default build-cuda/gpu, or its archive build-cuda/gpu.tar.gz:
 # `make gpu-check-pack` here), else builds `make cuda` (minutes). Writes its log to $GPU_CHECK_LOG
 # (default $GPU_CHECK_OUT/log.txt) and the outputs under $GPU_CHECK_OUT (default gpu-check-out).
-# Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s).
+# Issue 39 adds, each beside today's path in the same run: conv2d through cuDNN (MATEX_CUDNN=1: the
+# op tests, the goldens, bench_cuda, a timed texture, two runs of one seed byte-equal, its PSNR
+# against the CPU) and the diffusers peer (../shared/peer, packed) with the ratios matex / eager and
+# matex / compiled. cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
+# Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s),
+# before issue 39's steps (never run yet; the peer alone ~200 s with torch.compile).
 set -u
 B=${GPU_CHECK_BIN:-build-cuda/gpu}
 O=${GPU_CHECK_OUT:-gpu-check-out}
@@ -38,6 +43,27 @@ run() {
 stages() { # report.json -> its stage and work times, one line each
     tr -d '\n ' <"$1" | grep -o '"\(stages_s\|work_s\)":{[^}]*}' | tee -a "$LOG"
 }
+# summary LINE: the verdict lines of the log after line LINE (one test-cuda run).
+summary() {
+    tail -n +"$1" "$LOG" | grep -E "FAIL|SKIP|rel_l2=.*FAIL|device|not TESTED|all checks" | sort | uniq -c |
+        sort -rn | head -40
+}
+# cuDNN 9 for MATEX_CUDNN=1 (dlopen libcudnn.so.9): the system's (ldconfig, the CUDA toolkit), else
+# the one PyTorch's wheels carry (nvidia/cudnn/lib) on LD_LIBRARY_PATH. Says which, or that there
+# is none (then the MATEX_CUDNN=1 steps show the fallback line and fail their cuDNN checks).
+find_cudnn() {
+    if ldconfig -p 2>/dev/null | grep -q 'libcudnn\.so\.9' || [ -f /usr/local/cuda/lib64/libcudnn.so.9 ]; then
+        echo "cuDNN: the system's libcudnn.so.9" | tee -a "$LOG"
+        return 0
+    fi
+    d=$(python3 -c 'import nvidia.cudnn, os; print(os.path.join(list(nvidia.cudnn.__path__)[0], "lib"))' 2>/dev/null)
+    if [ -n "$d" ] && [ -f "$d/libcudnn.so.9" ]; then
+        export LD_LIBRARY_PATH="$d${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+        echo "cuDNN: PyTorch's, $d" | tee -a "$LOG"
+        return 0
+    fi
+    echo "cuDNN: no libcudnn.so.9 on this machine" | tee -a "$LOG"
+}
 # The peer (../shared/peer, packed into $B/peer by make gpu-check-pack): unpacked under $O/peer and run
 # on this machine's python3 with the repository's SD1.5 configs. A missing peer, PyTorch or GPU for
 # PyTorch is said in one line and the check goes on: the peer is a yardstick, not a matex step, so
@@ -52,9 +78,12 @@ peer_run() {
         echo "peer NOT RUN: python3 has no PyTorch that sees the GPU" | tee -a "$LOG"
         return 1
     fi
-    rm -rf "$O/peer" && mkdir -p "$O/peer/src/hub" && cp "$P/peer_diffusers.py" "$O/peer/" &&
-        tar -xzf "$P"/diffusers-*-src.tar.gz -C "$O/peer/src" && tar -xzf "$P"/huggingface_hub-*-src.tar.gz -C "$O/peer/src/hub" ||
-        { echo "peer NOT RUN: could not unpack its sources from $P" | tee -a "$LOG"; return 1; }
+    if ! { rm -rf "$O/peer" && mkdir -p "$O/peer/src/hub" && cp "$P/peer_diffusers.py" "$O/peer/" &&
+        tar -xzf "$P"/diffusers-*-src.tar.gz -C "$O/peer/src" &&
+        tar -xzf "$P"/huggingface_hub-*-src.tar.gz -C "$O/peer/src/hub"; }; then
+        echo "peer NOT RUN: could not unpack its sources from $P" | tee -a "$LOG"
+        return 1
+    fi
     t0=$(date +%s)
     timeout 330 env PYTHONUNBUFFERED=1 python3 "$O/peer/peer_diffusers.py" tests/data/golden 11 >>"$LOG" 2>&1
     rc=$?
@@ -93,14 +122,22 @@ M="$B/matex"
 [ -d "$B/data" ] && export MATEX_TESTDATA="$B/data" # the goldens packed beside the binaries
 
 say "GPU"
+find_cudnn
 run "nvidia-smi" 30 nvidia-smi
 nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv | tee -a "$LOG"
 "$M" --version | tee -a "$LOG"
 
 say "make test-cuda (op tests, network goldens, tiny pipelines; MATEX_CUDA_SYNC=1 names a faulting op)"
+mark=$(wc -l <"$LOG")
 run "test-cuda" 180 env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh \
     "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
-grep -E "FAIL|SKIP|rel_l2=.*FAIL|device|not TESTED|all checks" "$LOG" | sort | uniq -c | sort -rn | head -40
+summary "$mark"
+say "make test-cuda with conv2d through cuDNN (MATEX_CUDNN=1)"
+mark=$(wc -l <"$LOG")
+run "test-cuda, MATEX_CUDNN=1" 180 env MATEX_CUDNN=1 MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 \
+    sh tests/cuda/run.sh "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
+summary "$mark"
+grep -E "cuDNN|cudnn" "$LOG" | tail -n +"$mark" | sort | uniq -c | sort -rn | head -20
 
 say "compute-sanitizer memcheck: tiny pipeline"
 run "memcheck tiny pipeline" 120 env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck --error-exitcode 99 \
@@ -114,6 +151,9 @@ run "make_sd15_weights --fast" 180 sh tools/scripts/make_sd15_weights.sh "$M" "$
 say "timed: default texture on the GPU (6 views, 10 steps, 1024^2)"
 run "texture --device cuda" 120 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --seed 1 \
     -o "$O/gpu_default" --force && stages "$O/gpu_default/report.json"
+say "timed: default texture on the GPU, conv2d through cuDNN (MATEX_CUDNN=1)"
+run "texture --device cuda, MATEX_CUDNN=1" 120 env MATEX_CUDNN=1 "$M" texture "$MESH" "$PROMPT" --weights "$W" \
+    --device cuda --seed 1 -o "$O/gpu_cudnn" --force && stages "$O/gpu_cudnn/report.json"
 say "timed: texture --fast on the GPU"
 run "texture --fast --device cuda" 60 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --fast --seed 1 \
     -o "$O/gpu_fast" --force && stages "$O/gpu_fast/report.json"
@@ -128,6 +168,16 @@ run "texture small, cpu fp32" 240 "$M" texture "$MESH" "$PROMPT" --weights "$W" 
 [ -f "$O/par_gpu/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
     run "psnr cpu vs gpu (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" --compare "$O/par_gpu/texture.png" &&
     tail -1 "$LOG"
+say "same seed twice on the GPU with cuDNN (MATEX_CUDNN=1): byte-equal textures, and PSNR against the CPU"
+for i in 1 2; do
+    # shellcheck disable=SC2086
+    run "texture small, cuda, MATEX_CUDNN=1, run $i" 60 env MATEX_CUDNN=1 "$M" texture "$MESH" "$PROMPT" \
+        --weights "$W" --device cuda $small -o "$O/par_cudnn$i" --force
+done
+run "two cuDNN runs of one seed: texture.png byte-equal" 10 cmp "$O/par_cudnn1/texture.png" "$O/par_cudnn2/texture.png"
+[ -f "$O/par_cudnn1/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
+    run "psnr cpu vs gpu with cuDNN (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" \
+        --compare "$O/par_cudnn1/texture.png" && tail -1 "$LOG"
 
 say "the networks at one view step's shapes (tools/bench/bench_cuda.c), and the card's matrix peak as the anchor"
 run "anchor: 8192^3 bf16 matrix product through PyTorch" 60 python3 -c '
@@ -141,14 +191,19 @@ for _ in range(10):
 ts.sort()
 print("anchor: bf16 8192^3 matrix product %.0f TFLOP/s (median of 10)" % (2 * 8192**3 / ts[5] / 1e12))'
 grep "^anchor:" "$LOG"
-run "bench_cuda (11 calls per network)" 120 "$B/bench_cuda" "$W" --calls 11 && grep -E "median|load" "$LOG" | tail -4
+run "bench_cuda (11 calls per network)" 120 "$B/bench_cuda" "$W" --calls 11 && grep -E "median|load" "$LOG" | tail -5
+run "bench_cuda, conv2d through cuDNN (MATEX_CUDNN=1)" 120 env MATEX_CUDNN=1 "$B/bench_cuda" "$W" --calls 11 &&
+    grep -E "median|load" "$LOG" | tail -5
 run "bench_cuda --profile, MATEX_CUDA_SYNC=1 (per-op GPU time)" 120 env MATEX_CUDA_SYNC=1 "$B/bench_cuda" "$W" \
     --calls 3 --profile
 
 say "the peer beside matex: diffusers 0.35.2 on this machine's PyTorch, same shapes (peer_diffusers.py)"
 if peer_run; then
     grep -E "^(torch|peer|compile)" "$LOG" | tail -8
-    ratios "$(grep '^matex:' "$LOG" | tail -1)" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
+    echo "matex, today's path:" | tee -a "$LOG"
+    ratios "$(grep '^matex:' "$LOG" | head -1)" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
+    echo "matex, conv2d through cuDNN (MATEX_CUDNN=1):" | tee -a "$LOG"
+    ratios "$(grep '^matex:' "$LOG" | sed -n 2p)" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
 fi
 
 say "compute-sanitizer memcheck: SD1.5-size networks"
