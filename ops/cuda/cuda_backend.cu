@@ -100,6 +100,8 @@ unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c) { return c->h
 
 unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c) { return c->cudnn_convs; }
 
+unsigned long long mx_cuda_ctx_flash_calls(const mx_cuda_ctx *c) { return c->flash_calls; }
+
 unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
     mx_cuda_ctx *c = ((cuda_backend *)be->impl)->cc;
     unsigned long long n = c->half_products;

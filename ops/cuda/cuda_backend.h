@@ -85,6 +85,8 @@ unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c);
 /* The conv2d calls of a context that cuDNN ran (MATEX_CUDNN=1, cuda_cudnn.cu; never reset): the op
  * test checks cuDNN really ran where it was asked for, and never where it was not. */
 unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c);
+/* The attention calls of a context that the fused kernel ran (MATEX_CUDA_FLASH=1, cuda_flash.cu). */
+unsigned long long mx_cuda_ctx_flash_calls(const mx_cuda_ctx *c);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

@@ -30,6 +30,8 @@ struct mx_cuda_ctx {
     int staging_next;
     unsigned long long half_products; /* GEMMs run on fp16/bf16 inputs (mx_cuda_half_products) */
     unsigned long long cudnn_convs;   /* conv2d calls run by cuDNN (mx_cuda_ctx_cudnn_convs) */
+    unsigned long long flash_calls;   /* attention calls run by the fused kernel (mx_cuda_ctx_flash_calls) */
+    int flash_attn; /* MATEX_CUDA_FLASH=1: half-precision attention through cuda_flash.cu */
     int attn_fp32; /* the last linear had fp32 weights: attention (fed by it) in fp32 */
     struct mx_cuda_gemm_plans *gemm_plans; /* cuBLASLt plans by shape (cuda_gemm.cu), made on first use */
     struct mx_cuda_cudnn *cudnn; /* conv2d through cuDNN (cuda_cudnn.cu); NULL: im2col + cuBLASLt */
@@ -167,6 +169,16 @@ void mx_cuda_cudnn_close(mx_cuda_ctx *c);
  * then nothing was queued. */
 int mx_cuda_cudnn_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
                          mx_wptr bias, int Cout, int kh, int kw, int stride, int pad, int Ho, int Wo, mx_status *st);
+
+/* ---- attention without materialised scores (cuda_flash.cu) ---- */
+
+/* Sets c->flash_attn from MATEX_CUDA_FLASH (only "1" switches it on). */
+void mx_cuda_flash_open(mx_cuda_ctx *c);
+/* mx_cuda_attention's half-precision path (checked arguments) in the fused kernel: 0, -1 on error,
+ * or 1 when it does not take it (off, head size above 160, scratch too small): nothing queued. */
+int mx_cuda_flash_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k, const float *v, int B, int H,
+                            int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal,
+                            float scale, mx_status *st);
 
 /* dst[i] = src[i] rounded (nearest even) to dt (MX_F32: a copy). */
 int mx_cuda_convert_from_f32(mx_cuda_ctx *c, void *dst, mx_dtype dt, const float *src, size_t n, const char *what,

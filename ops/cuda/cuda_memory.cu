@@ -69,6 +69,7 @@ int mx_cuda_ctx_create(mx_cuda_ctx **out, int device, size_t scratch_bytes, mx_s
     if (scratch_bytes && mx_cuda_alloc((void **)&c->scratch, scratch_bytes, "cuda scratch", st)) goto fail;
     if (staging_create(c, st)) goto fail;
     mx_cuda_cudnn_open(c);
+    mx_cuda_flash_open(c);
     *out = c;
     return 0;
 fail:

@@ -481,6 +481,33 @@ static void test_attention_ops(env *e) {
     test_attention(e, 1, 1, 21, 35, 512, 0); /* the VAE mid-block's head size on the fp32 kernel */
 }
 
+/* Attention in the fused kernel (ops/cuda/cuda_flash.cu) where MATEX_CUDA_FLASH=1, at the half bound:
+ * the UNet's shapes (64x64 latent: 4096 queries and keys, 8 heads of 40; cross-attention on 77
+ * tokens; the 32x32 level's heads of 80 and the 16x16 level's of 160; the grid's 8192 tokens, one
+ * head: the CPU reference takes ~10 s a case) and awkward ones (partial tiles of queries and keys,
+ * one key, causal, head sizes 16, 33 and 100 padded to 48, 48 and 160). The fused kernel must have
+ * run them all; without MATEX_CUDA_FLASH=1 it must never run. */
+static void test_flash_attention(env *e) {
+    const char *env_on = getenv("MATEX_CUDA_FLASH");
+    int on = env_on && strcmp(env_on, "1") == 0;
+    static const int cases[10][6] = {/* B, H, Tq, Tk, D, causal */
+                                   {1, 8, 4096, 4096, 40, 0}, {2, 8, 4096, 77, 40, 0}, {1, 8, 1024, 1024, 80, 0},
+                                   {2, 8, 256, 77, 160, 0},   {1, 1, 8192, 8192, 40, 0}, {1, 3, 37, 45, 40, 0},
+                                   {1, 2, 29, 29, 64, 1},     {2, 1, 100, 1, 16, 0},    {1, 2, 65, 130, 33, 1},
+                                   {1, 1, 63, 200, 100, 0}};
+    /* off: the small cases only (the UNet's take the CPU reference ~20 s, and the cuBLASLt path they
+     * would check has its own cases above) */
+    int n = on ? (int)(sizeof cases / sizeof cases[0]) : 5, first = on ? 0 : 5;
+    unsigned long long before = mx_cuda_ctx_flash_calls(e->gpu);
+    test_linear(e, MX_F16, 33, 70, 130); /* after a half-precision projection: the half-precision path */
+    for (int i = first; i < first + n; i++)
+        test_attention(e, cases[i][0], cases[i][1], cases[i][2], cases[i][3], cases[i][4], cases[i][5]);
+    unsigned long long ran = mx_cuda_ctx_flash_calls(e->gpu) - before;
+    printf("%-48s %llu of %d calls %s\n", on ? "attention in the fused kernel (MATEX_CUDA_FLASH=1)" :
+           "attention in the fused kernel (unset): none", ran, n, (on ? ran == (unsigned long long)n : ran == 0) ? "ok" : "FAIL");
+    CHECK(on ? ran == (unsigned long long)n : ran == 0);
+}
+
 /* The small layout, vector and embedding ops (pad, fill, axpy, lincomb, clamp, affine, timestep and
  * token embeddings) against the scalar references: bit-exact except the embeddings' transcendental
  * functions. */
@@ -643,6 +670,7 @@ int main(void) {
     test_small_scratch(&e);
     test_norm_ops(&e);
     test_attention_ops(&e);
+    test_flash_attention(&e);
     test_other_ops(&e);
     mx_arena_destroy(&e.cpu_scratch);
     mx_cuda_ctx_destroy(e.gpu);

@@ -9,9 +9,9 @@
 # Uses the binaries of $GPU_CHECK_BIN (default build-cuda/gpu, or its archive build-cuda/gpu.tar.gz:
 # `make gpu-check-pack` here), else builds `make cuda` (minutes). Writes its log to $GPU_CHECK_LOG
 # (default $GPU_CHECK_OUT/log.txt) and the outputs under $GPU_CHECK_OUT (default gpu-check-out).
-# Issue 39 adds, each beside today's path in the same run: conv2d through cuDNN (MATEX_CUDNN=1: the
-# op tests, the goldens, bench_cuda, a timed texture, two runs of one seed byte-equal, its PSNR
-# against the CPU) and the diffusers peer (../shared/peer, packed) with the ratios matex / eager and
+# Issue 39 adds, each beside today's path in the same run: conv2d through cuDNN (MATEX_CUDNN=1) and
+# the fused attention (MATEX_CUDA_FLASH=1): the op tests, the goldens, bench_cuda for each path, a
+# timed texture, two runs of one seed byte-equal, their PSNR against the CPU; and the diffusers peer (../shared/peer, packed) with the ratios matex / eager and
 # matex / compiled. cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
 # Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s),
 # before issue 39's steps (never run yet; the peer alone ~200 s with torch.compile).
@@ -132,12 +132,13 @@ mark=$(wc -l <"$LOG")
 run "test-cuda" 180 env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh \
     "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
 summary "$mark"
-say "make test-cuda with conv2d through cuDNN (MATEX_CUDNN=1)"
+say "make test-cuda with conv2d through cuDNN and the fused attention (MATEX_CUDNN=1 MATEX_CUDA_FLASH=1)"
 mark=$(wc -l <"$LOG")
-run "test-cuda, MATEX_CUDNN=1" 180 env MATEX_CUDNN=1 MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 \
-    sh tests/cuda/run.sh "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
+run "test-cuda, MATEX_CUDNN=1 MATEX_CUDA_FLASH=1" 240 env MATEX_CUDNN=1 MATEX_CUDA_FLASH=1 MATEX="$M" \
+    MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh "$B/tests/cuda/test_cuda_ops" \
+    "$B"/tests/test_nn_*
 summary "$mark"
-grep -E "cuDNN|cudnn" "$LOG" | tail -n +"$mark" | sort | uniq -c | sort -rn | head -20
+tail -n +"$mark" "$LOG" | grep -E "cuDNN|fused kernel" | sort | uniq -c | sort -rn | head -20
 
 say "compute-sanitizer memcheck: tiny pipeline"
 run "memcheck tiny pipeline" 120 env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck --error-exitcode 99 \
@@ -151,8 +152,8 @@ run "make_sd15_weights --fast" 180 sh tools/scripts/make_sd15_weights.sh "$M" "$
 say "timed: default texture on the GPU (6 views, 10 steps, 1024^2)"
 run "texture --device cuda" 120 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --seed 1 \
     -o "$O/gpu_default" --force && stages "$O/gpu_default/report.json"
-say "timed: default texture on the GPU, conv2d through cuDNN (MATEX_CUDNN=1)"
-run "texture --device cuda, MATEX_CUDNN=1" 120 env MATEX_CUDNN=1 "$M" texture "$MESH" "$PROMPT" --weights "$W" \
+say "timed: default texture on the GPU, cuDNN convolution and the fused attention (MATEX_CUDNN=1 MATEX_CUDA_FLASH=1)"
+run "texture --device cuda, new paths" 120 env MATEX_CUDNN=1 MATEX_CUDA_FLASH=1 "$M" texture "$MESH" "$PROMPT" --weights "$W" \
     --device cuda --seed 1 -o "$O/gpu_cudnn" --force && stages "$O/gpu_cudnn/report.json"
 say "timed: texture --fast on the GPU"
 run "texture --fast --device cuda" 60 "$M" texture "$MESH" "$PROMPT" --weights "$W" --device cuda --fast --seed 1 \
@@ -168,15 +169,15 @@ run "texture small, cpu fp32" 240 "$M" texture "$MESH" "$PROMPT" --weights "$W" 
 [ -f "$O/par_gpu/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
     run "psnr cpu vs gpu (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" --compare "$O/par_gpu/texture.png" &&
     tail -1 "$LOG"
-say "same seed twice on the GPU with cuDNN (MATEX_CUDNN=1): byte-equal textures, and PSNR against the CPU"
+say "same seed twice on the GPU, new paths (MATEX_CUDNN=1 MATEX_CUDA_FLASH=1): byte-equal textures, PSNR vs the CPU"
 for i in 1 2; do
     # shellcheck disable=SC2086
-    run "texture small, cuda, MATEX_CUDNN=1, run $i" 60 env MATEX_CUDNN=1 "$M" texture "$MESH" "$PROMPT" \
+    run "texture small, cuda, new paths, run $i" 60 env MATEX_CUDNN=1 MATEX_CUDA_FLASH=1 "$M" texture "$MESH" "$PROMPT" \
         --weights "$W" --device cuda $small -o "$O/par_cudnn$i" --force
 done
-run "two cuDNN runs of one seed: texture.png byte-equal" 10 cmp "$O/par_cudnn1/texture.png" "$O/par_cudnn2/texture.png"
+run "two runs of one seed, new paths: texture.png byte-equal" 10 cmp "$O/par_cudnn1/texture.png" "$O/par_cudnn2/texture.png"
 [ -f "$O/par_cudnn1/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
-    run "psnr cpu vs gpu with cuDNN (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" \
+    run "psnr cpu vs gpu, new paths (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" \
         --compare "$O/par_cudnn1/texture.png" && tail -1 "$LOG"
 
 say "the networks at one view step's shapes (tools/bench/bench_cuda.c), and the card's matrix peak as the anchor"
@@ -191,19 +192,27 @@ for _ in range(10):
 ts.sort()
 print("anchor: bf16 8192^3 matrix product %.0f TFLOP/s (median of 10)" % (2 * 8192**3 / ts[5] / 1e12))'
 grep "^anchor:" "$LOG"
-run "bench_cuda (11 calls per network)" 120 "$B/bench_cuda" "$W" --calls 11 && grep -E "median|load" "$LOG" | tail -5
-run "bench_cuda, conv2d through cuDNN (MATEX_CUDNN=1)" 120 env MATEX_CUDNN=1 "$B/bench_cuda" "$W" --calls 11 &&
-    grep -E "median|load" "$LOG" | tail -5
+# The four paths in turn, each one's matex: line kept for the ratios: today's, cuDNN convolution,
+# the fused attention, both.
+matex_lines=""
+for paths in "MATEX_CUDNN=0 MATEX_CUDA_FLASH=0" "MATEX_CUDNN=1 MATEX_CUDA_FLASH=0" "MATEX_CUDNN=0 MATEX_CUDA_FLASH=1" \
+    "MATEX_CUDNN=1 MATEX_CUDA_FLASH=1"; do
+    # shellcheck disable=SC2086
+    run "bench_cuda (11 calls per network), $paths" 120 env $paths "$B/bench_cuda" "$W" --calls 11 &&
+        grep -E "median|load" "$LOG" | tail -5
+    matex_lines="$matex_lines$paths $(grep '^matex:' "$LOG" | tail -1)
+"
+done
 run "bench_cuda --profile, MATEX_CUDA_SYNC=1 (per-op GPU time)" 120 env MATEX_CUDA_SYNC=1 "$B/bench_cuda" "$W" \
     --calls 3 --profile
 
 say "the peer beside matex: diffusers 0.35.2 on this machine's PyTorch, same shapes (peer_diffusers.py)"
 if peer_run; then
     grep -E "^(torch|peer|compile)" "$LOG" | tail -8
-    echo "matex, today's path:" | tee -a "$LOG"
-    ratios "$(grep '^matex:' "$LOG" | head -1)" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
-    echo "matex, conv2d through cuDNN (MATEX_CUDNN=1):" | tee -a "$LOG"
-    ratios "$(grep '^matex:' "$LOG" | sed -n 2p)" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
+    printf '%s' "$matex_lines" | while read -r cudnn flash line; do
+        echo "matex with $cudnn $flash:" | tee -a "$LOG"
+        ratios "$line" "$(grep '^peer:' "$LOG" | tail -1)" | tee -a "$LOG"
+    done
 fi
 
 say "compute-sanitizer memcheck: SD1.5-size networks"
