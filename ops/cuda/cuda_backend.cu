@@ -10,6 +10,9 @@
 #include <string.h>
 
 #include "cuda_common.cuh"
+extern "C" {
+#include "../../runtime/log.h" /* mx_now; a C header without its own extern "C" */
+}
 
 #define CUDA_SCRATCH_BYTES ((size_t)64 << 20)
 
@@ -21,6 +24,8 @@ typedef struct cuda_backend {
     int failed;
     int sync_each_op;    /* MATEX_CUDA_SYNC=1: wait after every op (slow; names the op that faults) */
     const char *last_op; /* the op queued last (an op_list.h name) */
+    double alloc_s;      /* time in device allocations (weights, arenas) and their count */
+    unsigned long long allocs;
 } cuda_backend;
 
 static cuda_backend *of(const mx_ctx *c) { return (cuda_backend *)c->be->impl; }
@@ -55,9 +60,13 @@ void mx_cuda_fill_kernels(mx_kernels *k) {
 /* ---- memory and copies ---- */
 
 static void *cuda_alloc(mx_backend *be, size_t bytes, mx_status *st) {
+    cuda_backend *b = (cuda_backend *)be->impl;
     void *p = NULL;
-    (void)be;
-    return mx_cuda_alloc(&p, bytes, "cuda device memory", st) ? NULL : p;
+    double t0 = mx_now();
+    int rc = mx_cuda_alloc(&p, bytes, "cuda device memory", st);
+    b->alloc_s += mx_now() - t0;
+    b->allocs++;
+    return rc ? NULL : p;
 }
 
 static void cuda_release(mx_backend *be, void *p) {
@@ -107,6 +116,15 @@ unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
     unsigned long long n = c->half_products;
     if (reset) c->half_products = 0;
     return n;
+}
+
+void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out) {
+    const cuda_backend *b = (const cuda_backend *)be->impl;
+    out->copy_s = b->cc->upload_copy_s;
+    out->wait_s = b->cc->upload_wait_s;
+    out->bytes = b->cc->upload_bytes;
+    out->alloc_s = b->alloc_s;
+    out->allocs = b->allocs;
 }
 
 static void cuda_destroy(mx_backend *be) {

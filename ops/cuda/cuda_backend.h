@@ -87,6 +87,15 @@ unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c);
 unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c);
 /* The attention calls of a context that the fused kernel ran (MATEX_CUDA_FLASH=1, cuda_flash.cu). */
 unsigned long long mx_cuda_ctx_flash_calls(const mx_cuda_ctx *c);
+/* Where loading weights onto the GPU spends its time, since the backend was created: host copies
+ * into the pinned staging halves, waits for a half the copy engine still reads, bytes uploaded, and
+ * device allocations (time and count). bench_cuda prints them after loading (issue 39: the 3.6 GB
+ * set takes 2.5-3 s; the goal is under 1 s). */
+typedef struct mx_cuda_upload_stats {
+    double copy_s, wait_s, alloc_s;
+    unsigned long long bytes, allocs;
+} mx_cuda_upload_stats;
+void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

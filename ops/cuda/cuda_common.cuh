@@ -30,6 +30,10 @@ struct mx_cuda_ctx {
     int staging_next;
     unsigned long long half_products; /* GEMMs run on fp16/bf16 inputs (mx_cuda_half_products) */
     unsigned long long cudnn_convs;   /* conv2d calls run by cuDNN (mx_cuda_ctx_cudnn_convs) */
+    /* Where staged uploads spend their time (mx_cuda_backend_upload_stats): host copies into the
+     * staging halves, waits for a half the copy engine still reads, and the bytes. */
+    double upload_copy_s, upload_wait_s;
+    unsigned long long upload_bytes;
     unsigned long long flash_calls;   /* attention calls run by the fused kernel (mx_cuda_ctx_flash_calls) */
     int flash_attn; /* MATEX_CUDA_FLASH=1: half-precision attention through cuda_flash.cu */
     int attn_fp32; /* the last linear had fp32 weights: attention (fed by it) in fp32 */

@@ -3,6 +3,9 @@
 #include <string.h>
 
 #include "cuda_common.cuh"
+extern "C" {
+#include "../../runtime/log.h" /* mx_now; a C header without its own extern "C" */
+}
 
 /* cuBLASLt workspace: 32 MiB is what NVIDIA recommends for Hopper (4 MiB is enough before it). */
 #define MX_CUDA_WORKSPACE_BYTES ((size_t)32 << 20)
@@ -128,8 +131,13 @@ int mx_cuda_upload_staged(mx_cuda_ctx *c, void *dst, const void *src, size_t byt
     for (size_t off = 0; off < bytes;) {
         int h = c->staging_next;
         size_t n = bytes - off < c->staging_bytes ? bytes - off : c->staging_bytes;
+        double t0 = mx_now();
         if (mx_cuda_ok(cudaEventSynchronize(c->staging_done[h]), what, st)) return -1;
+        double t1 = mx_now();
         memcpy(c->staging[h], (const unsigned char *)src + off, n);
+        c->upload_wait_s += t1 - t0;
+        c->upload_copy_s += mx_now() - t1;
+        c->upload_bytes += n;
         if (mx_cuda_ok(cudaMemcpyAsync((unsigned char *)dst + off, c->staging[h], n, cudaMemcpyHostToDevice, c->stream),
                        what, st) ||
             mx_cuda_ok(cudaEventRecord(c->staging_done[h], c->stream), what, st))

@@ -26,6 +26,8 @@
 #include "bench_sd15.h"
 
 #ifdef MX_WITH_CUDA
+#include "../../ops/cuda/cuda_backend.h"
+
 enum { B = 2, H = 64, W = 64, T = 77, MAX_CALLS = 101 };
 
 typedef struct {
@@ -181,6 +183,12 @@ int main(int argc, char **argv) {
         return 1;
     }
     printf("load + upload %.2f s; %d timed calls per network\n", mx_now() - t0, calls);
+    mx_cuda_upload_stats us;
+    mx_cuda_backend_upload_stats(b.c.be, &us);
+    printf("load: %.2f GB through pinned staging (host copies %.2f s, %.1f GB/s; waits for the copy engine %.2f s), "
+           "%llu device allocations %.2f s\n",
+           us.bytes / 1e9, us.copy_s, us.copy_s > 0 ? us.bytes / 1e9 / us.copy_s : 0.0, us.wait_s, us.allocs,
+           us.alloc_s);
     int rc = 0;
     double med[NETS];
     for (int net = 0; net < NETS && !rc; net++)
