@@ -118,6 +118,28 @@ unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
     return n;
 }
 
+int mx_cuda_backend_capture_count(mx_backend *be, int (*queue)(void *arg, mx_status *st), void *arg,
+                                  size_t *launches, mx_status *st) {
+    cuda_backend *b = (cuda_backend *)be->impl;
+    *launches = 0;
+    if (report_failure(b, st) || wait_queued(b, st)) return -1;
+    if (mx_cuda_ok(cudaStreamBeginCapture(b->cc->stream, cudaStreamCaptureModeRelaxed), "cuda capture: begin", st))
+        return -1;
+    int rc = queue(arg, st);
+    cudaGraph_t g = NULL;
+    cudaError_t e = cudaStreamEndCapture(b->cc->stream, &g);
+    if (b->failed) { /* an op failed while captured: its error, and the backend usable again */
+        *st = b->err;
+        b->failed = 0;
+        rc = -1;
+    }
+    if (rc == 0 && mx_cuda_ok(e, "cuda capture: the work queued cannot be one graph", st)) rc = -1;
+    if (rc == 0 && mx_cuda_ok(cudaGraphGetNodes(g, NULL, launches), "cuda capture: graph nodes", st)) rc = -1;
+    if (g) cudaGraphDestroy(g);
+    (void)cudaGetLastError(); /* a capture error is not a later op's */
+    return rc;
+}
+
 void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out) {
     const cuda_backend *b = (const cuda_backend *)be->impl;
     out->copy_s = b->cc->upload_copy_s;

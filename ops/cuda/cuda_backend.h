@@ -96,6 +96,13 @@ typedef struct mx_cuda_upload_stats {
     unsigned long long bytes, allocs;
 } mx_cuda_upload_stats;
 void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out);
+/* Captures what queue(arg) queues on the backend's stream into one CUDA graph (relaxed mode), without
+ * running it, and gives its node count (kernel launches, copies, memsets): the launches of, e.g.,
+ * one guided step. Fails, naming the cause, where the work cannot be captured (a host wait inside
+ * it, an allocation): what issue 39's graph replay must remove first. Run queue once before, so
+ * that plans and buffers exist. */
+int mx_cuda_backend_capture_count(mx_backend *be, int (*queue)(void *arg, mx_status *st), void *arg,
+                                  size_t *launches, mx_status *st);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

@@ -78,8 +78,8 @@ static int run_controlnet(bench *b, int accumulate, mx_status *st) {
     return mx_controlnet_forward(&b->c, b->m.cn_depth, &ci, b->res, b->res[b->nres], accumulate, &b->a, st);
 }
 
-/* One call of network `net` (NET_*), waited for. */
-static int run_net(bench *b, int net, mx_status *st) {
+/* Queues one call of network `net` (NET_*). */
+static int queue_net(bench *b, int net, mx_status *st) {
     int rc;
     if (net == NET_CONTROLNET) {
         rc = run_controlnet(b, 0, st);
@@ -92,8 +92,26 @@ static int run_net(bench *b, int net, mx_status *st) {
     } else {
         rc = mx_vae_decode(&b->c, b->m.vae, b->sample, 1, H, W, b->img, &b->a, st);
     }
+    return rc;
+}
+
+/* One call of network `net`, waited for (a 4-byte download). */
+static int run_net(bench *b, int net, mx_status *st) {
     float one;
-    return rc || mx_download(&b->c, &one, b->out, 1, st) ? -1 : 0;
+    return queue_net(b, net, st) || mx_download(&b->c, &one, b->out, 1, st) ? -1 : 0;
+}
+
+static int queue_guided_step(void *arg, mx_status *st) { return queue_net((bench *)arg, NET_GUIDED_STEP, st); }
+
+/* The launches of one guided step, counted by capturing it as one CUDA graph (not run); or why it
+ * cannot be one graph yet. */
+static void count_launches(bench *b) {
+    size_t n = 0;
+    mx_status st;
+    if (mx_cuda_backend_capture_count(b->c.be, queue_guided_step, b, &n, &st) == 0)
+        printf("guided step: %zu launches (kernels, copies, memsets), captured as one CUDA graph\n", n);
+    else
+        printf("guided step: launches not counted, the step cannot be captured as one CUDA graph: %s\n", st.msg);
 }
 
 static int cmp_double(const void *x, const void *y) {
@@ -194,6 +212,7 @@ int main(int argc, char **argv) {
     for (int net = 0; net < NETS && !rc; net++)
         if ((rc = bench_net(&b, net, calls, profile && net != NET_GUIDED_STEP, &med[net], &st)))
             fprintf(stderr, "bench_cuda: %s\n", st.msg);
+    if (!rc) count_launches(&b);
     if (!rc) /* the names of the peer's line (peer_diffusers.py) */
         printf("matex: controlnet_ms=%.2f unet_ms=%.2f guided_step_ms=%.2f vae_decode_ms=%.2f\n",
                1e3 * med[NET_CONTROLNET], 1e3 * med[NET_UNET], 1e3 * med[NET_GUIDED_STEP],

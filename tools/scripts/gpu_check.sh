@@ -199,7 +199,7 @@ for paths in "MATEX_CUDNN=0 MATEX_CUDA_FLASH=0" "MATEX_CUDNN=1 MATEX_CUDA_FLASH=
     "MATEX_CUDNN=1 MATEX_CUDA_FLASH=1"; do
     # shellcheck disable=SC2086
     run "bench_cuda (11 calls per network), $paths" 120 env $paths "$B/bench_cuda" "$W" --calls 11 &&
-        grep -E "median|load" "$LOG" | tail -6
+        grep -E "median|load|launches" "$LOG" | tail -7
     matex_lines="$matex_lines$paths $(grep '^matex:' "$LOG" | tail -1)
 "
 done
