@@ -128,12 +128,12 @@ nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv
 "$M" --version | tee -a "$LOG"
 
 say "make test-cuda (op tests, network goldens, tiny pipelines; MATEX_CUDA_SYNC=1 names a faulting op)"
-mark=$(wc -l <"$LOG")
+mark=$(($(wc -l <"$LOG") + 1)) # the first line of the next run
 run "test-cuda" 180 env MATEX="$M" MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh \
     "$B/tests/cuda/test_cuda_ops" "$B"/tests/test_nn_*
 summary "$mark"
 say "make test-cuda with conv2d through cuDNN and the fused attention (MATEX_CUDNN=1 MATEX_CUDA_FLASH=1)"
-mark=$(wc -l <"$LOG")
+mark=$(($(wc -l <"$LOG") + 1)) # the first line of the next run
 run "test-cuda, MATEX_CUDNN=1 MATEX_CUDA_FLASH=1" 240 env MATEX_CUDNN=1 MATEX_CUDA_FLASH=1 MATEX="$M" \
     MX_TEST_DEVICE=cuda MATEX_FULL=1 MATEX_CUDA_SYNC=1 sh tests/cuda/run.sh "$B/tests/cuda/test_cuda_ops" \
     "$B"/tests/test_nn_*
