@@ -157,7 +157,7 @@ void mx_cuda_cudnn_close(mx_cuda_ctx *c) {
     for (int i = 0; i < PLAN_SLOTS; i++)
         if (n->plans[i].used) plan_free(&n->api, &n->plans[i]);
     free(n->plans);
-    mx_cuda_free(n->buf);
+    if (n->buf) cudaFree(n->buf);
     n->api.Destroy(n->handle);
     dlclose(n->api.lib);
     free(n);
@@ -433,10 +433,13 @@ static int transpose(mx_cuda_ctx *c, Tout *dst, const Tin *src, unsigned rows, u
  * while the first calls of the largest shapes grow it). */
 static void *call_buffer(mx_cuda_cudnn *n, size_t bytes, mx_status *st) {
     if (bytes <= n->buf_bytes) return n->buf;
-    mx_cuda_free(n->buf);
+    if (n->buf) cudaFree(n->buf); /* cudaMalloc/cudaFree here: cuda_memory.cu opens this file's state */
     n->buf = NULL;
     n->buf_bytes = 0;
-    if (mx_cuda_alloc(&n->buf, bytes, "cuda conv2d (cuDNN) buffers", st)) return NULL;
+    if (mx_cuda_ok(cudaMalloc(&n->buf, bytes), "cuda conv2d (cuDNN) buffers", st)) {
+        n->buf = NULL;
+        return NULL;
+    }
     n->buf_bytes = bytes;
     return n->buf;
 }
