@@ -198,10 +198,11 @@ matex_lines=""
 for paths in "MATEX_CUDNN=0 MATEX_CUDA_FLASH=0" "MATEX_CUDNN=1 MATEX_CUDA_FLASH=0" "MATEX_CUDNN=0 MATEX_CUDA_FLASH=1" \
     "MATEX_CUDNN=1 MATEX_CUDA_FLASH=1"; do
     # shellcheck disable=SC2086
-    run "bench_cuda (11 calls per network), $paths" 120 env $paths "$B/bench_cuda" "$W" --calls 11 &&
+    if run "bench_cuda (11 calls per network), $paths" 120 env $paths "$B/bench_cuda" "$W" --calls 11; then
         grep -E "median|load|launches" "$LOG" | tail -7
-    matex_lines="$matex_lines$paths $(grep '^matex:' "$LOG" | tail -1)
+        matex_lines="$matex_lines$paths $(grep '^matex:' "$LOG" | tail -1)
 "
+    fi
 done
 run "bench_cuda --profile, MATEX_CUDA_SYNC=1 (per-op GPU time)" 120 env MATEX_CUDA_SYNC=1 "$B/bench_cuda" "$W" \
     --calls 3 --profile
