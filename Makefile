@@ -159,6 +159,8 @@ $(BUILD)/tests/amx_emu.o: tests/amx_emu.c
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
 $(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/amx_emu.o
+# The cuDNN path's host-side decisions (plan keys, layouts, fallback) are tested without CUDA.
+$(BUILD)/tests/test_ops_cuda_plan: $(BUILD)/ops/cuda/cudnn_plan.o
 endif
 $(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
@@ -359,6 +361,13 @@ CUDA_HOME  ?= /usr/local/cuda
 CUDA_BUILD ?= build-cuda
 NVCC_ARCH   = -gencode arch=compute_80,code=sm_80 -gencode arch=compute_90,code=sm_90
 NVCCFLAGS   = -std=c++17 -O3 $(NVCC_ARCH) -Xcompiler -Wall,-Wextra -Werror all-warnings -MMD -MP
+# CUDNN=1 (the default where the toolkit has cudnn_graph.h): conv2d through cuDNN's graph API,
+# loaded at run time (dlopen libcudnn.so.9, nothing linked) and used only under MATEX_CUDNN=1
+# (cuda_cudnn.cu). CUDNN=0: today's path only.
+CUDNN      ?= $(if $(wildcard $(CUDA_HOME)/include/cudnn_graph.h),1,0)
+ifeq ($(CUDNN),1)
+NVCCFLAGS  += -DMX_WITH_CUDNN
+endif
 CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
@@ -366,7 +375,7 @@ CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt
 CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
                 test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast test_nn_clip_vision
 
-$(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC))
+$(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC)) $(BUILD)/ops/cuda/cudnn_plan.o
 $(BUILD)/ops/cuda/%.o: ops/cuda/%.cu
 	@mkdir -p $(dir $@)
 	$(NVCC) $(NVCCFLAGS) -c -o $@ $<
@@ -421,5 +430,9 @@ gpu-check-pack: cuda
 	ldd $(CUDA_BUILD)/matex-lite | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \
 	    while read -r lib; do cp -L "$$lib" $(GPU_PACK)/lib/ || exit 1; done
 	for d in $(GPU_PACK_DATA); do cp -r $(MATEX_TESTDATA)/$$d $(GPU_PACK)/data/$$d || exit 1; done
+	# the peer (diffusers' sources, ~4 MB): gpu_check.sh says so and goes on where it is missing
+	if [ -f $(MATEX_TESTDATA)/peer/peer_diffusers.py ]; then mkdir -p $(GPU_PACK)/peer && \
+	    cp $(MATEX_TESTDATA)/peer/peer_diffusers.py $(MATEX_TESTDATA)/peer/*-src.tar.gz $(GPU_PACK)/peer/; \
+	    else echo "gpu-check-pack: no $(MATEX_TESTDATA)/peer: packed without the peer"; fi
 	tar -C $(CUDA_BUILD) -czf $(GPU_PACK).tar.gz gpu
 	du -sh $(GPU_PACK) $(GPU_PACK).tar.gz

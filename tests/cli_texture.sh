@@ -25,7 +25,7 @@ mesh_ok() {
 # report_ok DIR: report.json is UTF-8 and has the keys the README lists
 report_ok() {
     iconv -f UTF-8 -t UTF-8 "$1/report.json" > /dev/null 2>&1 || return 1
-    for k in views coverage_after stages_s work_s seed weights_digest; do grep -q "\"$k\":" "$1/report.json" || return 1; done
+    for k in views coverage_after stages_s work_s load_s seed weights_digest; do grep -q "\"$k\":" "$1/report.json" || return 1; done
 }
 
 check "texture --help exits 0" [ "$(rc_of "$M" texture --help)" = 0 ]

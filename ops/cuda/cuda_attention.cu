@@ -13,7 +13,8 @@
  * q, k, v rounded to fp16 and packed per head, S = Q·Kᵀ and O = P·V as strided-batched cuBLASLt
  * products over the heads (fp32 accumulation, O written straight into `out`), and between them a
  * softmax kernel with fp32 statistics (max, sum) that writes P in fp16. Queries go in chunks whose
- * score rows fit the scratch; when not even 16 fit, the fp32 kernel runs. */
+ * score rows fit the scratch; when not even 16 fit, the fp32 kernel runs. Under MATEX_CUDA_FLASH=1
+ * the fused kernel of cuda_flash.cu takes the tensor-core path's place for head sizes up to 160. */
 #include "cuda_common.cuh"
 
 #define ATTN_WARPS 4
@@ -224,6 +225,11 @@ int mx_cuda_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k
     if (q_stride < H * D || kv_stride < H * D || out_stride < H * D)
         return mx_fail(st, MX_EINPUT, "cuda attention: a row stride is below heads x head size (%d)", H * D);
     attn_args a = {out, q, k, v, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal, scale};
+    if (!c->attn_fp32) { /* MATEX_CUDA_FLASH=1: the fused kernel, no score matrix (cuda_flash.cu) */
+        int rc = mx_cuda_flash_attention(c, out, q, k, v, B, H, Tq, Tk, D, q_stride, kv_stride, out_stride, causal,
+                                         scale, st);
+        if (rc <= 0) return rc;
+    }
     if (!c->attn_fp32 && (long long)Tk * D < (1LL << 31) && (long long)Tq * D < (1LL << 31)) { /* fp32 stays fp32 */
         int rc = attention_tc(c, a, B, st);
         if (rc <= 0) return rc;

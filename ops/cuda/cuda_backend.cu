@@ -10,6 +10,9 @@
 #include <string.h>
 
 #include "cuda_common.cuh"
+extern "C" {
+#include "../../runtime/log.h" /* mx_now; a C header without its own extern "C" */
+}
 
 #define CUDA_SCRATCH_BYTES ((size_t)64 << 20)
 
@@ -21,6 +24,8 @@ typedef struct cuda_backend {
     int failed;
     int sync_each_op;    /* MATEX_CUDA_SYNC=1: wait after every op (slow; names the op that faults) */
     const char *last_op; /* the op queued last (an op_list.h name) */
+    double alloc_s;      /* time in device allocations (weights, arenas) and their count */
+    unsigned long long allocs;
 } cuda_backend;
 
 static cuda_backend *of(const mx_ctx *c) { return (cuda_backend *)c->be->impl; }
@@ -55,9 +60,13 @@ void mx_cuda_fill_kernels(mx_kernels *k) {
 /* ---- memory and copies ---- */
 
 static void *cuda_alloc(mx_backend *be, size_t bytes, mx_status *st) {
+    cuda_backend *b = (cuda_backend *)be->impl;
     void *p = NULL;
-    (void)be;
-    return mx_cuda_alloc(&p, bytes, "cuda device memory", st) ? NULL : p;
+    double t0 = mx_now();
+    int rc = mx_cuda_alloc(&p, bytes, "cuda device memory", st);
+    b->alloc_s += mx_now() - t0;
+    b->allocs++;
+    return rc ? NULL : p;
 }
 
 static void cuda_release(mx_backend *be, void *p) {
@@ -98,11 +107,46 @@ static int cuda_to_host(mx_backend *be, void *dst, const void *src, size_t bytes
 
 unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c) { return c->half_products; }
 
+unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c) { return c->cudnn_convs; }
+
+unsigned long long mx_cuda_ctx_flash_calls(const mx_cuda_ctx *c) { return c->flash_calls; }
+
 unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
     mx_cuda_ctx *c = ((cuda_backend *)be->impl)->cc;
     unsigned long long n = c->half_products;
     if (reset) c->half_products = 0;
     return n;
+}
+
+int mx_cuda_backend_capture_count(mx_backend *be, int (*queue)(void *arg, mx_status *st), void *arg,
+                                  size_t *launches, mx_status *st) {
+    cuda_backend *b = (cuda_backend *)be->impl;
+    *launches = 0;
+    if (report_failure(b, st) || wait_queued(b, st)) return -1;
+    if (mx_cuda_ok(cudaStreamBeginCapture(b->cc->stream, cudaStreamCaptureModeRelaxed), "cuda capture: begin", st))
+        return -1;
+    int rc = queue(arg, st);
+    cudaGraph_t g = NULL;
+    cudaError_t e = cudaStreamEndCapture(b->cc->stream, &g);
+    if (b->failed) { /* an op failed while captured: its error, and the backend usable again */
+        *st = b->err;
+        b->failed = 0;
+        rc = -1;
+    }
+    if (rc == 0 && mx_cuda_ok(e, "cuda capture: the work queued cannot be one graph", st)) rc = -1;
+    if (rc == 0 && mx_cuda_ok(cudaGraphGetNodes(g, NULL, launches), "cuda capture: graph nodes", st)) rc = -1;
+    if (g) cudaGraphDestroy(g);
+    (void)cudaGetLastError(); /* a capture error is not a later op's */
+    return rc;
+}
+
+void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out) {
+    const cuda_backend *b = (const cuda_backend *)be->impl;
+    out->copy_s = b->cc->upload_copy_s;
+    out->wait_s = b->cc->upload_wait_s;
+    out->bytes = b->cc->upload_bytes;
+    out->alloc_s = b->alloc_s;
+    out->allocs = b->allocs;
 }
 
 static void cuda_destroy(mx_backend *be) {

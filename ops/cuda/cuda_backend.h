@@ -82,6 +82,27 @@ unsigned long long mx_cuda_half_products(mx_backend *be, int reset);
 /* The same count of one context (never reset): what the op test reads around one op. Attention
  * counts too: it runs on tensor cores in fp16 (cuda_attention.cu) unless the scratch is too small. */
 unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c);
+/* The conv2d calls of a context that cuDNN ran (MATEX_CUDNN=1, cuda_cudnn.cu; never reset): the op
+ * test checks cuDNN really ran where it was asked for, and never where it was not. */
+unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c);
+/* The attention calls of a context that the fused kernel ran (MATEX_CUDA_FLASH=1, cuda_flash.cu). */
+unsigned long long mx_cuda_ctx_flash_calls(const mx_cuda_ctx *c);
+/* Where loading weights onto the GPU spends its time, since the backend was created: host copies
+ * into the pinned staging halves, waits for a half the copy engine still reads, bytes uploaded, and
+ * device allocations (time and count). bench_cuda prints them after loading (issue 39: the 3.6 GB
+ * set takes 2.5-3 s; the goal is under 1 s). */
+typedef struct mx_cuda_upload_stats {
+    double copy_s, wait_s, alloc_s;
+    unsigned long long bytes, allocs;
+} mx_cuda_upload_stats;
+void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out);
+/* Captures what queue(arg) queues on the backend's stream into one CUDA graph (relaxed mode), without
+ * running it, and gives its node count (kernel launches, copies, memsets): the launches of, e.g.,
+ * one guided step. Fails, naming the cause, where the work cannot be captured (a host wait inside
+ * it, an allocation): what issue 39's graph replay must remove first. Run queue once before, so
+ * that plans and buffers exist. */
+int mx_cuda_backend_capture_count(mx_backend *be, int (*queue)(void *arg, mx_status *st), void *arg,
+                                  size_t *launches, mx_status *st);
 /* That kernel table (needs no device: tests check it is full). */
 void mx_cuda_fill_kernels(mx_kernels *k);
 

@@ -29,8 +29,16 @@ struct mx_cuda_ctx {
     size_t staging_bytes;        /* of each half; 0: no staging, plain copies */
     int staging_next;
     unsigned long long half_products; /* GEMMs run on fp16/bf16 inputs (mx_cuda_half_products) */
+    unsigned long long cudnn_convs;   /* conv2d calls run by cuDNN (mx_cuda_ctx_cudnn_convs) */
+    /* Where staged uploads spend their time (mx_cuda_backend_upload_stats): host copies into the
+     * staging halves, waits for a half the copy engine still reads, and the bytes. */
+    double upload_copy_s, upload_wait_s;
+    unsigned long long upload_bytes;
+    unsigned long long flash_calls;   /* attention calls run by the fused kernel (mx_cuda_ctx_flash_calls) */
+    int flash_attn; /* MATEX_CUDA_FLASH=1: half-precision attention through cuda_flash.cu */
     int attn_fp32; /* the last linear had fp32 weights: attention (fed by it) in fp32 */
     struct mx_cuda_gemm_plans *gemm_plans; /* cuBLASLt plans by shape (cuda_gemm.cu), made on first use */
+    struct mx_cuda_cudnn *cudnn; /* conv2d through cuDNN (cuda_cudnn.cu); NULL: im2col + cuBLASLt */
 };
 
 /* 0 when e is cudaSuccess, else -1 with "what: CUDA error name: text". */
@@ -56,6 +64,14 @@ static inline void *mx_cuda_scratch(mx_cuda_ctx *c, size_t bytes, const char *wh
     }
     c->scratch_used = start + bytes;
     return c->scratch + start;
+}
+
+/* v rounded (nearest even) to T. */
+template <typename T> __device__ __forceinline__ T mx_cuda_store(float v);
+template <> __device__ __forceinline__ float mx_cuda_store<float>(float v) { return v; }
+template <> __device__ __forceinline__ __half mx_cuda_store<__half>(float v) { return __float2half_rn(v); }
+template <> __device__ __forceinline__ __nv_bfloat16 mx_cuda_store<__nv_bfloat16>(float v) {
+    return __float2bfloat16_rn(v);
 }
 
 /* Blocks for an elementwise grid-stride loop over n items. */
@@ -145,6 +161,29 @@ int mx_cuda_gemm_batched(mx_cuda_ctx *c, mx_dtype ab, int transa, int transb, in
 /* Destroys the cached GEMM plans (at context destruction). */
 typedef struct mx_cuda_gemm_plans mx_cuda_gemm_plans;
 void mx_cuda_gemm_plans_free(mx_cuda_ctx *c);
+/* ---- conv2d through cuDNN (cuda_cudnn.cu) ---- */
+
+typedef struct mx_cuda_cudnn mx_cuda_cudnn;
+/* Sets c->cudnn: cuDNN when MATEX_CUDNN=1, the build has cuDNN's headers and libcudnn.so.9 loads
+ * (cudnnGetVersion: major 9), else NULL; one line saying which, only when MATEX_CUDNN=1 was asked. */
+void mx_cuda_cudnn_open(mx_cuda_ctx *c);
+void mx_cuda_cudnn_close(mx_cuda_ctx *c);
+/* conv2d of mx_cuda_conv2d (checked arguments, Ho x Wo output) through cuDNN: 0, -1 on error, or 1
+ * when cuDNN does not take it (off, not fp16 weights, no deterministic engine for this shape):
+ * then nothing was queued. */
+int mx_cuda_cudnn_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                         mx_wptr bias, int Cout, int kh, int kw, int stride, int pad, int Ho, int Wo, mx_status *st);
+
+/* ---- attention without materialised scores (cuda_flash.cu) ---- */
+
+/* Sets c->flash_attn from MATEX_CUDA_FLASH (only "1" switches it on). */
+void mx_cuda_flash_open(mx_cuda_ctx *c);
+/* mx_cuda_attention's half-precision path (checked arguments) in the fused kernel: 0, -1 on error,
+ * or 1 when it does not take it (off, head size above 160, scratch too small): nothing queued. */
+int mx_cuda_flash_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k, const float *v, int B, int H,
+                            int Tq, int Tk, int D, int q_stride, int kv_stride, int out_stride, int causal,
+                            float scale, mx_status *st);
+
 /* dst[i] = src[i] rounded (nearest even) to dt (MX_F32: a copy). */
 int mx_cuda_convert_from_f32(mx_cuda_ctx *c, void *dst, mx_dtype dt, const float *src, size_t n, const char *what,
                              mx_status *st);

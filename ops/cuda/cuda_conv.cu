@@ -12,13 +12,6 @@ typedef struct conv_shape {
     int Cin, H, W, kh, kw, stride, pad, Ho, Wo;
 } conv_shape;
 
-template <typename T> __device__ __forceinline__ T conv_store(float v);
-template <> __device__ __forceinline__ float conv_store<float>(float v) { return v; }
-template <> __device__ __forceinline__ __half conv_store<__half>(float v) { return __float2half_rn(v); }
-template <> __device__ __forceinline__ __nv_bfloat16 conv_store<__nv_bfloat16>(float v) {
-    return __float2bfloat16_rn(v);
-}
-
 /* col[kk, pl] (row-major, width pc) = x[ci, oy*stride - pad + ky, ox*stride - pad + kx] or 0 for one
  * item x, for kk = (ci, ky, kx) and output pixel p0 + pl = (oy, ox). Grid: x over the tile's pixels,
  * y over kk (< 65536: Cin·kh·kw of SD is at most 11,520): every index is 32-bit, (ci, ky, kx) is
@@ -33,7 +26,7 @@ __global__ void im2col_tile_kernel(T *col, const float *x, conv_shape s, unsigne
         unsigned p = p0 + pl, oy = p / (unsigned)s.Wo, ox = p - oy * (unsigned)s.Wo;
         int iy = (int)(oy * s.stride + ky) - s.pad, ix = (int)(ox * s.stride + kx) - s.pad;
         float v = iy >= 0 && iy < s.H && ix >= 0 && ix < s.W ? plane[(size_t)iy * s.W + ix] : 0.0f;
-        row[pl] = conv_store<T>(v);
+        row[pl] = mx_cuda_store<T>(v);
     }
 }
 
@@ -108,6 +101,9 @@ int mx_cuda_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int
     if ((long long)s.Ho * s.Wo > 0x7fffffffLL || (long long)Cin * kh * kw > 65535)
         return mx_fail(st, MX_EINPUT, "cuda conv2d: %d x %d output pixels or %d x %d x %d taps out of range", s.Ho, s.Wo,
                        Cin, kh, kw);
+    /* cuDNN where MATEX_CUDNN=1 and a deterministic engine runs this shape (cuda_cudnn.cu), else im2col */
+    int rc = mx_cuda_cudnn_conv2d(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad, s.Ho, s.Wo, st);
+    if (rc != 1) return rc;
     if (conv_items(c, y, x, B, w, Cout, &s, st)) return -1;
     return mx_cuda_add_bias(c, y, bias, B, Cout, (long long)s.Ho * s.Wo, "cuda conv2d bias", st);
 }

@@ -3,6 +3,9 @@
 #include <string.h>
 
 #include "cuda_common.cuh"
+extern "C" {
+#include "../../runtime/log.h" /* mx_now; a C header without its own extern "C" */
+}
 
 /* cuBLASLt workspace: 32 MiB is what NVIDIA recommends for Hopper (4 MiB is enough before it). */
 #define MX_CUDA_WORKSPACE_BYTES ((size_t)32 << 20)
@@ -68,6 +71,8 @@ int mx_cuda_ctx_create(mx_cuda_ctx **out, int device, size_t scratch_bytes, mx_s
     c->scratch_cap = scratch_bytes;
     if (scratch_bytes && mx_cuda_alloc((void **)&c->scratch, scratch_bytes, "cuda scratch", st)) goto fail;
     if (staging_create(c, st)) goto fail;
+    mx_cuda_cudnn_open(c);
+    mx_cuda_flash_open(c);
     *out = c;
     return 0;
 fail:
@@ -79,6 +84,7 @@ void mx_cuda_ctx_destroy(mx_cuda_ctx *c) {
     if (!c) return;
     if (c->stream) cudaStreamSynchronize(c->stream);
     staging_destroy(c);
+    mx_cuda_cudnn_close(c);
     mx_cuda_gemm_plans_free(c);
     mx_cuda_free(c->scratch);
     mx_cuda_free(c->workspace);
@@ -125,8 +131,13 @@ int mx_cuda_upload_staged(mx_cuda_ctx *c, void *dst, const void *src, size_t byt
     for (size_t off = 0; off < bytes;) {
         int h = c->staging_next;
         size_t n = bytes - off < c->staging_bytes ? bytes - off : c->staging_bytes;
+        double t0 = mx_now();
         if (mx_cuda_ok(cudaEventSynchronize(c->staging_done[h]), what, st)) return -1;
+        double t1 = mx_now();
         memcpy(c->staging[h], (const unsigned char *)src + off, n);
+        c->upload_wait_s += t1 - t0;
+        c->upload_copy_s += mx_now() - t1;
+        c->upload_bytes += n;
         if (mx_cuda_ok(cudaMemcpyAsync((unsigned char *)dst + off, c->staging[h], n, cudaMemcpyHostToDevice, c->stream),
                        what, st) ||
             mx_cuda_ok(cudaEventRecord(c->staging_done[h], c->stream), what, st))

@@ -74,10 +74,12 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
                         !mx_job_ctx_on_cuda(j->gen.ctx) && mx_isa_precision(j->gen.ctx->k->isa) != mx_texture_opts_precision(o)
                             ? ": bf16 is not available on this CPU"
                             : "");
+        double t_load = mx_now();
         if (mx_models_load(&j->gen.own_models, j->gen.ctx, o->weights_path, model_needs, st)) return -1;
         j->gen.own_models_ready = 1;
         j->gen.models = &j->gen.own_models;
         if (j->gen.own_ctx_ready && mx_models_pack_weights(&j->gen.own_ctx, st)) return -1;
+        j->rep.load_s = mx_now() - t_load;
         mx_job_progress(j, "loaded weights %s%s", o->weights_path, o->pub.fast ? " (fast: LCM + TAESD)" : "");
     }
     if (model_needs == MX_JOB_NO_MODELS) j->gen.models = NULL;

@@ -164,6 +164,7 @@ const char *mx_job_report_end(mx_job *j) {
     mx_jw_num(w, "decode", j->rep.decode_s);
     mx_jw_num(w, "backproject", j->rep.backproject_s);
     mx_jw_end_obj(w);
+    mx_jw_num(w, "load_s", j->rep.load_s); /* the weights onto the device: inside stages_s.load */
     mx_jw_num(w, "total_s", mx_now() - j->rep.t0);
     mx_jw_end_obj(w);
     return mx_jw_text(w);

@@ -19,6 +19,8 @@ typedef struct mx_job_rep {
     double t0;
     double last_denoise_s, last_decode_s;      /* of the latest mx_job_generate, for the report */
     double denoise_s, decode_s, backproject_s; /* summed over the run: the report's work_s */
+    double load_s;  /* reading the weight file onto the device (CPU or GPU): the report's load_s; 0 when
+                     * the job used a model set already loaded */
     double psnr_db; /* transfer onto its own mesh: PSNR of the painted texels (report), else NAN */
     int nstages;    /* seconds per stage, for the report */
     const char *stage_name[8];

@@ -379,6 +379,71 @@ static void test_gemm_ops(env *e) {
     test_conv2d(e, MX_F16, 2, 9, 7, 5, 6, 1, 1, 0);
 }
 
+/* n floats of dev, waited for (NULL after a counted failure). */
+static float *download(env *e, const float *dev, size_t n, const char *what) {
+    float *h = malloc(n * sizeof *h);
+    if (!h) abort();
+    if (gpu_ok(e, mx_cuda_sync(e->gpu, &e->st), what) ||
+        gpu_ok(e, mx_cuda_download(e->gpu, h, dev, n * sizeof *h, what, &e->st), what)) {
+        free(h);
+        return NULL;
+    }
+    return h;
+}
+
+/* One fp16 conv (SD's 3x3, 320 channels, at 16x16): the same call twice gives the same bytes, and
+ * item 1 of a batch of 2 the same bytes as that item alone (deterministic engines; plans of one item). */
+static void test_conv_repeatable(env *e) {
+    enum { B = 2, C = 320, H = 16, W = 16 };
+    size_t plane = (size_t)C * H * W;
+    float *x = rnd(B * plane, 31, -1, 1);
+    test_weight w = make_weight(e, (size_t)C * C * 9, 32, MX_F16), b = make_weight(e, C, 33, MX_F16);
+    float *dx = dev_copy(e, x, B * plane * sizeof *x), *dy = dev_zero(e, B * plane * sizeof *dy);
+    float *y2 = NULL, *y2again = NULL, *y1 = NULL;
+    if (dx && dy && w.dev.data && b.dev.data &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx, B, C, H, W, w.dev, b.dev, C, 3, 3, 1, 1, &e->st), "conv B=2") &&
+        (y2 = download(e, dy, B * plane, "conv B=2")) &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx, B, C, H, W, w.dev, b.dev, C, 3, 3, 1, 1, &e->st), "conv again") &&
+        (y2again = download(e, dy, B * plane, "conv again")) &&
+        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx + plane, 1, C, H, W, w.dev, b.dev, C, 3, 3, 1, 1, &e->st),
+                "conv item 1 alone") &&
+        (y1 = download(e, dy, plane, "conv item 1 alone"))) {
+        int same = !memcmp(y2, y2again, B * plane * sizeof *y2), alone = !memcmp(y2 + plane, y1, plane * sizeof *y1);
+        printf("%-48s %s\n", "conv2d f16 repeated call: same bytes", same ? "ok" : "FAIL");
+        printf("%-48s %s\n", "conv2d f16 item alone = item in batch (bytes)", alone ? "ok" : "FAIL");
+        CHECK(same);
+        CHECK(alone);
+    }
+    free(y1), free(y2), free(y2again);
+    mx_cuda_free(dx);
+    mx_cuda_free(dy);
+    free_weight(&w);
+    free_weight(&b);
+    free(x);
+}
+
+/* conv2d through cuDNN (ops/cuda/cuda_cudnn.cu) where MATEX_CUDNN=1: fp16 convolutions of SD1.5's
+ * kinds (scaled down) and awkward ones at the half bound, and cuDNN must have run SD's 3x3 (a shape
+ * no cuDNN engine takes goes through im2col, which these checks cover too). Without MATEX_CUDNN=1,
+ * cuDNN must never run. */
+static void test_cudnn_conv(env *e) {
+    const char *env_on = getenv("MATEX_CUDNN");
+    int on = env_on && strcmp(env_on, "1") == 0;
+    unsigned long long before = mx_cuda_ctx_cudnn_convs(e->gpu);
+    test_conv2d(e, MX_F16, 2, 320, 16, 16, 320, 3, 1, 1); /* a resnet conv of the UNet */
+    unsigned long long sd = mx_cuda_ctx_cudnn_convs(e->gpu) - before;
+    test_conv2d(e, MX_F16, 2, 4, 17, 13, 32, 3, 1, 1);  /* conv_in: 4 channels */
+    test_conv2d(e, MX_F16, 1, 3, 33, 31, 16, 3, 1, 1);  /* the ControlNet hint: 3 channels */
+    test_conv2d(e, MX_F16, 1, 64, 15, 15, 64, 3, 2, 1); /* downsample: stride 2, odd size */
+    test_conv2d(e, MX_F16, 2, 40, 9, 9, 24, 1, 1, 0);   /* 1x1 */
+    test_conv2d(e, MX_F16, 1, 13, 11, 7, 5, 3, 1, 0);   /* odd channels, no padding */
+    test_conv_repeatable(e);
+    unsigned long long all = mx_cuda_ctx_cudnn_convs(e->gpu) - before;
+    printf("%-48s %llu of 8 calls (SD 3x3: %llu) %s\n", on ? "conv2d through cuDNN (MATEX_CUDNN=1)" :
+           "conv2d through cuDNN (MATEX_CUDNN unset): none", all, sd, (on ? sd > 0 : all == 0) ? "ok" : "FAIL");
+    CHECK(on ? sd > 0 : all == 0);
+}
+
 /* A context with a 32 KiB scratch: linear and conv2d must split their work into several chunks/tiles,
  * attention falls back to its fp32 kernel. */
 static void test_small_scratch(env *e) {
@@ -414,6 +479,33 @@ static void test_attention_ops(env *e) {
     test_linear(e, MX_F32, 37, 53, 71); /* after an fp32 linear (projection) attention runs in fp32: [fp32] */
     test_attention(e, 2, 3, 37, 45, 40, 0);
     test_attention(e, 1, 1, 21, 35, 512, 0); /* the VAE mid-block's head size on the fp32 kernel */
+}
+
+/* Attention in the fused kernel (ops/cuda/cuda_flash.cu) where MATEX_CUDA_FLASH=1, at the half bound:
+ * the UNet's shapes (64x64 latent: 4096 queries and keys, 8 heads of 40; cross-attention on 77
+ * tokens; the 32x32 level's heads of 80 and the 16x16 level's of 160; the grid's 8192 tokens, one
+ * head: the CPU reference takes ~10 s a case) and awkward ones (partial tiles of queries and keys,
+ * one key, causal, head sizes 16, 33 and 100 padded to 48, 48 and 160). The fused kernel must have
+ * run them all; without MATEX_CUDA_FLASH=1 it must never run. */
+static void test_flash_attention(env *e) {
+    const char *env_on = getenv("MATEX_CUDA_FLASH");
+    int on = env_on && strcmp(env_on, "1") == 0;
+    static const int cases[10][6] = {/* B, H, Tq, Tk, D, causal */
+                                   {1, 8, 4096, 4096, 40, 0}, {2, 8, 4096, 77, 40, 0}, {1, 8, 1024, 1024, 80, 0},
+                                   {2, 8, 256, 77, 160, 0},   {1, 1, 8192, 8192, 40, 0}, {1, 3, 37, 45, 40, 0},
+                                   {1, 2, 29, 29, 64, 1},     {2, 1, 100, 1, 16, 0},    {1, 2, 65, 130, 33, 1},
+                                   {1, 1, 63, 200, 100, 0}};
+    /* off: the small cases only (the UNet's take the CPU reference ~20 s, and the cuBLASLt path they
+     * would check has its own cases above) */
+    int n = on ? (int)(sizeof cases / sizeof cases[0]) : 5, first = on ? 0 : 5;
+    unsigned long long before = mx_cuda_ctx_flash_calls(e->gpu);
+    test_linear(e, MX_F16, 33, 70, 130); /* after a half-precision projection: the half-precision path */
+    for (int i = first; i < first + n; i++)
+        test_attention(e, cases[i][0], cases[i][1], cases[i][2], cases[i][3], cases[i][4], cases[i][5]);
+    unsigned long long ran = mx_cuda_ctx_flash_calls(e->gpu) - before;
+    printf("%-48s %llu of %d calls %s\n", on ? "attention in the fused kernel (MATEX_CUDA_FLASH=1)" :
+           "attention in the fused kernel (unset): none", ran, n, (on ? ran == (unsigned long long)n : ran == 0) ? "ok" : "FAIL");
+    CHECK(on ? ran == (unsigned long long)n : ran == 0);
 }
 
 /* The small layout, vector and embedding ops (pad, fill, axpy, lincomb, clamp, affine, timestep and
@@ -574,9 +666,11 @@ int main(void) {
     e.cpu.k = mx_kernels_scalar();
     e.cpu.scratch = &e.cpu_scratch;
     test_gemm_ops(&e);
+    test_cudnn_conv(&e);
     test_small_scratch(&e);
     test_norm_ops(&e);
     test_attention_ops(&e);
+    test_flash_attention(&e);
     test_other_ops(&e);
     mx_arena_destroy(&e.cpu_scratch);
     mx_cuda_ctx_destroy(e.gpu);

@@ -1,6 +1,9 @@
 /* bench_cuda: the SD1.5 networks on the CUDA backend at the shapes of one guided view step
  * (latent 64x64, classifier-free guidance: batch 2): the depth ControlNet, the UNet with its
- * residuals, and one VAE decode. Per network: the median wall time of a call over --calls calls
+ * residuals, one guided step (two ControlNets, the second accumulating its residuals into the
+ * first's, then the UNet: the depth ControlNet stands in for the inpaint one, same architecture and
+ * shapes), and one VAE decode. The last line, `matex: controlnet_ms=... unet_ms=... guided_step_ms=...
+ * vae_decode_ms=...`, is what gpu_check.sh divides by the peer's (tools/scripts/gpu_check.sh). Per network: the median wall time of a call over --calls calls
  * (each call waited for: one 4-byte download after it), its GFLOP and TFLOP/s. With --profile, one
  * more call of each with the per-op wall time (ops/profile.h); run it under MATEX_CUDA_SYNC=1,
  * which makes every op wait for its kernels, so an op's wall time is its GPU time plus one launch
@@ -23,6 +26,8 @@
 #include "bench_sd15.h"
 
 #ifdef MX_WITH_CUDA
+#include "../../ops/cuda/cuda_backend.h"
+
 enum { B = 2, H = 64, W = 64, T = 77, MAX_CALLS = 101 };
 
 typedef struct {
@@ -65,13 +70,21 @@ static int setup_buffers(bench *b, mx_status *st) {
     return mx_arena_create_on(&b->a, b->c.be, need > vb ? need : vb, st);
 }
 
-/* One call of network `net` (0 ControlNet, 1 UNet, 2 VAE decode), waited for. */
-static int run_net(bench *b, int net, mx_status *st) {
+enum { NET_CONTROLNET, NET_UNET, NET_GUIDED_STEP, NET_VAE_DECODE, NETS };
+
+/* One ControlNet call: its residuals written (accumulate 0) or added into b->res (1). */
+static int run_controlnet(bench *b, int accumulate, mx_status *st) {
+    mx_controlnet_input ci = {b->sample, b->ts, b->ehs, b->cond, B, H, W, T, 0.8f, 0};
+    return mx_controlnet_forward(&b->c, b->m.cn_depth, &ci, b->res, b->res[b->nres], accumulate, &b->a, st);
+}
+
+/* Queues one call of network `net` (NET_*). */
+static int queue_net(bench *b, int net, mx_status *st) {
     int rc;
-    if (net == 0) {
-        mx_controlnet_input ci = {b->sample, b->ts, b->ehs, b->cond, B, H, W, T, 0.8f, 0};
-        rc = mx_controlnet_forward(&b->c, b->m.cn_depth, &ci, b->res, b->res[b->nres], 0, &b->a, st);
-    } else if (net == 1) {
+    if (net == NET_CONTROLNET) {
+        rc = run_controlnet(b, 0, st);
+    } else if (net == NET_UNET || net == NET_GUIDED_STEP) {
+        if (net == NET_GUIDED_STEP && (run_controlnet(b, 0, st) || run_controlnet(b, 1, st))) return -1;
         mx_unet_input ui = {.sample = b->sample, .timesteps = b->ts, .encoder_hidden_states = b->ehs, .B = B, .H = H,
                             .W = W, .T = T, .down_residuals = (const float *const *)b->res,
                             .mid_residual = b->res[b->nres]};
@@ -79,8 +92,26 @@ static int run_net(bench *b, int net, mx_status *st) {
     } else {
         rc = mx_vae_decode(&b->c, b->m.vae, b->sample, 1, H, W, b->img, &b->a, st);
     }
+    return rc;
+}
+
+/* One call of network `net`, waited for (a 4-byte download). */
+static int run_net(bench *b, int net, mx_status *st) {
     float one;
-    return rc || mx_download(&b->c, &one, b->out, 1, st) ? -1 : 0;
+    return queue_net(b, net, st) || mx_download(&b->c, &one, b->out, 1, st) ? -1 : 0;
+}
+
+static int queue_guided_step(void *arg, mx_status *st) { return queue_net((bench *)arg, NET_GUIDED_STEP, st); }
+
+/* The launches of one guided step, counted by capturing it as one CUDA graph (not run); or why it
+ * cannot be one graph yet. */
+static void count_launches(bench *b) {
+    size_t n = 0;
+    mx_status st;
+    if (mx_cuda_backend_capture_count(b->c.be, queue_guided_step, b, &n, &st) == 0)
+        printf("guided step: %zu launches (kernels, copies, memsets), captured as one CUDA graph\n", n);
+    else
+        printf("guided step: launches not counted, the step cannot be captured as one CUDA graph: %s\n", st.msg);
 }
 
 static int cmp_double(const void *x, const void *y) {
@@ -104,12 +135,15 @@ static void print_profile(const mx_profile *p, double wall) {
     printf("    %-20s %8.2f ms %5.1f%%\n", "outside ops", 1e3 * (wall - in_ops), 100 * (wall - in_ops) / wall);
 }
 
-static int bench_net(bench *b, int net, int calls, int profile, mx_status *st) {
-    static const char *const names[3] = {"ControlNet 64x64 batch 2", "UNet 64x64 batch 2 (+residuals)",
-                                         "VAE decode 64x64 batch 1"};
-    double flops = net == 0 ? mx_controlnet_flops(b->m.cn_depth, B, H, W, T, 0)
-                 : net == 1 ? mx_unet_flops(b->m.unet, B, H, W, T, 0)
-                            : mx_vae_decode_flops(b->m.vae, 1, H, W);
+/* The median wall time of one call of `net` (seconds) into *median. */
+static int bench_net(bench *b, int net, int calls, int profile, double *median, mx_status *st) {
+    static const char *const names[NETS] = {"ControlNet 64x64 batch 2", "UNet 64x64 batch 2 (+residuals)",
+                                            "guided step: 2 ControlNets + UNet", "VAE decode 64x64 batch 1"};
+    double cn = mx_controlnet_flops(b->m.cn_depth, B, H, W, T, 0), unet = mx_unet_flops(b->m.unet, B, H, W, T, 0);
+    double flops = net == NET_CONTROLNET ? cn
+                 : net == NET_UNET       ? unet
+                 : net == NET_GUIDED_STEP ? 2 * cn + unet
+                                          : mx_vae_decode_flops(b->m.vae, 1, H, W);
     double secs[MAX_CALLS];
     for (int i = 0; i < 2; i++)
         if (run_net(b, net, st)) return -1; /* warm-up: cuBLASLt plans, module load */
@@ -120,6 +154,7 @@ static int bench_net(bench *b, int net, int calls, int profile, mx_status *st) {
     }
     qsort(secs, (size_t)calls, sizeof secs[0], cmp_double);
     double med = secs[calls / 2];
+    *median = med;
     printf("%-34s %8.2f ms median (min %.2f, max %.2f) %7.1f GFLOP %7.1f TFLOP/s\n", names[net], 1e3 * med,
            1e3 * secs[0], 1e3 * secs[calls - 1], flops / 1e9, flops / med / 1e12);
     if (profile) {
@@ -166,9 +201,22 @@ int main(int argc, char **argv) {
         return 1;
     }
     printf("load + upload %.2f s; %d timed calls per network\n", mx_now() - t0, calls);
+    mx_cuda_upload_stats us;
+    mx_cuda_backend_upload_stats(b.c.be, &us);
+    printf("load: %.2f GB through pinned staging (host copies %.2f s, %.1f GB/s; waits for the copy engine %.2f s), "
+           "%llu device allocations %.2f s\n",
+           us.bytes / 1e9, us.copy_s, us.copy_s > 0 ? us.bytes / 1e9 / us.copy_s : 0.0, us.wait_s, us.allocs,
+           us.alloc_s);
     int rc = 0;
-    for (int net = 0; net < 3 && !rc; net++)
-        if ((rc = bench_net(&b, net, calls, profile, &st))) fprintf(stderr, "bench_cuda: %s\n", st.msg);
+    double med[NETS];
+    for (int net = 0; net < NETS && !rc; net++)
+        if ((rc = bench_net(&b, net, calls, profile && net != NET_GUIDED_STEP, &med[net], &st)))
+            fprintf(stderr, "bench_cuda: %s\n", st.msg);
+    if (!rc) count_launches(&b);
+    if (!rc) /* the names of the peer's line (peer_diffusers.py) */
+        printf("matex: controlnet_ms=%.2f unet_ms=%.2f guided_step_ms=%.2f vae_decode_ms=%.2f\n",
+               1e3 * med[NET_CONTROLNET], 1e3 * med[NET_UNET], 1e3 * med[NET_GUIDED_STEP],
+               1e3 * med[NET_VAE_DECODE]);
     float *bufs[] = {b.sample, b.ehs, b.ts, b.cond, b.out, b.img};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) mx_dev_free(&b.c, bufs[i]);
     for (int i = 0; i <= b.nres; i++) mx_dev_free(&b.c, b.res[i]);
