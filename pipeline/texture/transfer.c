@@ -156,7 +156,7 @@ int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status 
     source s;
     memset(&s, 0, sizeof s);
     int rc = source_load(o, &s, st);
-    if (!rc) rc = mx_job_open(&j, o, MX_JOB_NO_MODELS, 0, st);
+    if (!rc) rc = mx_job_open(&j, o, MX_JOB_NO_MODELS, MX_VERB_TRANSFER, st);
     if (!rc) rc = source_place(&j, &s, st);
     if (!rc) rc = transfer_views(&j, &s, st);
     if (!rc) rc = finish(&j, &s, res, st); /* res filled as texture's, in memory too with keep_outputs */

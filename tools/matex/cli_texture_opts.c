@@ -32,10 +32,6 @@ int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
     return 2;
 }
 
-static const char *verb_name(unsigned verb) {
-    return verb == MX_VERB_ENHANCE ? "enhance" : verb == MX_VERB_TRANSFER ? "transfer" : verb == MX_VERB_BATCH ? "batch" : "texture";
-}
-
 int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value, mx_status *st) {
     const mx_option_spec *s = mx_option_find(name, c->verb);
     const char *dashes = name[0] == '-' ? "" : "--";
@@ -45,8 +41,8 @@ int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value
             char verbs[64] = "";
             for (unsigned v = MX_VERB_TEXTURE; v <= MX_VERB_TRANSFER; v <<= 1)
                 if (mx_option_find(name, v))
-                    snprintf(verbs + strlen(verbs), sizeof verbs - strlen(verbs), "%s%s", verbs[0] ? " and " : "", verb_name(v));
-            return mx_fail(st, MX_EUSAGE, "%s%s is not an option of %s (it is one of %s)", dashes, name, verb_name(c->verb), verbs);
+                    snprintf(verbs + strlen(verbs), sizeof verbs - strlen(verbs), "%s%s", verbs[0] ? " and " : "", mx_options_verb_name(v));
+            return mx_fail(st, MX_EUSAGE, "%s%s is not an option of %s (it is one of %s)", dashes, name, mx_options_verb_name(c->verb), verbs);
         }
         return mx_fail(st, MX_EUSAGE, "unknown option %s%s", dashes, name);
     }
