@@ -138,7 +138,7 @@ static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status 
     if (!tex) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
     int rc = mx_job_current_textures(j, tex, st);
     if (!rc) {
-        if (!strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) {
+        if (j->o->pub.mesh_path && !strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) { /* a mesh in memory: no path */
             j->rep.psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->rep.psnr_db);
         }
