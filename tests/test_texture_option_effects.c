@@ -35,12 +35,13 @@ typedef struct special_case {
 static const special_case SPECIAL[] = {
     {"batch", "1", NULL, NULL},           /* the base has fewer later views than the default batch of 4 */
     {"style-scale", NULL, "style-image", "STYLE"}, /* a scale without a style image weighs nothing */
+    {"normals", NULL, "frontal-threshold", "0.8"},  /* the two normals differ by little: a cut they straddle */
+    {"background", NULL, "image-size", "64"}, /* only the model image's resampling mixes it into texels */
 };
 
 /* A UV sphere (an ellipsoid of that height): curved, so that the normal, the frontal threshold
  * and the write policy matter (a cube's flat faces hide them). Transfer's destination is a round
- * sphere and its source the flattened one, so that frontal pixels of the destination fall
- * outside the source's silhouette, where --background shows. */
+ * sphere finer than its flattened source: another mesh than the source, as a transfer's is. */
 enum { RINGS = 8, MAX_SEGMENTS = 16, MAX_VERTS = 2 + (RINGS - 1) * MAX_SEGMENTS, MAX_FACES = 2 * MAX_SEGMENTS * (RINGS - 1) };
 typedef struct sphere {
     float pos[MAX_VERTS][3];

@@ -106,7 +106,8 @@ static const mx_option_spec TABLE[] = {
      .help = "a later view that sees a texel with |n.v| higher by 0.15\n"
              "restarts it, or the first writer keeps it"},
     {.name = "background", .arg = "R,G,B", .type = MX_OPTION_FLOAT3, .field = FIELD(background, float3), .lo = 0,
-     .hi = 1, .def = "0,0,0", .verbs = TRA, .scope = MX_SCOPE_JOB, .help = "colour behind the source in its renders"},
+     .hi = 1, .def = "0,0,0", .verbs = TRA, .scope = MX_SCOPE_JOB, .help = "colour behind the source in its renders (reaches the texture only\n"
+             "through --image-size's resampling at the silhouettes)"},
     {.name = "up", .arg = "y|z", .type = MX_OPTION_CHOICE, .field = FIELD(z_up, int), .choices = "y|z", .def = "y",
      .verbs = ALL | BAT, .scope = MX_SCOPE_JOB, .help = "up axis of the mesh"},
     {.name = "threads", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(threads, int), .lo = 0, .hi = 1024, .def = "0",
