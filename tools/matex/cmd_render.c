@@ -18,6 +18,8 @@
 #include "cli.h"
 #include "cli_args.h"
 #include "cli_signals.h"
+#include "cli_texture_opts.h"
+#include "../../runtime/numparse.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] [--force] -o DIR\n\n"
@@ -35,6 +37,13 @@ typedef struct render_args {
     mx_up_axis up;
 } render_args;
 
+/* An integer option in lo..hi, worded as the other verbs' option errors; 0 or the exit code 2. */
+static int int_option(const char *opt, const char *value, int lo, int hi, int *out) {
+    if (mx_parse_int(value, lo, hi, out))
+        return mx_cli_usage_error("render", 0, "%s must be an integer in %d..%d, not '%s'", opt, lo, hi, value);
+    return 0;
+}
+
 /* 0 ok, 2 usage error (message printed). */
 static int parse_args(int argc, char **argv, render_args *a) {
     memset(a, 0, sizeof *a);
@@ -45,28 +54,27 @@ static int parse_args(int argc, char **argv, render_args *a) {
         int has = i + 1 < argc;
         if (!strcmp(o, "--texture") && has) a->texture = argv[++i];
         else if (!strcmp(o, "--views") && has) {
-            if (mx_arg_int("render", o, argv[++i], 1, 360, &a->views)) return 2;
+            if (int_option(o, argv[++i], 1, 360, &a->views)) return 2;
         } else if (!strcmp(o, "--size") && has) {
-            if (mx_arg_int("render", o, argv[++i], 16, 4096, &a->size)) return 2;
+            if (int_option(o, argv[++i], 16, 4096, &a->size)) return 2;
         }
         else if (!strcmp(o, "-o") && has) a->out = argv[++i];
         else if (!strcmp(o, "--force")) a->force = 1;
         else if (!strcmp(o, "--up") && has) {
             const char *u = argv[++i];
-            if (strcmp(u, "y") && strcmp(u, "z")) {
-                fprintf(stderr, "matex render: --up must be y or z\n");
-                return 2;
-            }
+            if (strcmp(u, "y") && strcmp(u, "z")) return mx_cli_usage_error("render", 0, "--up must be one of y|z, not '%s'", u);
             a->up = u[0] == 'z' ? MX_UP_Z : MX_UP_Y;
-        } else if (o[0] == '-' || a->mesh) {
-            fprintf(stderr, "matex render: unexpected argument '%s'\n", o);
-            return 2;
+        } else if (o[0] == '-' && (!strcmp(o, "--texture") || !strcmp(o, "--views") || !strcmp(o, "--size") ||
+                                   !strcmp(o, "-o") || !strcmp(o, "--up"))) {
+            return mx_cli_usage_error("render", 0, "missing value after %s", o);
+        } else if (o[0] == '-') {
+            return mx_cli_usage_error("render", 0, "unknown option %s", o);
+        } else if (a->mesh) {
+            return mx_cli_usage_error("render", 0, "unexpected argument %s", o);
         } else a->mesh = o;
     }
-    if (!a->mesh || !a->out) {
-        usage(stderr);
-        return 2;
-    }
+    if (!a->mesh) return mx_cli_usage_error("render", 0, "missing MESH");
+    if (!a->out) return mx_cli_usage_error("render", 0, "missing -o DIR");
     return 0;
 }
 
@@ -74,6 +82,9 @@ static int parse_args(int argc, char **argv, render_args *a) {
 static int load_textures(const render_args *a, const mx_mesh *m, mx_image **tex, int *ntex, mx_status *st) {
     *tex = NULL;
     *ntex = 0;
+    if (!m->face_uv && a->texture) /* the texture would have nowhere to go: refused, not shaded normals */
+        return mx_fail(st, MX_EINPUT, "%s has no UVs, so --texture %s cannot be mapped onto it (matex texture gives a mesh UVs)",
+                       a->mesh, a->texture);
     if (!m->face_uv) return 0;
     int n = m->nmat > 0 ? m->nmat : 1;
     mx_image *t = calloc((size_t)n, sizeof *t);
