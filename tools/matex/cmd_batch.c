@@ -351,8 +351,11 @@ int cmd_batch(int argc, char **argv) {
     mx_status st;
     mx_status_clear(&st);
     mx_batch_manifest m;
+    struct stat sb;
+    int made_root = stat(a.outroot, &sb) != 0; /* removed at the end if still empty (rmdir: never a file in it) */
     if (make_folders(a.outroot, &st) || mx_batch_manifest_read(&m, a.manifest, a.defaults, a.ndefaults, a.outroot, a.shard, a.nshards, &st)) {
         fprintf(stderr, "matex batch: %s\n", st.msg);
+        if (made_root) rmdir(a.outroot);
         return 1;
     }
     if (a.theme_from_first) theme_from_first(&a, &m);
@@ -367,6 +370,7 @@ int cmd_batch(int argc, char **argv) {
     matex_models_close(r.models);
     mx_batch_manifest_free(&m);
     mx_buf_free(&r.results);
+    if (made_root) rmdir(a.outroot); /* an interrupt before the first job wrote anything */
     if (r.fatal) return 1;
     return *r.stop || r.count[JOB_INTERRUPTED] ? 130 : r.count[JOB_FAILED] ? 1 : 0;
 }
