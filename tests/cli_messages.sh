@@ -5,7 +5,7 @@
 # staging folder left by kill -9 is removed by the next run into that folder (only one with
 # matex's marker); an output written inside an output (make demo's views/) does not block
 # --force; messages name what the user gave (an unwritable -o, a non-image to --compare, a text
-# file named .obj, batch's counts and nameless lines); --progress json on an interrupt writes one
+# file named .obj, batch's counts and nameless lines; render's usage errors and --json); --progress json on an interrupt writes one
 # line on stderr; a SIGTERM'd batch leaves no empty output root.
 NAME=messages
 . tests/lib_cli.sh
@@ -70,6 +70,9 @@ check "... names the line without empty brackets" sh -c "grep -q 'matex batch: l
 check "render --views 0: exit 2" [ "$(rc_of "$M" render "$T/box.obj" --views 0 -o "$T/r2")" = 2 ]
 check "... worded as the other verbs, with the --help hint" sh -c "grep -q \"matex render: --views must be an integer in 1..360, not '0'\" '$T/err' && grep -q 'matex render --help for usage' '$T/err'"
 check "render without -o: exit 2" [ "$(rc_of "$M" render "$T/box.obj")" = 2 ] && check "... says -o is missing, with the --help hint" sh -c "grep -q 'missing -o DIR' '$T/err' && grep -q 'matex render --help' '$T/err'"
+check "render --json: the summary" sh -c "'$M' render '$T/box.obj' --views 2 --size 32 -o '$T/rj' --json | grep -q '^{\"ok\":true,\"out\":\"$T/rj\",\"views\":2}\$'"
+check "render --json, a usage error: exit 2" [ "$(rc_of "$M" render "$T/box.obj" --views 0 -o "$T/rj2" --json)" = 2 ]
+check "... in JSON on stdout" grep -q '^{"ok":false,"error":"--views must be an integer in 1..360' "$T/out"
 # --progress json, interrupted: the result line on stdout, one line on stderr
 "$M" texture "$T/box.obj" "a box" --weights "$W" -o "$T/pj" --image-size 64 --texture-size 32 --render-size 32 --steps 200 --views 3 --progress json > "$T/pj.out" 2> "$T/pj.err" &
 pid=$!

@@ -11,7 +11,7 @@
 #include "cli_progress.h"
 #include "cli_signals.h"
 
-static void print_json_error(const char *msg) {
+void mx_cli_print_json_error(const char *msg) {
     mx_buf b = {0};
     mx_buf_printf(&b, "{\"ok\":false,\"error\":");
     mx_buf_json_str(&b, msg);
@@ -28,7 +28,7 @@ int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
     va_end(ap);
     fprintf(stderr, "matex %s: %s\n(matex %s --help for usage)\n", verb, msg, verb);
     if (json == MX_CLI_JSON_STREAM) mx_cli_progress_result(stdout, 2, msg, NULL, NULL);
-    else if (json) print_json_error(msg);
+    else if (json) mx_cli_print_json_error(msg);
     return 2;
 }
 
@@ -154,7 +154,7 @@ static int run_failed(const mx_cli_texture *c, const char *verb, int code, const
     fprintf(stderr, "matex %s: %s\n", verb, message);
     int exit_code = code == MATEX_ECANCELLED ? 130 : 1;
     if (c->json == MX_CLI_JSON_STREAM) stream_result(c, exit_code, message, NULL);
-    else if (c->json) print_json_error(message);
+    else if (c->json) mx_cli_print_json_error(message);
     return exit_code;
 }
 
