@@ -58,7 +58,7 @@ check "... and it stays" [ -s "$T/tex/mine/a.txt" ]
 
 # item 6: messages
 check "-o in an unwritable place: exit 1" [ "$(rc_of "$M" texture "$T/box.obj" "a box" --weights "$W" -o /proc/matex_out $SMALL)" = 1 ]
-check "... names the output folder, not a lock" sh -c "grep -q '/proc/matex_out: cannot write the output folder' '$T/err' && ! grep -q lock '$T/err'"
+check "... names the output folder, not a lock" sh -c "grep -q '/proc/matex_out: cannot create the output folder' '$T/err' && ! grep -q lock '$T/err'"
 check "info --compare MESH: exit 1" [ "$(rc_of "$M" info "$T/enh/texture.png" --compare "$T/box.obj")" = 1 ]
 check "... says it is not an image" has "box.obj is not an image (it holds text)"
 echo "just some notes" > "$T/notes.obj"

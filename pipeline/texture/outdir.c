@@ -240,7 +240,7 @@ static int take_lock(mx_outdir *od, const char *given, mx_status *st) {
     for (int attempt = 0; attempt < 8; attempt++) {
         int fd = open(od->lock, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
         if (fd < 0) /* the lock sits beside the folder: failing to make it means the folder cannot be written */
-            return mx_fail(st, MX_EIO, "%s: cannot write the output folder there: %s", given, strerror(errno));
+            return mx_fail(st, MX_EIO, "%s: cannot create the output folder there: %s", given, strerror(errno));
         if (flock(fd, LOCK_EX | LOCK_NB)) {
             int busy = errno == EWOULDBLOCK;
             close(fd);
