@@ -163,7 +163,8 @@ static void expect_fail(const char *name, const char *text, const char *expect) 
 }
 
 static void test_hostile(void) {
-    expect_fail("empty.obj", "", "no faces");
+    expect_fail("empty.obj", "", "holds no OBJ data");
+    expect_fail("text.obj", "just some notes\n", "holds no OBJ data"); /* a text file renamed .obj */
     expect_fail("verts_only.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no faces");
     expect_fail("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite");
     expect_fail("inf.obj", "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite");

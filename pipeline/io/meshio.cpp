@@ -296,7 +296,9 @@ int check_indices(const std::vector<int32_t> &idx, size_t count, bool allow_miss
 
 int obj_to_mesh(const char *path, ObjData &d, mx_mesh *m, mx_status *st) {
     size_t nv = d.pos.size() / 3, nt = d.uv.size() / 2, nn = d.nrm.size() / 3, nf = d.tri.size() / 3;
-    if (nf == 0) return mx_fail(st, MX_EINPUT, "%s: no faces", path);
+    if (nf == 0 && nv == 0) /* a text file renamed .obj, say */
+        return mx_fail(st, MX_EINPUT, "%s holds no OBJ data (no 'v' or 'f' lines): is it a mesh?", path);
+    if (nf == 0) return mx_fail(st, MX_EINPUT, "%s: no faces (%zu vertices, no 'f' lines)", path, nv);
     if (check_indices(d.tri, nv, false, "vertex", path, st)) return -1;
     if (d.any_uv && check_indices(d.tri_uv, nt, true, "texcoord", path, st)) return -1;
     if (d.any_nrm && check_indices(d.tri_nrm, nn, true, "normal", path, st)) return -1;

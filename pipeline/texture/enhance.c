@@ -143,7 +143,7 @@ static int enhance_views(mx_job *j, const mx_image *orig, mx_status *st) {
 int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_VERB_ENHANCE, st)) return -1;
     mx_job j;
-    int rc = mx_job_open(&j, o, 0, 1, st);
+    int rc = mx_job_open(&j, o, 0, MX_VERB_ENHANCE, st);
     mx_image *orig = NULL, *out = NULL;
     if (!rc) {
         orig = calloc((size_t)j.nlayers, sizeof *orig);

@@ -50,9 +50,10 @@ static void warn_render_size(const mx_texture_opts *o) {
                 o->pub.render_size, o->pub.texture_size, o->pub.texture_size);
 }
 
-int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st) {
+int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, unsigned verb, mx_status *st) {
     memset(j, 0, sizeof *j);
     j->o = o;
+    j->verb = verb;
     j->rep.t0 = mx_now();
     mx_job_set_phase(j, "load");
     j->rep.psnr_db = NAN;
@@ -90,7 +91,7 @@ int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_u
     if (o->mesh ? mx_mesh_validate(o->mesh, st) || mx_mesh_clone(o->mesh, &j->mesh, st)
                 : mx_mesh_load(o->pub.mesh_path, &j->mesh, st))
         return -1;
-    if (prepare_uvs(j, need_uvs, st) || mx_job_check_cancel(j, st)) return -1;
+    if (prepare_uvs(j, verb == MX_VERB_ENHANCE, st) || mx_job_check_cancel(j, st)) return -1;
     if (mx_mesh_normalized(&j->mesh, mx_texture_opts_up(o), &j->pos, j->center, &j->scale, st)) return -1;
     if (mx_bake_init(&j->bake, o->pub.texture_size, o->pub.texture_size, j->nlayers, st)) return -1;
     j->bake_ready = 1;

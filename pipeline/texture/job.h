@@ -22,6 +22,7 @@ extern const float mx_job_grey[3];
 
 typedef struct mx_job {
     const mx_texture_opts *o;
+    unsigned verb; /* MX_VERB_TEXTURE, _ENHANCE or _TRANSFER: the report names it and its options */
     mx_outdir out; /* opened (checked, staging folder created) before anything else */
     mx_job_gen gen;
     mx_mesh mesh;
@@ -41,9 +42,10 @@ typedef struct mx_job {
 /* Output folder when o->pub.out_dir is set (checked, staging folder created), context and models
  * (o->models with its context, else loaded from o->weights_path; needs: MX_MODELS_NEED_*, or
  * MX_JOB_NO_MODELS), mesh (a copy of o->mesh, else loaded from o->pub.mesh_path) and its normalised
- * copy, bake sized tex_size with nlayers layers, candidate cache and the report's header.
- * mx_job_close removes the staging folder of a run that did not finish. */
-int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, int need_uvs, mx_status *st);
+ * copy, bake sized tex_size with nlayers layers, candidate cache and the report's header. verb:
+ * MX_VERB_* (enhance keeps the mesh's UVs, which it needs). mx_job_close removes the staging
+ * folder of a run that did not finish. */
+int mx_job_open(mx_job *j, const mx_texture_opts *o, int model_needs, unsigned verb, mx_status *st);
 void mx_job_close(mx_job *j);
 
 /* The context of a run (device, threads, precision of o), as a job or a model set makes it. */

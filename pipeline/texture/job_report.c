@@ -65,6 +65,7 @@ void mx_job_report_header(mx_job *j) {
     mx_jw_init(w);
     mx_jw_begin_obj(w, NULL);
     mx_jw_str(w, "matex_version", MX_VERSION);
+    mx_jw_str(w, "verb", mx_options_verb_name(j->verb));
     mx_jw_str(w, "mesh", j->mesh.source_path);
     if (o->pub.source_path) mx_jw_str(w, "source", o->pub.source_path);
     if (j->gen.models) {
@@ -77,6 +78,7 @@ void mx_job_report_header(mx_job *j) {
         mx_jw_int(w, "image_size", o->pub.image_size);
         mx_style_report(&j->gen.style, w);
     }
+    mx_options_report(&o->pub, j->verb, w);
     mx_jw_int(w, "texture_size", o->pub.texture_size);
     mx_jw_int(w, "render_size", o->pub.render_size);
     mx_jw_int(w, "threads", mx_pool_threads(j->gen.ctx->pool));

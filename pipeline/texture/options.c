@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "../../runtime/backend.h"
+#include "../../runtime/jsonw.h"
 #include "../../runtime/numparse.h"
 #include "options.h"
 #include "texture.h"
@@ -56,8 +57,9 @@ static const mx_option_spec TABLE[] = {
      .scope = MX_SCOPE_JOB,
      .help = "send each render through the texture job's model image (crop to\n"
              "the object, M x M, back): its resampling at the silhouettes"},
+    /* enhance runs one view at a time: each view continues the ones before it (enhance.c) */
     {.name = "batch", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(batch, int), .lo = 1, .hi = 64, .def = "4",
-     .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "most views generated in one batch"},
+     .verbs = TEX | BAT, .scope = MX_SCOPE_JOB, .help = "most views generated in one batch"},
     {.name = "negative", .arg = "TEXT", .type = MX_OPTION_TEXT, .field = FIELD(negative_prompt, text), .def = "",
      .def_help = "empty", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB, .help = "negative prompt"},
     {.name = "guidance", .arg = "G", .type = MX_OPTION_FLOAT, .field = FIELD(guidance, float), .lo = 0, .hi = 50,
@@ -66,14 +68,17 @@ static const mx_option_spec TABLE[] = {
     {.name = "fast", .type = MX_OPTION_FLAG, .field = FIELD(fast, int), .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "few-step path: LCM scheduler, TAESD encoder/decoder; needs a weight file\n"
              "made with convert --lcm-lora FILE --taesd DIR"},
+    /* enhance has no grid, no inpainting control and one depth weight (enhance.c) */
     {.name = "grid-depth-weight", .arg = "W", .type = MX_OPTION_FLOAT, .field = FIELD(grid_depth_weight, float), .lo = 0,
-     .hi = 2, .def = "1.0", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+     .hi = 2, .def = "1.0", .verbs = TEX | BAT, .scope = MX_SCOPE_JOB,
      .help = "depth control weight of the front+back grid"},
     {.name = "depth-weight", .arg = "A[,B]", .type = MX_OPTION_FLOAT2, .field = FIELD(depth_weight, float2), .lo = 0,
-     .hi = 2, .def = "1.0,0.7", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+     .hi = 2, .def = "1.0,0.7", .verbs = TEX | BAT, .scope = MX_SCOPE_JOB,
      .help = "depth control weight of the first[,last] later view"},
+    {.name = "depth-weight", .arg = "W", .type = MX_OPTION_FLOAT, .field = FIELD(depth_weight[0], float), .lo = 0,
+     .hi = 2, .def = "1.0", .verbs = ENH, .scope = MX_SCOPE_JOB, .help = "depth control weight of every view"},
     {.name = "inpaint-weight", .arg = "A[,B]", .type = MX_OPTION_FLOAT2, .field = FIELD(inpaint_weight, float2), .lo = 0,
-     .hi = 2, .def = "0.8,1.0", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+     .hi = 2, .def = "0.8,1.0", .verbs = TEX | BAT, .scope = MX_SCOPE_JOB,
      .help = "inpainting control weight of the first[,last] later view"},
     {.name = "frontal-threshold", .arg = "T", .type = MX_OPTION_FLOAT, .field = FIELD(frontal_threshold, float), .lo = 0,
      .hi = 1, .hi_open = 1, .def = "0.3", .verbs = ALL | BAT, .scope = MX_SCOPE_JOB,
@@ -85,7 +90,7 @@ static const mx_option_spec TABLE[] = {
      .lo_open = 1, .hi = 1, .def = "0.995", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
      .help = "stop adding views at this painted fraction"},
     {.name = "front-back-words", .arg = "TEXT", .type = MX_OPTION_TEXT, .field = FIELD(front_back_words, text),
-     .def = "front and back view of", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
+     .def = "front and back view of", .verbs = TEX | BAT, .scope = MX_SCOPE_JOB,
      .help = "prompt prefix of the grid"},
     {.name = "style-image", .arg = "FILE", .type = MX_OPTION_PATHS, .field = FIELD(style_images, paths),
      .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_JOB,
@@ -101,7 +106,8 @@ static const mx_option_spec TABLE[] = {
      .help = "a later view that sees a texel with |n.v| higher by 0.15\n"
              "restarts it, or the first writer keeps it"},
     {.name = "background", .arg = "R,G,B", .type = MX_OPTION_FLOAT3, .field = FIELD(background, float3), .lo = 0,
-     .hi = 1, .def = "0,0,0", .verbs = TRA, .scope = MX_SCOPE_JOB, .help = "colour behind the source in its renders"},
+     .hi = 1, .def = "0,0,0", .verbs = TRA, .scope = MX_SCOPE_JOB, .help = "colour behind the source in its renders (reaches the texture only\n"
+             "through --image-size's resampling at the silhouettes)"},
     {.name = "up", .arg = "y|z", .type = MX_OPTION_CHOICE, .field = FIELD(z_up, int), .choices = "y|z", .def = "y",
      .verbs = ALL | BAT, .scope = MX_SCOPE_JOB, .help = "up axis of the mesh"},
     {.name = "threads", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(threads, int), .lo = 0, .hi = 1024, .def = "0",
@@ -337,6 +343,70 @@ int mx_options_check_image_size(int image_size, int step, mx_status *st) {
                        "S has a latent of S/8, which the UNet halves at each of its levels), not %d",
                        step, step, 2 * step, image_size);
     return 0;
+}
+
+/* The i-th value of "a|b|c" into out. */
+static void choice_name(const char *choices, int index, char *out, size_t cap) {
+    const char *p = choices;
+    for (int i = 0; i < index && strchr(p, '|'); i++) p = strchr(p, '|') + 1;
+    const char *bar = strchr(p, '|');
+    snprintf(out, cap, "%.*s", bar ? (int)(bar - p) : (int)strlen(p), p);
+}
+
+/* One option's value as a member of report.json, named as a batch manifest key ("image_size"). */
+static void report_one(const mx_option_spec *s, const matex_options *o, mx_jw *w) {
+    char key[64], text[64];
+    snprintf(key, sizeof key, "%s", s->name);
+    for (char *c = key; *c; c++) *c = *c == '-' ? '_' : *c;
+    const void *f = cfield(o, s->field);
+    switch (s->type) {
+    case MX_OPTION_FLAG: mx_jw_bool(w, key, *(const int *)f); return;
+    case MX_OPTION_INT: mx_jw_int(w, key, *(const int *)f); return;
+    case MX_OPTION_U64: { /* a JSON integer while a reader's int64 holds it, else its digits */
+        uint64_t v = *(const uint64_t *)f;
+        snprintf(text, sizeof text, "%llu", (unsigned long long)v);
+        if (v <= (uint64_t)INT64_MAX) mx_jw_int(w, key, (long long)v);
+        else mx_jw_str(w, key, text);
+        return;
+    }
+    case MX_OPTION_FLOAT: mx_jw_num(w, key, *(const float *)f); return;
+    case MX_OPTION_FLOAT2:
+    case MX_OPTION_FLOAT3:
+        mx_jw_begin_arr(w, key);
+        for (int i = 0; i < (s->type == MX_OPTION_FLOAT2 ? 2 : 3); i++) mx_jw_num(w, NULL, ((const float *)f)[i]);
+        mx_jw_end_arr(w);
+        return;
+    case MX_OPTION_TEXT: {
+        const char *t = *(const char *const *)f;
+        mx_jw_str(w, key, t ? t : s->def ? s->def : "");
+        return;
+    }
+    case MX_OPTION_PATHS:
+        mx_jw_begin_arr(w, key);
+        for (int i = 0; i < MATEX_MAX_STYLE_IMAGES && ((const char *const *)f)[i]; i++)
+            mx_jw_str(w, NULL, ((const char *const *)f)[i]);
+        mx_jw_end_arr(w);
+        return;
+    case MX_OPTION_CHOICE: choice_name(s->choices, *(const int *)f, text, sizeof text); mx_jw_str(w, key, text); return;
+    case MX_OPTION_CLI: return;
+    }
+}
+
+void mx_options_report(const matex_options *o, unsigned verb, mx_jw *w) {
+    mx_jw_begin_obj(w, "options");
+    for (size_t i = 0; i < sizeof TABLE / sizeof TABLE[0]; i++) {
+        const mx_option_spec *s = &TABLE[i];
+        int off = s->marks && !*(const int *)cfield(o, s->marks); /* transfer's --image-size when not given */
+        if ((s->verbs & verb) && s->scope == MX_SCOPE_JOB && !off) report_one(s, o, w);
+    }
+    mx_jw_end_obj(w);
+}
+
+const char *mx_options_verb_name(unsigned verb) {
+    return verb == MX_VERB_ENHANCE    ? "enhance"
+           : verb == MX_VERB_TRANSFER ? "transfer"
+           : verb == MX_VERB_BATCH    ? "batch"
+                                      : "texture";
 }
 
 #define HELP_COLUMN 27 /* where the text of an option starts */

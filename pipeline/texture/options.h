@@ -11,6 +11,7 @@
 #include <stdio.h>
 
 #include "../../include/matex.h"
+#include "../../runtime/jsonw.h"
 #include "../../runtime/status.h"
 
 typedef enum {
@@ -75,5 +76,11 @@ void mx_options_help(FILE *f, unsigned verb);
 /* The side of the generated images the loaded networks accept: a multiple of `step`, from `step` up
  * (image -> latent by the VAE's factor, then 2^(levels-1) for the UNet's levels: 64 for SD1.5). */
 int mx_options_check_image_size(int image_size, int step, mx_status *st);
+/* "texture", "enhance", "transfer" or "batch". */
+const char *mx_options_verb_name(unsigned verb);
+/* report.json's "options": the value of every option of the verb that shapes one run's result (scope
+ * JOB), named as batch manifest keys, so that the report reproduces the run. The model set's
+ * options (threads, precision, device) are reported as what ran: "threads", "precision", "kernels". */
+void mx_options_report(const matex_options *o, unsigned verb, mx_jw *w);
 
 #endif

@@ -4,6 +4,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <ftw.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -17,7 +18,11 @@
 #include "../geom/export.h"
 
 #define MARKER_HEADER "matex output folder: `--force` may replace it. The files matex wrote here:\n"
+/* The marker of a staging folder from its creation until write_marker replaces it: a staging folder
+ * left by a killed process is recognised as matex's by it (remove_stale_stages). */
+#define STAGE_HEADER "matex staging folder: removed when its process has ended\n"
 #define MARKER_MAX_BYTES (1 << 20)
+#define MAX_SUBFOLDER_DEPTH 4 /* an output inside an output (demo/spot/views): how deep --force looks */
 
 static int remove_entry(const char *path, const struct stat *sb, int type, struct FTW *ftw) {
     (void)sb, (void)type, (void)ftw;
@@ -147,15 +152,45 @@ static int marker_lists(const char *marker, const char *name) {
     return 0;
 }
 
-/* --force replaces only what matex wrote: a folder with the marker, every entry of which is a plain
- * file the marker lists. Anything else (an older matex's output included) is refused, with why. */
-static int check_written_by_matex(const char *dir, const char *given, mx_status *st) {
-    char path[4200];
+/* The marker of `dir` when it starts with `header`, else NULL (the caller frees it). */
+static char *read_marker(const char *dir, const char *header) {
+    char path[4300];
     snprintf(path, sizeof path, "%s/%s", dir, MX_OUTDIR_MARKER);
     mx_status ignored;
     char *marker = mx_read_file(path, MARKER_MAX_BYTES, NULL, &ignored);
-    if (!marker || strncmp(marker, MARKER_HEADER, strlen(MARKER_HEADER))) {
+    if (marker && strncmp(marker, header, strlen(header))) {
         free(marker);
+        return NULL;
+    }
+    return marker;
+}
+
+/* Is the entry `name` of the folder listed by its marker and matex's: a plain file listed as
+ * "name", or a sub-folder listed as "name/" that is itself a folder matex wrote (an output written
+ * into an output, as `make demo`'s views/)? */
+static int check_written_by_matex_at(const char *dir, const char *given, int depth, mx_status *st);
+
+static int entry_written_by_matex(DIR *d, const char *dir, const char *marker, const char *name, int depth) {
+    struct stat sb;
+    if (fstatat(dirfd(d), name, &sb, AT_SYMLINK_NOFOLLOW)) return 0;
+    if (S_ISREG(sb.st_mode)) return marker_lists(marker, name);
+    char listed[300], sub[4400];
+    snprintf(listed, sizeof listed, "%s/", name);
+    snprintf(sub, sizeof sub, "%s/%s", dir, name);
+    mx_status ignored;
+    return S_ISDIR(sb.st_mode) && depth < MAX_SUBFOLDER_DEPTH && marker_lists(marker, listed) &&
+           check_written_by_matex_at(sub, sub, depth + 1, &ignored) == 0;
+}
+
+/* --force replaces only what matex wrote: a folder with the marker, every entry of which the marker
+ * lists (entry_written_by_matex). Anything else (an older matex's output included) is refused, with why. */
+static int check_written_by_matex(const char *dir, const char *given, mx_status *st) {
+    return check_written_by_matex_at(dir, given, 0, st);
+}
+
+static int check_written_by_matex_at(const char *dir, const char *given, int depth, mx_status *st) {
+    char *marker = read_marker(dir, MARKER_HEADER);
+    if (!marker) {
         return mx_fail(st, MX_EINPUT,
                        "%s: was not written by matex (no %s in it): --force replaces only a folder of matex's own output; "
                        "empty it yourself or give another folder",
@@ -170,9 +205,7 @@ static int check_written_by_matex(const char *dir, const char *given, mx_status 
     struct dirent *e;
     while (!rc && (e = readdir(d)) != NULL) {
         if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..") || !strcmp(e->d_name, MX_OUTDIR_MARKER)) continue;
-        struct stat sb;
-        int is_file = fstatat(dirfd(d), e->d_name, &sb, AT_SYMLINK_NOFOLLOW) == 0 && S_ISREG(sb.st_mode);
-        if (!is_file || !marker_lists(marker, e->d_name))
+        if (!entry_written_by_matex(d, dir, marker, e->d_name, depth))
             rc = mx_fail(st, MX_EINPUT,
                          "%s: holds %s, which matex did not write there: --force replaces only a folder of matex's own "
                          "output; move it away or give another folder",
@@ -206,7 +239,8 @@ int mx_outdir_names(const char *dir, char stage[4200], char lock[4200]) {
 static int take_lock(mx_outdir *od, const char *given, mx_status *st) {
     for (int attempt = 0; attempt < 8; attempt++) {
         int fd = open(od->lock, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
-        if (fd < 0) return mx_fail(st, MX_EIO, "%s: cannot create the lock %s: %s", given, od->lock, strerror(errno));
+        if (fd < 0) /* the lock sits beside the folder: failing to make it means the folder cannot be written */
+            return mx_fail(st, MX_EIO, "%s: cannot create the output folder there: %s", given, strerror(errno));
         if (flock(fd, LOCK_EX | LOCK_NB)) {
             int busy = errno == EWOULDBLOCK;
             close(fd);
@@ -235,21 +269,69 @@ static void release_lock(mx_outdir *od) {
     od->locked = 0;
 }
 
+/* Is the process `pid` gone? (EPERM: it exists, another user's.) */
+static int process_gone(long pid) { return pid > 0 && kill((pid_t)pid, 0) && errno == ESRCH; }
+
+/* Staging folders "DIR.partial-PID" beside DIR left by a process that is gone (kill -9, a power
+ * cut): removed when they carry matex's marker (a staging one, or a complete one not yet moved),
+ * never otherwise. Called under the folder's lock, so no live run of this folder is staging. */
+static void remove_stale_stages(const mx_outdir *od) {
+    char parent[4096], prefix[4200];
+    snprintf(parent, sizeof parent, "%s", od->dir);
+    char *slash = strrchr(parent, '/');
+    const char *base = slash ? slash + 1 : parent;
+    snprintf(prefix, sizeof prefix, "%s.partial-", base);
+    if (slash == parent) parent[1] = 0;
+    else if (slash) *slash = 0;
+    else snprintf(parent, sizeof parent, ".");
+    DIR *d = opendir(parent);
+    if (!d) return;
+    struct dirent *e;
+    size_t n = strlen(prefix);
+    while ((e = readdir(d)) != NULL) {
+        char *end;
+        if (strncmp(e->d_name, prefix, n)) continue;
+        long pid = strtol(e->d_name + n, &end, 10);
+        if (*end || end == e->d_name + n || pid == (long)getpid() || !process_gone(pid)) continue;
+        char path[8400];
+        snprintf(path, sizeof path, "%s/%s", parent, e->d_name);
+        char *marker = read_marker(path, STAGE_HEADER);
+        if (!marker) marker = read_marker(path, MARKER_HEADER);
+        if (marker) remove_tree(path);
+        free(marker);
+    }
+    closedir(d);
+}
+
+/* The staging folder, marked as matex's from the start (STAGE_HEADER). */
+static int make_stage(mx_outdir *od, const char *given, mx_status *st) {
+    char path[4300];
+    remove_tree(od->stage); /* a stale one of an earlier process with the same id */
+    if (mkdir(od->stage, 0777))
+        return mx_fail(st, MX_EIO, "%s: cannot create the staging folder %s: %s", given, od->stage, strerror(errno));
+    od->staged = 1;
+    return mx_path_join(path, sizeof path, od->stage, MX_OUTDIR_MARKER, st) ||
+                   mx_atomic_write(path, STAGE_HEADER, strlen(STAGE_HEADER), st)
+               ? -1
+               : 0;
+}
+
 /* Past the lock: the content (force), then the staging folder. */
 static int open_checked(mx_outdir *od, const char *dir, int force, mx_status *st) {
     int content = od->exists ? folder_content(od->dir, st) : 0;
     if (content < 0) return -1;
     if (content && !force)
         return mx_fail(st, MX_EINPUT, "%s: the output folder exists and is not empty (--force replaces it)", dir);
-    /* a guard against a slip like "-o ~ --force": an earlier output holds files only */
-    if (content == 2)
+    /* a guard against a slip like "-o ~ --force": an earlier output holds files, and sub-folders
+     * only where its marker lists them */
+    char *marker = content == 2 ? read_marker(od->dir, MARKER_HEADER) : NULL;
+    free(marker);
+    if (content == 2 && !marker)
         return mx_fail(st, MX_EINPUT, "%s: holds sub-folders; --force replaces only a folder of files (an earlier output)",
                        dir);
     if (content && check_written_by_matex(od->dir, dir, st)) return -1;
-    remove_tree(od->stage); /* a stale one of an earlier process with the same id */
-    if (mkdir(od->stage, 0777))
-        return mx_fail(st, MX_EIO, "%s: cannot create the staging folder %s: %s", dir, od->stage, strerror(errno));
-    od->staged = 1;
+    remove_stale_stages(od);
+    if (make_stage(od, dir, st)) return -1;
     return od->exists ? check_same_device(od, dir, st) : 0;
 }
 
@@ -328,6 +410,30 @@ int mx_outdir_commit(mx_outdir *od, const mx_mesh *m, const mx_image *textures, 
     return mx_outdir_publish(od, cancel, st);
 }
 
+/* An output written into a folder of matex's output (`make demo`: demo/spot/views) is listed in that
+ * folder's marker as "NAME/", so that --force may replace the outer folder with it. Best effort: an
+ * unlisted sub-folder only makes --force refuse the outer folder. */
+static void note_in_parent_marker(const mx_outdir *od) {
+    char parent[4096];
+    snprintf(parent, sizeof parent, "%s", od->dir);
+    char *slash = strrchr(parent, '/');
+    if (!slash || slash == parent) return;
+    *slash = 0;
+    char entry[300];
+    snprintf(entry, sizeof entry, "%s/", slash + 1);
+    char *marker = read_marker(parent, MARKER_HEADER);
+    if (marker && !marker_lists(marker, entry)) {
+        mx_buf b = {0};
+        char path[4300];
+        mx_status ignored;
+        mx_buf_printf(&b, "%s%s\n", marker, entry);
+        if (!b.oom && !mx_path_join(path, sizeof path, parent, MX_OUTDIR_MARKER, &ignored))
+            mx_atomic_write(path, b.p, b.len, &ignored);
+        mx_buf_free(&b);
+    }
+    free(marker);
+}
+
 int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_status *st) {
     if (!od->staged) return mx_fail(st, MX_EINTERNAL, "%s: output folder not opened", od->dir);
     if (cancel && *cancel) {
@@ -340,6 +446,7 @@ int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_sta
     }
     if (od->exists) {
         int rc = replace_existing(od, st);
+        if (!rc) note_in_parent_marker(od);
         mx_outdir_discard(od); /* the lock (and a staging folder left by a failure) */
         return rc;
     }
@@ -349,6 +456,7 @@ int mx_outdir_publish(mx_outdir *od, const volatile sig_atomic_t *cancel, mx_sta
         return mx_fail(st, MX_EIO, "%s: cannot write: %s", od->dir, strerror(e));
     }
     od->staged = 0;
+    note_in_parent_marker(od);
     release_lock(od);
     return 0;
 }

@@ -3,11 +3,14 @@
  *   mx_outdir_open: resolves DIR (a link to a folder is followed), refuses a path that is not a
  *     folder, the current folder (or one holding it), a folder holding one of the run's inputs,
  *     and a non-empty folder unless force; even with force it replaces only a folder that matex
- *     wrote: one with the marker file MX_OUTDIR_MARKER, every entry of which is a file the marker
- *     lists (so never a sub-folder, a user's file, the input mesh or the weights). Creates missing
- *     parents and the staging
+ *     wrote: one with the marker file MX_OUTDIR_MARKER, every entry of which the marker lists: a
+ *     file, or a sub-folder listed as "NAME/" that is itself matex's output (an output written into
+ *     an output, as `make demo`'s views/, is added to the outer marker when published); so never a
+ *     user's file or folder, the input mesh or the weights. Creates missing parents and the staging
  *     folder "DIR.partial-PID" beside DIR (same file system, so the final move cannot be
- *     cross-device): an unwritable location fails at once, not after the generation;
+ *     cross-device), marked as matex's from the start: an unwritable location fails at once, not
+ *     after the generation. Staging folders of DIR whose process is gone (kill -9) are removed
+ *     there, and only those carrying matex's marker;
  *   mx_outdir_commit: writes the files into the staging folder, then puts it in place with one
  *     rename (DIR missing or empty) or one atomic exchange (--force over a non-empty DIR; its old
  *     content is then removed);

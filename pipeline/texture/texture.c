@@ -198,7 +198,7 @@ static int fill_stage(mx_job *j, mx_texture_result *res, mx_status *st) {
 int mx_texture_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *st) {
     if (mx_texture_opts_check(o, MX_VERB_TEXTURE, st)) return -1;
     mx_job j;
-    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->pub.views > 2 ? MX_MODELS_NEED_INPAINT : 0), 0, st);
+    int rc = mx_job_open(&j, o, MX_MODELS_NEED_DEPTH | (o->pub.views > 2 ? MX_MODELS_NEED_INPAINT : 0), MX_VERB_TEXTURE, st);
     if (!rc) rc = mx_job_check_cancel(&j, st) || grid_stage(&j, st) ? -1 : 0;
     if (!rc) rc = view_stage(&j, st);
     if (!rc) rc = fill_stage(&j, res, st);

@@ -138,7 +138,7 @@ static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status 
     if (!tex) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
     int rc = mx_job_current_textures(j, tex, st);
     if (!rc) {
-        if (!strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) {
+        if (j->o->pub.mesh_path && !strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) { /* a mesh in memory: no path */
             j->rep.psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->rep.psnr_db);
         }
@@ -156,7 +156,7 @@ int mx_transfer_run(const mx_texture_opts *o, mx_texture_result *res, mx_status 
     source s;
     memset(&s, 0, sizeof s);
     int rc = source_load(o, &s, st);
-    if (!rc) rc = mx_job_open(&j, o, MX_JOB_NO_MODELS, 0, st);
+    if (!rc) rc = mx_job_open(&j, o, MX_JOB_NO_MODELS, MX_VERB_TRANSFER, st);
     if (!rc) rc = source_place(&j, &s, st);
     if (!rc) rc = transfer_views(&j, &s, st);
     if (!rc) rc = finish(&j, &s, res, st); /* res filled as texture's, in memory too with keep_outputs */

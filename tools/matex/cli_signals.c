@@ -10,6 +10,8 @@
 /* Set by SIGINT/SIGTERM; a run checks it between stages and denoising steps. A signal handler
  * can only reach a flag and the paths below with static storage. */
 static volatile sig_atomic_t interrupted;
+/* 1: the first signal says nothing (--progress json: the run's one error line reports it). */
+static volatile sig_atomic_t quiet_first;
 /* What a second signal removes before ending the process: the run's staging folder (files only)
  * and its output folder's lock; "" when there is none. */
 static char stage_path[4200], lock_path[4200];
@@ -44,7 +46,7 @@ static void on_signal(int sig) {
     (void)sig;
     if (!interrupted) {
         interrupted = 1;
-        say("matex: interrupted, stopping after the current step (interrupt again to stop now)\n");
+        if (!quiet_first) say("matex: interrupted, stopping after the current step (interrupt again to stop now)\n");
         return;
     }
     if (stage_path[0]) remove_flat_folder(stage_path);
@@ -72,11 +74,14 @@ volatile sig_atomic_t *mx_cli_signals_catch(void) {
     sa.sa_flags = SA_RESTART;
     sigemptyset(&sa.sa_mask);
     interrupted = 0;
+    quiet_first = 0;
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     set_mask(SIG_UNBLOCK);
     return &interrupted;
 }
+
+void mx_cli_signals_quiet(void) { quiet_first = 1; }
 
 void mx_cli_signals_output(const char *out_dir) {
     char stage[sizeof stage_path], lock[sizeof lock_path];

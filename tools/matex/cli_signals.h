@@ -16,6 +16,9 @@ void mx_cli_signals_default(void);
 /* Installs the handler (it sets the returned flag and says "interrupted" once on stderr),
  * clears the flag, then unblocks the signals. */
 volatile sig_atomic_t *mx_cli_signals_catch(void);
+/* After mx_cli_signals_catch: the first signal prints nothing (--progress json promises one line on
+ * stderr for a failed run: its error). */
+void mx_cli_signals_quiet(void);
 /* The output folder of the run the signals stop: a second SIGINT/SIGTERM removes its staging
  * folder and lock (pipeline/texture/outdir.h) and ends the process at once with 130 (NULL: none). */
 void mx_cli_signals_output(const char *out_dir);

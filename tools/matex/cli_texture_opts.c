@@ -11,7 +11,7 @@
 #include "cli_progress.h"
 #include "cli_signals.h"
 
-static void print_json_error(const char *msg) {
+void mx_cli_print_json_error(const char *msg) {
     mx_buf b = {0};
     mx_buf_printf(&b, "{\"ok\":false,\"error\":");
     mx_buf_json_str(&b, msg);
@@ -28,12 +28,8 @@ int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) {
     va_end(ap);
     fprintf(stderr, "matex %s: %s\n(matex %s --help for usage)\n", verb, msg, verb);
     if (json == MX_CLI_JSON_STREAM) mx_cli_progress_result(stdout, 2, msg, NULL, NULL);
-    else if (json) print_json_error(msg);
+    else if (json) mx_cli_print_json_error(msg);
     return 2;
-}
-
-static const char *verb_name(unsigned verb) {
-    return verb == MX_VERB_ENHANCE ? "enhance" : verb == MX_VERB_TRANSFER ? "transfer" : verb == MX_VERB_BATCH ? "batch" : "texture";
 }
 
 int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value, mx_status *st) {
@@ -45,8 +41,8 @@ int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value
             char verbs[64] = "";
             for (unsigned v = MX_VERB_TEXTURE; v <= MX_VERB_TRANSFER; v <<= 1)
                 if (mx_option_find(name, v))
-                    snprintf(verbs + strlen(verbs), sizeof verbs - strlen(verbs), "%s%s", verbs[0] ? " and " : "", verb_name(v));
-            return mx_fail(st, MX_EUSAGE, "%s%s is not an option of %s (it is one of %s)", dashes, name, verb_name(c->verb), verbs);
+                    snprintf(verbs + strlen(verbs), sizeof verbs - strlen(verbs), "%s%s", verbs[0] ? " and " : "", mx_options_verb_name(v));
+            return mx_fail(st, MX_EUSAGE, "%s%s is not an option of %s (it is one of %s)", dashes, name, mx_options_verb_name(c->verb), verbs);
         }
         return mx_fail(st, MX_EUSAGE, "unknown option %s%s", dashes, name);
     }
@@ -158,7 +154,7 @@ static int run_failed(const mx_cli_texture *c, const char *verb, int code, const
     fprintf(stderr, "matex %s: %s\n", verb, message);
     int exit_code = code == MATEX_ECANCELLED ? 130 : 1;
     if (c->json == MX_CLI_JSON_STREAM) stream_result(c, exit_code, message, NULL);
-    else if (c->json) print_json_error(message);
+    else if (c->json) mx_cli_print_json_error(message);
     return exit_code;
 }
 
@@ -175,6 +171,7 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     if (mx_options_check(&c->o, c->verb, &st)) return mx_cli_usage_error(verb, c->json, "%s", st.msg);
     if (mx_style_check_inputs(&c->o, &st)) return run_failed(c, verb, st.code, st.msg); /* before the weights */
     c->o.cancel = mx_cli_signals_catch();
+    if (c->json == MX_CLI_JSON_STREAM) mx_cli_signals_quiet();
     mx_cli_signals_output(c->o.out_dir);
     matex_result *r = NULL;
     int rc = run_once(run, c, c->json ? &r : NULL, &err);

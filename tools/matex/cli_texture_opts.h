@@ -30,6 +30,8 @@ int mx_cli_texture_option(mx_cli_texture *c, const char *name, const char *value
  * {"ok":false,"error":MESSAGE} (the stream's result line when json is MX_CLI_JSON_STREAM).
  * Returns 2 (the usage-error exit code). */
 int mx_cli_usage_error(const char *verb, int json, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+/* {"ok":false,"error":MESSAGE} on stdout: a failed run's --json answer. */
+void mx_cli_print_json_error(const char *msg);
 /* Checks the options (mx_options_check), opens the weights (texture, enhance), runs the verb's API
  * call with SIGINT/SIGTERM setting its cancel flag, prints errors (also in the --json summary)
  * and returns the exit code: 0, 1 (bad input), 2 (usage), 130 (interrupted: nothing written). */

@@ -259,9 +259,10 @@ static void add_result(batch_run *r, const mx_batch_job *j, int status, double s
     mx_buf_printf(&r->results, ",\"status\":\"%s\",\"seconds\":%.3f", STATUS_NAME[status], seconds);
     if (status == JOB_DONE) mx_buf_printf(&r->results, ",\"coverage\":%.6f", coverage);
     mx_buf_printf(&r->results, "}");
-    if (error) fprintf(stderr, "matex batch: line %d (%s): failed: %s\n", j->line, j->name, error);
-    else if (!r->a->quiet)
-        fprintf(stderr, "matex batch: line %d (%s): %s (%.2f s)\n", j->line, j->name, STATUS_NAME[status], seconds);
+    char label[160]; /* "line 5 (chair_a)"; a job that has no name yet (a bad line) is its line alone */
+    snprintf(label, sizeof label, j->name[0] ? "line %d (%s)" : "line %d", j->line, j->name);
+    if (error) fprintf(stderr, "matex batch: %s: failed: %s\n", label, error);
+    else if (!r->a->quiet) fprintf(stderr, "matex batch: %s: %s (%.2f s)\n", label, STATUS_NAME[status], seconds);
 }
 
 /* --theme-from-first: the first job writes front.png, the style image of every later job whose line
@@ -326,8 +327,8 @@ static void print_summary(const batch_run *r, int jobs, double seconds) {
     const batch_args *a = r->a;
     double per_job = r->count[JOB_DONE] ? r->job_seconds / r->count[JOB_DONE] : 0.0;
     if (!a->json) {
-        printf("matex batch: shard %d/%d, %d jobs: %d done, %d skipped, %d failed%s; %.2f s per job done, %.2f s in all\n",
-               a->shard, a->nshards, jobs, r->count[JOB_DONE], r->count[JOB_SKIPPED], r->count[JOB_FAILED],
+        printf("matex batch: shard %d/%d, %d job%s: %d done, %d skipped, %d failed%s; %.2f s per job done, %.2f s in all\n",
+               a->shard, a->nshards, jobs, jobs == 1 ? "" : "s", r->count[JOB_DONE], r->count[JOB_SKIPPED], r->count[JOB_FAILED],
                r->count[JOB_INTERRUPTED] ? ", interrupted" : "", per_job, seconds);
         return;
     }
@@ -350,8 +351,11 @@ int cmd_batch(int argc, char **argv) {
     mx_status st;
     mx_status_clear(&st);
     mx_batch_manifest m;
+    struct stat sb;
+    int made_root = stat(a.outroot, &sb) != 0; /* removed at the end if still empty (rmdir: never a file in it) */
     if (make_folders(a.outroot, &st) || mx_batch_manifest_read(&m, a.manifest, a.defaults, a.ndefaults, a.outroot, a.shard, a.nshards, &st)) {
         fprintf(stderr, "matex batch: %s\n", st.msg);
+        if (made_root) rmdir(a.outroot);
         return 1;
     }
     if (a.theme_from_first) theme_from_first(&a, &m);
@@ -366,6 +370,7 @@ int cmd_batch(int argc, char **argv) {
     matex_models_close(r.models);
     mx_batch_manifest_free(&m);
     mx_buf_free(&r.results);
+    if (made_root) rmdir(a.outroot); /* an interrupt before the first job wrote anything */
     if (r.fatal) return 1;
     return *r.stop || r.count[JOB_INTERRUPTED] ? 130 : r.count[JOB_FAILED] ? 1 : 0;
 }

@@ -182,14 +182,23 @@ static int mesh_info(const char *path, int json) {
 
 /* PSNR (dB) of b against a over every channel, values in 0..1: the CPU-vs-GPU texture check of
  * tools/scripts/gpu_check.sh. */
+/* One image of --compare; a file that is no image says so, not the image library's words. */
+static int read_compared(const char *path, mx_image *img) {
+    mx_status st, kind_st;
+    if (!mx_io_read_image(path, img, &st)) return 0;
+    const char *kind;
+    int definite;
+    if (!mx_file_kind_of(path, "an image", &kind, &definite, &kind_st) && !strstr(kind, " image"))
+        fprintf(stderr, "matex info: %s is not an image (it holds %s): --compare takes two images\n", path, kind);
+    else
+        fprintf(stderr, "matex info: %s\n", st.msg);
+    return -1;
+}
+
 static int image_compare(const char *a_path, const char *b_path, int json) {
     mx_image a = {0}, b = {0};
-    mx_status st;
     int rc = 1;
-    if (mx_io_read_image(a_path, &a, &st) || mx_io_read_image(b_path, &b, &st)) {
-        fprintf(stderr, "matex info: %s\n", st.msg);
-        goto done;
-    }
+    if (read_compared(a_path, &a) || read_compared(b_path, &b)) goto done;
     if (a.w != b.w || a.h != b.h || a.c != b.c) {
         fprintf(stderr, "matex info: %s is %d x %d x %d, %s is %d x %d x %d: the sizes must agree\n", a_path, a.w, a.h,
                 a.c, b_path, b.w, b.h, b.c);

@@ -14,59 +14,71 @@
 #include "../../pipeline/geom/raster.h"
 #include "../../pipeline/io/io.h"
 #include "../../pipeline/texture/outdir.h"
+#include "../../runtime/buf.h"
 #include "../../runtime/log.h"
 #include "cli.h"
 #include "cli_args.h"
 #include "cli_signals.h"
+#include "cli_texture_opts.h"
+#include "../../runtime/numparse.h"
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] [--force] -o DIR\n\n"
+    fprintf(f, "usage: matex render MESH [--texture IMG] [--views N] [--size S] [--up y|z] [--force] [--json] -o DIR\n\n"
                "Renders N turntable views (default 8) of S x S pixels (default 512) into DIR/view_NN.png\n"
                "and a contact sheet DIR/contact_sheet.png. Textured when the mesh has UVs and a texture\n"
                "(its materials' own, or IMG for all), else shaded normals.\n"
                "  --up z   the mesh is z-up (CAD, scans); default y-up (glTF, OBJ)\n"
                "  --force  replace DIR when it holds an earlier output of matex (never other files)\n"
+               "  --json   print a JSON summary on stdout: {\"ok\":true,\"out\":DIR,\"views\":N} or {\"ok\":false,\"error\":...}\n"
                "exit: 0 done, 1 bad input, 2 usage, 130 interrupted (nothing written)\n");
 }
 
 typedef struct render_args {
     const char *mesh, *texture, *out;
-    int views, size, force;
+    int views, size, force, json;
     mx_up_axis up;
 } render_args;
+
+/* An integer option in lo..hi, worded as the other verbs' option errors; 0 or the exit code 2. */
+static int int_option(const render_args *a, const char *opt, const char *value, int lo, int hi, int *out) {
+    if (mx_parse_int(value, lo, hi, out))
+        return mx_cli_usage_error("render", a->json, "%s must be an integer in %d..%d, not '%s'", opt, lo, hi, value);
+    return 0;
+}
 
 /* 0 ok, 2 usage error (message printed). */
 static int parse_args(int argc, char **argv, render_args *a) {
     memset(a, 0, sizeof *a);
     a->views = 8;
     a->size = 512;
+    for (int i = 1; i < argc; i++) a->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
     for (int i = 1; i < argc; i++) {
         const char *o = argv[i];
         int has = i + 1 < argc;
         if (!strcmp(o, "--texture") && has) a->texture = argv[++i];
         else if (!strcmp(o, "--views") && has) {
-            if (mx_arg_int("render", o, argv[++i], 1, 360, &a->views)) return 2;
+            if (int_option(a, o, argv[++i], 1, 360, &a->views)) return 2;
         } else if (!strcmp(o, "--size") && has) {
-            if (mx_arg_int("render", o, argv[++i], 16, 4096, &a->size)) return 2;
+            if (int_option(a, o, argv[++i], 16, 4096, &a->size)) return 2;
         }
         else if (!strcmp(o, "-o") && has) a->out = argv[++i];
         else if (!strcmp(o, "--force")) a->force = 1;
+        else if (!strcmp(o, "--json")) continue;
         else if (!strcmp(o, "--up") && has) {
             const char *u = argv[++i];
-            if (strcmp(u, "y") && strcmp(u, "z")) {
-                fprintf(stderr, "matex render: --up must be y or z\n");
-                return 2;
-            }
+            if (strcmp(u, "y") && strcmp(u, "z")) return mx_cli_usage_error("render", a->json, "--up must be one of y|z, not '%s'", u);
             a->up = u[0] == 'z' ? MX_UP_Z : MX_UP_Y;
-        } else if (o[0] == '-' || a->mesh) {
-            fprintf(stderr, "matex render: unexpected argument '%s'\n", o);
-            return 2;
+        } else if (o[0] == '-' && (!strcmp(o, "--texture") || !strcmp(o, "--views") || !strcmp(o, "--size") ||
+                                   !strcmp(o, "-o") || !strcmp(o, "--up"))) {
+            return mx_cli_usage_error("render", a->json, "missing value after %s", o);
+        } else if (o[0] == '-') {
+            return mx_cli_usage_error("render", a->json, "unknown option %s", o);
+        } else if (a->mesh) {
+            return mx_cli_usage_error("render", a->json, "unexpected argument %s", o);
         } else a->mesh = o;
     }
-    if (!a->mesh || !a->out) {
-        usage(stderr);
-        return 2;
-    }
+    if (!a->mesh) return mx_cli_usage_error("render", a->json, "missing MESH");
+    if (!a->out) return mx_cli_usage_error("render", a->json, "missing -o DIR");
     return 0;
 }
 
@@ -74,6 +86,9 @@ static int parse_args(int argc, char **argv, render_args *a) {
 static int load_textures(const render_args *a, const mx_mesh *m, mx_image **tex, int *ntex, mx_status *st) {
     *tex = NULL;
     *ntex = 0;
+    if (!m->face_uv && a->texture) /* the texture would have nowhere to go: refused, not shaded normals */
+        return mx_fail(st, MX_EINPUT, "%s has no UVs, so --texture %s cannot be mapped onto it (matex texture gives a mesh UVs)",
+                       a->mesh, a->texture);
     if (!m->face_uv) return 0;
     int n = m->nmat > 0 ? m->nmat : 1;
     mx_image *t = calloc((size_t)n, sizeof *t);
@@ -134,6 +149,20 @@ static int render_views(const render_args *a, const char *dir, const volatile si
     return rc;
 }
 
+/* --json: the summary of a done run, or its error (msg). */
+static void print_json_result(const render_args *a, const char *msg) {
+    if (msg) {
+        mx_cli_print_json_error(msg);
+        return;
+    }
+    mx_buf b = {0};
+    mx_buf_printf(&b, "{\"ok\":true,\"out\":");
+    mx_buf_json_str(&b, a->out);
+    mx_buf_printf(&b, ",\"views\":%d}", a->views);
+    if (!b.oom) puts(b.p);
+    mx_buf_free(&b);
+}
+
 int cmd_render(int argc, char **argv) {
     for (int i = 1; i < argc; i++)
         if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
@@ -168,6 +197,7 @@ int cmd_render(int argc, char **argv) {
     mx_outdir_discard(&od);
     if (rc) fprintf(stderr, "matex render: %s\n", st.msg);
     else mx_info("matex render: %d views of %s in %s", a.views, a.mesh, a.out);
+    if (a.json) print_json_result(&a, rc ? st.msg : NULL);
     if (tex) free_textures(tex, ntex, a.texture != NULL);
     mx_image_free(&sheet);
     mx_pool_destroy(pool);
