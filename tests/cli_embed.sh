@@ -8,7 +8,7 @@ W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
 eval "${MATEX_MAKE_VARS:-}" # BUILD, CC, SAN ... of the build under test
 P="$T/prefix"
 check "make install PREFIX=..." sh -c "make -s ${MATEX_MAKE_VARS:-} install PREFIX='$P' > '$T/install.log' 2>&1"
-for f in include/matex.h lib/libmatex.a lib/libmatex_io.a lib/pkgconfig/matex.pc bin/matex; do
+for f in include/matex.h lib/libmatex.a lib/libmatex_io.a lib/libmatex_oiio.so lib/pkgconfig/matex.pc bin/matex; do
     check "installed $f" [ -s "$P/$f" ]
 done
 export PKG_CONFIG_PATH="$P/lib/pkgconfig"
