@@ -249,7 +249,13 @@ TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
 # Everything the suite needs, built without running it (CI builds it before two suites run side by side).
 .PHONY: test-deps
 test-deps: $(TEST_DEPS)
-test: $(TEST_DEPS)
+# `make demo` and `make test` set up first (the missing Debian packages: tools/scripts/deps.sh,
+# silent when none is), then build and run in a second make, so nothing builds before that.
+.PHONY: test-run demo-run
+test:
+	@sh tools/scripts/deps.sh
+	@$(MAKE) --no-print-directory test-run
+test-run: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
 # Every repository path named in the docs and the code exists (tools/scripts/check_paths.sh; under a
@@ -285,7 +291,10 @@ test-blender: all $(DEMO_WEIGHTS) $(ADDON_ZIP)
 # End to end in seconds with tiny random weights (they paint noise: see README): the shipped
 # Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
 DEMO_OUT = demo/spot
-demo: all $(DEMO_WEIGHTS)
+demo:
+	@sh tools/scripts/deps.sh
+	@$(MAKE) --no-print-directory demo-run
+demo-run: all $(DEMO_WEIGHTS)
 	rm -rf $(DEMO_OUT)
 	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
 	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
@@ -322,7 +331,8 @@ $(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LI
 $(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
-# The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
+# The Debian 12 packages the build and the tests need (tools/scripts/packages.txt), those missing,
+# non-interactively (root or sudo -n); `make demo` and `make test` run it first.
 deps:
 	sh tools/scripts/deps.sh
 
