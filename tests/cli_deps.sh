@@ -3,7 +3,8 @@
 # fake dpkg-query, id, sudo and apt-get on PATH, so nothing is installed: with every package of
 # tools/scripts/packages.txt present it prints nothing and calls no apt-get; with some missing,
 # as root it installs exactly those (after an update, waiting for the apt lock) and says so;
-# through `sudo -n` likewise; with neither it prints the exact apt-get line and fails.
+# through `sudo -n` likewise; with neither it prints the exact apt-get line and fails (also run
+# for real as the user nobody when the test runs as root).
 NAME=deps
 . "$(dirname "$0")/lib_cli.sh"
 F="$T/fake"
@@ -61,4 +62,13 @@ check "missing, user without sudo: exit 1" [ "$(deps "zip curl" 1000 no)" = 1 ]
 check "names what is missing" grep -q "missing Debian packages: zip curl$" "$T/err"
 check "prints the exact apt-get line" grep -q "^    apt-get update && apt-get install -y --no-install-recommends zip curl$" "$T/err"
 check "and installs nothing" [ ! -e "$T/apt.log" ]
+
+# a real user without root (as root, which CI is: nobody through setpriv), only dpkg-query faked
+if [ "$(id -u)" = 0 ] && command -v setpriv > /dev/null 2>&1; then
+    mkdir -p "$T/dpkg_only" && cp "$F/dpkg-query" "$T/dpkg_only/" && chmod -R a+rX "$T"
+    rc=$(setpriv --reuid=65534 --regid=65534 --clear-groups env PATH="$T/dpkg_only:$PATH" FAKE_MISSING=zip \
+        sh tools/scripts/deps.sh > "$T/out" 2> "$T/err"; echo $?)
+    check "nobody, zip missing: exit 1" [ "$rc" = 1 ]
+    check "nobody: the exact apt-get line" grep -q "^    apt-get update && apt-get install -y --no-install-recommends zip$" "$T/err"
+fi
 exit $fail
