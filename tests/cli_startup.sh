@@ -23,8 +23,7 @@ check "--help does not map libOpenImageIO" no_oiio
 check "an option error: maps read at exit" maps_of "$M" texture tests/data/box.obj "a box" --image-size 7 -o "$T/o"
 check "the option error was refused" grep -q "image-size" "$T/err"
 check "an option error does not map libOpenImageIO" no_oiio
-# a 2 x 2 24-bit BMP (54-byte header, two rows of 6 bytes + 2 of padding)
-printf '\102\115\106\000\000\000\000\000\000\000\066\000\000\000\050\000\000\000\002\000\000\000\002\000\000\000\001\000\030\000\000\000\000\000\020\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\000\377\000\377\000\000\000\377\000\000\377\377\377\000\000' > "$T/rgb.bmp"
+write_bmp "$T/rgb.bmp"
 check "BMP through the adapter: maps read at exit" maps_of "$M" info "$T/rgb.bmp"
 check "BMP read: 2 x 2" grep -q "^size: *2 x 2" "$T/out"
 check "a BMP maps libOpenImageIO (the check can see it)" grep -q "libOpenImageIO" "$T/maps"
