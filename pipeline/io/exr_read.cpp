@@ -198,8 +198,10 @@ int read_exr_pixels(Imf::InputFile &file, const char *what, mx_image *out, mx_st
     int c = nch == 2 ? 4 : nch;
     float *data = (float *)calloc((size_t)(w * h * c), sizeof(float));
     if (!data) return mx_fail(st, MX_ENOMEM, "%s: out of memory for a %lldx%lld image", what, w, h);
-    // slices addressed from the data window's origin, as OpenEXR expects
-    char *origin = (char *)(data - ((long long)win.min.y * w + win.min.x) * c);
+    // slices addressed from the data window's origin, as OpenEXR expects (in unsigned arithmetic:
+    // a window far from (0, 0) puts that origin outside the buffer)
+    uintptr_t shift = (uintptr_t)(((long long)win.min.y * w + win.min.x) * c) * sizeof(float);
+    char *origin = (char *)((uintptr_t)data - shift);
     size_t xs = sizeof(float) * c, ys = xs * (size_t)w;
     Imf::FrameBuffer fb;
     for (int k = 0; k < nch; k++) fb.insert(names[k], Imf::Slice(Imf::FLOAT, origin + (nch == 2 && k ? 3 : k) * sizeof(float), xs, ys));
