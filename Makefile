@@ -12,9 +12,9 @@ CFLAGS   = -std=c11 $(OPT) -g $(WARN) -pthread -D_GNU_SOURCE -ffp-contract=off -
 CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR -I/usr/include/Imath
 LDLIBS   = -lm -lpthread
 # The file adapter's libraries. OpenImageIO is not among them: its part of the adapter is
-# libmatex_oiio.so, opened on first use (pipeline/io/oiio_adapter.h), found through the RUNPATH:
-# $ORIGIN and $ORIGIN/../lib for matex (build/, or PREFIX/lib once installed), the build folder
-# for the test and benchmark programs.
+# libmatex_oiio.so, opened on first use (pipeline/io/oiio_adapter.h) beside matex (build/, or
+# PREFIX/bin/../lib once installed), or through the RUNPATH: the build folder for the test and
+# benchmark programs, PREFIX/lib for a program linked through matex.pc.
 IO_CORE_LIBS = -lOpenMeshCore -lOpenEXR -lIex -lImath -lz -lstdc++ -ldl
 IOLIBS   = $(IO_CORE_LIBS) -Wl,-rpath,$(abspath $(BUILD))
 OIIO_LIBS = -lOpenImageIO -lOpenImageIO_Util
@@ -95,12 +95,12 @@ ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SR
 .SECONDARY:
 all: $(LIBMATEX) $(LIB_IO) $(LIB_OIIO) matex
 
-# a link, not a copy: matex finds libmatex_oiio.so beside its real path ($ORIGIN)
+# a link, not a copy: matex finds libmatex_oiio.so beside its real path (/proc/self/exe)
 matex: $(BUILD)/matex
 	ln -sf $< $@
 
 $(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IO_CORE_LIBS) -Wl,-rpath,'$$ORIGIN:$$ORIGIN/../lib' $(LDLIBS)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IO_CORE_LIBS) $(LDLIBS)
 
 # The OpenImageIO adapter: imageio.cpp and the status functions it reports through, position-
 # independent, only its two entry points exported.
@@ -244,7 +244,10 @@ TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS
            MATEX_TEST_JOBS=$(TEST_JOBS) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
            MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
-           MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
+           MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)" \
+           $(if $(SAN),LD_LIBRARY_PATH=$(abspath $(BUILD)))
+# (with sanitizers, dlopen runs from their interceptor and the test programs' RUNPATH is not
+# searched for libmatex_oiio.so: LD_LIBRARY_PATH is)
 TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS) $(BUILD)/tests/maps_at_exit.so
 # Everything the suite needs, built without running it (CI builds it before two suites run side by side).
 .PHONY: test-deps

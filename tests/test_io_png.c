@@ -56,6 +56,7 @@ static void round_trips(mx_oiio_decode_fn *oiio_decode, int w, int h, int c) {
     CHECK(ok);
     printf("png %s: %s\n", what, ok ? "ours and OpenImageIO read it alike" : "FAILED");
     free(back.data);
+    free(theirs.data);
     free(png);
     free(img.data);
 }

@@ -14,6 +14,7 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "exr_read.h"
 #include "io_write.h"
@@ -43,10 +44,29 @@ static struct {
     char error[512];
 } oiio = {PTHREAD_ONCE_INIT, NULL, NULL, ""};
 
+/* dlopen of the adapter in the folder of the running program (matex: build/, or PREFIX/bin's
+ * ../lib once installed), then by the loader's own search (LD_LIBRARY_PATH, the RUNPATH of the
+ * program: PREFIX/lib for a program linked through matex.pc, the build folder for the tests).
+ * The program's folder comes first so that build/matex never picks up an older installed copy;
+ * it is looked up here rather than through an $ORIGIN RUNPATH because under AddressSanitizer
+ * dlopen is called from its interceptor, and the program's RUNPATH is then not searched. */
+static void *open_oiio_library(void) {
+    char exe[4096], path[4096 + 64];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    char *slash = n > 0 ? (exe[n] = 0, strrchr(exe, '/')) : NULL;
+    static const char *const beside[2] = {"", "/../lib"};
+    for (int i = 0; slash && i < 2; i++) {
+        *slash = 0;
+        snprintf(path, sizeof path, "%s%s/" MX_OIIO_LIBRARY, exe, beside[i]);
+        if (access(path, F_OK) == 0) return dlopen(path, RTLD_NOW | RTLD_LOCAL); /* its error is the one to report */
+    }
+    return dlopen(MX_OIIO_LIBRARY, RTLD_NOW | RTLD_LOCAL);
+}
+
 static void load_oiio(void) {
     /* RTLD_LOCAL: OpenImageIO's symbols stay out of the program's namespace. Never closed: its
      * libraries register atexit handlers and thread-local state. */
-    void *lib = dlopen(MX_OIIO_LIBRARY, RTLD_NOW | RTLD_LOCAL);
+    void *lib = open_oiio_library();
     if (lib) {
         oiio.read = (mx_oiio_read_fn *)dlsym(lib, MX_OIIO_READ);
         oiio.decode = (mx_oiio_decode_fn *)dlsym(lib, MX_OIIO_DECODE);

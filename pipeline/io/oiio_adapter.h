@@ -2,9 +2,9 @@
  * does not read itself (JPEG, TIFF, BMP, HDR, palette/16-bit/interlaced PNG ...). Debian's
  * OpenImageIO brings ~250 libraries (1.3 s and 134 MB at start-up), so it is not linked into
  * matex: image_files.c opens this library with dlopen() the first time a file needs it.
- * Where it is found: beside the program or in ../lib of it (matex's RUNPATH $ORIGIN and
- * $ORIGIN/../lib: build/ in the tree, PREFIX/lib once installed), else the RUNPATH of the program
- * that links libmatex_io (matex.pc adds PREFIX/lib), LD_LIBRARY_PATH and the system's paths.
+ * Where it is found (image_files.c): beside the running program or in ../lib of it (matex: build/
+ * in the tree, PREFIX/lib once installed), else by dlopen's search: LD_LIBRARY_PATH, the RUNPATH
+ * of the program that links libmatex_io (matex.pc adds PREFIX/lib), the system's paths.
  * Both functions follow io.h's conventions (0 or -1 with st filled; out owns malloc'ed pixels). */
 #ifndef MX_OIIO_ADAPTER_H
 #define MX_OIIO_ADAPTER_H
