@@ -54,9 +54,9 @@ static void *open_oiio_library(void) {
     char exe[4096], path[4096 + 64];
     ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
     char *slash = n > 0 ? (exe[n] = 0, strrchr(exe, '/')) : NULL;
+    if (slash) *slash = 0; /* exe: the program's folder */
     static const char *const beside[2] = {"", "/../lib"};
     for (int i = 0; slash && i < 2; i++) {
-        *slash = 0;
         snprintf(path, sizeof path, "%s%s/" MX_OIIO_LIBRARY, exe, beside[i]);
         if (access(path, F_OK) == 0) return dlopen(path, RTLD_NOW | RTLD_LOCAL); /* its error is the one to report */
     }
