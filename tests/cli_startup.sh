@@ -15,6 +15,7 @@ maps_of() {
     grep -q "maps_at_exit" "$T/maps" # the hook ran: the maps were read at exit
 }
 no_oiio() { ! grep -q "libOpenImageIO" "$T/maps"; }
+check "the hook is built ($HOOK)" [ -f "$HOOK" ] || exit 1
 
 check "--version: maps read at exit" maps_of "$M" --version
 check "--version does not map libOpenImageIO" no_oiio
