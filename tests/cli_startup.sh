@@ -14,8 +14,8 @@ maps_of() {
         "$@" > "$T/out" 2> "$T/err"
     grep -q "maps_at_exit" "$T/maps" # the hook ran: the maps were read at exit
 }
-no_oiio() { ! grep -q "libOpenImageIO" "$T/maps"; }
-check "the hook is built ($HOOK)" [ -f "$HOOK" ] || exit 1
+no_oiio() { [ -s "$T/maps" ] && ! grep -q "libOpenImageIO" "$T/maps"; }
+[ -f "$HOOK" ] || { echo "FAIL the hook is not built: $HOOK"; exit 1; }
 
 check "--version: maps read at exit" maps_of "$M" --version
 check "--version does not map libOpenImageIO" no_oiio
