@@ -11,9 +11,13 @@ WARN     = -Wall -Wextra -Werror
 CFLAGS   = -std=c11 $(OPT) -g $(WARN) -pthread -D_GNU_SOURCE -ffp-contract=off -MMD -MP
 CXXFLAGS = -std=c++17 $(OPT) -g $(WARN) -pthread -MMD -MP -I/usr/include/OpenEXR -I/usr/include/Imath
 LDLIBS   = -lm -lpthread
-IOLIBS   = -lOpenMeshCore -lOpenImageIO -lOpenImageIO_Util -lOpenEXR -lImath -lz -lstdc++
-# matex-lite: the file adapter without OpenImageIO (PNG through zlib, pipeline/io/io_lite.c)
-LITE_IOLIBS = -lOpenMeshCore -lOpenEXR -lIex -lImath -lz -lstdc++
+# The file adapter's libraries. OpenImageIO is not among them: its part of the adapter is
+# libmatex_oiio.so, opened on first use (pipeline/io/oiio_adapter.h) beside matex (build/, or
+# PREFIX/bin/../lib once installed), or through the RUNPATH: the build folder for the test and
+# benchmark programs, PREFIX/lib for a program linked through matex.pc.
+IO_CORE_LIBS = -lOpenMeshCore -lOpenEXR -lIex -lImath -lz -lstdc++ -ldl
+IOLIBS   = $(IO_CORE_LIBS) -Wl,-rpath,$(abspath $(BUILD))
+OIIO_LIBS = -lOpenImageIO -lOpenImageIO_Util
 
 SANITIZERS = address,undefined
 ifeq ($(SAN),1)
@@ -67,9 +71,9 @@ WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
 TEX_SRC     = $(wildcard pipeline/texture/*.c)
-IO_SRC      = $(wildcard pipeline/io/*.cpp) pipeline/io/io_write.c pipeline/io/png_zlib.c
-LITE_IO_SRC = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/io_write.c pipeline/io/png_zlib.c \
-              pipeline/io/io_lite.c
+IO_SRC      = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/exr_read.cpp pipeline/io/io_write.c \
+              pipeline/io/png_zlib.c pipeline/io/image_files.c
+OIIO_SRC    = pipeline/io/imageio.cpp
 TOOL_SRC    = $(wildcard tools/matex/cmd_*.c tools/matex/cli_*.c)
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(patsubst %.cpp,$(BUILD)/%.o,$(1)))
@@ -80,6 +84,7 @@ LIB_NN      = $(BUILD)/libmx_nn.a
 LIB_GEOM    = $(BUILD)/libmx_geom.a
 LIB_TEX     = $(BUILD)/libmx_tex.a
 LIB_IO      = $(BUILD)/libmatex_io.a
+LIB_OIIO    = $(BUILD)/libmatex_oiio.so
 LIBMATEX    = $(BUILD)/libmatex.a
 LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
@@ -88,13 +93,25 @@ ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SR
 .PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm blender-addon test-blender
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
 .SECONDARY:
-all: $(LIBMATEX) $(LIB_IO) matex
+all: $(LIBMATEX) $(LIB_IO) $(LIB_OIIO) matex
 
+# a link, not a copy: matex finds libmatex_oiio.so beside its real path (/proc/self/exe)
 matex: $(BUILD)/matex
-	cp $< $@
+	ln -sf $< $@
 
 $(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IO_CORE_LIBS) $(LDLIBS)
+
+# The OpenImageIO adapter: imageio.cpp and the status functions it reports through, position-
+# independent, only its two entry points exported.
+$(LIB_OIIO): $(patsubst %,$(BUILD)/%.pic.o,$(OIIO_SRC) runtime/status.c)
+	$(CXX) $(LDFLAGS) -shared -o $@ $^ $(OIIO_LIBS) -lstdc++
+$(BUILD)/%.cpp.pic.o: %.cpp
+	@mkdir -p $(dir $@)
+	$(CXX) $(CXXFLAGS) -fPIC -fvisibility=hidden -c -o $@ $<
+$(BUILD)/%.c.pic.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -fPIC -fvisibility=hidden -c -o $@ $<
 
 $(LIB_CORE):    $(call obj,$(CORE_SRC))
 $(LIB_WEIGHTS): $(call obj,$(WEIGHTS_SRC))
@@ -229,12 +246,21 @@ TEST_ENV = BUILD=$(BUILD) MATEX=$(BUILD)/matex MATEX_DEMO_WEIGHTS=$(DEMO_WEIGHTS
            MATEX_TEST_JOBS=$(TEST_JOBS) \
            MATEX_UNET_ONLY_WEIGHTS=$(BUILD)/demo/demo_unet_only.mxw MATEX_FAULTS=$(MATEX_FAULTS) \
            MATEX_DEMO_FAST_WEIGHTS=$(BUILD)/demo/demo_fast.mxw \
-           MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)"
-TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS)
+           MATEX_MAKE_VARS="BUILD=$(BUILD) CC=$(CC) CXX=$(CXX) OPT=$(OPT) SAN=$(SAN)" \
+           $(if $(SAN),LD_LIBRARY_PATH=$(abspath $(BUILD)))
+# (with sanitizers, dlopen runs from their interceptor and the test programs' RUNPATH is not
+# searched for libmatex_oiio.so: LD_LIBRARY_PATH is)
+TEST_DEPS = all core $(TEST_BINS) $(FUZZ_REPLAY) $(MATEX_FAULTS) $(DEMO_WEIGHTS) $(BUILD)/tests/maps_at_exit.so
 # Everything the suite needs, built without running it (CI builds it before two suites run side by side).
 .PHONY: test-deps
 test-deps: $(TEST_DEPS)
-test: $(TEST_DEPS)
+# `make demo` and `make test` set up first (the missing Debian packages: tools/scripts/deps.sh,
+# silent when none is), then build and run in a second make, so nothing builds before that.
+.PHONY: test-run demo-run
+test:
+	@sh tools/scripts/deps.sh
+	@$(MAKE) --no-print-directory test-run
+test-run: $(TEST_DEPS)
 	$(TEST_ENV) sh tests/run.sh $(TEST_BINS) $(FUZZ_REPLAY)
 
 # Every repository path named in the docs and the code exists (tools/scripts/check_paths.sh), and the
@@ -244,6 +270,11 @@ test: $(TEST_DEPS)
 check:
 	sh tools/scripts/check_paths.sh .
 	sh tools/scripts/check_docs.sh .
+
+# tests/cli_startup.sh preloads it: the libraries a matex run mapped, read at its exit
+$(BUILD)/tests/maps_at_exit.so: tests/maps_at_exit.c
+	@mkdir -p $(dir $@)
+	$(CC) -std=c11 -O2 $(WARN) -fPIC -shared -o $@ $<  # no sanitizer: it is preloaded before their runtime
 
 # The SD1.5-size golden cases (weights made by the golden-v1 rule in memory): minutes, GBs.
 test-full: $(TEST_DEPS)
@@ -267,7 +298,10 @@ test-blender: all $(DEMO_WEIGHTS) $(ADDON_ZIP)
 # End to end in seconds with tiny random weights (they paint noise: see README): the shipped
 # Spot mesh textured into demo/spot, then a contact sheet of it from 8 sides.
 DEMO_OUT = demo/spot
-demo: all $(DEMO_WEIGHTS)
+demo:
+	@sh tools/scripts/deps.sh
+	@$(MAKE) --no-print-directory demo-run
+demo-run: all $(DEMO_WEIGHTS)
 	rm -rf $(DEMO_OUT)
 	$(BUILD)/matex texture tests/data/assets/spot/spot_triangulated.obj "a black-and-white dairy cow" \
 	    --weights $(DEMO_WEIGHTS) --image-size 64 --steps 4 --quiet -o $(DEMO_OUT)
@@ -300,16 +334,12 @@ arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TEST
 $(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
-# matex with the file adapter but without OpenImageIO (PNG only, through zlib): what `make
-# gpu-check-pack` carries to a GPU machine, which has none of OpenImageIO's ~250 libraries.
-$(BUILD)/matex-lite: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
-                     $(call obj,$(LITE_IO_SRC)) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(LITE_IOLIBS) $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
 $(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
-# The Debian 12 packages the build and the tests need, non-interactively (root or sudo).
+# The Debian 12 packages the build and the tests need (tools/scripts/packages.txt), those missing,
+# non-interactively (root or sudo -n); `make demo` and `make test` run it first.
 deps:
 	sh tools/scripts/deps.sh
 
@@ -329,12 +359,15 @@ bench: all $(BENCH_BINS)
 
 PREFIX ?= /usr/local
 # matex.pc: the static libraries and what they need (the I/O adapter and libmatex refer to
-# each other, hence the group).
-PC_LIBS = -L$${libdir} -Wl,--start-group -lmatex -lmatex_io -Wl,--end-group $(IOLIBS) $(LDLIBS) -pthread $(LDFLAGS)
+# each other, hence the group); not OpenImageIO: the RUNPATH ${libdir} lets the program find
+# libmatex_oiio.so there when a file needs it (JPEG, TIFF ...).
+PC_LIBS = -L$${libdir} -Wl,--start-group -lmatex -lmatex_io -Wl,--end-group $(IO_CORE_LIBS) $(LDLIBS) -pthread \
+          -Wl,-rpath,$${libdir} $(LDFLAGS)
 install: all
 	install -D -m 755 $(BUILD)/matex $(DESTDIR)$(PREFIX)/bin/matex
 	install -D -m 644 $(LIBMATEX) $(DESTDIR)$(PREFIX)/lib/libmatex.a
 	install -D -m 644 $(LIB_IO) $(DESTDIR)$(PREFIX)/lib/libmatex_io.a
+	install -D -m 755 $(LIB_OIIO) $(DESTDIR)$(PREFIX)/lib/libmatex_oiio.so
 	install -D -m 644 include/matex.h $(DESTDIR)$(PREFIX)/include/matex.h
 	# the CLIP vocabulary (MIT, OpenAI) for single-file checkpoints, which carry none (matex convert)
 	for f in vocab.json merges.txt LICENSE; do \
@@ -383,7 +416,7 @@ $(CUDA_TEST): $(BUILD)/tests/cuda/test_cuda_ops.o $(TEST_UTIL) $(LIB_CUDA) $(LIB
 	$(NVCC) $(NVCC_ARCH) -o $@ -Xlinker --start-group $^ -Xlinker --end-group $(CUDA_LIBS) -lm -lpthread
 
 ifeq ($(CUDA),1)
-$(BUILD)/matex $(BUILD)/matex-lite $(BUILD)/tools/bench/bench_cuda $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): \
+$(BUILD)/matex $(BUILD)/tools/bench/bench_cuda $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS)): \
     $(LIB_CUDA) # relinked when the kernels change
 endif
 
@@ -398,7 +431,7 @@ cuda-run-tests:
 	    $(patsubst %,$(BUILD)/tests/%,$(CUDA_NN_TESTS))
 
 # `make gpu-check` on a machine with a GPU: the evidence of tools/scripts/gpu_check.sh (docs/cuda-notes.md).
-# `make gpu-check-pack` here first: stripped binaries (matex-lite as matex, with the few libraries
+# `make gpu-check-pack` here first: stripped binaries (matex without libmatex_oiio.so, with the few libraries
 # it needs that a GPU machine lacks, in lib/) and the small SD1.5 goldens into $(CUDA_BUILD)/gpu
 # (~40 MB) and its archive gpu.tar.gz (~20 MB): the one file a device run carries (a run carries at
 # most 64 MiB with the repository); gpu-check unpacks it and then builds nothing.
@@ -421,13 +454,12 @@ gpu-golden-pack: cuda
 	tar -C $(CUDA_BUILD) -czf $(CUDA_BUILD)/gpu-golden.tar.gz gpu-golden
 	du -sh $(CUDA_BUILD)/gpu-golden.tar.gz
 gpu-check-pack: cuda
-	$(MAKE) BUILD=$(CUDA_BUILD) CUDA=1 $(CUDA_BUILD)/matex-lite
 	rm -rf $(GPU_PACK) && mkdir -p $(GPU_PACK)/tests/cuda $(GPU_PACK)/lib $(GPU_PACK)/data/golden/sd15_controlnet
-	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex-lite
+	strip -o $(GPU_PACK)/matex $(CUDA_BUILD)/matex
 	strip -o $(GPU_PACK)/bench_cuda $(CUDA_BUILD)/tools/bench/bench_cuda
 	strip -o $(GPU_PACK)/tests/cuda/test_cuda_ops $(CUDA_BUILD)/tests/cuda/test_cuda_ops
 	for t in $(CUDA_NN_TESTS); do strip -o $(GPU_PACK)/tests/$$t $(CUDA_BUILD)/tests/$$t || exit 1; done
-	ldd $(CUDA_BUILD)/matex-lite | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \
+	ldd $(CUDA_BUILD)/matex | awk '/=> \// {print $$3}' | grep -Ev '/lib(c|m|gcc_s|stdc\+\+|pthread|dl|rt)\.so|cuda' | \
 	    while read -r lib; do cp -L "$$lib" $(GPU_PACK)/lib/ || exit 1; done
 	for d in $(GPU_PACK_DATA); do cp -r $(MATEX_TESTDATA)/$$d $(GPU_PACK)/data/$$d || exit 1; done
 	# the peer (diffusers' sources, ~4 MB): gpu_check.sh says so and goes on where it is missing

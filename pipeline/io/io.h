@@ -1,5 +1,6 @@
 /* The file I/O adapter: the only code that touches third-party file-format libraries
- * (OpenMesh for PLY/OFF/STL, OpenImageIO for PNG/JPEG/TIFF, OpenEXR for float output).
+ * (OpenMesh for PLY/OFF/STL, OpenEXR, zlib for PNG; OpenImageIO for other images, opened on
+ * first use: image_files.c).
  * Implemented in C++ (pipeline/io, .cpp files) behind this C interface; it depends only on
  * runtime/ (status, log) and the types-only header pipeline/geom/mesh_types.h, never on
  * pipeline/geom's code, so it links after libmx_geom.
@@ -49,7 +50,8 @@ int mx_io_read_mesh(const char *path, mx_mesh *out, mx_status *st);
 
 /* ---- images ---- */
 
-/* Reads PNG/JPEG/TIFF (anything OpenImageIO reads) into float [0,1] values, channels kept
+/* Reads 8-bit PNG and EXR (matex's own readers) or anything OpenImageIO reads (JPEG, TIFF, 16-bit
+ * PNG ...: libmatex_oiio.so, loaded then) into float [0,1] values (EXR: as stored), channels kept
  * (gray 1, RGB 3, RGBA 4; 2-channel gray+alpha is widened to RGBA; more than 4 are cut to 4),
  * no colour conversion (8-bit sRGB code values / 255). Row 0 is the top row. */
 int mx_io_read_image(const char *path, mx_image *out, mx_status *st);

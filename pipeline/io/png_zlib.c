@@ -103,10 +103,15 @@ static int parse_ihdr(const unsigned char *d, const char *what, png_header *hd, 
     hd->channels = type == 3 ? 0 : SAMPLES_OF_TYPE[type]; /* a palette is not read here */
     if (depth != 8 || hd->channels == 0 || interlace)
         return mx_fail(st, MX_EINPUT,
-                       "%s: a %d-bit PNG of colour type %d%s: this build (without OpenImageIO) reads only "
-                       "non-interlaced 8-bit grey, grey+alpha, RGB and RGBA; use the full build",
+                       "%s: a %d-bit PNG of colour type %d%s: this decoder reads only "
+                       "non-interlaced 8-bit grey, grey+alpha, RGB and RGBA",
                        what, depth, type, interlace ? ", interlaced" : "");
     return 0;
+}
+
+int mx_png_zlib_reads(const void *data) {
+    const unsigned char *ihdr = (const unsigned char *)data + 16; /* after the signature, length and type */
+    return ihdr[8] == 8 && ihdr[9] <= 6 && SAMPLES_OF_TYPE[ihdr[9]] && ihdr[9] != 3 && ihdr[12] == 0;
 }
 
 /* The IDAT payloads of a checked PNG, joined into one malloc'ed buffer of lay->idat_len bytes. */

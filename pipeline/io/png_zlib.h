@@ -1,9 +1,8 @@
-/* An 8-bit PNG codec on zlib alone, for the build without OpenImageIO (io_lite.c, `matex-lite`,
- * which the GPU check carries to machines that lack OpenImageIO's hundreds of libraries).
- * Decodes non-interlaced 8-bit grey, grey+alpha (widened to RGBA), RGB and RGBA: every PNG this
- * project writes and what most tools write; palette, 16-bit and interlaced files are refused with
- * a message that names the full build. Encodes 1, 3 or 4 channels. Every length, CRC and size in
- * the file is checked before use. */
+/* An 8-bit PNG codec on zlib alone: matex reads and writes PNG with it, without OpenImageIO
+ * (image_files.c). Decodes non-interlaced 8-bit grey, grey+alpha (widened to RGBA), RGB and
+ * RGBA: every PNG this project writes and what most tools write; palette, 16-bit and interlaced
+ * files are refused here (image_files.c hands them to the OpenImageIO adapter). Encodes 1, 3 or
+ * 4 channels. Every length, CRC and size in the file is checked before use. */
 #ifndef MX_PNG_ZLIB_H
 #define MX_PNG_ZLIB_H
 
@@ -22,6 +21,10 @@ extern "C" {
  * most 1032:1: a few hundred bytes declaring 16k × 16k would have a decoder allocate gigabytes
  * before the data runs out). Bit depth, colour type and interlace are the decoder's to judge. */
 int mx_png_check(const void *data, size_t len, const char *what, mx_status *st);
+
+/* 1 when a PNG that mx_png_check accepted is of a kind mx_png_decode reads (8-bit, no palette,
+ * not interlaced); 0 otherwise. */
+int mx_png_zlib_reads(const void *data);
 
 /* The PNG in data[0..len) as float [0,1] values; `what` names it in errors. */
 int mx_png_decode(const void *data, size_t len, const char *what, mx_image *out, mx_status *st);

@@ -9,8 +9,8 @@
     X(batch, "texture a catalogue (a manifest of meshes and prompts), sharded and resumable")    \
     X(transfer, "move the texture of a textured mesh onto another mesh or UV layout")             \
     X(render, "render turntable views and a contact sheet of a mesh")                             \
-    X(info, "print mesh statistics or a weight file's table of contents")                         \
-    X(convert, "convert diffusers folders into one matex weight file")                            \
+    X(info, "describe a mesh, an image (or compare two), a weight file or a checkpoint")          \
+    X(convert, "convert an SD1.x checkpoint or diffusers folders into one matex weight file")     \
     X(gen_weights, "make random weights for a network config (golden-v1 rule)")                  \
     X(run_net, "run one network on tensors from a safetensors file")                              \
     X(tokenize, "print the 77 CLIP token ids of a prompt")                                        \

@@ -30,7 +30,10 @@ static void usage(FILE *f) {
                "  --threads N   worker threads (default: all CPUs)\n"
                "  --precision P fp32 (default) or bf16 kernels (bf16 needs AVX512_BF16)\n"
                "  --json        one JSON object on stdout instead of the table\n"
-               "MATEX_ISA=scalar|avx2|avx512 lowers the kernel level.\n");
+               "MATEX_ISA=");
+    /* the levels from the code's own table (runtime/backend.h), not a copy of it */
+    for (int i = 0; i < MX_ISA_COUNT; i++) fprintf(f, "%s%s", i ? "|" : "", mx_isa_name((mx_isa)i));
+    fprintf(f, " lowers the kernel level (`matex --version` shows the one used).\n");
 }
 
 static double flops_of(const bench_case *b) {
