@@ -11,6 +11,7 @@
 
 #include "../../ops/ops.h"
 #include "../../runtime/status.h"
+#include "../../weights/networks.h"
 
 typedef struct mx_net_io mx_net_io;
 struct mx_net_io {
@@ -29,7 +30,7 @@ struct mx_net_io {
     float *(*output)(mx_net_io *io, const char *name, int ndim, const int64_t *shape, mx_status *st);
     /* The call's arena on the device, `bytes` big (one per call). */
     mx_arena *(*arena)(mx_net_io *io, size_t bytes, mx_status *st);
-    /* Another network of the same weight file, by its registry kind ("ip_adapter": prefix
+    /* Another network of the same weight file, by its kind (MX_NET_IP_ADAPTER: prefix
      * "ip_adapter."), loaded with its weights on the device (freed after the call); NULL with st
      * set when the file has none. */
     const void *(*network)(mx_net_io *io, const char *kind, mx_status *st);

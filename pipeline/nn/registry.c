@@ -20,32 +20,32 @@ static void taesd_free(void *n) { mx_taesd_free(n); }
 #define CONDITIONING "sample [B,C,H,W], timestep [B] or [1] (I64, I32 or F32),\n               encoder_hidden_states [B,T,D]"
 
 const mx_net_def mx_nets[] = {
-    {.kind = "unet", .load = mx_unet_load_config, .free = unet_free,
+    {.kind = MX_NET_UNET, .load = mx_unet_load_config, .free = unet_free,
      .verbs = {{"unet", CONDITIONING ",\n               optional down_block_res_sample.{i} and mid_block_res_sample,\n"
                         "               optional image_embeds [B,n_images,E] + ip_adapter_scale [1] (the file's ip_adapter.)\n"
                         "               -> out (+ image_tokens [B,n_images,tokens,D])",
                 mx_unet_run_io}}},
-    {.kind = "controlnet", .load = mx_controlnet_load_config, .free = controlnet_free,
+    {.kind = MX_NET_CONTROLNET, .load = mx_controlnet_load_config, .free = controlnet_free,
      .verbs = {{"controlnet", "sample, timestep, encoder_hidden_states (as unet), controlnet_cond [B,3,8H,8W],\n"
                               "               conditioning_scale (one float, default 1)\n"
                               "               -> down_block_res_sample.{i}, mid_block_res_sample",
                 mx_controlnet_run_io}}},
-    {.kind = "vae", .fp32_under_bf16 = 1, .load = mx_vae_load_config, .free = vae_free,
+    {.kind = MX_NET_VAE, .load = mx_vae_load_config, .free = vae_free,
      .verbs = {{"vae-encode", "image [B,3,H,W] in [-1,1] -> mean, logvar", mx_vae_run_encode_io},
                {"vae-decode", "latents [B,4,h,w] (unscaled) -> image", mx_vae_run_decode_io}}},
-    {.kind = "text_encoder", .load = mx_clip_load_config, .free = mx_clip_destroy,
+    {.kind = MX_NET_TEXT_ENCODER, .load = mx_clip_load_config, .free = mx_clip_destroy,
      .verbs = {{"clip", "input_ids [B,T] (I64 or I32) -> last_hidden_state, pooler_output, hidden_states.{i}",
                 mx_clip_run_io}}},
-    {.kind = "taesd", .load = mx_taesd_load_config, .free = taesd_free,
+    {.kind = MX_NET_TAESD, .load = mx_taesd_load_config, .free = taesd_free,
      .verbs = {{"taesd-encode", "image [B,3,H,W] in [-1,1] -> latents (SD latents, scaling factor 1)",
                 mx_taesd_run_encode_io},
                {"taesd-decode", "latents [B,4,h,w] -> image (in about [-1,1], unclamped)", mx_taesd_run_decode_io}}},
-    {.kind = "image_encoder", .load = mx_clip_vision_load_config, .free = mx_clip_vision_destroy,
+    {.kind = MX_NET_IMAGE_ENCODER, .load = mx_clip_vision_load_config, .free = mx_clip_vision_destroy,
      .verbs = {{"clip-vision", "pixel_values [B,3,S,S] (clip-preprocess) -> image_embeds [B,P],\n"
                                "               last_hidden_state, penultimate_hidden_state [B,1+(S/patch)^2,D]",
                 mx_clip_vision_run_io}}},
     /* run by the UNet's cross-attentions: run-net unet's image_embeds */
-    {.kind = "ip_adapter", .load = mx_ip_adapter_load_config, .free = mx_ip_adapter_destroy},
+    {.kind = MX_NET_IP_ADAPTER, .load = mx_ip_adapter_load_config, .free = mx_ip_adapter_destroy},
 };
 const size_t mx_net_count = sizeof mx_nets / sizeof mx_nets[0];
 

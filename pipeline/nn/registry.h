@@ -35,8 +35,7 @@ typedef struct mx_net_verb {
 #define MX_NET_MAX_VERBS 2
 
 typedef struct mx_net_def {
-    const char *kind;    /* its entry in weights/networks.h ("unet") */
-    int fp32_under_bf16; /* precision policy: runs in fp32 throughout under a bf16 context (precision.h) */
+    const char *kind; /* its entry in weights/networks.h (MX_NET_UNET) */
     mx_net_load_fn load;
     void (*free)(void *net);
     mx_net_verb verbs[MX_NET_MAX_VERBS]; /* unused slots have name NULL */

@@ -8,6 +8,7 @@
 
 #include "ae_pass.h"
 #include "blocks.h"
+#include "precision.h"
 
 #define TAESD_MAX_BLOCKS 16
 
@@ -28,6 +29,7 @@ struct mx_taesd {
     mx_taesd_config cfg;
     tiny_level enc[MX_NET_MAX_LEVELS], dec[MX_NET_MAX_LEVELS];
     mx_conv enc_out, dec_in, dec_out;
+    int fp32; /* runs in fp32 throughout under a bf16 context (mx_prec_net_fp32, read at load) */
 };
 
 const mx_taesd_config *mx_taesd_cfg(const mx_taesd *t) { return &t->cfg; }
@@ -93,6 +95,7 @@ int mx_taesd_load(mx_taesd **out, const mx_taesd_config *cfg, mx_binder *b, mx_s
     mx_taesd *t = calloc(1, sizeof *t);
     if (!t) return mx_fail(st, MX_ENOMEM, "out of memory loading TAESD");
     t->cfg = *cfg;
+    t->fp32 = mx_prec_net_fp32(MX_NET_TAESD);
     if (encoder_load(t, b, st) || decoder_load(t, b, st)) {
         mx_fail_prefix(st, "loading TAESD");
         free(t);
@@ -201,14 +204,14 @@ static int check_sizes(const mx_taesd *t, int B, int H, int W, mx_status *st) {
 int mx_taesd_encode(const mx_ctx *c, const mx_taesd *t, const float *image, int B, int H, int W, float *latents,
                     mx_arena *a, mx_status *st) {
     if (check_sizes(t, B, H, W, st)) return -1;
-    return mx_ae_run(c, "taesd", encode_run, t, image, B, H, W, latents, a, st, "TAESD encode");
+    return mx_ae_run(c, t->fp32, encode_run, t, image, B, H, W, latents, a, st, "TAESD encode");
 }
 
 int mx_taesd_decode(const mx_ctx *c, const mx_taesd *t, const float *latents, int B, int h, int w, float *image,
                     mx_arena *a, mx_status *st) {
     int f = mx_taesd_factor(t);
     if (check_sizes(t, B, h * f, w * f, st)) return -1;
-    return mx_ae_run(c, "taesd", decode_run, t, latents, B, h, w, image, a, st, "TAESD decode");
+    return mx_ae_run(c, t->fp32, decode_run, t, latents, B, h, w, image, a, st, "TAESD decode");
 }
 
 int mx_taesd_encode_arena_bytes(const mx_taesd *t, int B, int H, int W, size_t *bytes, mx_status *st) {

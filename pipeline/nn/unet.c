@@ -314,7 +314,7 @@ static int read_image_guidance(mx_net_io *io, const mx_unet *u, mx_unet_input *i
         return io->has(io, "ip_adapter_scale")
                    ? mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale without image_embeds", io->source)
                    : 0;
-    if (!(*ad = io->network(io, "ip_adapter", st)) || mx_unet_check_ip(u, *ad, st)) return -1;
+    if (!(*ad = io->network(io, MX_NET_IP_ADAPTER, st)) || mx_unet_check_ip(u, *ad, st)) return -1;
     int64_t es[3] = {in->B, -1, (*ad)->embed_dim};
     if (!(*embeds = mx_net_io_input(io, "image_embeds", 3, es, st))) return -1;
     if (es[1] > MX_IP_MAX_TOKENS / (*ad)->num_tokens)

@@ -38,6 +38,7 @@ struct mx_vae {
     mx_vae_config cfg;
     vae_half enc, dec;
     mx_conv quant_conv, post_quant_conv;
+    int fp32; /* runs in fp32 throughout under a bf16 context (mx_prec_net_fp32, read at load) */
 };
 
 const mx_vae_config *mx_vae_cfg(const mx_vae *v) { return &v->cfg; }
@@ -113,6 +114,7 @@ int mx_vae_load(mx_vae **out, const mx_vae_config *cfg, mx_binder *b, mx_status 
     mx_vae *v = calloc(1, sizeof *v);
     if (!v) return mx_fail(st, MX_ENOMEM, "out of memory loading the VAE");
     v->cfg = *cfg;
+    v->fp32 = mx_prec_net_fp32(MX_NET_VAE);
     int lc = cfg->latent_channels;
     int rc = encoder_load(&v->enc, b, cfg, st);
     if (!rc) rc = decoder_load(&v->dec, b, cfg, st);
@@ -270,7 +272,7 @@ int mx_vae_encode(const mx_ctx *c, const mx_vae *v, const float *image, int B, i
                   float *logvar, mx_arena *a, mx_status *st) {
     if (check_sizes(v, B, H, W, mx_vae_factor(v), st)) return -1;
     mx_run r;
-    mx_run_init_net(&r, "vae", c, a, st);
+    mx_run_init_prec(&r, v->fp32, c, a, st);
     size_t mark = mx_arena_mark(a);
     int rc = encode_run(&r, v, image, B, H, W, mean, logvar);
     mx_arena_reset(a, mark);
@@ -281,7 +283,7 @@ int mx_vae_decode(const mx_ctx *c, const mx_vae *v, const float *latents, int B,
                   mx_arena *a, mx_status *st) {
     int f = mx_vae_factor(v);
     if (check_sizes(v, B, h * f, w * f, f, st)) return -1;
-    return mx_ae_run(c, "vae", decode_run, v, latents, B, h, w, image, a, st, "VAE decode");
+    return mx_ae_run(c, v->fp32, decode_run, v, latents, B, h, w, image, a, st, "VAE decode");
 }
 
 int mx_vae_encode_arena_bytes(const mx_vae *v, int B, int H, int W, size_t *bytes, mx_status *st) {
