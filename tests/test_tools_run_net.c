@@ -38,6 +38,13 @@ static int run_net(const char *args, const char *out) {
     return rc;
 }
 
+/* run-net NET on weight file `weights` and input file `inputs` into tmpdir/out. */
+static void run_entry(const char *net, const char *weights, const char *inputs, const char *out) {
+    char args[2048];
+    snprintf(args, sizeof args, "%s --weights %s --inputs %s", net, weights, inputs);
+    CHECK(run_net(args, out) == 0);
+}
+
 static void compare(const char *outfile, const char *name, const char *net, const char *ref, const char *refname) {
     char path[512], label[256];
     mx_safetensors got, want;
@@ -114,11 +121,9 @@ int main(void) {
     snprintf(args, sizeof args, "%s -o %s --dtype f32 --quiet --ip-adapter ", unet_dir, ipw);
     CHECK(sh("./matex convert %s%s", args, adapter) == 0);
     golden_path(gin, sizeof gin, "ip_adapter_tiny", "inputs.safetensors");
-    snprintf(args, sizeof args, "ip-adapter --weights %s --inputs %s", ipw, gin);
-    CHECK(run_net(args, "ip.safetensors") == 0);
+    run_entry("ip-adapter", ipw, gin, "ip.safetensors");
     compare("ip.safetensors", "image_tokens", "ip_adapter_tiny", "outputs.safetensors", "image_tokens");
-    snprintf(args, sizeof args, "unet --weights %s --inputs %s", ipw, gin);
-    CHECK(run_net(args, "unet_ip.safetensors") == 0);
+    run_entry("unet", ipw, gin, "unet_ip.safetensors");
     compare("unet_ip.safetensors", "out", "ip_adapter_tiny", "outputs.safetensors", "out_scale_1_0");
     compare("unet_ip.safetensors", "image_tokens", "ip_adapter_tiny", "outputs.safetensors", "image_tokens");
 
