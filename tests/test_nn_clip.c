@@ -123,7 +123,7 @@ static void test_tiny(const char *weights_file, const char *outputs_file, const 
     mx_safetensors sf;
     mx_status st = {0};
     mx_binder b, db = {0};
-    mx_clip m;
+    mx_clip *m = NULL;
     if (mx_st_open(&sf, path, &st) || mx_binder_st(&b, &sf, "", &st) || mx_binder_device(&db, &b, c, &st)) {
         fprintf(stderr, "%s\n", st.msg);
         CHECK(0);
@@ -133,16 +133,16 @@ static void test_tiny(const char *weights_file, const char *outputs_file, const 
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
     mx_st_close(&sf); /* the safetensors binder keeps its own copies */
-    if (ok) run_and_compare(&m, c, net, outputs_file, label);
+    if (ok) run_and_compare(m, c, net, outputs_file, label);
     if (ok) {
         int32_t ids[2] = {0, 1000}; /* 1000 is past the tiny vocabulary */
         float out[2 * 32];
         mx_arena a;
         CHECK(mx_arena_create(&a, 1 << 20, &st) == 0);
-        CHECK(mx_clip_forward(&m, c, &a, ids, 1, 2, out, NULL, NULL, &st) != 0 && strstr(st.msg, "1000"));
+        CHECK(mx_clip_forward(m, c, &a, ids, 1, 2, out, NULL, NULL, &st) != 0 && strstr(st.msg, "1000"));
         mx_arena_destroy(&a);
     }
-    mx_clip_free(&m);
+    mx_clip_free(m);
     mx_binder_free(&db);
     mx_binder_free(&b);
 }
@@ -161,7 +161,7 @@ static void test_converted(const mx_ctx *c) {
     mx_status st = {0};
     mx_weightfile *wf = NULL;
     mx_binder b = {0}, db = {0};
-    mx_clip m = {0};
+    mx_clip *m = NULL;
     mx_clip_config cfg;
     const char *cfg_text = NULL;
     int ok = mx_convert(&opts, &res, &st) == 0 && mx_wf_open(&wf, path, &st) == 0;
@@ -171,8 +171,8 @@ static void test_converted(const mx_ctx *c) {
          mx_clip_load(&m, &cfg, &db, &st) == 0;
     if (!ok) fprintf(stderr, "converted clip_tiny: %s\n", cfg_text || !wf ? st.msg : "no text_encoder.config");
     CHECK(ok);
-    if (ok) run_and_compare(&m, c, "clip_tiny", "outputs.safetensors", "converted");
-    mx_clip_free(&m);
+    if (ok) run_and_compare(m, c, "clip_tiny", "outputs.safetensors", "converted");
+    mx_clip_free(m);
     mx_binder_free(&db);
     mx_binder_free(&b);
     if (wf) mx_wf_close(wf);
@@ -185,12 +185,12 @@ static void test_enumerate_and_errors(void) {
     mx_clip_config_sd15(&cfg);
     mx_binder b;
     mx_status st = {0};
-    mx_clip m;
+    mx_clip *m = NULL;
     CHECK(mx_binder_enum(&b, &st) == 0);
     CHECK(mx_clip_load(&m, &cfg, &b, &st) == 0);
     CHECK(mx_binder_enum_count(&b) == 196); /* golden sd15_clip: 196 float tensors */
     CHECK(mx_binder_enum_bytes(&b) == (size_t)123060480 * 4);
-    mx_clip_free(&m);
+    mx_clip_free(m);
     mx_binder_free(&b);
     const char *bad = "{\"hidden_size\": 30, \"num_attention_heads\": 4}";
     CHECK(mx_clip_config_parse(&cfg, bad, strlen(bad), "bad.json", &st) != 0);
@@ -261,16 +261,16 @@ static void test_sd15(const mx_ctx *c) {
     mx_binder b = {0}, db = {0};
     b.bind = bind_golden;
     b.impl = &g;
-    mx_clip m;
+    mx_clip *m = NULL;
     mx_status st = {0};
     int ok = mx_binder_device(&db, &b, c, &st) == 0 && mx_clip_load(&m, &cfg, &db, &st) == 0;
     if (!ok) fprintf(stderr, "%s\n", st.msg);
     CHECK(ok);
     char label[32];
     golden_label(label, sizeof label, c, "sd15");
-    if (ok) run_and_compare(&m, c, net, "outputs.safetensors", label);
-    if (ok) check_prompt_path(&m, c, net);
-    mx_clip_free(&m);
+    if (ok) run_and_compare(m, c, net, "outputs.safetensors", label);
+    if (ok) check_prompt_path(m, c, net);
+    mx_clip_free(m);
     mx_binder_free(&db);
     for (size_t i = 0; i < g.n; i++) free(g.bufs[i]);
     free(g.bufs);

@@ -32,7 +32,7 @@ static void check_embeddings(const tiny_nets *n, const mx_ctx *c, const mx_safet
             golden_arena(c, &a, (size_t)1 << 20);
             float *dgot = golden_dev_alloc(c, nemb);
             for (int i = 0; i < 77; i++) ids[i] = (int32_t)fid[i];
-            CHECK(mx_clip_forward(&n->clip, c, &a, ids, 1, 77, dgot, NULL, NULL, &st) == 0);
+            CHECK(mx_clip_forward(n->clip, c, &a, ids, 1, 77, dgot, NULL, NULL, &st) == 0);
             CHECK(golden_fetch(c, got, dgot, nemb) == 0);
             mx_check_close(emb_name[k], got, want, nemb, 1e-4);
             mx_arena_destroy(&a);

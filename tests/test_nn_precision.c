@@ -34,12 +34,12 @@ static void test_conv_rule(void) {
     check_conv("conv_input", 0);
     check_conv("up_blocks.1.my_downsamplers.0.conv", 0);
     check_conv("encoder.layers.3.conv.0", 0); /* TAESD: follows the context */
-    CHECK(mx_prec_net_fp32("vae") == 1);
+    CHECK(mx_prec_net_fp32(MX_NET_VAE) == 1);
     /* ...but for the 3×3 convolutions of its decoder's two full-resolution up blocks */
     CHECK(mx_prec_vae_up_block_bf16(3, 4) && mx_prec_vae_up_block_bf16(2, 4));
     CHECK(!mx_prec_vae_up_block_bf16(1, 4) && !mx_prec_vae_up_block_bf16(0, 4));
     CHECK(mx_prec_vae_up_block_bf16(1, 3) && !mx_prec_vae_up_block_bf16(0, 3));
-    CHECK(mx_prec_net_fp32("unet") == 0 && mx_prec_net_fp32("taesd") == 0 && mx_prec_net_fp32("clip") == 0);
+    CHECK(mx_prec_net_fp32(MX_NET_UNET) == 0 && mx_prec_net_fp32(MX_NET_TAESD) == 0 && mx_prec_net_fp32(MX_NET_TEXT_ENCODER) == 0);
 }
 
 /* mx_ctx_fp32: a bf16 table becomes the fp32 one below it; fp32 tables and NULL stay. */

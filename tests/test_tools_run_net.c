@@ -1,6 +1,7 @@
 /* `matex convert` + `matex run-net` end to end (the binary ./matex, run from the repo root):
- * unet_tiny, controlnet_tiny (scale 0.5, inputs written here), vae_tiny, clip_vision_tiny, CLIP's
- * image preprocessing and taesd encode/decode against the golden outputs. */
+ * unet_tiny (plain, and with ip_adapter_tiny's image guidance), the IP-Adapter's tokens,
+ * controlnet_tiny (scale 0.5, inputs written here), vae_tiny, clip_vision_tiny, CLIP's image
+ * preprocessing and taesd encode/decode against the golden outputs. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -35,6 +36,13 @@ static int run_net(const char *args, const char *out) {
     int rc = system(cmd);
     if (rc) fprintf(stderr, "command failed (%d): %s\n", rc, cmd);
     return rc;
+}
+
+/* run-net NET on weight file `weights` and input file `inputs` into tmpdir/out. */
+static void run_entry(const char *net, const char *weights, const char *inputs, const char *out) {
+    char args[2048];
+    snprintf(args, sizeof args, "%s --weights %s --inputs %s", net, weights, inputs);
+    CHECK(run_net(args, out) == 0);
 }
 
 static void compare(const char *outfile, const char *name, const char *net, const char *ref, const char *refname) {
@@ -104,6 +112,20 @@ int main(void) {
     snprintf(args, sizeof args, "unet --weights %s/unet_tiny.mxw --inputs %s", tmpdir, gin);
     CHECK(run_net(args, "unet.safetensors") == 0);
     compare("unet.safetensors", "out", "unet_tiny", "outputs.safetensors", "out_plain");
+
+    /* the UNet with its companion IP-Adapter (found by kind in the same file), and the adapter's own entry */
+    char adapter[1024], unet_dir[1024], ipw[512];
+    golden_path(adapter, sizeof adapter, "ip_adapter_tiny", "ip_adapter.safetensors");
+    golden_path(unet_dir, sizeof unet_dir, "unet_tiny", "");
+    snprintf(ipw, sizeof ipw, "%s/unet_ip.mxw", tmpdir);
+    snprintf(args, sizeof args, "%s -o %s --dtype f32 --quiet --ip-adapter ", unet_dir, ipw);
+    CHECK(sh("./matex convert %s%s", args, adapter) == 0);
+    golden_path(gin, sizeof gin, "ip_adapter_tiny", "inputs.safetensors");
+    run_entry("ip-adapter", ipw, gin, "ip.safetensors");
+    compare("ip.safetensors", "image_tokens", "ip_adapter_tiny", "outputs.safetensors", "image_tokens");
+    run_entry("unet", ipw, gin, "unet_ip.safetensors");
+    compare("unet_ip.safetensors", "out", "ip_adapter_tiny", "outputs.safetensors", "out_scale_1_0");
+    compare("unet_ip.safetensors", "image_tokens", "ip_adapter_tiny", "outputs.safetensors", "image_tokens");
 
     CHECK(convert("controlnet_tiny") == 0);
     snprintf(cnin, sizeof cnin, "%s/cn_inputs.safetensors", tmpdir);

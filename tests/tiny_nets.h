@@ -27,9 +27,8 @@ typedef struct tiny_nets {
     mx_unet *unet;
     mx_controlnet *cnet;
     mx_vae *vae;
-    mx_clip clip;
+    mx_clip *clip;
     mx_taesd *taesd;
-    int clip_loaded;
 } tiny_nets;
 
 /* Reads golden/<net>/config.json into text and binds slot i to its weights file, through the
@@ -65,7 +64,6 @@ static inline int tiny_nets_load(tiny_nets *n, const mx_ctx *c, int which, mx_st
         if (!rc && i == 3) {
             rc = mx_clip_config_parse(&n->clip_cfg, t, len, names[i], st) ||
                  mx_clip_load(&n->clip, &n->clip_cfg, &n->w[i].dev, st);
-            n->clip_loaded = !rc;
         }
         if (!rc && i == 4)
             rc = mx_taesd_config_parse(&n->tcfg, t, len, names[i], st) || mx_taesd_load(&n->taesd, &n->tcfg, &n->w[i].dev, st);
@@ -79,7 +77,7 @@ static inline void tiny_nets_free(tiny_nets *n) {
     mx_unet_free(n->unet);
     mx_controlnet_free(n->cnet);
     mx_vae_free(n->vae);
-    if (n->clip_loaded) mx_clip_free(&n->clip);
+    mx_clip_free(n->clip);
     mx_taesd_free(n->taesd);
     for (int i = 0; i < 5; i++) golden_weights_close(&n->w[i]);
 }

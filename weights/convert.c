@@ -39,11 +39,22 @@ typedef struct {
     mx_single_file *singles[MX_CONVERT_MAX_EXTRA + 1]; /* single-file inputs, mapped until the end */
     size_t n_singles;
     text_buf sources; /* provenance: JSON array items */
-    char *unet_config; /* of the UNet converted, for the IP-Adapter's check */
+    char *configs[MX_NET_KIND_MAX]; /* the first config converted of each kind (mx_net_kinds' order) */
     mx_convert_result res;
 } converter;
 
 /* ---- small helpers ---- */
+
+/* The configs convert checks against another network's: an IP-Adapter's against the UNet's it
+ * is converted with (it must fit the UNet's cross-attentions). */
+typedef struct config_check {
+    const char *kind, *against;
+    int (*check)(const char *config, const char *against_config, const char *path, mx_status *st);
+} config_check;
+
+static const config_check config_checks[] = {
+    {MX_NET_IP_ADAPTER, MX_NET_UNET, mx_ip_adapter_file_check_unet},
+};
 
 
 
@@ -186,6 +197,23 @@ static int find_weight_files(const char *dir, int prefer_fp16, weight_files *wfs
                    dir);
 }
 
+static int add_text_meta(converter *cv, const char *dir, const char *file, const char *key, int must_be_json,
+                         mx_status *st) {
+    char path[PATH_MAX];
+    if (mx_path_join(path, sizeof path, dir, file, st)) return -1;
+    char *text = read_text(path, st);
+    if (!text) return -1;
+    int rc = 0;
+    if (must_be_json) {
+        mx_json *j = mx_json_parse(text, strlen(text), path, st);
+        if (!j || mx_json_kind(j) != MX_JSON_OBJ) rc = j ? mx_fail(st, MX_EINPUT, "%s: not a JSON object", path) : -1;
+        mx_json_free(j);
+    }
+    if (!rc && mx_wf_writer_meta(cv->w, key, text, st)) rc = mx_fail_prefix(st, "%s", path);
+    free(text);
+    return rc;
+}
+
 /* ---- adding tensors ---- */
 
 static int lora_targets(const converter *cv, const char *kind) {
@@ -277,6 +305,58 @@ static int add_weight_file(converter *cv, const char *prefix, const char *kind, 
     return 0;
 }
 
+/* Keeps the first config of each kind, and checks it against the one config_checks names. */
+static int add_config(converter *cv, const mx_net_kind *kind, const char *config, const char *path, mx_status *st) {
+    if (!kind) return 0;
+    char **slot = &cv->configs[kind - mx_net_kinds];
+    if (!*slot && !(*slot = strdup(config))) return mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    for (size_t i = 0; i < sizeof config_checks / sizeof *config_checks; i++) {
+        const mx_net_kind *against = mx_net_kind_named(config_checks[i].against);
+        const char *against_config = against ? cv->configs[against - mx_net_kinds] : NULL;
+        if (!strcmp(kind->name, config_checks[i].kind) && against_config &&
+            config_checks[i].check(config, against_config, path, st))
+            return -1;
+    }
+    return 0;
+}
+
+/* A network given by its own option (--vae, --taesd, --image-encoder, --ip-adapter): converted
+ * under its kind, it replaces the model set's or checkpoint's network of that kind. */
+typedef struct net_option {
+    const char *path, *kind;
+    int single; /* the single-file opener (MX_SF_VAE_ONLY, ...) when path is not a diffusers folder, or 0 */
+} net_option;
+
+static size_t net_options(const mx_convert_opts *o, net_option opt[4]) {
+    size_t n = 0;
+    if (o->vae) opt[n++] = (net_option){o->vae, MX_NET_VAE, mx_sf_is_file(o->vae) ? MX_SF_VAE_ONLY : 0};
+    if (o->taesd)
+        opt[n++] = (net_option){o->taesd, MX_NET_TAESD,
+                                mx_sf_is_file(o->taesd) || mx_taesd_files_given(o->taesd) ? MX_SF_TAESD : 0};
+    if (o->image_encoder) opt[n++] = (net_option){o->image_encoder, MX_NET_IMAGE_ENCODER, 0};
+    if (o->ip_adapter) opt[n++] = (net_option){o->ip_adapter, MX_NET_IP_ADAPTER, MX_SF_IP_ADAPTER};
+    return n;
+}
+
+/* 1 when an option of its own gives the network of that kind. */
+static int given_alone(const mx_convert_opts *o, const char *kind) {
+    net_option opt[4];
+    size_t n = net_options(o, opt);
+    for (size_t i = 0; i < n; i++)
+        if (!strcmp(opt[i].kind, kind)) return 1;
+    return 0;
+}
+
+/* The kind's processor file (its image size, mean, std) as the metadata "<prefix>.processor",
+ * when the folder has one. */
+static int add_processor(converter *cv, const char *dir, const mx_net_kind *kind, const char *prefix, mx_status *st) {
+    char path[PATH_MAX], key[128];
+    if (!kind->processor) return 0;
+    if (mx_path_join(path, sizeof path, dir, kind->processor, st)) return -1;
+    snprintf(key, sizeof key, "%s.processor", prefix);
+    return is_file(path) ? add_text_meta(cv, dir, kind->processor, key, 1, st) : 0;
+}
+
 /* Converts one network folder under the name prefix ("unet", "controlnet_depth", ...).
  * want_kind: the type the folder must hold, or NULL to accept any. */
 static int add_network(converter *cv, const char *dir, const char *prefix, const char *want_kind, mx_status *st) {
@@ -307,8 +387,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
         snprintf(key, sizeof key, "%s.config", resolved_prefix);
         rc = mx_wf_writer_meta(cv->w, key, cfg_text, st);
     }
-    if (!rc && !strcmp(kind, "unet") && !cv->unet_config && !(cv->unet_config = strdup(cfg_text)))
-        rc = mx_fail(st, MX_ENOMEM, "convert: out of memory");
+    if (!rc) rc = add_config(cv, known, cfg_text, cfg_path, st);
     size_t before = cv->res.tensors;
     if (!rc) {
         mx_buf_printf(&cv->sources, "%s{\"net\": ", cv->sources.len ? ", " : "");
@@ -325,6 +404,7 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
         cv->res.networks++;
         mx_info("convert: %s <- %s (%zu tensors, %zu file%s)", resolved_prefix, dir, cv->res.tensors - before, wfs->n,
                 wfs->n == 1 ? "" : "s");
+        rc = add_processor(cv, dir, known, resolved_prefix, st);
     }
     free(wfs);
     mx_json_free(cfg);
@@ -333,23 +413,6 @@ static int add_network(converter *cv, const char *dir, const char *prefix, const
 }
 
 /* ---- tokenizer and scheduler ---- */
-
-static int add_text_meta(converter *cv, const char *dir, const char *file, const char *key, int must_be_json,
-                         mx_status *st) {
-    char path[PATH_MAX];
-    if (mx_path_join(path, sizeof path, dir, file, st)) return -1;
-    char *text = read_text(path, st);
-    if (!text) return -1;
-    int rc = 0;
-    if (must_be_json) {
-        mx_json *j = mx_json_parse(text, strlen(text), path, st);
-        if (!j || mx_json_kind(j) != MX_JSON_OBJ) rc = j ? mx_fail(st, MX_EINPUT, "%s: not a JSON object", path) : -1;
-        mx_json_free(j);
-    }
-    if (!rc && mx_wf_writer_meta(cv->w, key, text, st)) rc = mx_fail_prefix(st, "%s", path);
-    free(text);
-    return rc;
-}
 
 static int add_tokenizer(converter *cv, const char *dir, mx_status *st) {
     if (add_text_meta(cv, dir, "vocab.json", "tokenizer.vocab", 1, st) ||
@@ -369,7 +432,7 @@ static int convert_model_set(converter *cv, const char *root, mx_status *st) {
         if (!mx_net_kinds[i].in_model_set) continue;
         if (mx_path_join(dir, sizeof dir, root, sub, st)) return -1;
         if (!is_dir(dir)) continue;
-        if (cv->o->vae && !strcmp(sub, "vae")) continue; /* replaced by --vae */
+        if (given_alone(cv->o, sub)) continue;
         if (add_network(cv, dir, sub, sub, st)) return -1;
         found++;
     }
@@ -395,11 +458,7 @@ static int add_single_net(converter *cv, const mx_single_file *sf, const mx_sf_n
     char key[128];
     snprintf(key, sizeof key, "%s.config", prefix);
     if (mx_wf_writer_meta(cv->w, key, n->config, st)) return -1;
-    if (!strcmp(n->kind, "unet") && !cv->unet_config && !(cv->unet_config = strdup(n->config)))
-        return mx_fail(st, MX_ENOMEM, "convert: out of memory");
-    if (!strcmp(n->kind, "ip_adapter") && cv->unet_config &&
-        mx_ip_adapter_file_check_unet(n->config, cv->unet_config, sf->src.path, st))
-        return -1;
+    if (add_config(cv, mx_net_kind_named(n->kind), n->config, sf->src.path, st)) return -1;
     for (size_t i = 0; i < n->count; i++) {
         if (add_tensor(cv, prefix, n->kind, &sf->src, &n->tensors[i], st)) return -1;
         cv->res.tensors++;
@@ -432,8 +491,9 @@ static int add_single_file(converter *cv, const char *path, int only, const char
     int has_clip = 0;
     for (size_t k = 0; k < sf->n_nets; k++) {
         const mx_sf_net *n = &sf->nets[k];
-        has_clip |= !strcmp(n->kind, "text_encoder");
-        if (!only && cv->o->vae && !strcmp(n->kind, "vae")) continue;
+        const mx_net_kind *kind = mx_net_kind_named(n->kind);
+        has_clip |= kind && kind->needs_tokenizer;
+        if (!only && given_alone(cv->o, n->kind)) continue;
         if (add_single_net(cv, sf, n, only ? prefix : n->kind, st)) return -1;
     }
     if (sf->skipped) mx_info("convert: %s: %zu entries skipped (e.g. %s)", path, sf->skipped, sf->skipped_example);
@@ -447,16 +507,6 @@ static int valid_controlnet_name(const char *s) {
     for (; *s; s++)
         if (!((*s >= 'a' && *s <= 'z') || (*s >= '0' && *s <= '9') || *s == '_')) return 0;
     return 1;
-}
-
-/* The IP-Adapter's CLIP vision tower, and its preprocessor_config.json (image size, mean, std)
- * as the metadata "image_encoder.processor" when the folder has one. */
-static int add_image_encoder(converter *cv, const char *dir, mx_status *st) {
-    char path[PATH_MAX];
-    if (add_network(cv, dir, "image_encoder", "image_encoder", st) ||
-        mx_path_join(path, sizeof path, dir, "preprocessor_config.json", st))
-        return -1;
-    return is_file(path) ? add_text_meta(cv, dir, "preprocessor_config.json", "image_encoder.processor", 1, st) : 0;
 }
 
 static int convert_inputs(converter *cv, mx_status *st) {
@@ -473,20 +523,17 @@ static int convert_inputs(converter *cv, mx_status *st) {
         char prefix[64];
         if (!valid_controlnet_name(o->controlnets[i].name))
             return mx_fail(st, MX_EUSAGE, "--controlnet %s: the name must be 1-32 of [a-z0-9_]", o->controlnets[i].name);
-        snprintf(prefix, sizeof prefix, "controlnet_%s", o->controlnets[i].name);
+        snprintf(prefix, sizeof prefix, MX_NET_CONTROLNET "_%s", o->controlnets[i].name);
         if (mx_sf_is_file(o->controlnets[i].dir) ? add_single_file(cv, o->controlnets[i].dir, MX_SF_CONTROLNET_ONLY, prefix, st)
-                                                 : add_network(cv, o->controlnets[i].dir, prefix, "controlnet", st))
+                                                 : add_network(cv, o->controlnets[i].dir, prefix, MX_NET_CONTROLNET, st))
             return -1;
     }
-    if (o->vae && (mx_sf_is_file(o->vae) ? add_single_file(cv, o->vae, MX_SF_VAE_ONLY, "vae", st)
-                                         : add_network(cv, o->vae, "vae", "vae", st)))
-        return -1;
-    int taesd_files = o->taesd && (mx_sf_is_file(o->taesd) || mx_taesd_files_given(o->taesd));
-    if (o->taesd && (taesd_files ? add_single_file(cv, o->taesd, MX_SF_TAESD, "taesd", st)
-                                 : add_network(cv, o->taesd, "taesd", "taesd", st)))
-        return -1;
-    if (o->image_encoder && add_image_encoder(cv, o->image_encoder, st)) return -1;
-    if (o->ip_adapter && add_single_file(cv, o->ip_adapter, MX_SF_IP_ADAPTER, "ip_adapter", st)) return -1;
+    net_option opt[4];
+    size_t n = net_options(o, opt);
+    for (size_t i = 0; i < n; i++)
+        if (opt[i].single ? add_single_file(cv, opt[i].path, opt[i].single, opt[i].kind, st)
+                          : add_network(cv, opt[i].path, opt[i].kind, opt[i].kind, st))
+            return -1;
     if (cv->res.networks == 0) return mx_fail(st, MX_EUSAGE, "convert: nothing to convert");
     return 0;
 }
@@ -530,7 +577,7 @@ static int add_lcm_mark(converter *cv, mx_status *st) {
         mx_buf_put(&p, "{\"file\": ", 9);
         mx_buf_json_str(&p, cv->o->loras[k].path);
         mx_buf_printf(&p, ", \"scale\": %.9g}", (double)cv->o->loras[k].scale);
-        int rc = p.oom ? mx_fail(st, MX_ENOMEM, "convert: out of memory") : mx_wf_writer_meta(cv->w, "unet.lcm_lora", p.p, st);
+        int rc = p.oom ? mx_fail(st, MX_ENOMEM, "convert: out of memory") : mx_wf_writer_meta(cv->w, MX_NET_UNET ".lcm_lora", p.p, st);
         free(p.p);
         return rc;
     }
@@ -551,7 +598,7 @@ static void converter_free(converter *cv) {
         free(cv->singles[k]);
     }
     free(cv->sources.p);
-    free(cv->unet_config);
+    for (size_t k = 0; k < MX_NET_KIND_MAX; k++) free(cv->configs[k]);
 }
 
 int mx_convert(const mx_convert_opts *o, mx_convert_result *res, mx_status *st) {

@@ -7,6 +7,7 @@
 
 #include "../runtime/buf.h"
 #include "../runtime/json.h"
+#include "networks.h"
 
 #define MAX_LAYERS 64 /* MX_IP_MAX_LAYERS of pipeline/nn/ip_adapter.h (SD1.5 has 16) */
 #define LAYER_PREFIX "ip_adapter."
@@ -124,7 +125,7 @@ int mx_ip_adapter_file_open(mx_single_file *sf, const char *path, mx_status *st)
     memset(sf, 0, sizeof *sf);
     adapter_parts p;
     mx_sf_net *n = &sf->nets[0];
-    n->kind = "ip_adapter";
+    n->kind = MX_NET_IP_ADAPTER;
     int rc = mx_sf_open_tensors(&sf->src, path, &sf->container, &sf->skipped, st);
     if (!rc) sf->n_nets = 1;
     if (!rc) rc = classify(&sf->src, &p, st);

@@ -51,8 +51,8 @@ static char *module_key(const char *stem, int processor_style) {
     if (starts_with(m, "lora_unet_") || starts_with(m, "lora_te_")) return strdup(m);
     if (starts_with(m, "base_model.model.")) m += strlen("base_model.model.");
     const char *net = "";
-    if (!starts_with(m, "unet.") && !starts_with(m, "text_encoder."))
-        net = starts_with(m, "text_model.") ? "text_encoder." : "unet.";
+    if (!starts_with(m, MX_NET_UNET ".") && !starts_with(m, MX_NET_TEXT_ENCODER "."))
+        net = starts_with(m, "text_model.") ? MX_NET_TEXT_ENCODER "." : MX_NET_UNET ".";
     char *k = malloc(strlen(net) + strlen(m) + 8);
     if (!k) return NULL;
     sprintf(k, "%s%s", net, m);

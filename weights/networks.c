@@ -5,16 +5,16 @@
 #include <string.h>
 
 const mx_net_kind mx_net_kinds[] = {
-    {.name = "unet", .class_name = "UNet2DConditionModel", .in_model_set = 1, .lora_prefix = "lora_unet_"},
-    {.name = "controlnet", .class_name = "ControlNetModel", .in_model_set = 1, .lora_prefix = NULL},
-    {.name = "vae", .class_name = "AutoencoderKL", .in_model_set = 1, .lora_prefix = NULL},
-    {.name = "text_encoder", .class_name = "CLIPTextModel", .in_model_set = 1, .lora_prefix = "lora_te_",
-     .model_type = "clip_text_model"},
-    {.name = "taesd", .class_name = "AutoencoderTiny", .in_model_set = 0, .lora_prefix = NULL},
-    {.name = "image_encoder", .class_name = "CLIPVisionModelWithProjection", .in_model_set = 0, .lora_prefix = NULL,
-     .model_type = "clip_vision_model"},
+    {.name = MX_NET_UNET, .class_name = "UNet2DConditionModel", .in_model_set = 1, .lora_prefix = "lora_unet_"},
+    {.name = MX_NET_CONTROLNET, .class_name = "ControlNetModel", .in_model_set = 1},
+    {.name = MX_NET_VAE, .class_name = "AutoencoderKL", .in_model_set = 1},
+    {.name = MX_NET_TEXT_ENCODER, .class_name = "CLIPTextModel", .in_model_set = 1, .lora_prefix = "lora_te_",
+     .model_type = "clip_text_model", .needs_tokenizer = 1},
+    {.name = MX_NET_TAESD, .class_name = "AutoencoderTiny"},
+    {.name = MX_NET_IMAGE_ENCODER, .class_name = "CLIPVisionModelWithProjection", .model_type = "clip_vision_model",
+     .processor = "preprocessor_config.json"},
     /* matex's own config of the published adapter file (weights/ip_adapter_file.h) */
-    {.name = "ip_adapter", .class_name = "IPAdapter", .in_model_set = 0, .lora_prefix = NULL},
+    {.name = MX_NET_IP_ADAPTER, .class_name = "IPAdapter"},
 };
 const size_t mx_net_kind_count = sizeof mx_net_kinds / sizeof mx_net_kinds[0];
 

@@ -11,6 +11,7 @@
 
 #include "../runtime/buf.h"
 #include "ldm_names.h"
+#include "networks.h"
 #include "torchzip.h"
 
 #define NAME_MAX_LEN 1024
@@ -22,10 +23,10 @@ typedef struct {
 } part;
 
 static const part parts[] = {
-    {"model.diffusion_model.", MX_LDM_UNET, "unet"},
-    {"control_model.", MX_LDM_CONTROLNET, "controlnet"},
-    {"first_stage_model.", MX_LDM_VAE, "vae"},
-    {"cond_stage_model.transformer.", MX_LDM_CLIP, "text_encoder"},
+    {"model.diffusion_model.", MX_LDM_UNET, MX_NET_UNET},
+    {"control_model.", MX_LDM_CONTROLNET, MX_NET_CONTROLNET},
+    {"first_stage_model.", MX_LDM_VAE, MX_NET_VAE},
+    {"cond_stage_model.transformer.", MX_LDM_CLIP, MX_NET_TEXT_ENCODER},
 };
 
 static int starts(const char *s, const char *pre) { return !strncmp(s, pre, strlen(pre)); }

@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 
 #include "../runtime/buf.h"
+#include "networks.h"
 
 #define TAESD_MAX_LEVELS 8
 
@@ -154,7 +155,7 @@ int mx_taesd_files_open(mx_single_file *sf, const char *path, mx_status *st) {
     if (!rc) rc = mx_sf_open_tensors(&sf->aux, enc, &container2, &skipped2, st);
     sf->skipped += skipped2;
     mx_sf_net *n = &sf->nets[0];
-    n->kind = "taesd";
+    n->kind = MX_NET_TAESD;
     if (!rc && !(n->tensors = calloc(sf->src.count + sf->aux.count + 1, sizeof *n->tensors)))
         rc = mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
     if (!rc) sf->n_nets = 1;

@@ -1,10 +1,10 @@
 /* Autoencoder pass helpers (see ae_pass.h). */
 #include "ae_pass.h"
 
-int mx_ae_run(const mx_ctx *c, const char *net_name, mx_ae_pass_fn pass, const void *net, const float *in, int B,
+int mx_ae_run(const mx_ctx *c, int net_fp32, mx_ae_pass_fn pass, const void *net, const float *in, int B,
               int H, int W, float *out, mx_arena *a, mx_status *st, const char *what) {
     mx_run r;
-    mx_run_init_net(&r, net_name, c, a, st);
+    mx_run_init_prec(&r, net_fp32, c, a, st);
     size_t mark = mx_arena_mark(a);
     int rc = pass(&r, net, in, B, H, W, out);
     mx_arena_reset(a, mark);

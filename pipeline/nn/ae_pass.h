@@ -9,9 +9,9 @@
 /* A pass on r's arena: in [B, ., H, W] -> out (sizes are those of `in`). */
 typedef int (*mx_ae_pass_fn)(mx_run *r, const void *net, const float *in, int B, int H, int W, float *out);
 
-/* Runs pass of the network named net_name ("vae", "taesd": its precision, precision.h) on arena a
- * and releases what it took there; a failure is prefixed with `what`. */
-int mx_ae_run(const mx_ctx *c, const char *net_name, mx_ae_pass_fn pass, const void *net, const float *in, int B,
+/* Runs pass on arena a (in fp32 throughout when net_fp32: the network's mx_prec_net_fp32) and
+ * releases what it took there; a failure is prefixed with `what`. */
+int mx_ae_run(const mx_ctx *c, int net_fp32, mx_ae_pass_fn pass, const void *net, const float *in, int B,
               int H, int W, float *out, mx_arena *a, mx_status *st, const char *what);
 
 /* The pass's dry run on a measuring arena (sizes checked by the caller): the arena bytes it needs

@@ -18,9 +18,9 @@ void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st) {
     r->st = st;
 }
 
-void mx_run_init_net(mx_run *r, const char *net, const mx_ctx *c, mx_arena *a, mx_status *st) {
+void mx_run_init_prec(mx_run *r, int net_fp32, const mx_ctx *c, mx_arena *a, mx_status *st) {
     mx_run_init(r, c, a, st);
-    if (mx_prec_net_fp32(net)) r->c = &r->fp32;
+    if (net_fp32) r->c = &r->fp32;
 }
 
 float *mx_run_alloc(mx_run *r, size_t n) { return mx_act_alloc(r->a, n, r->st); }

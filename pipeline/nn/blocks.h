@@ -19,7 +19,7 @@
 typedef struct mx_run {
     const mx_ctx *c;
     mx_ctx fp32; /* c computing in fp32 (mx_ctx_fp32): the layers precision.h keeps in fp32 */
-    /* the context the run was given: c, unless the whole network runs in fp32 (mx_run_init_net);
+    /* the context the run was given: c, unless the whole network runs in fp32 (mx_run_init_prec);
      * the layers precision.h computes in bf16 even there take it */
     const mx_ctx *given;
     mx_arena *a;
@@ -33,8 +33,9 @@ typedef struct mx_run {
 } mx_run;
 
 void mx_run_init(mx_run *r, const mx_ctx *c, mx_arena *a, mx_status *st);
-/* The same for a network precision.h runs in fp32 throughout (mx_prec_net_fp32), by name. */
-void mx_run_init_net(mx_run *r, const char *net, const mx_ctx *c, mx_arena *a, mx_status *st);
+/* The same, computing in fp32 throughout when net_fp32 (the network's mx_prec_net_fp32, read at
+ * its load). */
+void mx_run_init_prec(mx_run *r, int net_fp32, const mx_ctx *c, mx_arena *a, mx_status *st);
 /* Activation floats from the run's arena (mx_act_alloc). NULL only on failure (st filled). */
 float *mx_run_alloc(mx_run *r, size_t n);
 /* The run's next step-cache slot of n floats: 1 when *slot holds the result already, 0 when the

@@ -64,8 +64,10 @@ static int bind_layer(mx_binder *b, const mx_tf_shape *s, int i, mx_tf_layer *l,
     return mx_tf_layer_bind(b, path, s, l, st);
 }
 
-int mx_clip_load(mx_clip *m, const mx_clip_config *cfg, mx_binder *b, mx_status *st) {
-    memset(m, 0, sizeof *m);
+int mx_clip_load(mx_clip **out, const mx_clip_config *cfg, mx_binder *b, mx_status *st) {
+    mx_clip *m = calloc(1, sizeof *m);
+    *out = m;
+    if (!m) return mx_fail(st, MX_ENOMEM, "clip: out of memory");
     m->cfg = *cfg;
     m->shape = (mx_tf_shape){.hidden = cfg->hidden_size,
                              .intermediate = cfg->intermediate_size,
@@ -87,12 +89,14 @@ int mx_clip_load(mx_clip *m, const mx_clip_config *cfg, mx_binder *b, mx_status 
     return 0;
 fail:
     mx_clip_free(m);
+    *out = NULL;
     return mx_fail_prefix(st, "loading the CLIP text encoder: ");
 }
 
 void mx_clip_free(mx_clip *m) {
+    if (!m) return;
     free(m->layers);
-    m->layers = NULL;
+    free(m);
 }
 
 /* ---- forward ---- */
@@ -112,14 +116,34 @@ static int pooled_position(const mx_clip_config *cfg, const int32_t *ids, int T)
     return best;
 }
 
+/* The sizes, and the ids unless NULL. */
 static int check_ids(const mx_clip_config *cfg, const int32_t *ids, int B, int T, mx_status *st) {
     if (B < 1 || T < 1 || T > cfg->max_position_embeddings)
         return mx_fail(st, MX_EUSAGE, "clip: %d sequences of %d tokens (at most %d positions)", B, T,
                        cfg->max_position_embeddings);
-    for (int i = 0; i < B * T; i++)
+    for (int i = 0; ids && i < B * T; i++)
         if (ids[i] < 0 || ids[i] >= cfg->vocab_size)
             return mx_fail(st, MX_EINPUT, "clip: token id %d at position %d outside the vocabulary of %d", ids[i], i,
                            cfg->vocab_size);
+    return 0;
+}
+
+/* What a forward pass takes of its arena: the residual stream x [B·T, C] and the layers' buffers. */
+static int alloc_activations(const mx_clip *m, mx_arena *arena, int B, int T, float **x, mx_tf_buffers *bf,
+                             mx_status *st) {
+    size_t M = (size_t)B * T;
+    *x = mx_act_alloc(arena, M * (size_t)m->cfg.hidden_size, st);
+    return !*x || mx_tf_buffers_alloc(arena, M, &m->shape, bf, st) ? -1 : 0;
+}
+
+int mx_clip_arena_bytes(const mx_clip *m, int B, int T, size_t *bytes, mx_status *st) {
+    mx_arena a;
+    mx_tf_buffers bf;
+    float *x;
+    if (check_ids(&m->cfg, NULL, B, T, st)) return -1;
+    mx_arena_measure(&a);
+    if (alloc_activations(m, &a, B, T, &x, &bf, st)) return -1;
+    *bytes = a.peak + 4 * MX_ARENA_ALIGN;
     return 0;
 }
 
@@ -131,8 +155,8 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
     size_t MC = (size_t)M * (size_t)C, mark = mx_arena_mark(arena);
     mx_tf_buffers bf;
     c = mx_run_ctx(c, arena);
-    float *x = mx_act_alloc(arena, MC, st);
-    if (!x || mx_tf_buffers_alloc(arena, (size_t)M, &m->shape, &bf, st)) return mx_fail_prefix(st, "clip forward: ");
+    float *x;
+    if (alloc_activations(m, arena, B, T, &x, &bf, st)) return mx_fail_prefix(st, "clip forward: ");
     mx_embed_tokens(c, x, ids, B, T, C, m->token_embedding, m->position_embedding);
     if (hidden_states && hidden_states[0]) mx_copy(c, hidden_states[0], x, MC);
     for (int i = 0; i < cfg->num_hidden_layers; i++) {
@@ -152,30 +176,31 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
 
 int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st) {
     mx_clip_config cfg;
-    if (mx_clip_config_parse(&cfg, text, len, what, st)) return -1;
-    mx_clip *m = calloc(1, sizeof *m);
-    if (!m) return mx_fail(st, MX_ENOMEM, "clip: out of memory");
-    *net = m;
-    return mx_clip_load(m, &cfg, b, st);
-}
-
-void mx_clip_destroy(void *net) {
-    if (!net) return;
-    mx_clip_free(net);
-    free(net);
+    return mx_clip_config_parse(&cfg, text, len, what, st) ? -1 : mx_clip_load((mx_clip **)net, &cfg, b, st);
 }
 
 /* run-net clip: input_ids [B,T] -> last_hidden_state, pooler_output, hidden_states.{i}. */
-int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+static int input_ids_shape(const mx_clip *m, mx_net_io *io, int64_t is[2], mx_status *st) {
+    is[0] = is[1] = -1;
+    if (io->shape(io, "input_ids", 2, is, st)) return -1;
+    if (is[1] > m->cfg.max_position_embeddings)
+        return mx_fail(st, MX_EINPUT, "%s: input_ids has %lld tokens, the model takes at most %d", io->source,
+                       (long long)is[1], m->cfg.max_position_embeddings);
+    return 0;
+}
+
+int mx_clip_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    int64_t is[2];
+    return input_ids_shape(net, io, is, st) ? -1 : mx_clip_arena_bytes(net, (int)is[0], (int)is[1], bytes, st);
+}
+
+int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_clip *m = net;
     int L = m->cfg.num_hidden_layers, C = m->cfg.hidden_size, rc = -1;
-    int64_t is[2] = {-1, -1};
-    const float *idf = io->host(io, "input_ids", 2, is, st);
+    int64_t is[2];
+    const float *idf = input_ids_shape(m, io, is, st) ? NULL : io->host(io, "input_ids", 2, is, st);
     if (!idf) return -1;
     int B = (int)is[0], T = (int)is[1];
-    if (T > m->cfg.max_position_embeddings)
-        return mx_fail(st, MX_EINPUT, "%s: input_ids has %d tokens, the model takes at most %d", io->source, T,
-                       m->cfg.max_position_embeddings);
     float **hs = calloc((size_t)L + 1, sizeof *hs), *last, *pooled;
     int32_t *ids = malloc((size_t)B * T * sizeof *ids);
     if (!hs || !ids) {
@@ -192,12 +217,7 @@ int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *s
         snprintf(name, sizeof name, "hidden_states.%d", i);
         if (!(hs[i] = io->output(io, name, 3, hshape, st))) goto done;
     }
-    mx_arena dry, *a;
-    mx_arena_measure(&dry);
-    if (mx_clip_forward(m, c, &dry, ids, B, T, last, pooled, hs, st) ||
-        !(a = io->arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st)) ||
-        mx_clip_forward(m, c, a, ids, B, T, last, pooled, hs, st))
-        goto done;
+    if (mx_clip_forward(m, c, a, ids, B, T, last, pooled, hs, st)) goto done;
     rc = 0;
 done:
     free(ids);

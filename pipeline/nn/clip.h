@@ -45,9 +45,12 @@ typedef struct mx_clip {
     mx_tf_layer *layers;   /* num_hidden_layers, malloc'ed */
 } mx_clip;
 
-/* Binds every parameter through b (or only enumerates them when b->enumerating). */
-int mx_clip_load(mx_clip *m, const mx_clip_config *cfg, mx_binder *b, mx_status *st);
+/* Binds every parameter through b (or only enumerates them when b->enumerating) into a new *out
+ * (NULL after a failure); mx_clip_free(NULL) does nothing. */
+int mx_clip_load(mx_clip **out, const mx_clip_config *cfg, mx_binder *b, mx_status *st);
 void mx_clip_free(mx_clip *m);
+/* Arena bytes of mx_clip_forward on ids [B, T]. */
+int mx_clip_arena_bytes(const mx_clip *m, int B, int T, size_t *bytes, mx_status *st);
 
 /* Runs the encoder on ids [B, T] (T <= max_position_embeddings; ids are checked against
  * vocab_size). Outputs (caller-owned, any may be NULL except last_hidden):
@@ -61,10 +64,9 @@ void mx_clip_free(mx_clip *m);
 int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const int32_t *ids, int B, int T,
                     float *last_hidden, float *pooled, float **hidden_states, mx_status *st);
 
-/* The registry's entry points (registry.h): config parse + load into a malloc'ed mx_clip, its
- * free, the run-net adapter. */
+/* The registry's entry points (registry.h): config parse + load, arena bytes and run on a run-net io. */
 int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
-void mx_clip_destroy(void *net);
-int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_clip_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 
 #endif

@@ -75,8 +75,10 @@ static int bind_layer(mx_binder *b, const mx_tf_shape *s, int i, mx_tf_layer *l,
     return mx_tf_layer_bind(b, path, s, l, st);
 }
 
-int mx_clip_vision_load(mx_clip_vision *m, const mx_clip_vision_config *cfg, mx_binder *b, mx_status *st) {
-    memset(m, 0, sizeof *m);
+int mx_clip_vision_load(mx_clip_vision **out, const mx_clip_vision_config *cfg, mx_binder *b, mx_status *st) {
+    mx_clip_vision *m = calloc(1, sizeof *m);
+    *out = m;
+    if (!m) return mx_fail(st, MX_ENOMEM, "clip vision: out of memory");
     m->cfg = *cfg;
     m->shape = (mx_tf_shape){.hidden = cfg->hidden_size,
                              .intermediate = cfg->intermediate_size,
@@ -102,12 +104,14 @@ int mx_clip_vision_load(mx_clip_vision *m, const mx_clip_vision_config *cfg, mx_
     return 0;
 fail:
     mx_clip_vision_free(m);
+    *out = NULL;
     return mx_fail_prefix(st, "loading the CLIP vision tower: ");
 }
 
 void mx_clip_vision_free(mx_clip_vision *m) {
+    if (!m) return;
     free(m->layers);
-    m->layers = NULL;
+    free(m);
 }
 
 /* ---- forward ---- */
@@ -165,17 +169,24 @@ int mx_clip_vision_forward(const mx_clip_vision *m, const mx_ctx *c, mx_arena *a
     return 0;
 }
 
+int mx_clip_vision_arena_bytes(const mx_clip_vision *m, int B, size_t *bytes, mx_status *st) {
+    mx_arena dry;
+    mx_arena_measure(&dry);
+    if (mx_clip_vision_forward(m, NULL, &dry, mx_act_placeholder(), B, mx_act_placeholder(), NULL, NULL, st)) return -1;
+    *bytes = dry.peak + 4 * MX_ARENA_ALIGN;
+    return 0;
+}
+
 int mx_clip_vision_embed_images(const mx_ctx *c, const mx_clip_vision *m, const float *pixels, int B,
                                 float *image_embeds, mx_status *st) {
     const mx_clip_vision_config *cfg = &m->cfg;
     size_t npix = (size_t)B * cfg->num_channels * cfg->image_size * cfg->image_size;
-    size_t nout = (size_t)B * cfg->projection_dim;
-    mx_arena dry, arena;
-    mx_arena_measure(&dry);
-    if (mx_clip_vision_forward(m, c, &dry, mx_act_placeholder(), B, mx_act_placeholder(), NULL, NULL, st)) return -1;
+    size_t nout = (size_t)B * cfg->projection_dim, bytes;
+    mx_arena arena;
+    if (mx_clip_vision_arena_bytes(m, B, &bytes, st)) return -1;
     float *dpix = mx_dev_from_host(c, pixels, npix, st), *dout = dpix ? mx_dev_alloc(c, nout, st) : NULL;
     int rc = -1;
-    if (dout && mx_arena_create_on(&arena, c->be, dry.peak + 4 * MX_ARENA_ALIGN, st) == 0) {
+    if (dout && mx_arena_create_on(&arena, c->be, bytes, st) == 0) {
         rc = mx_clip_vision_forward(m, c, &arena, dpix, B, dout, NULL, NULL, st) ||
                      mx_download(c, image_embeds, dout, nout, st)
                  ? -1
@@ -192,25 +203,26 @@ int mx_clip_vision_embed_images(const mx_ctx *c, const mx_clip_vision *m, const 
 int mx_clip_vision_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b,
                                mx_status *st) {
     mx_clip_vision_config cfg;
-    if (mx_clip_vision_config_parse(&cfg, text, len, what, st)) return -1;
-    mx_clip_vision *m = calloc(1, sizeof *m);
-    if (!m) return mx_fail(st, MX_ENOMEM, "clip vision: out of memory");
-    *net = m;
-    return mx_clip_vision_load(m, &cfg, b, st);
+    return mx_clip_vision_config_parse(&cfg, text, len, what, st) ? -1
+                                                                   : mx_clip_vision_load((mx_clip_vision **)net, &cfg, b, st);
 }
 
-void mx_clip_vision_destroy(void *net) {
-    if (!net) return;
-    mx_clip_vision_free(net);
-    free(net);
+/* run-net clip-vision: pixel_values [B,3,S,S] -> image_embeds, last_hidden_state, penultimate_hidden_state. */
+static void pixel_shape(const mx_clip_vision *m, int64_t ps[4]) {
+    ps[0] = -1, ps[1] = m->cfg.num_channels, ps[2] = ps[3] = m->cfg.image_size;
 }
 
-/* run-net clip-vision: pixel_values [B,3,S,S] -> image_embeds, last_hidden_state,
- * penultimate_hidden_state. */
-int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+int mx_clip_vision_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    int64_t ps[4];
+    pixel_shape(net, ps);
+    return io->shape(io, "pixel_values", 4, ps, st) ? -1 : mx_clip_vision_arena_bytes(net, (int)ps[0], bytes, st);
+}
+
+int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_clip_vision *m = net;
     const mx_clip_vision_config *cfg = &m->cfg;
-    int64_t ps[4] = {-1, cfg->num_channels, cfg->image_size, cfg->image_size};
+    int64_t ps[4];
+    pixel_shape(m, ps);
     const float *pixels = mx_net_io_input(io, "pixel_values", 4, ps, st);
     if (!pixels) return -1;
     int B = (int)ps[0], T = mx_clip_vision_tokens(cfg);
@@ -218,11 +230,6 @@ int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_st
     float *embeds, *last, *penult;
     if (!(embeds = io->output(io, "image_embeds", 2, es, st)) || !(last = io->output(io, "last_hidden_state", 3, hs, st)) ||
         !(penult = io->output(io, "penultimate_hidden_state", 3, hs, st)))
-        return -1;
-    mx_arena dry, *a;
-    mx_arena_measure(&dry);
-    if (mx_clip_vision_forward(m, c, &dry, pixels, B, embeds, last, penult, st) ||
-        !(a = io->arena(io, dry.peak + 4 * MX_ARENA_ALIGN, st)))
         return -1;
     return mx_clip_vision_forward(m, c, a, pixels, B, embeds, last, penult, st);
 }

@@ -54,9 +54,12 @@ typedef struct mx_clip_vision {
     mx_tf_layer *layers;        /* num_hidden_layers, malloc'ed */
 } mx_clip_vision;
 
-/* Binds every parameter through b (or only enumerates them when b->enumerating). */
-int mx_clip_vision_load(mx_clip_vision *m, const mx_clip_vision_config *cfg, mx_binder *b, mx_status *st);
+/* Binds every parameter through b (or only enumerates them when b->enumerating) into a new *out
+ * (NULL after a failure); mx_clip_vision_free(NULL) does nothing. */
+int mx_clip_vision_load(mx_clip_vision **out, const mx_clip_vision_config *cfg, mx_binder *b, mx_status *st);
 void mx_clip_vision_free(mx_clip_vision *m);
+/* Arena bytes of mx_clip_vision_forward on B images (its dry run). */
+int mx_clip_vision_arena_bytes(const mx_clip_vision *m, int B, size_t *bytes, mx_status *st);
 
 /* Runs the tower on pixel_values [B, channels, image_size, image_size] (CLIP-normalised,
  * clip_image.h). Outputs (backend memory of c; any may be NULL):
@@ -75,7 +78,7 @@ int mx_clip_vision_embed_images(const mx_ctx *c, const mx_clip_vision *m, const 
 /* The registry's entry points (registry.h). */
 int mx_clip_vision_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b,
                                mx_status *st);
-void mx_clip_vision_destroy(void *net);
-int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_clip_vision_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 
 #endif

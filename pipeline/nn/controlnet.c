@@ -242,14 +242,27 @@ int mx_controlnet_load_config(void **net, const char *text, size_t len, const ch
 
 /* run-net controlnet: sample, timestep, encoder_hidden_states, controlnet_cond, optional
  * conditioning_scale -> the residuals. */
-int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+static int conditioning_shapes(const mx_unet_config *cfg, mx_net_io *io, int64_t ss[4], int64_t es[3], mx_status *st) {
+    ss[0] = ss[2] = ss[3] = -1, ss[1] = cfg->in_channels;
+    if (io->shape(io, "sample", 4, ss, st)) return -1;
+    es[0] = ss[0], es[1] = -1, es[2] = cfg->cross_attention_dim;
+    return io->shape(io, "encoder_hidden_states", 3, es, st);
+}
+
+int mx_controlnet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    int64_t ss[4], es[3];
+    if (conditioning_shapes(mx_controlnet_cfg(net), io, ss, es, st)) return -1;
+    return mx_controlnet_arena_bytes(net, (int)ss[0], (int)ss[2], (int)ss[3], (int)es[1], bytes, st);
+}
+
+int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_controlnet *m = net;
     const mx_unet_config *cfg = mx_controlnet_cfg(m);
     int n = mx_unet_num_residuals(cfg), f = 1 << (cfg->n_cond_emb - 1), C, h, w;
-    int64_t ss[4] = {-1, cfg->in_channels, -1, -1}, es[3] = {-1, -1, cfg->cross_attention_dim}, one[1] = {1};
+    int64_t ss[4], es[3], one[1] = {1};
+    if (conditioning_shapes(cfg, io, ss, es, st)) return -1;
     mx_controlnet_input in = {.sample = mx_net_io_input(io, "sample", 4, ss, st), .scale = 1.0f};
     if (!in.sample) return -1;
-    es[0] = ss[0];
     if (!(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st))) return -1;
     in.B = (int)ss[0], in.H = (int)ss[2], in.W = (int)ss[3], in.T = (int)es[1];
     if (!(in.timesteps = mx_net_io_timesteps(io, in.B, st))) return -1;
@@ -269,7 +282,5 @@ int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_sta
         int64_t rs[4] = {in.B, C, h, w};
         if (!(down[i] = io->output(io, name, 4, rs, st))) return -1;
     }
-    size_t bytes;
-    mx_arena *a = mx_controlnet_arena_bytes(m, in.B, in.H, in.W, in.T, &bytes, st) ? NULL : io->arena(io, bytes, st);
-    return a ? mx_controlnet_forward(c, m, &in, down, down[n], 0, a, st) : -1;
+    return mx_controlnet_forward(c, m, &in, down, down[n], 0, a, st);
 }

@@ -49,6 +49,7 @@ double mx_controlnet_flops(const mx_controlnet *m, int B, int H, int W, int T, i
 /* The registry's entry points (registry.h): config parse + load, the run-net adapter. */
 int mx_controlnet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b,
                               mx_status *st);
-int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_controlnet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 
 #endif

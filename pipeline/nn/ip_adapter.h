@@ -53,6 +53,7 @@ int mx_ip_adapter_guidance_tokens(const mx_ctx *c, const mx_ip_adapter *ad, cons
 /* The registry's entry points (registry.h). */
 int mx_ip_adapter_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b,
                               mx_status *st);
-void mx_ip_adapter_destroy(void *net);
+int mx_ip_adapter_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_ip_adapter_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 
 #endif

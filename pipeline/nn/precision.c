@@ -3,7 +3,7 @@
 
 #include <string.h>
 
-#include "registry.h"
+#include "../../weights/networks.h"
 
 /* The fp32 convolutions of UNet and ControlNet by parameter path: first component... */
 static const char *const fp32_first[] = {"conv_in", "controlnet_cond_embedding", "controlnet_down_blocks",
@@ -42,7 +42,11 @@ int mx_prec_conv_fp32(const char *path) {
 
 int mx_prec_vae_up_block_bf16(int level, int nlevels) { return level >= nlevels - 2; }
 
-int mx_prec_net_fp32(const char *net) {
-    const mx_net_def *d = mx_net_named(net);
-    return d && d->fp32_under_bf16;
+/* The networks that run in fp32 throughout under a bf16 context. */
+static const char *const fp32_nets[] = {MX_NET_VAE};
+
+int mx_prec_net_fp32(const char *kind) {
+    for (size_t i = 0; kind && i < sizeof fp32_nets / sizeof *fp32_nets; i++)
+        if (!strcmp(kind, fp32_nets[i])) return 1;
+    return 0;
 }

@@ -38,6 +38,8 @@
 #ifndef MX_NN_PRECISION_H
 #define MX_NN_PRECISION_H
 
+#include "../../weights/networks.h"
+
 /* 1 when the convolution bound at `path` (its parameter path in the network, e.g.
  * "down_blocks.0.resnets.1.conv_shortcut") runs in fp32 under a bf16 context. */
 int mx_prec_conv_fp32(const char *path);
@@ -47,8 +49,8 @@ int mx_prec_conv_fp32(const char *path);
  * context, although the VAE runs in fp32 otherwise. */
 int mx_prec_vae_up_block_bf16(int level, int nlevels);
 
-/* 1 when the network of that kind (registry.h: "vae") runs in fp32 under a bf16 context: its
- * registry entry's fp32_under_bf16. */
-int mx_prec_net_fp32(const char *net);
+/* 1 when the network of that kind (weights/networks.h: MX_NET_VAE) runs in fp32 throughout under
+ * a bf16 context. A network reads it once, at load (mx_run_init_prec takes the answer). */
+int mx_prec_net_fp32(const char *kind);
 
 #endif

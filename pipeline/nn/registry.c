@@ -1,6 +1,7 @@
-/* The networks matex runs (registry.h): one entry each. */
+/* The networks matex runs (registry.h): one entry per run. */
 #include "registry.h"
 
+#include <stdio.h>
 #include <string.h>
 
 #include "clip.h"
@@ -16,40 +17,51 @@ static void unet_free(void *n) { mx_unet_free(n); }
 static void controlnet_free(void *n) { mx_controlnet_free(n); }
 static void vae_free(void *n) { mx_vae_free(n); }
 static void taesd_free(void *n) { mx_taesd_free(n); }
+static void clip_free(void *n) { mx_clip_free(n); }
+static void clip_vision_free(void *n) { mx_clip_vision_free(n); }
+static void ip_adapter_free(void *n) { mx_ip_adapter_free(n); }
 
 #define CONDITIONING "sample [B,C,H,W], timestep [B] or [1] (I64, I32 or F32),\n               encoder_hidden_states [B,T,D]"
 
 const mx_net_def mx_nets[] = {
-    {.kind = "unet", .load = mx_unet_load_config, .free = unet_free,
-     .verbs = {{"unet", CONDITIONING ",\n               optional down_block_res_sample.{i} and mid_block_res_sample,\n"
-                        "               optional image_embeds [B,n_images,E] + ip_adapter_scale [1] (the file's ip_adapter.)\n"
-                        "               -> out (+ image_tokens [B,n_images,tokens,D])",
-                mx_unet_run_io}}},
-    {.kind = "controlnet", .load = mx_controlnet_load_config, .free = controlnet_free,
-     .verbs = {{"controlnet", "sample, timestep, encoder_hidden_states (as unet), controlnet_cond [B,3,8H,8W],\n"
-                              "               conditioning_scale (one float, default 1)\n"
-                              "               -> down_block_res_sample.{i}, mid_block_res_sample",
-                mx_controlnet_run_io}}},
-    {.kind = "vae", .fp32_under_bf16 = 1, .load = mx_vae_load_config, .free = vae_free,
-     .verbs = {{"vae-encode", "image [B,3,H,W] in [-1,1] -> mean, logvar", mx_vae_run_encode_io},
-               {"vae-decode", "latents [B,4,h,w] (unscaled) -> image", mx_vae_run_decode_io}}},
-    {.kind = "text_encoder", .load = mx_clip_load_config, .free = mx_clip_destroy,
-     .verbs = {{"clip", "input_ids [B,T] (I64 or I32) -> last_hidden_state, pooler_output, hidden_states.{i}",
-                mx_clip_run_io}}},
-    {.kind = "taesd", .load = mx_taesd_load_config, .free = taesd_free,
-     .verbs = {{"taesd-encode", "image [B,3,H,W] in [-1,1] -> latents (SD latents, scaling factor 1)",
-                mx_taesd_run_encode_io},
-               {"taesd-decode", "latents [B,4,h,w] -> image (in about [-1,1], unclamped)", mx_taesd_run_decode_io}}},
-    {.kind = "image_encoder", .load = mx_clip_vision_load_config, .free = mx_clip_vision_destroy,
-     .verbs = {{"clip-vision", "pixel_values [B,3,S,S] (clip-preprocess) -> image_embeds [B,P],\n"
-                               "               last_hidden_state, penultimate_hidden_state [B,1+(S/patch)^2,D]",
-                mx_clip_vision_run_io}}},
-    /* run by the UNet's cross-attentions: run-net unet's image_embeds */
-    {.kind = "ip_adapter", .load = mx_ip_adapter_load_config, .free = mx_ip_adapter_destroy},
+    {"unet", MX_NET_UNET,
+     CONDITIONING ",\n               optional down_block_res_sample.{i} and mid_block_res_sample,\n"
+                  "               optional image_embeds [B,n_images,E] + ip_adapter_scale [1] (the file's ip_adapter.)\n"
+                  "               -> out (+ image_tokens [B,n_images,tokens,D])",
+     mx_unet_load_config, mx_unet_arena_io, mx_unet_run_io, unet_free},
+    {"controlnet", MX_NET_CONTROLNET,
+     "sample, timestep, encoder_hidden_states (as unet), controlnet_cond [B,3,8H,8W],\n"
+     "               conditioning_scale (one float, default 1)\n"
+     "               -> down_block_res_sample.{i}, mid_block_res_sample",
+     mx_controlnet_load_config, mx_controlnet_arena_io, mx_controlnet_run_io, controlnet_free},
+    {"vae-encode", MX_NET_VAE, "image [B,3,H,W] in [-1,1] -> mean, logvar", mx_vae_load_config, mx_vae_encode_arena_io,
+     mx_vae_encode_run_io, vae_free},
+    {"vae-decode", MX_NET_VAE, "latents [B,4,h,w] (unscaled) -> image", mx_vae_load_config, mx_vae_decode_arena_io,
+     mx_vae_decode_run_io, vae_free},
+    {"clip", MX_NET_TEXT_ENCODER,
+     "input_ids [B,T] (I64 or I32) -> last_hidden_state, pooler_output, hidden_states.{i}", mx_clip_load_config,
+     mx_clip_arena_io, mx_clip_run_io, clip_free},
+    {"taesd-encode", MX_NET_TAESD, "image [B,3,H,W] in [-1,1] -> latents (SD latents, scaling factor 1)",
+     mx_taesd_load_config, mx_taesd_encode_arena_io, mx_taesd_encode_run_io, taesd_free},
+    {"taesd-decode", MX_NET_TAESD, "latents [B,4,h,w] -> image (in about [-1,1], unclamped)", mx_taesd_load_config,
+     mx_taesd_decode_arena_io, mx_taesd_decode_run_io, taesd_free},
+    {"clip-vision", MX_NET_IMAGE_ENCODER,
+     "pixel_values [B,3,S,S] (clip-preprocess) -> image_embeds [B,P],\n"
+     "               last_hidden_state, penultimate_hidden_state [B,1+(S/patch)^2,D]",
+     mx_clip_vision_load_config, mx_clip_vision_arena_io, mx_clip_vision_run_io, clip_vision_free},
+    {"ip-adapter", MX_NET_IP_ADAPTER,
+     "image_embeds [B,n_images,E] -> image_tokens [B,n_images,tokens,D] (the UNet's image guidance)",
+     mx_ip_adapter_load_config, mx_ip_adapter_arena_io, mx_ip_adapter_run_io, ip_adapter_free},
 };
 const size_t mx_net_count = sizeof mx_nets / sizeof mx_nets[0];
 
-const mx_net_def *mx_net_named(const char *kind) {
+const mx_net_def *mx_net_named(const char *name) {
+    for (size_t i = 0; name && i < mx_net_count; i++)
+        if (!strcmp(mx_nets[i].name, name)) return &mx_nets[i];
+    return NULL;
+}
+
+const mx_net_def *mx_net_of_kind(const char *kind) {
     for (size_t i = 0; kind && i < mx_net_count; i++)
         if (!strcmp(mx_nets[i].kind, kind)) return &mx_nets[i];
     return NULL;
@@ -57,17 +69,7 @@ const mx_net_def *mx_net_named(const char *kind) {
 
 const mx_net_def *mx_net_of_class(const char *class_name) {
     const mx_net_kind *k = mx_net_kind_of_class(class_name);
-    return k ? mx_net_named(k->name) : NULL;
-}
-
-const mx_net_verb *mx_net_verb_named(const char *name, const mx_net_def **net) {
-    for (size_t i = 0; name && i < mx_net_count; i++)
-        for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name; v++)
-            if (!strcmp(mx_nets[i].verbs[v].name, name)) {
-                if (net) *net = &mx_nets[i];
-                return &mx_nets[i].verbs[v];
-            }
-    return NULL;
+    return k ? mx_net_of_kind(k->name) : NULL;
 }
 
 int mx_net_load_config(const mx_net_def **def, void **net, const char *text, size_t len, const char *what,
@@ -81,6 +83,27 @@ int mx_net_load_config(const mx_net_def **def, void **net, const char *text, siz
         return mx_fail(st, MX_EINPUT, "%s: \"_class_name\" \"%s\" is not one of %s", what, cls, known);
     }
     return (*def)->load(net, text, len, what, b, st);
+}
+
+int mx_net_load_kind(const char *kind, void **net, const mx_weightfile *wf, const char *prefix, mx_binder *b,
+                     mx_status *st) {
+    char key[96];
+    const mx_net_def *def = NULL;
+    *net = NULL;
+    snprintf(key, sizeof key, "%s.config", prefix ? prefix : kind);
+    const char *text = mx_wf_meta(wf, key);
+    if (!text)
+        return mx_fail(st, MX_EINPUT, "%s: no network '%s' in this weight file (metadata '%s' missing)", mx_wf_path(wf),
+                       prefix ? prefix : kind, key);
+    int rc = mx_net_load_config(&def, net, text, strlen(text), key, b, st) ? mx_fail_prefix(st, "%s", mx_wf_path(wf)) : 0;
+    if (!rc && strcmp(def->kind, kind))
+        rc = mx_fail(st, MX_EINPUT, "%s: network '%s' is a %s, expected a %s", mx_wf_path(wf), prefix ? prefix : kind,
+                     mx_net_kind_named(def->kind)->class_name, mx_net_kind_named(kind)->class_name);
+    if (rc && def) {
+        def->free(*net);
+        *net = NULL;
+    }
+    return rc;
 }
 
 int mx_net_enumerate(mx_binder *b, const char *text, size_t len, const char *what, mx_status *st) {

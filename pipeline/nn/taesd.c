@@ -8,6 +8,7 @@
 
 #include "ae_pass.h"
 #include "blocks.h"
+#include "precision.h"
 
 #define TAESD_MAX_BLOCKS 16
 
@@ -28,6 +29,7 @@ struct mx_taesd {
     mx_taesd_config cfg;
     tiny_level enc[MX_NET_MAX_LEVELS], dec[MX_NET_MAX_LEVELS];
     mx_conv enc_out, dec_in, dec_out;
+    int fp32; /* runs in fp32 throughout under a bf16 context (mx_prec_net_fp32, read at load) */
 };
 
 const mx_taesd_config *mx_taesd_cfg(const mx_taesd *t) { return &t->cfg; }
@@ -93,6 +95,7 @@ int mx_taesd_load(mx_taesd **out, const mx_taesd_config *cfg, mx_binder *b, mx_s
     mx_taesd *t = calloc(1, sizeof *t);
     if (!t) return mx_fail(st, MX_ENOMEM, "out of memory loading TAESD");
     t->cfg = *cfg;
+    t->fp32 = mx_prec_net_fp32(MX_NET_TAESD);
     if (encoder_load(t, b, st) || decoder_load(t, b, st)) {
         mx_fail_prefix(st, "loading TAESD");
         free(t);
@@ -201,14 +204,14 @@ static int check_sizes(const mx_taesd *t, int B, int H, int W, mx_status *st) {
 int mx_taesd_encode(const mx_ctx *c, const mx_taesd *t, const float *image, int B, int H, int W, float *latents,
                     mx_arena *a, mx_status *st) {
     if (check_sizes(t, B, H, W, st)) return -1;
-    return mx_ae_run(c, "taesd", encode_run, t, image, B, H, W, latents, a, st, "TAESD encode");
+    return mx_ae_run(c, t->fp32, encode_run, t, image, B, H, W, latents, a, st, "TAESD encode");
 }
 
 int mx_taesd_decode(const mx_ctx *c, const mx_taesd *t, const float *latents, int B, int h, int w, float *image,
                     mx_arena *a, mx_status *st) {
     int f = mx_taesd_factor(t);
     if (check_sizes(t, B, h * f, w * f, st)) return -1;
-    return mx_ae_run(c, "taesd", decode_run, t, latents, B, h, w, image, a, st, "TAESD decode");
+    return mx_ae_run(c, t->fp32, decode_run, t, latents, B, h, w, image, a, st, "TAESD decode");
 }
 
 int mx_taesd_encode_arena_bytes(const mx_taesd *t, int B, int H, int W, size_t *bytes, mx_status *st) {
@@ -266,28 +269,46 @@ int mx_taesd_load_config(void **net, const char *text, size_t len, const char *w
     return mx_taesd_config_parse(&cfg, text, len, what, st) ? -1 : mx_taesd_load((mx_taesd **)net, &cfg, b, st);
 }
 
-/* image -> latents (encode) or latents -> image (decode), one input and one output. */
-static int run_io(const mx_ctx *c, const mx_taesd *t, int decode, mx_net_io *io, mx_status *st) {
-    const mx_taesd_config *cfg = &t->cfg;
-    int f = mx_taesd_factor(t), cin = decode ? cfg->latent_channels : cfg->in_channels;
-    int64_t is[4] = {-1, cin, -1, -1};
+/* image -> latents (encode) or latents -> image (decode), one input and one output: its shape
+ * (-1 where any size goes). */
+static void input_shape(const mx_taesd *t, int decode, int64_t is[4]) {
+    is[0] = is[2] = is[3] = -1;
+    is[1] = decode ? t->cfg.latent_channels : t->cfg.in_channels;
+}
+
+static int arena_io(const mx_taesd *t, int decode, mx_net_io *io, size_t *bytes, mx_status *st) {
+    int64_t is[4];
+    input_shape(t, decode, is);
+    if (io->shape(io, decode ? "latents" : "image", 4, is, st)) return -1;
+    int B = (int)is[0], H = (int)is[2], W = (int)is[3];
+    return decode ? mx_taesd_decode_arena_bytes(t, B, H, W, bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, bytes, st);
+}
+
+static int run_io(const mx_ctx *c, const mx_taesd *t, int decode, mx_net_io *io, mx_arena *a, mx_status *st) {
+    int64_t is[4];
+    input_shape(t, decode, is);
     const float *x = mx_net_io_input(io, decode ? "latents" : "image", 4, is, st);
     if (!x) return -1;
-    int B = (int)is[0], H = (int)is[2], W = (int)is[3], Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
-    int64_t os[4] = {B, decode ? cfg->out_channels : cfg->latent_channels, Ho, Wo};
-    size_t bytes;
-    if (decode ? mx_taesd_decode_arena_bytes(t, B, H, W, &bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, &bytes, st))
-        return -1;
+    int f = mx_taesd_factor(t), B = (int)is[0], H = (int)is[2], W = (int)is[3];
+    int Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
+    int64_t os[4] = {B, decode ? t->cfg.out_channels : t->cfg.latent_channels, Ho, Wo};
     float *y = io->output(io, decode ? "image" : "latents", 4, os, st);
-    mx_arena *a = y ? io->arena(io, bytes, st) : NULL;
-    if (!a) return -1;
+    if (!y) return -1;
     return decode ? mx_taesd_decode(c, t, x, B, H, W, y, a, st) : mx_taesd_encode(c, t, x, B, H, W, y, a, st);
 }
 
-int mx_taesd_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
-    return run_io(c, net, 0, io, st);
+int mx_taesd_encode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    return arena_io(net, 0, io, bytes, st);
 }
 
-int mx_taesd_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
-    return run_io(c, net, 1, io, st);
+int mx_taesd_encode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
+    return run_io(c, net, 0, io, a, st);
+}
+
+int mx_taesd_decode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    return arena_io(net, 1, io, bytes, st);
+}
+
+int mx_taesd_decode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
+    return run_io(c, net, 1, io, a, st);
 }

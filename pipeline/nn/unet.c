@@ -304,25 +304,56 @@ void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int
     else snprintf(buf, cap, "mid_block_res_sample");
 }
 
-/* run-net unet's optional image guidance: image_embeds [B, n_images, E] through the weight file's
- * IP-Adapter into the output image_tokens [B, n_images, num_tokens, C], at ip_adapter_scale [1]
- * (default 1). *ad stays NULL without image_embeds. */
-static int read_image_guidance(mx_net_io *io, const mx_unet *u, mx_unet_input *in, const mx_ip_adapter **ad,
-                               const float **embeds, float **tokens, mx_status *st) {
+/* run-net unet: the call's sizes from its inputs' shapes (sample [B,C,H,W],
+ * encoder_hidden_states [B,T,D]) and, with image_embeds [B, n_images, E], the weight file's
+ * IP-Adapter (*ad, else NULL) and its n_images. */
+static int read_sizes(mx_net_io *io, const mx_unet *u, mx_unet_input *in, const mx_ip_adapter **ad, int *n_images,
+                      mx_status *st) {
+    const mx_unet_config *cfg = mx_unet_cfg(u);
+    int64_t ss[4] = {-1, cfg->in_channels, -1, -1}, es[3] = {-1, -1, cfg->cross_attention_dim};
+    if (io->shape(io, "sample", 4, ss, st)) return -1;
+    es[0] = ss[0];
+    if (io->shape(io, "encoder_hidden_states", 3, es, st)) return -1;
+    *in = (mx_unet_input){.B = (int)ss[0], .H = (int)ss[2], .W = (int)ss[3], .T = (int)es[1]};
+    if (mx_unet_check_sizes(cfg, in->B, in->H, in->W, in->T, st)) return -1;
     *ad = NULL;
+    *n_images = 0;
     if (!io->has(io, "image_embeds"))
         return io->has(io, "ip_adapter_scale")
                    ? mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale without image_embeds", io->source)
                    : 0;
-    if (!(*ad = io->network(io, "ip_adapter", st)) || mx_unet_check_ip(u, *ad, st)) return -1;
-    int64_t es[3] = {in->B, -1, (*ad)->embed_dim};
-    if (!(*embeds = mx_net_io_input(io, "image_embeds", 3, es, st))) return -1;
-    if (es[1] > MX_IP_MAX_TOKENS / (*ad)->num_tokens)
+    if (!(*ad = io->network(io, MX_NET_IP_ADAPTER, st)) || mx_unet_check_ip(u, *ad, st)) return -1;
+    int64_t is[3] = {in->B, -1, (*ad)->embed_dim};
+    if (io->shape(io, "image_embeds", 3, is, st)) return -1;
+    if (is[1] > MX_IP_MAX_TOKENS / (*ad)->num_tokens)
         return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->source,
-                       (long long)es[1], (*ad)->num_tokens, MX_IP_MAX_TOKENS);
+                       (long long)is[1], (*ad)->num_tokens, MX_IP_MAX_TOKENS);
+    *n_images = (int)is[1];
     in->ip = *ad;
-    in->ip_n = (int)es[1] * (*ad)->num_tokens;
+    in->ip_n = *n_images * (*ad)->num_tokens;
     in->ip_scale = 1.0f;
+    return 0;
+}
+
+int mx_unet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    mx_unet_input in;
+    const mx_ip_adapter *ad;
+    int n_images;
+    size_t ip_bytes = 0;
+    if (read_sizes(io, net, &in, &ad, &n_images, st) || mx_unet_call_arena_bytes(net, &in, bytes, st) ||
+        (ad && mx_ip_adapter_arena_bytes(ad, n_images * in.B, &ip_bytes, st)))
+        return -1;
+    if (ip_bytes > *bytes) *bytes = ip_bytes; /* the tokens are made before the UNet runs, on the same arena */
+    return 0;
+}
+
+/* The optional image guidance's tensors: image_embeds through the IP-Adapter into the output
+ * image_tokens [B, n_images, num_tokens, C], at ip_adapter_scale [1] (default 1). */
+static int run_image_guidance(const mx_ctx *c, mx_net_io *io, const mx_ip_adapter *ad, int n_images, mx_unet_input *in,
+                              mx_arena *a, mx_status *st) {
+    int64_t es[3] = {in->B, n_images, ad->embed_dim}, ts[4] = {in->B, n_images, ad->num_tokens, ad->cross_dim};
+    const float *embeds = mx_net_io_input(io, "image_embeds", 3, es, st);
+    if (!embeds) return -1;
     if (io->has(io, "ip_adapter_scale")) {
         size_t n;
         const float *s = io->host_flat(io, "ip_adapter_scale", &n, st);
@@ -330,21 +361,23 @@ static int read_image_guidance(mx_net_io *io, const mx_unet *u, mx_unet_input *i
         if (n != 1) return mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale has %zu values, expected 1", io->source, n);
         in->ip_scale = s[0];
     }
-    int64_t ts[4] = {in->B, es[1], (*ad)->num_tokens, (*ad)->cross_dim};
-    return (in->ip_tokens = *tokens = io->output(io, "image_tokens", 4, ts, st)) ? 0 : -1;
+    float *tokens = io->output(io, "image_tokens", 4, ts, st);
+    in->ip_tokens = tokens;
+    return tokens ? mx_ip_adapter_tokens(c, ad, embeds, n_images * in->B, tokens, a, st) : -1;
 }
 
 /* run-net unet: sample, timestep, encoder_hidden_states, optional residuals and image guidance -> out. */
-int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_unet *u = net;
     const mx_unet_config *cfg = mx_unet_cfg(u);
-    int64_t ss[4] = {-1, cfg->in_channels, -1, -1}, es[3] = {-1, -1, cfg->cross_attention_dim};
-    mx_unet_input in = {.sample = mx_net_io_input(io, "sample", 4, ss, st)};
-    if (!in.sample) return -1;
-    es[0] = ss[0];
-    if (!(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st))) return -1;
-    in.B = (int)ss[0], in.H = (int)ss[2], in.W = (int)ss[3], in.T = (int)es[1];
-    if (!(in.timesteps = mx_net_io_timesteps(io, in.B, st)) || mx_unet_check_sizes(cfg, in.B, in.H, in.W, in.T, st))
+    mx_unet_input in;
+    const mx_ip_adapter *ad;
+    int n_images;
+    if (read_sizes(io, u, &in, &ad, &n_images, st)) return -1;
+    int64_t ss[4] = {in.B, cfg->in_channels, in.H, in.W}, es[3] = {in.B, in.T, cfg->cross_attention_dim};
+    if (!(in.sample = mx_net_io_input(io, "sample", 4, ss, st)) ||
+        !(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st)) ||
+        !(in.timesteps = mx_net_io_timesteps(io, in.B, st)))
         return -1;
     int n = mx_unet_num_residuals(cfg), C, h, w;
     const float *res[MX_UNET_MAX_RES];
@@ -360,17 +393,8 @@ int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *s
         else in.mid_residual = p;
     }
     if (have) in.down_residuals = res;
-    const mx_ip_adapter *ad;
-    const float *embeds = NULL;
-    float *tokens = NULL;
-    if (read_image_guidance(io, u, &in, &ad, &embeds, &tokens, st)) return -1;
     int64_t os[4] = {in.B, cfg->out_channels, in.H, in.W};
-    size_t bytes, ip_bytes = 0;
     float *out = io->output(io, "out", 4, os, st);
-    if (!out || mx_unet_call_arena_bytes(u, &in, &bytes, st) ||
-        (ad && mx_ip_adapter_arena_bytes(ad, in.ip_n / ad->num_tokens * in.B, &ip_bytes, st)))
-        return -1;
-    mx_arena *a = io->arena(io, bytes > ip_bytes ? bytes : ip_bytes, st);
-    if (!a || (ad && mx_ip_adapter_tokens(c, ad, embeds, in.ip_n / ad->num_tokens * in.B, tokens, a, st))) return -1;
+    if (!out || (ad && run_image_guidance(c, io, ad, n_images, &in, a, st))) return -1;
     return mx_unet_forward(c, u, &in, out, a, st);
 }

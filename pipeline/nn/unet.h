@@ -1,9 +1,9 @@
 /* UNet2DConditionModel (diffusers v0.35.2 semantics) for the Stable Diffusion 1.5 family.
  *
- * Use:
- *   mx_unet_config cfg;  mx_unet_config_parse(&cfg, json, len, "unet.config", st);
- *   mx_binder b;         mx_binder_wf(&b, wf, "unet.", st);   (or mx_binder_st for safetensors)
- *   mx_unet *u;          mx_unet_load(&u, &cfg, &b, st);
+ * Use (from a weight file, through the registry: registry.h):
+ *   mx_binder b;         mx_binder_wf(&b, wf, MX_NET_UNET ".", st);   (or mx_binder_st for safetensors)
+ *   mx_unet *u;          mx_net_load_kind(MX_NET_UNET, (void **)&u, wf, NULL, &b, st);
+ *                        (or, from a parsed config: mx_unet_load(&u, &cfg, &b, st))
  *   size_t bytes;        mx_unet_arena_bytes(u, B, H, W, T, &bytes, st);
  *   mx_arena a;          mx_arena_create(&a, bytes, st);
  *   mx_unet_forward(ctx, u, &in, out, &a, st);
@@ -93,7 +93,8 @@ double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int how);
 /* The registry's entry points (registry.h): config parse + load, the run-net adapter, and the name
  * of residual i in run-net's tensors (down_block_res_sample.{i}, then mid_block_res_sample). */
 int mx_unet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
-int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_unet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int i);
 
 #endif

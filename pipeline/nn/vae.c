@@ -38,6 +38,7 @@ struct mx_vae {
     mx_vae_config cfg;
     vae_half enc, dec;
     mx_conv quant_conv, post_quant_conv;
+    int fp32; /* runs in fp32 throughout under a bf16 context (mx_prec_net_fp32, read at load) */
 };
 
 const mx_vae_config *mx_vae_cfg(const mx_vae *v) { return &v->cfg; }
@@ -113,6 +114,7 @@ int mx_vae_load(mx_vae **out, const mx_vae_config *cfg, mx_binder *b, mx_status 
     mx_vae *v = calloc(1, sizeof *v);
     if (!v) return mx_fail(st, MX_ENOMEM, "out of memory loading the VAE");
     v->cfg = *cfg;
+    v->fp32 = mx_prec_net_fp32(MX_NET_VAE);
     int lc = cfg->latent_channels;
     int rc = encoder_load(&v->enc, b, cfg, st);
     if (!rc) rc = decoder_load(&v->dec, b, cfg, st);
@@ -270,7 +272,7 @@ int mx_vae_encode(const mx_ctx *c, const mx_vae *v, const float *image, int B, i
                   float *logvar, mx_arena *a, mx_status *st) {
     if (check_sizes(v, B, H, W, mx_vae_factor(v), st)) return -1;
     mx_run r;
-    mx_run_init_net(&r, "vae", c, a, st);
+    mx_run_init_prec(&r, v->fp32, c, a, st);
     size_t mark = mx_arena_mark(a);
     int rc = encode_run(&r, v, image, B, H, W, mean, logvar);
     mx_arena_reset(a, mark);
@@ -281,7 +283,7 @@ int mx_vae_decode(const mx_ctx *c, const mx_vae *v, const float *latents, int B,
                   mx_arena *a, mx_status *st) {
     int f = mx_vae_factor(v);
     if (check_sizes(v, B, h * f, w * f, f, st)) return -1;
-    return mx_ae_run(c, "vae", decode_run, v, latents, B, h, w, image, a, st, "VAE decode");
+    return mx_ae_run(c, v->fp32, decode_run, v, latents, B, h, w, image, a, st, "VAE decode");
 }
 
 int mx_vae_encode_arena_bytes(const mx_vae *v, int B, int H, int W, size_t *bytes, mx_status *st) {
@@ -313,23 +315,32 @@ int mx_vae_load_config(void **net, const char *text, size_t len, const char *wha
 }
 
 /* run-net vae-encode: image [B,3,H,W] in [-1,1] -> mean, logvar. */
-int mx_vae_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+int mx_vae_encode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    const mx_vae *v = net;
+    int64_t is[4] = {-1, v->cfg.in_channels, -1, -1};
+    return io->shape(io, "image", 4, is, st) ? -1 : mx_vae_encode_arena_bytes(v, (int)is[0], (int)is[2], (int)is[3], bytes, st);
+}
+
+int mx_vae_encode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_vae *v = net;
     int f = mx_vae_factor(v), lc = v->cfg.latent_channels;
     int64_t is[4] = {-1, v->cfg.in_channels, -1, -1};
     const float *img = mx_net_io_input(io, "image", 4, is, st);
     if (!img) return -1;
     int B = (int)is[0], H = (int)is[2], W = (int)is[3];
-    size_t bytes;
-    if (mx_vae_encode_arena_bytes(v, B, H, W, &bytes, st)) return -1;
     int64_t os[4] = {B, lc, H / f, W / f};
     float *mean = io->output(io, "mean", 4, os, st), *logvar = mean ? io->output(io, "logvar", 4, os, st) : NULL;
-    mx_arena *a = logvar ? io->arena(io, bytes, st) : NULL;
-    return a ? mx_vae_encode(c, v, img, B, H, W, mean, logvar, a, st) : -1;
+    return logvar ? mx_vae_encode(c, v, img, B, H, W, mean, logvar, a, st) : -1;
 }
 
 /* run-net vae-decode: latents [B,4,h,w] (unscaled) -> image. */
-int mx_vae_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st) {
+int mx_vae_decode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
+    const mx_vae *v = net;
+    int64_t ls[4] = {-1, v->cfg.latent_channels, -1, -1};
+    return io->shape(io, "latents", 4, ls, st) ? -1 : mx_vae_decode_arena_bytes(v, (int)ls[0], (int)ls[2], (int)ls[3], bytes, st);
+}
+
+int mx_vae_decode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_vae *v = net;
     int f = mx_vae_factor(v);
     int64_t ls[4] = {-1, v->cfg.latent_channels, -1, -1};
@@ -337,9 +348,6 @@ int mx_vae_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_sta
     if (!lat) return -1;
     int B = (int)ls[0], h = (int)ls[2], w = (int)ls[3];
     int64_t os[4] = {B, v->cfg.out_channels, (int64_t)h * f, (int64_t)w * f};
-    size_t bytes;
-    if (mx_vae_decode_arena_bytes(v, B, h, w, &bytes, st)) return -1;
     float *img = io->output(io, "image", 4, os, st);
-    mx_arena *a = img ? io->arena(io, bytes, st) : NULL;
-    return a ? mx_vae_decode(c, v, lat, B, h, w, img, a, st) : -1;
+    return img ? mx_vae_decode(c, v, lat, B, h, w, img, a, st) : -1;
 }

@@ -30,7 +30,9 @@ double mx_vae_decode_flops(const mx_vae *v, int B, int h, int w);
 
 /* The registry's entry points (registry.h): config parse + load, the run-net adapters. */
 int mx_vae_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
-int mx_vae_run_encode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
-int mx_vae_run_decode_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_status *st);
+int mx_vae_encode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_vae_encode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
+int mx_vae_decode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
+int mx_vae_decode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 
 #endif

@@ -22,11 +22,12 @@
 #include "../nn/vae.h"
 
 enum { MX_MODELS_NEED_INPAINT = 1, MX_MODELS_NEED_DEPTH = 2 };
+#define MX_MODELS_NETS 8
 
 typedef struct mx_models {
     mx_weightfile *wf;
     mx_tokenizer *tok;
-    mx_clip clip;
+    mx_clip *clip;
     mx_unet *unet;
     mx_controlnet *cn_depth;   /* NULL when not in the file and not needed */
     mx_controlnet *cn_inpaint; /* NULL when not in the file and not needed */
@@ -38,9 +39,9 @@ typedef struct mx_models {
     int lcm;                   /* the UNet has a merged LCM-LoRA (metadata unet.lcm_lora) */
     mx_sched_config sched;
     const mx_ctx *c;                           /* the weights live on c's backend */
-    mx_binder b_clip, b_unet, b_depth, b_inpaint, b_vae, b_taesd, b_ip, b_image; /* weights on the device */
-    mx_binder wf_binders[8];                   /* the weight file's binders behind them */
-    int clip_loaded;
+    /* per network (text encoder, UNet, depth, inpaint, VAE, TAESD, IP-Adapter, image encoder):
+     * its weights on the device, and the weight file's binder behind them */
+    mx_binder binders[MX_MODELS_NETS], wf_binders[MX_MODELS_NETS];
     char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;
 

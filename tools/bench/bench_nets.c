@@ -31,6 +31,7 @@
 #include "../../pipeline/nn/clip.h"
 #include "../../pipeline/nn/controlnet.h"
 #include "../../pipeline/nn/netcfg.h"
+#include "../../pipeline/nn/registry.h"
 #include "../../pipeline/nn/unet.h"
 #include "../../pipeline/nn/vae.h"
 #include "../../pipeline/texture/models.h"
@@ -46,12 +47,12 @@ static double peak_rss_mb(void) {
 
 /* ---- the runs ---- */
 
-static const char *config_of(const mx_weightfile *wf, const char *prefix, mx_status *st) {
-    char key[96];
-    snprintf(key, sizeof key, "%sconfig", prefix);
-    const char *c = mx_wf_meta(wf, key);
-    if (!c) mx_fail(st, MX_EINPUT, "%s: no %s", mx_wf_path(wf), key);
-    return c;
+/* Network `kind` of wf under `prefix` (NULL: the kind's name), through its registry entry. */
+static int load_net(const mx_weightfile *wf, const char *kind, const char *prefix, mx_binder *b, void **net,
+                    mx_status *st) {
+    char p[80];
+    snprintf(p, sizeof p, "%s.", prefix ? prefix : kind);
+    return mx_binder_wf(b, wf, p, st) || mx_net_load_kind(kind, net, wf, prefix, b, st) ? -1 : 0;
 }
 
 /* One network in fp32 ([0]) and bf16 ([1]; 0 without bf16): wall seconds, process CPU seconds
@@ -205,31 +206,20 @@ typedef struct bench_opts {
 static int run_benchmarks(const bench_opts *o, mx_status *st) {
     mx_weightfile *wf = NULL;
     mx_binder bu, bc[2], bv, bt;
-    mx_unet_config ucfg, ccfg;
-    mx_vae_config vcfg;
-    mx_clip_config tcfg;
     mx_unet *u = NULL;
     mx_controlnet *cn[2] = {NULL, NULL};
     mx_vae *v = NULL;
-    mx_clip clip;
-    memset(&clip, 0, sizeof clip);
-    const char *t;
+    mx_clip *clip = NULL;
     double t0 = mx_now();
-    if (mx_wf_open(&wf, o->weights, st)) return -1;
-    if (!(t = config_of(wf, "unet.", st)) || mx_unet_config_parse(&ucfg, t, strlen(t), "unet.config", st) ||
-        mx_binder_wf(&bu, wf, "unet.", st) || mx_unet_load(&u, &ucfg, &bu, st))
-        return -1;
-    const char *cnp[2] = {"controlnet_depth.", "controlnet_inpaint."};
+    if (mx_wf_open(&wf, o->weights, st) || load_net(wf, MX_NET_UNET, NULL, &bu, (void **)&u, st)) return -1;
+    const char *cnp[2] = {MX_NET_CONTROLNET "_depth", MX_NET_CONTROLNET "_inpaint"};
     for (int i = 0; i < 2; i++)
-        if (!(t = config_of(wf, cnp[i], st)) || mx_unet_config_parse(&ccfg, t, strlen(t), cnp[i], st) ||
-            mx_binder_wf(&bc[i], wf, cnp[i], st) || mx_controlnet_load(&cn[i], &ccfg, &bc[i], st))
-            return -1;
-    if (!(t = config_of(wf, "vae.", st)) || mx_vae_config_parse(&vcfg, t, strlen(t), "vae.config", st) ||
-        mx_binder_wf(&bv, wf, "vae.", st) || mx_vae_load(&v, &vcfg, &bv, st))
+        if (load_net(wf, MX_NET_CONTROLNET, cnp[i], &bc[i], (void **)&cn[i], st)) return -1;
+    if (load_net(wf, MX_NET_VAE, NULL, &bv, (void **)&v, st) ||
+        load_net(wf, MX_NET_TEXT_ENCODER, NULL, &bt, (void **)&clip, st))
         return -1;
-    if (!(t = config_of(wf, "text_encoder.", st)) || mx_clip_config_parse(&tcfg, t, strlen(t), "text_encoder.config", st) ||
-        mx_binder_wf(&bt, wf, "text_encoder.", st) || mx_clip_load(&clip, &tcfg, &bt, st))
-        return -1;
+    const mx_unet_config ucfg = *mx_unet_cfg(u), ccfg = *mx_controlnet_cfg(cn[0]);
+    const mx_clip_config tcfg = clip->cfg;
     printf("%-34s %8.3f s (mmap + bind, 5 networks)\n", "load", mx_now() - t0);
 
     /* [0] fp32, [1] bf16 (when the CPU has it): each network runs in both, one after the other */
@@ -367,12 +357,12 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         float *last = malloc(nt * sizeof *last), *pooled = malloc((size_t)2 * tcfg.hidden_size * sizeof *pooled);
         mx_arena dry, ca;
         mx_arena_measure(&dry);
-        if (mx_clip_forward(&clip, &c[0], &dry, ids, 2, 77, last, pooled, NULL, st) ||
+        if (mx_clip_forward(clip, &c[0], &dry, ids, 2, 77, last, pooled, NULL, st) ||
             mx_arena_create(&ca, dry.peak + 256, st))
             return -1;
         for (int call = 0; call < 2; call++) { /* the first untimed, as above */
             t0 = mx_now();
-            if (mx_clip_forward(&clip, &c[0], &ca, ids, 2, 77, last, pooled, NULL, st)) return -1;
+            if (mx_clip_forward(clip, &c[0], &ca, ids, 2, 77, last, pooled, NULL, st)) return -1;
         }
         printf("%-32s %8.2f s (fp32)\n", "CLIP text encoder batch 2", mx_now() - t0);
         mx_arena_destroy(&ca);
@@ -397,7 +387,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     mx_controlnet_free(cn[0]);
     mx_controlnet_free(cn[1]);
     mx_vae_free(v);
-    mx_clip_free(&clip);
+    mx_clip_free(clip);
     mx_binder_free(&bu);
     mx_binder_free(&bc[0]);
     mx_binder_free(&bc[1]);

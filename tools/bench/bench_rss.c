@@ -16,6 +16,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "../../pipeline/nn/registry.h"
 #include "../../pipeline/nn/sd_pipeline.h"
 #include "../../pipeline/nn/vae_tiled.h"
 #include "../../weights/weights.h"
@@ -49,29 +50,21 @@ typedef struct stage_env {
     mx_ctx ctx;
 } stage_env;
 
-static int bind_net(stage_env *e, const char *prefix, mx_binder *b, int kind, void **out, mx_status *st) {
-    char key[96];
-    snprintf(key, sizeof key, "%sconfig", prefix);
-    const char *t = mx_wf_meta(e->wf, key);
-    if (!t) return mx_fail(st, MX_EINPUT, "%s: no %s", mx_wf_path(e->wf), key);
-    if (mx_binder_wf(b, e->wf, prefix, st)) return -1;
-    if (kind == 2) {
-        mx_vae_config c;
-        return mx_vae_config_parse(&c, t, strlen(t), key, st) || mx_vae_load((mx_vae **)out, &c, b, st) ? -1 : 0;
-    }
-    mx_unet_config c;
-    if (mx_unet_config_parse(&c, t, strlen(t), key, st)) return -1;
-    return kind ? mx_controlnet_load((mx_controlnet **)out, &c, b, st) : mx_unet_load((mx_unet **)out, &c, b, st);
+/* Network `kind` under `prefix` (NULL: the kind's name), through its registry entry. */
+static int bind_net(stage_env *e, const char *kind, const char *prefix, mx_binder *b, void **out, mx_status *st) {
+    char p[80];
+    snprintf(p, sizeof p, "%s.", prefix ? prefix : kind);
+    return mx_binder_wf(b, e->wf, p, st) || mx_net_load_kind(kind, out, e->wf, prefix, b, st) ? -1 : 0;
 }
 
 static int env_open(stage_env *e, const bench_cfg *o, mx_status *st) {
     memset(e, 0, sizeof e[0]);
     if (mx_wf_open(&e->wf, o->weights, st) || mx_ctx_create(&e->ctx, o->threads, mx_cpu_best_isa(), (size_t)64 << 20, st))
         return -1;
-    return bind_net(e, "unet.", &e->bu, 0, (void **)&e->unet, st) ||
-                   bind_net(e, "controlnet_depth.", &e->bd, 1, (void **)&e->cn[0], st) ||
-                   bind_net(e, "controlnet_inpaint.", &e->bi, 1, (void **)&e->cn[1], st) ||
-                   bind_net(e, "vae.", &e->bv, 2, (void **)&e->vae, st)
+    return bind_net(e, MX_NET_UNET, NULL, &e->bu, (void **)&e->unet, st) ||
+                   bind_net(e, MX_NET_CONTROLNET, MX_NET_CONTROLNET "_depth", &e->bd, (void **)&e->cn[0], st) ||
+                   bind_net(e, MX_NET_CONTROLNET, MX_NET_CONTROLNET "_inpaint", &e->bi, (void **)&e->cn[1], st) ||
+                   bind_net(e, MX_NET_VAE, NULL, &e->bv, (void **)&e->vae, st)
                ? -1
                : 0;
 }

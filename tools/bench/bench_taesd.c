@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "../../pipeline/nn/netcfg.h"
+#include "../../pipeline/nn/registry.h"
 #include "../../pipeline/nn/taesd.h"
 #include "../../runtime/fileio.h"
 #include "bench_sd15.h"
@@ -31,16 +32,17 @@ static int time_pass(const mx_ctx *c, const mx_taesd *t, int enc, int repeats, c
 static int run(int threads, int repeats, mx_status *st) {
     size_t len;
     char *text = mx_read_file("tools/bench/taesd_config.json", 1 << 16, &len, st);
-    mx_taesd_config cfg;
+    const mx_net_def *def = mx_net_of_kind(MX_NET_TAESD);
     mx_binder b;
     mx_taesd *t = NULL;
-    if (!text || mx_taesd_config_parse(&cfg, text, len, "tools/bench/taesd_config.json", st) ||
-        mx_binder_rule(&b, 1, MX_F16, st)) {
+    if (!text || mx_binder_rule(&b, 1, MX_F16, st)) {
         free(text);
         return -1;
     }
+    int loaded = def->load((void **)&t, text, len, "tools/bench/taesd_config.json", &b, st) == 0;
     free(text);
-    if (mx_taesd_load(&t, &cfg, &b, st)) {
+    if (!loaded) {
+        def->free(t);
         mx_binder_free(&b);
         return -1;
     }

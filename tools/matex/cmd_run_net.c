@@ -26,9 +26,7 @@ static void usage(FILE *f) {
                "\n"
                "Runs one network of a matex weight file on the tensors of IN and writes its outputs (fp32).\n"
                "NET and its tensors (B = batch; any batch and any valid size):\n");
-    for (size_t i = 0; i < mx_net_count; i++)
-        for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name; v++)
-            fprintf(f, "  %-12s %s\n", mx_nets[i].verbs[v].name, mx_nets[i].verbs[v].help);
+    for (size_t i = 0; i < mx_net_count; i++) fprintf(f, "  %-12s %s\n", mx_nets[i].name, mx_nets[i].help);
     fprintf(f,
             "  inpaint-pipeline  (W: a model set with controlnet_depth and controlnet_inpaint; --steps N [--guidance G])\n"
             "              prompt_embeds, negative_prompt_embeds [B,T,D], image [B,3,H,W] in [0,1], mask [B,1,H,W]\n"
@@ -93,11 +91,11 @@ static float *new_floats(run_io *io, size_t n, mx_status *st) {
     return p;
 }
 
-/* Input tensor as fp32 with its shape checked: want[i] = -1 accepts any size (filled in). */
-static float *input(run_io *io, const char *name, int ndim, int64_t *want, int required, mx_status *st) {
+/* Input tensor `name` with its shape checked: want[i] = -1 accepts any size (filled in). */
+static const mx_st_tensor *input_tensor(run_io *io, const char *name, int ndim, int64_t *want, mx_status *st) {
     const mx_st_tensor *t = mx_st_find(&io->in, name);
     if (!t) {
-        if (required) mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name);
+        mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name);
         return NULL;
     }
     int ok = t->ndim == ndim;
@@ -116,7 +114,13 @@ static float *input(run_io *io, const char *name, int ndim, int64_t *want, int r
         }
         want[i] = t->shape[i];
     }
-    return keep(io, mx_st_to_f32(&io->in, t, st));
+    return t;
+}
+
+/* The same as fp32 (freed by io_free). */
+static float *input(run_io *io, const char *name, int ndim, int64_t *want, mx_status *st) {
+    const mx_st_tensor *t = input_tensor(io, name, ndim, want, st);
+    return t ? keep(io, mx_st_to_f32(&io->in, t, st)) : NULL;
 }
 
 /* Device memory for n floats, a copy of host data when host is not NULL (freed by io_free). */
@@ -164,8 +168,12 @@ static float *dev_output(run_io *io, const char *name, int ndim, const int64_t *
 
 static int io_has(mx_net_io *n, const char *name) { return mx_st_find(&((run_io *)n->impl)->in, name) != NULL; }
 
+static int io_shape(mx_net_io *n, const char *name, int ndim, int64_t *shape, mx_status *st) {
+    return input_tensor(n->impl, name, ndim, shape, st) ? 0 : -1;
+}
+
 static const float *io_host(mx_net_io *n, const char *name, int ndim, int64_t *shape, mx_status *st) {
-    return input(n->impl, name, ndim, shape, 1, st);
+    return input(n->impl, name, ndim, shape, st);
 }
 
 static const float *io_host_flat(mx_net_io *n, const char *name, size_t *numel, mx_status *st) {
@@ -184,14 +192,6 @@ static float *io_output(mx_net_io *n, const char *name, int ndim, const int64_t 
     return dev_output(n->impl, name, ndim, shape, st);
 }
 
-static mx_arena *io_arena(mx_net_io *n, size_t bytes, mx_status *st) {
-    run_io *io = n->impl;
-    if (io->arena_ok) return mx_fail(st, MX_EINTERNAL, "run-net: a second arena"), NULL;
-    if (mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)) return NULL;
-    io->arena_ok = 1;
-    return &io->arena;
-}
-
 /* The binder of the network under `prefix`: weight file, weights kept on the device. */
 static int bind_weights(run_io *io, const char *prefix, mx_status *st) {
     return mx_binder_wf(&io->wb, io->wf, prefix, st) || mx_binder_device(&io->b, &io->wb, &io->ctx, st) ? -1 : 0;
@@ -208,7 +208,8 @@ static const char *net_config(run_io *io, const char *prefix, char *key, size_t 
 static const void *io_network(mx_net_io *n, const char *kind, mx_status *st) {
     run_io *io = n->impl;
     char prefix[80], key[96];
-    const mx_net_def *def = mx_net_named(kind);
+    const mx_net_def *def = mx_net_of_kind(kind);
+    if (io->def2 == def && def) return io->net2;
     if (!def || io->def2) return mx_fail(st, MX_EINTERNAL, "run-net: companion network %s", kind), NULL;
     snprintf(prefix, sizeof prefix, "%s.", kind);
     const char *text = net_config(io, prefix, key, sizeof key, st);
@@ -219,8 +220,9 @@ static const void *io_network(mx_net_io *n, const char *kind, mx_status *st) {
     return io->net2;
 }
 
-/* Any network of the registry: its config and weights under `prefix`, loaded, run by the verb. */
-static int run_network(run_io *io, const mx_net_def *def, const mx_net_verb *verb, const char *prefix, mx_status *st) {
+/* Any entry of the registry: its network's config and weights under `prefix`, loaded, its arena
+ * sized from the inputs, run. */
+static int run_network(run_io *io, const mx_net_def *def, const char *prefix, mx_status *st) {
     char key[96];
     void *net = NULL;
     const char *text = net_config(io, prefix, key, sizeof key, st);
@@ -228,13 +230,19 @@ static int run_network(run_io *io, const mx_net_def *def, const mx_net_verb *ver
     io->iface = (mx_net_io){.impl = io,
                             .source = io->in_path,
                             .has = io_has,
+                            .shape = io_shape,
                             .host = io_host,
                             .host_flat = io_host_flat,
                             .device = io_device,
                             .output = io_output,
-                            .arena = io_arena,
                             .network = io_network};
-    int rc = def->load(&net, text, strlen(text), key, &io->b, st) || verb->run(&io->ctx, net, &io->iface, st) ? -1 : 0;
+    size_t bytes;
+    int rc = def->load(&net, text, strlen(text), key, &io->b, st) || def->arena_bytes(net, &io->iface, &bytes, st) ||
+                     mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)
+                 ? -1
+                 : 0;
+    io->arena_ok = !rc;
+    if (!rc) rc = def->run(&io->ctx, net, &io->iface, &io->arena, st);
     def->free(net);
     return rc;
 }
@@ -285,38 +293,38 @@ static int pipe_read_image_guidance(run_io *io, const mx_models *m, pipe_inputs 
         return mx_fail(st, MX_EINPUT, "%s: image_embeds given, but %s has no IP-Adapter (convert --ip-adapter)",
                        io->in_path, mx_models_path(m));
     int64_t es[3] = {p->B, -1, m->ip_adapter->embed_dim}, one[1] = {1};
-    if (!(p->embeds = input(io, "image_embeds", 3, es, 1, st))) return -1;
+    if (!(p->embeds = input(io, "image_embeds", 3, es, st))) return -1;
     if (es[1] > MX_IP_MAX_TOKENS / m->ip_adapter->num_tokens)
         return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->in_path,
                        (long long)es[1], m->ip_adapter->num_tokens, MX_IP_MAX_TOKENS);
     p->n_images = (int)es[1];
-    return mx_st_find(&io->in, "ip_adapter_scale") && !(p->ip_scale = input(io, "ip_adapter_scale", 1, one, 1, st)) ? -1
+    return mx_st_find(&io->in, "ip_adapter_scale") && !(p->ip_scale = input(io, "ip_adapter_scale", 1, one, st)) ? -1
                                                                                                                    : 0;
 }
 
 static int pipe_read_inputs(run_io *io, const mx_models *m, const pipe_opts *po, pipe_inputs *p, mx_status *st) {
     int D = mx_unet_cfg(m->unet)->cross_attention_dim, f = mx_vae_factor(m->vae);
     int64_t es[3] = {-1, -1, D}, is[4] = {-1, 3, -1, -1}, one[1] = {1}, two[1] = {2};
-    if (!(p->cond = input(io, "prompt_embeds", 3, es, 1, st)) ||
-        !(p->uncond = input(io, "negative_prompt_embeds", 3, es, 1, st)))
+    if (!(p->cond = input(io, "prompt_embeds", 3, es, st)) ||
+        !(p->uncond = input(io, "negative_prompt_embeds", 3, es, st)))
         return -1;
     is[0] = es[0];
-    if (!(p->image = input(io, "image", 4, is, 1, st))) return -1;
+    if (!(p->image = input(io, "image", 4, is, st))) return -1;
     p->B = (int)is[0], p->T = (int)es[1], p->H = (int)is[2], p->W = (int)is[3];
     if (p->H % f || p->W % f)
         return mx_fail(st, MX_EINPUT, "%s: image is %dx%d, not a multiple of the VAE factor %d", io->in_path, p->W,
                        p->H, f);
     int64_t ms[4] = {p->B, 1, p->H, p->W}, cs[4] = {p->B, 3, p->H, p->W}, ns[4] = {p->B, 4, p->H / f, p->W / f};
-    if (!(p->depth = input(io, "control_depth", 4, cs, 1, st)) || !(p->noise = input(io, "noise", 4, ns, 1, st)) ||
+    if (!(p->depth = input(io, "control_depth", 4, cs, st)) || !(p->noise = input(io, "noise", 4, ns, st)) ||
         pipe_read_image_guidance(io, m, p, st))
         return -1;
     if (po->inpaint)
-        return !(p->mask = input(io, "mask", 4, ms, 1, st)) || !(p->inpaint = input(io, "control_inpaint", 4, cs, 1, st)) ||
-                       !(p->scales = input(io, "conditioning_scales", 1, two, 1, st))
+        return !(p->mask = input(io, "mask", 4, ms, st)) || !(p->inpaint = input(io, "control_inpaint", 4, cs, st)) ||
+                       !(p->scales = input(io, "conditioning_scales", 1, two, st))
                    ? -1
                    : 0;
-    if (!(p->strength = input(io, "strength", 1, one, 1, st))) return -1;
-    if (mx_st_find(&io->in, "conditioning_scales") && !(p->scales = input(io, "conditioning_scales", 1, one, 1, st)))
+    if (!(p->strength = input(io, "strength", 1, one, st))) return -1;
+    if (mx_st_find(&io->in, "conditioning_scales") && !(p->scales = input(io, "conditioning_scales", 1, one, st)))
         return -1;
     return 0;
 }
@@ -408,24 +416,22 @@ static int is_pipeline(const char *net) { return !strcmp(net, "inpaint-pipeline"
 static void net_names(char *buf, size_t cap) {
     size_t len = 0;
     for (size_t i = 0; i < mx_net_count && len < cap; i++)
-        for (int v = 0; v < MX_NET_MAX_VERBS && mx_nets[i].verbs[v].name && len < cap; v++)
-            len += (size_t)snprintf(buf + len, cap - len, "%s, ", mx_nets[i].verbs[v].name);
+        len += (size_t)snprintf(buf + len, cap - len, "%s, ", mx_nets[i].name);
     if (len < cap) snprintf(buf + len, cap - len, "inpaint-pipeline, img2img-pipeline or clip-preprocess");
 }
 
 static int run(run_io *io, const char *net, const char *weights, const char *prefix, int threads, mx_precision prec,
                mx_backend_kind device, const pipe_opts *po, mx_status *st) {
-    const mx_net_def *def = NULL;
-    const mx_net_verb *verb = mx_net_verb_named(net, &def);
+    const mx_net_def *def = mx_net_named(net);
     if (mx_ctx_create_on(&io->ctx, device, threads, mx_cpu_isa_for(prec), SCRATCH_BYTES, st)) return -1;
     io->ctx_ok = 1;
     if (device != MX_BACKEND_CUDA && mx_isa_precision(io->ctx.k->isa) != prec)
         mx_warn("run-net: %s arithmetic is not available on this CPU; using fp32", mx_precision_name(prec));
     if (mx_st_open(&io->in, io->in_path, st)) return -1;
     io->in_open = 1;
-    if (verb && mx_wf_open(&io->wf, weights, st)) return -1;
+    if (def && mx_wf_open(&io->wf, weights, st)) return -1;
     double t0 = mx_now();
-    int rc = verb ? run_network(io, def, verb, prefix, st) : run_pipeline(io, weights, po, st);
+    int rc = def ? run_network(io, def, prefix, st) : run_pipeline(io, weights, po, st);
     if (rc || fetch_outputs(io, st)) return -1;
     mx_info("run-net %s on %s: %.3f s", net, mx_backend_name(device), mx_now() - t0);
     return mx_st_write(io->out_path, io->outs, (size_t)io->nout, st);
@@ -473,7 +479,7 @@ int cmd_run_net(int argc, char **argv) {
         return 2;
     }
     if (net && !strcmp(net, "clip-preprocess")) return clip_preprocess(io.in_path, io.out_path, size);
-    int known = net && (mx_net_verb_named(net, &def) || is_pipeline(net));
+    int known = net && ((def = mx_net_named(net)) || is_pipeline(net));
     if (!net || !weights || !io.in_path || !io.out_path || !known) {
         char names[256];
         net_names(names, sizeof names);
