@@ -12,7 +12,7 @@ check "DESIGN.md's ops, networks and a new op's files match the code" sh tools/s
 R="$T/repo"
 mkdir -p "$R/docs" "$R/ops/cpu" "$R/ops/cuda" "$R/weights" "$R/tests/cuda"
 cp docs/DESIGN.md docs/cuda-notes.md "$R/docs/" && cp ops/op_list.h ops/backend.c "$R/ops/" && cp ops/cpu/*_ref.c "$R/ops/cpu/" &&
-    cp ops/cuda/*.cu "$R/ops/cuda/" && cp weights/networks.c "$R/weights/" && cp tests/test_ops_*.c "$R/tests/" &&
+    cp ops/cuda/*.cu "$R/ops/cuda/" && cp weights/networks.c weights/networks.h "$R/weights/" && cp tests/test_ops_*.c "$R/tests/" &&
     cp tests/cuda/*.c "$R/tests/cuda/" || { echo "FAIL copying the tree"; exit 1; }
 check "the copy passes" [ "$(rc_of sh tools/scripts/check_docs.sh "$R")" = 0 ]
 
@@ -47,7 +47,7 @@ planted ops/backend.c 's/strict_embed_tokens/strict_embed/g' \
     'op embed_tokens takes a weight but ops/backend.c has no strict wrapper' "a weight op without a strict wrapper"
 planted docs/DESIGN.md 's|ops/op_list.h lists 26 ops|ops/op_list.h lists 27 ops|' \
     'says ops/op_list.h lists 27 ops; it lists 26' "a wrong op count"
-planted weights/networks.c 's/^const mx_net_kind mx_net_kinds\[\] = {/&\n    {.name = "refiner", .class_name = "UNet2DConditionModel", .in_model_set = 0},/' \
+planted weights/networks.h 's/^#define MX_NET_IP_ADAPTER "ip_adapter"/#define MX_NET_IP_ADAPTER "refiner"/' \
     'network refiner of weights/networks.c is not in the network table' "a network missing from the table"
 planted docs/DESIGN.md 's/| `taesd` | `AutoencoderTiny` | no |/| `taesd` | `AutoencoderTiny` | yes |/' \
     'network taesd: in the model set yes in the table, no in' "a wrong model-set flag"

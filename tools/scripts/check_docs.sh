@@ -36,13 +36,14 @@ awk '/^#define MX_OPS\(X\)/ { on = 1; next }
      on && !/\\$/ { on = 0 }
      END { if (op != "") print op, w }' ops/op_list.h > "$tmp/ops"
 [ -s "$tmp/ops" ] || { echo "check_docs: no ops found in ops/op_list.h" >&2; exit 2; }
-# "name class in_model_set" per entry of weights/networks.c
-awk 'match($0, /\.name = "[^"]*"/) {
-         n = substr($0, RSTART + 9, RLENGTH - 10); c = "-"; m = 0
+# "name class in_model_set" per entry of weights/networks.c (names are weights/networks.h's MX_NET_*)
+awk 'FNR == NR { if ($1 == "#define" && $2 ~ /^MX_NET_/ && $3 ~ /^"/) { v = $3; gsub(/"/, "", v); names[$2] = v }; next }
+     match($0, /\.name = MX_NET_[A-Z_]*/) {
+         n = names[substr($0, RSTART + 8, RLENGTH - 8)]; c = "-"; m = 0
          if (match($0, /\.class_name = "[^"]*"/)) c = substr($0, RSTART + 15, RLENGTH - 16)
          if (match($0, /\.in_model_set = [01]/)) m = substr($0, RSTART + RLENGTH - 1, 1)
          print n, c, m
-     }' weights/networks.c > "$tmp/nets"
+     }' weights/networks.h weights/networks.c > "$tmp/nets"
 
 # ---- the map's claims ----
 # rows of the markdown table under a header line holding $1: "LINE|cell|cell|..." (cells trimmed,
