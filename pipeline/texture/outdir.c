@@ -14,7 +14,7 @@
 #include "../../runtime/atomic_file.h"
 #include "../../runtime/buf.h"
 #include "../../runtime/fileio.h"
-#include "../geom/export.h"
+#include "../io/export.h"
 
 #define MARKER_HEADER "matex output folder: `--force` may replace it. The files matex wrote here:\n"
 #define MARKER_MAX_BYTES (1 << 20)
