@@ -166,6 +166,8 @@ $(BUILD)/tests/amx_emu.o: tests/amx_emu.c
 	$(CC) $(CFLAGS) $(AVX512BF16_FLAGS) -c -o $@ $<
 $(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/amx_emu.o
 endif
+# test_ops_backend names each table entry's kernel by its symbol (dladdr): the symbols are exported.
+$(BUILD)/tests/test_ops_backend: LDFLAGS += -rdynamic
 $(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_nn_%: $(BUILD)/tests/test_nn_%.o $(TEST_UTIL) $(LIB_NN) $(LIB_WEIGHTS) $(LIB_CORE)
