@@ -11,6 +11,7 @@
 #include "gltf.h"
 #include "io.h"
 
+/* 1 when path's last component ends in "." ext, case-insensitive (ext in lower case). */
 static int has_ext(const char *path, const char *ext) {
     const char *dot = strrchr(path, '.');
     if (!dot || strchr(dot, '/')) return 0;
