@@ -71,8 +71,12 @@ WEIGHTS_SRC = $(wildcard weights/*.c)
 NN_SRC      = $(wildcard pipeline/nn/*.c)
 GEOM_SRC    = $(filter-out $(wildcard pipeline/geom/*_avx2.c),$(wildcard pipeline/geom/*.c)) $(GEOM_SIMD_SRC)
 TEX_SRC     = $(wildcard pipeline/texture/*.c)
-IO_SRC      = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/exr_read.cpp pipeline/io/io_write.c \
-              pipeline/io/png_zlib.c pipeline/io/image_files.c
+# pipeline/io holds every file format: the formats in C (glTF, the exporters, file kinds, the mesh
+# loader: FORMAT_SRC, part of libmatex) over the adapter to third-party libraries (IO_SRC, libmatex_io;
+# OpenImageIO in libmatex_oiio.so, opened on first use) or its stand-in io_none.c (no files, no C++).
+IO_ADAPTER_C = pipeline/io/io_write.c pipeline/io/png_zlib.c pipeline/io/image_files.c
+FORMAT_SRC  = $(filter-out $(IO_ADAPTER_C) pipeline/io/io_none.c,$(wildcard pipeline/io/*.c))
+IO_SRC      = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/exr_read.cpp $(IO_ADAPTER_C)
 OIIO_SRC    = pipeline/io/imageio.cpp
 TOOL_SRC    = $(wildcard tools/matex/cmd_*.c tools/matex/cli_*.c)
 
@@ -82,13 +86,14 @@ LIB_CORE    = $(BUILD)/libmx_core.a
 LIB_WEIGHTS = $(BUILD)/libmx_weights.a
 LIB_NN      = $(BUILD)/libmx_nn.a
 LIB_GEOM    = $(BUILD)/libmx_geom.a
+LIB_FORMATS = $(BUILD)/libmx_formats.a
 LIB_TEX     = $(BUILD)/libmx_tex.a
 LIB_IO      = $(BUILD)/libmatex_io.a
 LIB_OIIO    = $(BUILD)/libmatex_oiio.so
 LIBMATEX    = $(BUILD)/libmatex.a
 LIB_MATEX_CORE = $(BUILD)/libmatex_core.a
 
-ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(TEX_SRC))
+ALL_C_OBJ = $(call obj,$(CORE_SRC) $(WEIGHTS_SRC) $(NN_SRC) $(GEOM_SRC) $(FORMAT_SRC) $(TEX_SRC))
 
 .PHONY: all test asan bench clean cuda test-full demo install deps core test-slurm blender-addon test-blender
 # Keep objects of chained rules (test and bench objects), so reruns don't rebuild them.
@@ -99,7 +104,7 @@ all: $(LIBMATEX) $(LIB_IO) $(LIB_OIIO) matex
 matex: $(BUILD)/matex
 	ln -sf $< $@
 
-$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IO_CORE_LIBS) $(LDLIBS)
 
 # The OpenImageIO adapter: imageio.cpp and the status functions it reports through, position-
@@ -117,6 +122,7 @@ $(LIB_CORE):    $(call obj,$(CORE_SRC))
 $(LIB_WEIGHTS): $(call obj,$(WEIGHTS_SRC))
 $(LIB_NN):      $(call obj,$(NN_SRC))
 $(LIB_GEOM):    $(call obj,$(GEOM_SRC))
+$(LIB_FORMATS): $(call obj,$(FORMAT_SRC))
 $(LIB_TEX):     $(call obj,$(TEX_SRC))
 $(LIB_IO):      $(call obj,$(IO_SRC))
 $(LIBMATEX):    $(ALL_C_OBJ)
@@ -163,7 +169,7 @@ $(BUILD)/%.o: %.cpp
 TEST_SRC   = $(wildcard tests/test_*.c)
 TEST_BINS  = $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
 TEST_UTIL  = $(call obj,$(wildcard tests/util_*.c))
-TEST_ALL_LIBS = $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+TEST_ALL_LIBS = $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 
 $(BUILD)/tests/test_runtime_%: $(BUILD)/tests/test_runtime_%.o $(TEST_UTIL) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
@@ -179,13 +185,16 @@ $(BUILD)/tests/test_ops_kernels: $(BUILD)/tests/amx_emu.o
 # The cuDNN path's host-side decisions (plan keys, layouts, fallback) are tested without CUDA.
 $(BUILD)/tests/test_ops_cuda_plan: $(BUILD)/ops/cuda/cudnn_plan.o
 endif
+# test_ops_backend names each table entry's kernel by its symbol (dladdr): the symbols are exported.
+$(BUILD)/tests/test_ops_backend: LDFLAGS += -rdynamic
 $(BUILD)/tests/test_weights_%: $(BUILD)/tests/test_weights_%.o $(TEST_UTIL) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 $(BUILD)/tests/test_nn_%: $(BUILD)/tests/test_nn_%.o $(TEST_UTIL) $(LIB_NN) $(LIB_WEIGHTS) $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
-$(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
+# The geometry tests load their meshes through pipeline/io (mesh_load.h): libmx_formats.
+$(BUILD)/tests/test_geom_%: $(BUILD)/tests/test_geom_%.o $(TEST_UTIL) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
-$(BUILD)/tests/test_io_%: $(BUILD)/tests/test_io_%.o $(TEST_UTIL) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
+$(BUILD)/tests/test_io_%: $(BUILD)/tests/test_io_%.o $(TEST_UTIL) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/test_texture_%: $(BUILD)/tests/test_texture_%.o $(TEST_UTIL) $(TEST_ALL_LIBS)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
@@ -204,7 +213,7 @@ $(DEMO_WEIGHTS): $(BUILD)/matex tools/scripts/make_demo_weights.sh $(wildcard te
 # each harness N seconds under libFuzzer (clang, ASan + UBSan) in build-fuzz, FUZZ_JOBS (2) at a time ----
 FUZZ_NAMES  = $(patsubst tests/fuzz/fuzz_%.c,%,$(wildcard tests/fuzz/fuzz_*.c))
 FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
-FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/matex/cli_texture_opts.c tools/matex/cli_args.c tools/matex/cli_progress.c tools/matex/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) \
+FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/matex/cli_texture_opts.c tools/matex/cli_args.c tools/matex/cli_progress.c tools/matex/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
@@ -227,7 +236,7 @@ fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
 MATEX_FAULTS = $(BUILD)/tests/faults/matex_faults
 FAULT_WRAP   = $(foreach f,malloc calloc realloc aligned_alloc posix_memalign strdup strndup free _Znwm _Znam,-Wl,--wrap=$(f))
 $(MATEX_FAULTS): $(call obj,tools/matex/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
-                 $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+                 $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS) -ldl
 .PHONY: faults faults-run
 faults:
@@ -331,7 +340,7 @@ test-arm64: $(DEMO_WEIGHTS)
 arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
 # matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
 # memory and weight files, for a cross-built core.
-$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
@@ -346,11 +355,11 @@ deps:
 # ---- benchmarks: OpenBLAS is linked into the benchmark only ----
 BENCH_SRC  = $(wildcard tools/bench/bench_*.c)
 BENCH_BINS = $(patsubst tools/bench/%.c,$(BUILD)/tools/bench/%,$(BENCH_SRC))
-$(BUILD)/tools/bench/bench_%: $(BUILD)/tools/bench/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+$(BUILD)/tools/bench/bench_%: $(BUILD)/tools/bench/bench_%.o $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ -lopenblas $(IOLIBS) $(LDLIBS)
 
 # The CUDA benchmark needs no file I/O adapter: it links io_none.o and runs where OpenImageIO is not.
-$(BUILD)/tools/bench/bench_cuda: $(BUILD)/tools/bench/bench_cuda.o $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/tools/bench/bench_cuda: $(BUILD)/tools/bench/bench_cuda.o $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) \
                            $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 

@@ -10,9 +10,10 @@
 
 #include "../pipeline/geom/backproject.h"
 #include "../pipeline/geom/masks.h"
+#include "../pipeline/geom/mesh.h"
 #include "../pipeline/geom/uvfill.h"
 #include "../pipeline/geom/views.h"
-#include "../pipeline/geom/mesh.h"
+#include "../pipeline/io/mesh_load.h"
 #include "util_test.h"
 
 #define S 200

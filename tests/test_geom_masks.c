@@ -9,6 +9,7 @@
 #include "../pipeline/geom/masks.h"
 #include "../pipeline/geom/mesh.h"
 #include "../pipeline/geom/views.h"
+#include "../pipeline/io/mesh_load.h"
 #include "../runtime/log.h"
 #include "util_test.h"
 

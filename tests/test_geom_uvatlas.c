@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "../pipeline/geom/uvatlas.h"
+#include "../pipeline/io/mesh_load.h"
 #include "util_test.h"
 
 /* ---------- hand-made meshes ---------- */

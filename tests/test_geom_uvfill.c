@@ -13,6 +13,7 @@
 #include "../pipeline/geom/mesh.h"
 #include "../pipeline/geom/uvatlas.h"
 #include "../pipeline/geom/uvfill.h"
+#include "../pipeline/io/mesh_load.h"
 #include "../runtime/log.h"
 #include "util_test.h"
 

@@ -11,6 +11,7 @@
 #include "../pipeline/geom/image.h"
 #include "../pipeline/geom/mesh.h"
 #include "../pipeline/io/io.h"
+#include "../pipeline/io/mesh_load.h"
 #include "../runtime/log.h"
 #include "util_test.h"
 

@@ -1,10 +1,13 @@
 /* The backends: names and what is compiled in; every CPU kernel table compiled in (each level,
- * whether or not this CPU runs it; test_cuda_ops checks CUDA's) has every op of ops/op_list.h, and a
- * table that lacks one is refused with the op's name; cpu-strict memory really is out of reach
+ * whether or not this CPU runs it; test_cuda_ops checks CUDA's) has every op of ops/op_list.h wired
+ * to a kernel of that op and of that level or one below it on its ladder (told by the kernel's
+ * symbol, mx_<op>_ref or mx_<op>_<level>: this test is linked with -rdynamic), and a table that
+ * lacks one is refused with the op's name; cpu-strict memory really is out of reach
  * outside the op layer (a direct read or write kills a child process with SIGSEGV) while ops and
  * the host copies work on it; a measuring context computes nothing; the small layout, vector and
  * embedding ops (pad, copy, fill, axpy, lincomb, clamp, affine, embed_tokens) on known values, on
  * the strict backend. */
+#include <dlfcn.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -29,15 +32,42 @@ static void test_names(void) {
     }
 }
 
-/* One table: every op of the list present (a failure names the op and the table). */
+/* The symbol of the function at fn ("" when dladdr cannot name it). */
+static const char *kernel_symbol(void (*fn)(void)) {
+    void *p;
+    memcpy(&p, &fn, sizeof p); /* a function's address as an object pointer, for dladdr */
+    Dl_info info;
+    return dladdr(p, &info) && info.dli_sname ? info.dli_sname : "";
+}
+
+/* Whether sym names a kernel of op `op` that a table of level isa may hold: the scalar reference
+ * mx_<op>_ref, or mx_<op>_<level> of a level compiled in at or below isa on isa's ladder. */
+static int kernel_fits(const char *sym, const char *op, mx_isa isa) {
+    size_t n = strlen(op);
+    if (strncmp(sym, "mx_", 3) != 0 || strncmp(sym + 3, op, n) != 0 || sym[3 + n] != '_') return 0;
+    const char *level = sym + 3 + n + 1;
+    if (strcmp(level, "ref") == 0) return 1;
+    for (mx_isa l = MX_ISA_SCALAR + 1; l < MX_ISA_COUNT; l++)
+        if (strcmp(level, mx_isa_name(l)) == 0) return mx_kernels_compiled(l) && mx_isa_min(l, isa) == l;
+    return 0;
+}
+
+/* One table: every op of the list present and wired to a kernel of its own op at a level the
+ * table may use (a failure names the table, the op and the kernel it holds). */
 static void check_table_full(const mx_kernels *k, const char *table) {
-    int present = 0;
-#define COUNT_PRESENT_(name, guard, params, args, cost) present += k->name != NULL;
-    MX_OPS(COUNT_PRESENT_)
-#undef COUNT_PRESENT_
+    int present = 0, wired = 0;
+#define CHECK_ENTRY_(name, guard, params, args, cost)                                                       \
+    if (k->name) {                                                                                           \
+        present++;                                                                                           \
+        const char *sym_ = kernel_symbol((void (*)(void))k->name);                                           \
+        if (kernel_fits(sym_, #name, k->isa)) wired++;                                                       \
+        else printf("FAIL: table %s: op %s is wired to %s\n", table, #name, sym_[0] ? sym_ : "an unnamed function"); \
+    }
+    MX_OPS(CHECK_ENTRY_)
+#undef CHECK_ENTRY_
     const char *missing = mx_kernels_missing(k);
     if (missing) printf("FAIL: table %s has no kernel for op %s\n", table, missing);
-    CHECK(missing == NULL && present == MX_OP_COUNT);
+    CHECK(missing == NULL && present == MX_OP_COUNT && wired == MX_OP_COUNT);
 }
 
 static void test_tables_full(void) {
@@ -52,7 +82,7 @@ static void test_tables_full(void) {
 #ifndef MX_NO_X86_SIMD
     CHECK(tables == MX_ISA_AMX + 1);
 #endif
-    printf("kernel tables full: %d tables x %d ops\n", tables, MX_OP_COUNT);
+    printf("kernel tables full and wired: %d tables x %d ops\n", tables, MX_OP_COUNT);
     /* a table with a hole: refused with the op's name, never called */
     mx_kernels holed = *mx_kernels_scalar();
     holed.embed_tokens = NULL;

@@ -1,7 +1,9 @@
-/* The profile (ops/profile.h): a context with one counts each op's calls and time, and the GEMM
- * engine's FLOPs and part times (linear and conv2d told apart, K split into several blocks); the
- * results are bit-identical with and without it; a context without one records nothing; the op
- * names are the list's; each call's cost (op_list.h: FLOPs, bytes) and roofline floor. */
+/* The profile (ops/profile.h): a context with one counts each op's calls and time (CPU and wall,
+ * in the op's own slot, none in the others'), and the GEMM engine's FLOPs and part times (linear
+ * and conv2d told apart, K split into several blocks; the parts within the op's time); a second
+ * run adds to the sums; the results are bit-identical with and without it; a context without one
+ * records nothing; the op names are the list's; each call's cost (op_list.h: FLOPs, bytes) and
+ * roofline floor. */
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -25,17 +27,52 @@ static void run_ops(const mx_ctx *c, problem *p) {
     mx_silu(c, p->y, (size_t)M * N);
 }
 
-static void check_gemm_user(const mx_profile *pr, int user, double flops, int engine) {
+/* The GEMM engine's record of one user (linear or conv2d) whose op took op_secs of process CPU
+ * time: on the SIMD levels every part took time, and the parts (thread CPU time inside the op)
+ * add up to no more than the op's own; the scalar reference records nothing. */
+static void check_gemm_user(const mx_profile *pr, int user, double flops, int engine, double op_secs) {
     double parts = 0;
     for (int q = 0; q < MX_GEMM_PARTS; q++) {
-        CHECK(pr->gemm_secs[user][q] >= 0);
+        if (engine) CHECK(pr->gemm_secs[user][q] > 0);
         parts += pr->gemm_secs[user][q];
     }
     if (engine) { /* the SIMD levels run the GEMM engine */
         CHECK(pr->gemm_flops[user] == flops);
-        CHECK(pr->gemm_secs[user][MX_GEMM_MICRO] > 0 && parts > 0);
+        if (parts > op_secs) printf("FAIL: GEMM parts %.3e s > the op's %.3e s\n", parts, op_secs);
+        CHECK(parts <= op_secs);
     } else { /* the scalar reference does not */
         CHECK(pr->gemm_flops[user] == 0 && parts == 0);
+    }
+}
+
+/* The ops run_ops calls (linear, conv2d, silu once each) took time, CPU and wall, and every
+ * other op's slots are untouched. */
+static void check_op_slots(const mx_profile *pr, long calls) {
+    for (int op = 0; op < MX_OP_COUNT; op++) {
+        int called = op == MX_OP_ID_linear || op == MX_OP_ID_conv2d || op == MX_OP_ID_silu;
+        if (called) {
+            CHECK(pr->op_calls[op] == calls && pr->op_secs[op] > 0 && pr->op_wall[op] > 0);
+        } else {
+            if (pr->op_calls[op] || pr->op_secs[op] != 0 || pr->op_wall[op] != 0)
+                printf("FAIL: op %s was not called but has a profile\n", mx_op_name(op));
+            CHECK(pr->op_calls[op] == 0 && pr->op_secs[op] == 0 && pr->op_wall[op] == 0 && pr->op_flops[op] == 0);
+        }
+    }
+}
+
+/* A second run into the same profile adds to it: counts and FLOPs double, times grow. */
+static void check_accumulates(const mx_ctx *c, problem *p, mx_profile *pr) {
+    mx_profile first = *pr;
+    run_ops(c, p);
+    check_op_slots(pr, 2);
+    for (int op = 0; op < MX_OP_COUNT; op++) {
+        CHECK(pr->op_flops[op] == 2 * first.op_flops[op]);
+        if (first.op_calls[op]) CHECK(pr->op_secs[op] > first.op_secs[op] && pr->op_wall[op] > first.op_wall[op]);
+    }
+    for (int user = 0; user < MX_GEMM_USERS; user++) {
+        CHECK(pr->gemm_flops[user] == 2 * first.gemm_flops[user]);
+        for (int q = 0; q < MX_GEMM_PARTS; q++)
+            if (first.gemm_secs[user][q] > 0) CHECK(pr->gemm_secs[user][q] > first.gemm_secs[user][q]);
     }
 }
 
@@ -61,12 +98,11 @@ static void test_level(mx_isa isa) {
     c.prof = &pr;
     run_ops(&c, b);
     CHECK(memcmp(a->y, b->y, sizeof a->y) == 0 && memcmp(a->cy, b->cy, sizeof a->cy) == 0);
-    CHECK(pr.op_calls[MX_OP_ID_linear] == 1 && pr.op_calls[MX_OP_ID_conv2d] == 1 && pr.op_calls[MX_OP_ID_silu] == 1);
-    CHECK(pr.op_calls[MX_OP_ID_gelu] == 0 && pr.op_secs[MX_OP_ID_gelu] == 0);
-    for (int op = 0; op < MX_OP_COUNT; op++) CHECK(pr.op_secs[op] >= 0);
+    check_op_slots(&pr, 1);
     int engine = c.k->isa != MX_ISA_SCALAR;
-    check_gemm_user(&pr, MX_GEMM_LINEAR, 2.0 * M * N * K, engine);
-    check_gemm_user(&pr, MX_GEMM_CONV, 2.0 * CB * COUT * H * W * CIN * 9, engine);
+    check_gemm_user(&pr, MX_GEMM_LINEAR, 2.0 * M * N * K, engine, pr.op_secs[MX_OP_ID_linear]);
+    check_gemm_user(&pr, MX_GEMM_CONV, 2.0 * CB * COUT * H * W * CIN * 9, engine, pr.op_secs[MX_OP_ID_conv2d]);
+    check_accumulates(&c, b, &pr);
     if (c.k->isa == MX_ISA_AMX) { /* its fp32 layers: three bf16 products in one pass, all counted */
         mx_profile p3;
         memset(&p3, 0, sizeof p3);

@@ -12,10 +12,11 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../pipeline/geom/export.h"
 #include "../pipeline/geom/mesh.h"
 #include "../pipeline/geom/uvatlas.h"
+#include "../pipeline/io/export.h"
 #include "../pipeline/io/io.h"
+#include "../pipeline/io/mesh_load.h"
 #include "../pipeline/texture/texture.h"
 #include "../runtime/log.h"
 #include "util_test.h"

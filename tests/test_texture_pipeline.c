@@ -12,11 +12,12 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "../pipeline/geom/gltf.h"
-#include "../runtime/fileio.h"
 #include "../pipeline/geom/mesh.h"
+#include "../pipeline/io/gltf.h"
 #include "../pipeline/io/io.h"
+#include "../pipeline/io/mesh_load.h"
 #include "../pipeline/texture/texture.h"
+#include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
 #include "util_test.h"

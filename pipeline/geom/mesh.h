@@ -1,6 +1,6 @@
-/* Mesh utilities over mx_mesh (mesh_types.h): loading by extension, validation, bbox,
- * normalised copy for rendering, face normals, topology. The input's vertices, faces and UVs
- * are kept exactly as they were (normalisation works on a copy of the positions). */
+/* Mesh utilities over mx_mesh (mesh_types.h): copy, validation, bbox, normalised copy for
+ * rendering, face normals, topology (loading from a file: pipeline/io/mesh_load.h). The input's
+ * vertices, faces and UVs are kept exactly as they were (normalisation works on a copy). */
 #ifndef MX_MESH_H
 #define MX_MESH_H
 
@@ -11,18 +11,6 @@
 
 /* A deep copy of src into dst (dst's arrays are its own; free with mx_mesh_free). */
 int mx_mesh_clone(const mx_mesh *src, mx_mesh *dst, mx_status *st);
-
-/* ---- mesh utilities (pipeline/geom/mesh.c) ---- */
-
-/* Loads any supported mesh, chosen by extension: .obj .ply .off .stl (pipeline/io/io.h),
- * .gltf .glb (pipeline/geom/gltf.h); then validates it (mx_mesh_validate). */
-int mx_mesh_load(const char *path, mx_mesh *m, mx_status *st);
-
-/* Decodes the base-colour texture of every material into tex[0..m->nmat) (an empty image,
- * data NULL, where a material has none or its file is missing: a warning, not an error).
- * texture_path is a file path, or "<file.gltf|glb>#image<N>" for an image stored inside a
- * glTF (buffer view or data: URI). Free each with mx_image_free. */
-int mx_mesh_load_textures(const mx_mesh *m, struct mx_image *tex, mx_status *st);
 
 /* Positions beyond this magnitude are refused: the bounding box, normals and areas of the
  * geometry stages square and sum coordinates in float (3e38 overflowed into an atlas of

@@ -6,9 +6,9 @@
  * pipeline/geom's code, so it links after libmx_geom.
  *
  * Most callers want the higher-level entry points instead:
- *   mx_mesh_load / mx_mesh_load_textures (pipeline/geom/mesh.h): any mesh by extension,
- *     .obj .ply .off .stl through this adapter, .gltf .glb through pipeline/geom/gltf.h;
- *   mx_write_outputs (pipeline/geom/export.h): the output folder of a texturing run.
+ *   mx_mesh_load / mx_mesh_load_textures (pipeline/io/mesh_load.h): any mesh by extension,
+ *     .obj .ply .off .stl through this adapter, .gltf .glb through pipeline/io/gltf.h;
+ *   mx_write_outputs (pipeline/io/export.h): the output folder of a texturing run.
  *
  * Conventions: every function returns 0 or -1 with st filled (code MX_EINPUT for a bad or
  * missing file, MX_EIO for a failed write, MX_ENOMEM); outputs are zeroed on failure and own

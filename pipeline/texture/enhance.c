@@ -15,6 +15,7 @@
 #include "../geom/backproject.h"
 #include "../geom/masks.h"
 #include "../geom/raster.h"
+#include "../io/mesh_load.h"
 #include "condition.h"
 #include "job.h"
 #include "texture.h"

@@ -6,6 +6,7 @@
 
 #include "../../runtime/log.h"
 #include "../geom/uvfill.h"
+#include "../io/mesh_load.h"
 
 #define SCRATCH_BYTES ((size_t)64 << 20)
 

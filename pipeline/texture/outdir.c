@@ -15,7 +15,7 @@
 #include "../../runtime/atomic_file.h"
 #include "../../runtime/buf.h"
 #include "../../runtime/fileio.h"
-#include "../geom/export.h"
+#include "../io/export.h"
 
 #define MARKER_HEADER "matex output folder: `--force` may replace it. The files matex wrote here:\n"
 /* The marker of a staging folder from its creation until write_marker replaces it: a staging folder

@@ -11,6 +11,7 @@
 
 #include "../../runtime/log.h"
 #include "../geom/raster.h"
+#include "../io/mesh_load.h"
 #include "job.h"
 #include "texture.h"
 

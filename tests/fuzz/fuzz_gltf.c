@@ -1,8 +1,9 @@
-/* glTF and GLB (pipeline/geom/gltf.c): the first byte picks .gltf (even) or .glb (odd), the
+/* glTF and GLB (pipeline/io/gltf.c): the first byte picks .gltf (even) or .glb (odd), the
  * rest is the file; buffers and images come from data: URIs or the GLB's binary chunk. The
  * mesh is loaded as the product loads it, then every embedded image is decoded. */
-#include "../../pipeline/geom/gltf.h"
 #include "../../pipeline/geom/image.h"
+#include "../../pipeline/io/gltf.h"
+#include "../../pipeline/io/mesh_load.h"
 #include "fuzz.h"
 #include "mesh_common.h"
 

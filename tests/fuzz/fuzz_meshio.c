@@ -1,5 +1,6 @@
 /* PLY, OFF and STL through OpenMesh (pipeline/io/meshio.cpp): the first byte picks the
  * extension, the rest is the file. */
+#include "../../pipeline/io/mesh_load.h"
 #include "fuzz.h"
 #include "mesh_common.h"
 

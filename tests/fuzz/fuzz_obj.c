@@ -2,6 +2,7 @@
  * fuzz.obj and fuzz.mtl (the seeds say `mtllib fuzz.mtl`), loaded as the product loads any
  * mesh, then its textures (missing files are warnings). */
 #include "../../pipeline/geom/image.h"
+#include "../../pipeline/io/mesh_load.h"
 #include "fuzz.h"
 #include "mesh_common.h"
 

@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "../../pipeline/geom/uvatlas.h"
+#include "../../pipeline/io/mesh_load.h"
 
 /* Loads path, builds the atlas `runs` times (UVs dropped between runs) and prints one line. */
 static int bench_mesh(const char *path, int runs) {

@@ -14,6 +14,7 @@
 #include "../../pipeline/geom/mesh.h"
 #include "../../pipeline/geom/uvatlas.h"
 #include "../../pipeline/geom/views.h"
+#include "../../pipeline/io/mesh_load.h"
 #include "../../runtime/log.h"
 
 #define SIZE 1024

@@ -4,9 +4,10 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "../../pipeline/geom/filekind.h"
 #include "../../pipeline/geom/mesh.h"
+#include "../../pipeline/io/filekind.h"
 #include "../../pipeline/io/io.h"
+#include "../../pipeline/io/mesh_load.h"
 #include "../../runtime/buf.h"
 #include "../../runtime/log.h"
 #include "../../weights/ip_adapter_file.h"

@@ -13,6 +13,7 @@
 
 #include "../../pipeline/geom/raster.h"
 #include "../../pipeline/io/io.h"
+#include "../../pipeline/io/mesh_load.h"
 #include "../../pipeline/texture/outdir.h"
 #include "../../runtime/buf.h"
 #include "../../runtime/log.h"

@@ -3,8 +3,8 @@
 #ifndef MX_EXPORT_H
 #define MX_EXPORT_H
 
-#include "image.h"
-#include "mesh.h"
+#include "../../runtime/status.h"
+#include "../geom/mesh_types.h"
 
 /* Writes an OBJ (v, vt, vn, f with the mesh's own per-corner indices, usemtl per material)
  * and, when texture_files is given, "<obj path without .obj>.mtl" with one material per

@@ -9,13 +9,14 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "../pipeline/geom/export.h"
 #include "../pipeline/geom/image.h"
 #include "../pipeline/geom/mesh.h"
+#include "../pipeline/io/export.h"
 #include "../pipeline/io/io.h"
+#include "../pipeline/io/mesh_load.h"
+#include "../runtime/fileio.h"
 #include "../runtime/json.h"
 #include "../runtime/log.h"
-#include "../runtime/fileio.h"
 #include "util_test.h"
 
 static char tmpdir[256];
@@ -285,5 +286,5 @@ int main(void) {
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     if (system(cmd) != 0) printf("warning: could not remove %s\n", tmpdir);
-    return mx_test_finish("test_geom_export");
+    return mx_test_finish("test_io_export");
 }

@@ -1,4 +1,4 @@
-/* Exporters (pipeline/geom/export.h): OBJ + MTL, GLB 2.0 with embedded PNGs, output folder. */
+/* Exporters (pipeline/io/export.h): OBJ + MTL, GLB 2.0 with embedded PNGs, output folder. */
 #include "export.h"
 
 #include <errno.h>
@@ -13,7 +13,7 @@
 #include "../../runtime/atomic_file.h"
 #include "../../runtime/buf.h"
 #include "../../runtime/fileio.h"
-#include "../io/io.h"
+#include "io.h"
 
 /* ---- a growable byte buffer (JSON text and the GLB BIN chunk) ---- */
 

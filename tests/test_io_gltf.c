@@ -6,11 +6,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../pipeline/geom/gltf.h"
 #include "../pipeline/geom/image.h"
 #include "../pipeline/geom/mesh.h"
-#include "../runtime/log.h"
+#include "../pipeline/io/gltf.h"
+#include "../pipeline/io/mesh_load.h"
 #include "../runtime/fileio.h"
+#include "../runtime/log.h"
 #include "util_test.h"
 
 static char tmpdir[256];
@@ -309,5 +310,5 @@ int main(void) {
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tmpdir);
     if (system(cmd) != 0) printf("warning: could not remove %s\n", tmpdir);
-    return mx_test_finish("test_geom_gltf");
+    return mx_test_finish("test_io_gltf");
 }

@@ -1,4 +1,4 @@
-/* glTF 2.0 / GLB import (pipeline/geom/gltf.h). Spec: Khronos glTF 2.0, sections 3.6 (binary
+/* glTF 2.0 / GLB import (pipeline/io/gltf.h). Spec: Khronos glTF 2.0, sections 3.6 (binary
  * data: buffers, buffer views, accessors), 3.5 (node transforms), 3.7 (meshes), 4.4 (GLB). */
 #include "gltf.h"
 
@@ -10,7 +10,7 @@
 
 #include "../../runtime/json.h"
 #include "../../runtime/log.h"
-#include "../io/io.h"
+#include "io.h"
 
 #define GLB_MAGIC 0x46546C67u      /* "glTF" */
 #define GLB_CHUNK_JSON 0x4E4F534Au /* "JSON" */

@@ -12,8 +12,8 @@
 #ifndef MX_GLTF_H
 #define MX_GLTF_H
 
-#include "image.h"
-#include "mesh.h"
+#include "../../runtime/status.h"
+#include "../geom/mesh_types.h"
 
 int mx_gltf_load(const char *path, mx_mesh *m, mx_status *st);
 
