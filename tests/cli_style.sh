@@ -5,7 +5,7 @@
 # weights a style image changes the texture and nothing else (mesh.obj stays byte-identical), by an
 # amount that grows with --style-scale (PSNR against the unstyled texture falls about 6 dB per doubling
 # of the scale: IP-Adapter adds scale x its attention); scale 0 gives the same bytes as none; the same
-# image given twice is that image alone (its tokens concatenated under one softmax), two different
+# image given twice is that image alone up to rounding (its tokens concatenated under one softmax), two different
 # images differ from either alone; report.json records them; --front-render writes front.png as
 # matex's own.
 NAME=style
@@ -70,7 +70,8 @@ check "--style-scale 0" styled zero --style-image "$ST" --style-scale 0
 check "... the same texture as no style image (PNG bytes)" cmp -s "$P" "$T/zero/texture.png"
 check "... (EXR bytes)" cmp -s "$T/plain/texture.exr" "$T/zero/texture.exr"
 check "one style image twice" styled twice --style-image "$ST" --style-image "$ST"
-check "... is that image alone (PNG bytes)" cmp -s "$T/styled/texture.png" "$T/twice/texture.png"
+# (bytes equal where the kernels sum 2n keys as they sum n; 92 dB on avx2; a second, different image: ~50 dB)
+check "... is that image alone, up to rounding (PSNR above 60 dB)" below 60 "$(psnr "$T/styled/texture.png" "$T/twice/texture.png")"
 check "two style images (tokens concatenated)" styled two --style-image "$ST" --style-image "$T/plain/front.png"
 check "... differ from the first alone" below "$(psnr "$T/styled/texture.png" "$T/two/texture.png")" inf
 check "the second style image alone" styled front --style-image "$T/plain/front.png"
