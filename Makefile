@@ -71,6 +71,11 @@ IO_SRC      = $(wildcard pipeline/io/*.cpp) pipeline/io/io_write.c pipeline/io/p
 LITE_IO_SRC = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/io_write.c pipeline/io/png_zlib.c \
               pipeline/io/io_lite.c
 TOOL_SRC    = $(wildcard tools/matex/cmd_*.c tools/matex/cli_*.c)
+# `matex serve` and `matex batch --server` (tools/matex/serve/): the full build links libmicrohttpd and
+# libcurl; matex-core and matex-lite link serve_none.c, which says the verb is not in the build.
+SERVE_SRC   = $(filter-out tools/matex/serve/serve_none.c,$(wildcard tools/matex/serve/*.c))
+SERVE_LIBS  = -lmicrohttpd -lcurl
+SERVE_NONE  = $(BUILD)/tools/matex/serve/serve_none.o
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(patsubst %.cpp,$(BUILD)/%.o,$(1)))
 
@@ -93,8 +98,8 @@ all: $(LIBMATEX) $(LIB_IO) matex
 matex: $(BUILD)/matex
 	cp $< $@
 
-$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC) $(SERVE_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(SERVE_LIBS) $(LDLIBS)
 
 $(LIB_CORE):    $(call obj,$(CORE_SRC))
 $(LIB_WEIGHTS): $(call obj,$(WEIGHTS_SRC))
@@ -207,9 +212,9 @@ fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
 # allocation of each allocation site under ASan (FAULTS_SWEEP=sites) ----
 MATEX_FAULTS = $(BUILD)/tests/faults/matex_faults
 FAULT_WRAP   = $(foreach f,malloc calloc realloc aligned_alloc posix_memalign strdup strndup free _Znwm _Znam,-Wl,--wrap=$(f))
-$(MATEX_FAULTS): $(call obj,tools/matex/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
+$(MATEX_FAULTS): $(call obj,tools/matex/matex.c $(TOOL_SRC) $(SERVE_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
                  $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS) -ldl
+	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(SERVE_LIBS) $(LDLIBS) -ldl
 .PHONY: faults faults-run
 faults:
 	$(MAKE) FAULTS_SWEEP=full faults-run
@@ -293,12 +298,12 @@ test-arm64: $(DEMO_WEIGHTS)
 arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
 # matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
 # memory and weight files, for a cross-built core.
-$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(SERVE_NONE) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 # matex with the file adapter but without OpenImageIO (PNG only, through zlib): what `make
 # gpu-check-pack` carries to a GPU machine, which has none of OpenImageIO's ~250 libraries.
-$(BUILD)/matex-lite: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
+$(BUILD)/matex-lite: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(SERVE_NONE) $(LIB_TEX) $(LIB_NN) $(LIB_GEOM) $(LIB_WEIGHTS) \
                      $(call obj,$(LITE_IO_SRC)) $(LIB_CORE)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(LITE_IOLIBS) $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
