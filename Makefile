@@ -255,6 +255,11 @@ test-full: $(TEST_DEPS)
 test-slurm: all $(DEMO_WEIGHTS)
 	$(TEST_ENV) timeout 300 sh tests/slurm_cluster.sh
 
+# `matex serve` end to end with curl as the client (tests/cli_serve.sh; Debian's curl): about a minute.
+.PHONY: test-serve
+test-serve: all $(DEMO_WEIGHTS)
+	$(TEST_ENV) timeout 300 sh tests/cli_serve.sh
+
 # The Blender add-on (blender/matex_texture) as the zip Blender installs; `make test-blender` installs
 # it in a headless Blender (Debian's `blender`) and textures, renders, cancels (tests/blender/).
 ADDON_ZIP = $(BUILD)/matex_blender.zip
