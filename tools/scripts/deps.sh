@@ -4,7 +4,7 @@
 # I/O libraries). As root, or through sudo otherwise. Works without make: sh tools/scripts/deps.sh.
 # Optional extras, not installed here: clang (CC=clang make), libopenblas-dev (make bench).
 set -eu
-PACKAGES="build-essential pkg-config libopenmesh-dev libopenimageio-dev libopenexr-dev libimath-dev zlib1g-dev"
+PACKAGES="build-essential pkg-config libopenmesh-dev libopenimageio-dev libopenexr-dev libimath-dev zlib1g-dev libmicrohttpd-dev libcurl4-openssl-dev curl"
 if [ "$(id -u)" -eq 0 ]; then
     SUDO=""
 elif command -v sudo > /dev/null; then
