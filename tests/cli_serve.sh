@@ -29,7 +29,7 @@ start_server() { # start_server LOG ARGS...: matex serve on a free loopback port
     "$M" serve --weights "$W" --listen 127.0.0.1:0 --threads 2 "$@" 2> "$log" &
     SPID=$!
     i=0
-    while ! grep -q 'listening on' "$log" && [ $i -lt 600 ] && kill -0 "$SPID" 2> /dev/null; do
+    while ! grep -q 'listening on' "$log" 2> /dev/null && [ $i -lt 600 ] && kill -0 "$SPID" 2> /dev/null; do
         sleep 0.1
         i=$((i + 1))
     done
@@ -233,6 +233,23 @@ alldone=0
 for id in $(cat "$T/ids"); do wait_state "$id" done failed > /dev/null && [ "$(state_of "$id")" = done ] && alldone=$((alldone + 1)); done
 check "all 20 done" [ $alldone = 20 ]
 check "the jobs folder holds exactly those 20" sh -c "[ \$(ls '$T/jobs_c' | grep -c .) = 20 ]"
+
+# ---- matex batch --server: the outputs a local batch writes, resumed the same way ----
+mkdir -p "$T/cat"
+cp "$BOX" "$T/cat/box.obj"
+printf '{"mesh": "box.obj", "prompt": "a red crate", "name": "a", "seed": 5, "image_size": 64, "texture-size": 64, "render-size": 64, "candidates": 4, "views": 2}\n{"mesh": "box.obj", "prompt": "a blue crate", "name": "b", "seed": 6, "image-size": 64, "texture-size": 64, "render-size": 64, "candidates": 4, "views": 2, "steps": 2}\n' > "$T/cat/m.jsonl"
+check "batch --server: done" sh -c "'$M' batch '$T/cat/m.jsonl' --server '$URL' --steps 1 --quiet -o '$T/remote' > '$T/b1.out'"
+$M batch "$T/cat/m.jsonl" --weights "$W" --threads 2 --steps 1 --quiet -o "$T/local" > /dev/null 2>&1
+for n in a b; do
+    for f in mesh.glb mesh.obj texture.png texture.exr .matex-output; do
+        check "batch --server = local batch: $n/$f" cmp -s "$T/remote/$n/$f" "$T/local/$n/$f"
+    done
+done
+check "batch --server: a rerun skips the complete jobs" sh -c "'$M' batch '$T/cat/m.jsonl' --server '$URL' --steps 1 -o '$T/remote' 2> /dev/null | grep -q '0 done, 2 skipped'"
+check "batch --server: the server keeps no copy" sh -c "[ \$(ls '$T/jobs_c' | grep -c .) = 20 ]"
+printf '{"mesh": "box.obj", "prompt": "x", "colour": "red"}\n' > "$T/cat/bad.jsonl"
+check "batch --server: a bad line fails before the server" sh -c "! '$M' batch '$T/cat/bad.jsonl' --server '$URL' -o '$T/remote2' 2> '$T/b2.err' && grep -q 'unknown key' '$T/b2.err'"
+check "batch --server with --weights: usage error" sh -c "[ \$('$M' batch '$T/cat/m.jsonl' --server '$URL' --weights '$W' -o '$T/r3' 2> /dev/null; echo \$?) = 2 ]"
 stop_server
 
 # ---- kill -9 during a job: it runs again once after a restart, then fails if killed again ----
