@@ -250,6 +250,13 @@ void mx_serve_jobs_unstage(mx_serve_jobs *q, const char *id) {
     remove_tree(stage);
 }
 
+static int sync_path(const char *path) {
+    int fd = open(path, O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+    int bad = fd < 0 || fsync(fd);
+    if (fd >= 0) close(fd);
+    return bad ? -1 : 0;
+}
+
 /* fsync of every file of a flat folder and of the folder itself. */
 static int sync_folder(const char *path) {
     DIR *d = opendir(path);
@@ -272,7 +279,7 @@ int mx_serve_jobs_commit(mx_serve_jobs *q, const char *id, mx_serve_error *e) {
     pthread_mutex_lock(&q->mu);
     int rc = queue_full(q, e);
     if (!rc && (mx_atomic_write(state, "queued\n", 7, &st) || sync_folder(stage) || rename(stage, final) ||
-                sync_folder(q->dir)))
+                sync_path(q->dir)))
         rc = mx_serve_fail(e, 503, "storage", "cannot store the job in the jobs folder: %s", strerror(errno));
     if (!rc) pthread_cond_signal(&q->wake);
     pthread_mutex_unlock(&q->mu);
