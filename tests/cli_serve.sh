@@ -191,6 +191,7 @@ check "removed with its files" [ ! -e "$T/jobs/$QUEUED" ]
 expect "removed job is gone" 404 not_found "$URL/v1/jobs/$QUEUED"
 # the jobs folder is the server's own and locked
 check "a second server on the same jobs folder is refused" sh -c "! '$M' serve --weights '$W' --listen 127.0.0.1:0 --jobs '$T/jobs' 2> '$T/err2' && grep -q 'another matex serve' '$T/err2'"
+check "a taken port fails at once, before the weights load" sh -c "[ \$('$M' serve --weights /nonexistent.mxw --listen 127.0.0.1:${URL##*:} --jobs '$T/jobs_p' 2> '$T/err4'; echo \$?) = 1 ] && grep -q 'cannot listen' '$T/err4'"
 mkdir -p "$T/foreign" && echo mine > "$T/foreign/notes.txt"
 check "a foreign folder is refused" sh -c "! '$M' serve --weights '$W' --listen 127.0.0.1:0 --jobs '$T/foreign' 2> '$T/err3' && grep -q 'not a jobs folder' '$T/err3' && [ -f '$T/foreign/notes.txt' ]"
 check "SIGTERM: clean exit" stop_server
@@ -248,7 +249,7 @@ done
 check "batch --server: a rerun skips the complete jobs" sh -c "'$M' batch '$T/cat/m.jsonl' --server '$URL' --steps 1 -o '$T/remote' 2> /dev/null | grep -q '0 done, 2 skipped'"
 check "batch --server: the server keeps no copy" sh -c "[ \$(ls '$T/jobs_c' | grep -c .) = 20 ]"
 printf '{"mesh": "box.obj", "prompt": "x", "colour": "red"}\n' > "$T/cat/bad.jsonl"
-check "batch --server: a bad line fails before the server" sh -c "! '$M' batch '$T/cat/bad.jsonl' --server '$URL' -o '$T/remote2' 2> '$T/b2.err' && grep -q 'unknown key' '$T/b2.err'"
+check "batch --server: a bad line fails before the server" sh -c "! '$M' batch '$T/cat/bad.jsonl' --server '$URL' -o '$T/remote2' > /dev/null 2> '$T/b2.err' && grep -q 'unknown key' '$T/b2.err'"
 check "batch --server with --weights: usage error" sh -c "[ \$('$M' batch '$T/cat/m.jsonl' --server '$URL' --weights '$W' -o '$T/r3' 2> /dev/null; echo \$?) = 2 ]"
 stop_server
 

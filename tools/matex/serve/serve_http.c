@@ -30,8 +30,9 @@ typedef struct server {
     const mx_serve_config *cfg;
     mx_serve_jobs q;
     mx_serve_auth auth;
-    mx_buf info; /* GET /v1/info, made once */
-    volatile int stopping; /* event streams end */
+    mx_buf info; /* GET /v1/info, made once the model set is loaded */
+    _Atomic int ready; /* info is made */
+    _Atomic int stopping; /* event streams end */
 } server;
 
 /* The state of one request across the calls libmicrohttpd makes for it. */
@@ -356,7 +357,10 @@ static enum MHD_Result route(server *s, struct MHD_Connection *c, const mx_serve
     int status = 200;
     switch (r->kind) {
     case MX_ROUTE_HEALTH: mx_buf_printf(&b, "{\"ok\":true}"); break;
-    case MX_ROUTE_INFO: mx_buf_put(&b, s->info.p, s->info.len); break;
+    case MX_ROUTE_INFO:
+        if (!s->ready) return mx_serve_fail(&e, 503, "loading", "the model set is loading"), answer_error(c, &e, NULL);
+        mx_buf_put(&b, s->info.p, s->info.len);
+        break;
     case MX_ROUTE_JOBS_LIST: mx_serve_jobs_list(&s->q, &b); break;
     case MX_ROUTE_JOB_GET:
         if (mx_serve_jobs_describe(&s->q, r->id, &b, &e)) return mx_buf_free(&b), answer_error(c, &e, NULL);
@@ -416,7 +420,8 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
 
 /* ---- the server's life ---- */
 
-static void make_info(server *s) {
+/* GET /v1/info's answer, made once the model set is loaded; -1 when out of memory. */
+static int make_info(server *s) {
     const mx_serve_config *cfg = s->cfg;
     char digest[32], *build = NULL;
     size_t build_len = 0;
@@ -436,6 +441,9 @@ static void make_info(server *s) {
     mx_buf_json_str(b, build ? build : "");
     mx_buf_printf(b, ",\"max_queued\":%d,\"max_upload\":%llu}", cfg->limits.max_queued, (unsigned long long)cfg->max_upload);
     free(build);
+    if (b->oom) return -1;
+    s->ready = 1;
+    return 0;
 }
 
 static struct MHD_Daemon *start_daemon(server *s, struct sockaddr_storage *sa) {
@@ -467,8 +475,10 @@ static void *worker_main(void *arg) {
     return NULL;
 }
 
-/* Serves until the flag is set, then stops accepting, lets the worker end and closes. */
-static int serve_until_signal(server *s, matex_models *m, volatile sig_atomic_t *stop) {
+/* Listens (before the weights load, so that a taken port fails at once), loads the model set,
+ * then serves until the flag is set: stops accepting, lets the worker end, closes. Requests that
+ * come while the weights load are served; their jobs wait for the worker; /v1/info is a 503. */
+static int serve_until_signal(server *s, volatile sig_atomic_t *stop) {
     struct sockaddr_storage sa;
     struct MHD_Daemon *d = start_daemon(s, &sa);
     if (!d) {
@@ -477,25 +487,30 @@ static int serve_until_signal(server *s, matex_models *m, volatile sig_atomic_t 
     }
     const union MHD_DaemonInfo *info = MHD_get_daemon_info(d, MHD_DAEMON_INFO_BIND_PORT);
     s->auth.port = info ? info->port : s->cfg->port;
-    int v6 = strchr(s->cfg->listen_addr, ':') != NULL;
-    fprintf(stderr, "matex serve: listening on http://%s%s%s:%d/v1 (jobs in %s)\n", v6 ? "[" : "", s->cfg->listen_addr,
-            v6 ? "]" : "", s->auth.port, s->q.dir);
+    matex_error err;
+    matex_models *m = matex_models_open(s->cfg->weights, &s->cfg->models.o, &err);
     pthread_t worker;
     void *args[2] = {&s->q, m};
-    if (pthread_create(&worker, NULL, worker_main, args)) {
-        MHD_stop_daemon(d);
-        fprintf(stderr, "matex serve: cannot start the worker thread\n");
-        return 1;
+    int rc = 1;
+    if (!m) fprintf(stderr, "matex serve: %s\n", err.message);
+    else if (make_info(s)) fprintf(stderr, "matex serve: out of memory\n");
+    else if (pthread_create(&worker, NULL, worker_main, args)) fprintf(stderr, "matex serve: cannot start the worker thread\n");
+    else {
+        int v6 = strchr(s->cfg->listen_addr, ':') != NULL;
+        fprintf(stderr, "matex serve: listening on http://%s%s%s:%d/v1 (jobs in %s)\n", v6 ? "[" : "", s->cfg->listen_addr,
+                v6 ? "]" : "", s->auth.port, s->q.dir);
+        while (!*stop) usleep(50000);
+        fprintf(stderr, "matex serve: stopping (%s)\n", s->cfg->finish_on_term ? "the running job finishes" : "a running job goes back to the queue");
+        MHD_quiesce_daemon(d); /* no new connections */
+        mx_serve_jobs_stop(&s->q, !s->cfg->finish_on_term);
+        pthread_join(worker, NULL);
+        rc = 0;
     }
-    while (!*stop) usleep(50000);
-    fprintf(stderr, "matex serve: stopping (%s the running job)\n", s->cfg->finish_on_term ? "finishing" : "stopping and requeueing");
-    MHD_quiesce_daemon(d); /* no new connections */
-    mx_serve_jobs_stop(&s->q, !s->cfg->finish_on_term);
-    pthread_join(worker, NULL);
     s->stopping = 1; /* the event streams end */
     MHD_stop_daemon(d);
-    fprintf(stderr, "matex serve: stopped\n");
-    return 0;
+    matex_models_close(m);
+    if (!rc) fprintf(stderr, "matex serve: stopped\n");
+    return rc;
 }
 
 int mx_serve_run(const mx_serve_config *cfg) {
@@ -517,16 +532,7 @@ int mx_serve_run(const mx_serve_config *cfg) {
         fprintf(stderr, "matex serve: %s\n", st.msg);
         return 1;
     }
-    volatile sig_atomic_t *stop = mx_cli_signals_catch();
-    matex_error err;
-    matex_models *m = matex_models_open(cfg->weights, &cfg->models.o, &err);
-    int rc = 1;
-    if (!m) fprintf(stderr, "matex serve: %s\n", err.message);
-    else {
-        make_info(&s);
-        rc = s.info.oom ? 1 : serve_until_signal(&s, m, stop);
-    }
-    matex_models_close(m);
+    int rc = serve_until_signal(&s, mx_cli_signals_catch());
     mx_buf_free(&s.info);
     mx_serve_jobs_close(&s.q);
     return rc;
