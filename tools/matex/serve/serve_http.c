@@ -175,7 +175,7 @@ static int upload_begin(server *s, struct MHD_Connection *c, request *rq) {
     if (!type || strncasecmp(type, "multipart/form-data", 19))
         return mx_serve_fail(&rq->err, 415, "unsupported_media_type", "POST /v1/jobs takes multipart/form-data (parts mesh, options, style_image)");
     if (length && strtoull(length, NULL, 10) > s->cfg->max_upload)
-        return mx_serve_fail(&rq->err, 413, "too_large", "the request is larger than the server takes (%llu bytes: --max-upload)",
+        return mx_serve_fail(&rq->err, 413, "too_large", "the request is larger than the server takes (%llu bytes: --max-upload-mb)",
                              (unsigned long long)s->cfg->max_upload);
     if (mx_serve_jobs_stage(&s->q, rq->id, rq->stage, &rq->err)) return -1;
     rq->staged = 1;
@@ -210,7 +210,7 @@ static enum MHD_Result submit(server *s, struct MHD_Connection *c, request *rq, 
     if (*size) {
         rq->bytes += *size;
         if (!rq->failed && rq->bytes > s->cfg->max_upload)
-            rq->failed = 1, mx_serve_fail(&rq->err, 413, "too_large", "the request is larger than the server takes (%llu bytes: --max-upload)",
+            rq->failed = 1, mx_serve_fail(&rq->err, 413, "too_large", "the request is larger than the server takes (%llu bytes: --max-upload-mb)",
                                           (unsigned long long)s->cfg->max_upload);
         if (!rq->failed && MHD_post_process(rq->pp, data, *size) != MHD_YES && !rq->failed)
             rq->failed = 1, mx_serve_fail(&rq->err, 400, "bad_request", "the multipart body is malformed");
@@ -400,8 +400,9 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     if (!(rq = calloc(1, sizeof *rq))) return MHD_NO;
     *con_cls = rq;
     rq->route = r;
-    if (upload_begin(s, c, rq)) rq->failed = 1;
-    return MHD_YES;
+    if (!upload_begin(s, c, rq)) return MHD_YES;
+    rq->failed = 1;
+    return answer_error(c, &rq->err, NULL); /* at once: the body is not read (the connection closes after) */
 }
 
 /* After every request: an upload that did not become a job leaves nothing. */
