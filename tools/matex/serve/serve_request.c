@@ -75,7 +75,7 @@ void mx_serve_route_parse(const char *method, const char *url, mx_serve_route *r
     if (strcmp(seg[1], "jobs")) return;
     if (n == 2) return route_for(r, method, "GET, HEAD, POST", MX_ROUTE_JOBS_LIST, "POST", MX_ROUTE_JOB_SUBMIT);
     if (!mx_serve_id_valid(seg[2])) return;
-    snprintf(r->id, sizeof r->id, "%s", seg[2]);
+    snprintf(r->id, sizeof r->id, "%.40s", seg[2]); /* valid: at most 40 */
     if (n == 3) return route_for(r, method, "GET, HEAD, DELETE", MX_ROUTE_JOB_GET, "DELETE", MX_ROUTE_JOB_DELETE);
     if (n == 4 && !strcmp(seg[3], "events")) return route_for(r, method, "GET, HEAD", MX_ROUTE_JOB_EVENTS, NULL, 0);
     if (n == 5 && !strcmp(seg[3], "files") && mx_serve_name_valid(seg[4])) {
