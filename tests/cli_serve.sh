@@ -203,7 +203,7 @@ SLOW=$(submit "$T/slow.json")
 expect "full queue" 429 queue_full -F "mesh=@$BOX" -F "options=<$T/opts.json" "$URL/v1/jobs"
 curl -s -X DELETE "$URL/v1/jobs/$SLOW" > /dev/null
 check "429 leaves no job" [ "$(ls "$T/jobs_q" | wc -l)" = 1 ]
-stop_server
+check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
 
 # ---- the token, and an address that is not loopback ----
 head -c 24 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$T/token"
@@ -215,7 +215,7 @@ start_server "$T/log3" --jobs "$T/jobs_t" --token-file "$T/token"
 expect "no token" 401 unauthorized "$URL/v1/health"
 expect "wrong token" 401 unauthorized -H "Authorization: Bearer 0123456789abcdef0123456789abcdef" "$URL/v1/health"
 expect "right token" 200 - -H "Authorization: Bearer $(cat "$T/token")" "$URL/v1/health"
-stop_server
+check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
 
 # ---- 4 clients, 5 jobs each: every job completes, none lost or duplicated ----
 start_server "$T/log4" --jobs "$T/jobs_c"
@@ -251,7 +251,7 @@ check "batch --server: the server keeps no copy" sh -c "[ \$(ls '$T/jobs_c' | gr
 printf '{"mesh": "box.obj", "prompt": "x", "colour": "red"}\n' > "$T/cat/bad.jsonl"
 check "batch --server: a bad line fails before the server" sh -c "! '$M' batch '$T/cat/bad.jsonl' --server '$URL' -o '$T/remote2' > /dev/null 2> '$T/b2.err' && grep -q 'unknown key' '$T/b2.err'"
 check "batch --server with --weights: usage error" sh -c "[ \$('$M' batch '$T/cat/m.jsonl' --server '$URL' --weights '$W' -o '$T/r3' 2> /dev/null; echo \$?) = 2 ]"
-stop_server
+check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
 
 # ---- kill -9 during a job: it runs again once after a restart, then fails if killed again ----
 start_server "$T/log5" --jobs "$T/jobs_k"
@@ -273,6 +273,6 @@ kill -9 "$SPID"
 wait "$SPID" 2> /dev/null
 start_server "$T/log8" --jobs "$T/jobs_k"
 check "killed twice: failed with the reason" sh -c "curl -s '$URL/v1/jobs/$K2' | grep -q '\"state\":\"failed\".*\"error\":\"the server stopped while running this job, twice'"
-stop_server
+check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
 
 exit $fail
