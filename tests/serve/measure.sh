@@ -3,7 +3,7 @@
 #   overhead: per job, the time from POST to the `end` event minus the report's total_s, median of 20;
 #   warm job: a second job through the server against one `matex texture` run of the same job, and
 #             that run's load stage (report.json stages_s.load);
-#   memory:   the server's VmRSS after its first job and after 100 more.
+#   memory:   the server's VmRSS after those jobs and after 100 more.
 # usage: sh tests/serve/measure.sh [MATEX [WEIGHTS]]   (the demo weights by default; curl, awk)
 set -u
 M=${1:-build/matex}
@@ -31,7 +31,6 @@ one_job() {
 rss() { awk '/^VmRSS/ {print $2}' /proc/$SPID/status; }
 
 one_job $BOX "{\"prompt\": \"warm-up\", $SMALL}" > /dev/null
-RSS1=$(rss)
 for i in $(seq 20); do one_job $BOX "{\"prompt\": \"crate $i\", \"seed\": $i, $SMALL}"; done > "$T/over"
 sort -n -k1 "$T/over" > /dev/null
 awk '{print ($1 - $2) * 1000}' "$T/over" | sort -n | awk '{v[NR] = $1} END {printf "overhead per job (POST -> end event - report total_s), 20 jobs: median %.1f ms, min %.1f ms, max %.1f ms\n", (v[10] + v[11]) / 2, v[1], v[NR]}'
@@ -47,6 +46,8 @@ t1=$(now)
 LOAD=$(grep -o '"load":[0-9.e+-]*' "$T/cli/report.json" | head -n 1 | cut -d: -f2)
 echo "$t0 $t1 $SERVER $LOAD" | awk '{cli = $2 - $1; printf "spot, 4 steps: CLI run %.3f s (its load stage %.3f s), the same job through a warm server %.3f s: %.3f s faster\n", cli, $4, $3, cli - $3}'
 
+# memory: the baseline after the jobs above (the allocator keeps what their largest buffers took)
+RSS1=$(rss)
 for i in $(seq 100); do one_job $BOX "{\"prompt\": \"crate $i\", \"seed\": $i, $SMALL}" > /dev/null; done
 RSS2=$(rss)
-echo "server VmRSS: $RSS1 kB after the first job, $RSS2 kB after 121 more"
+echo "server VmRSS: $RSS1 kB after 23 jobs, $RSS2 kB after 100 more"
