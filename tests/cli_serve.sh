@@ -3,7 +3,7 @@
 # server gives the CLI's outputs byte for byte; the bad requests, each with its status and error
 # body while the server keeps serving; the token, Host and Origin rules; 4 clients submitting 20
 # jobs; kill -9 during a job and a restart (the job runs again once, then fails); the jobs folder's
-# marker and lock.
+# marker and lock; retention; matex batch --server.
 NAME=serve
 . tests/lib_cli.sh
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
@@ -203,6 +203,15 @@ SLOW=$(submit "$T/slow.json")
 expect "full queue" 429 queue_full -F "mesh=@$BOX" -F "options=<$T/opts.json" "$URL/v1/jobs"
 curl -s -X DELETE "$URL/v1/jobs/$SLOW" > /dev/null
 check "429 leaves no job" [ "$(ls "$T/jobs_q" | wc -l)" = 1 ]
+check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
+
+# ---- finished jobs are kept up to --keep-jobs, oldest removed first ----
+start_server "$T/log2b" --jobs "$T/jobs_r" --keep-jobs 2
+R1=$(submit "$T/opts.json") && wait_state "$R1" done > /dev/null
+R2=$(submit "$T/opts.json") && wait_state "$R2" done > /dev/null
+R3=$(submit "$T/opts.json") && wait_state "$R3" done > /dev/null
+check "--keep-jobs 2: the oldest finished job removed, the two newest kept" \
+    sh -c "[ ! -e '$T/jobs_r/$R1' ] && [ -d '$T/jobs_r/$R2' ] && [ -d '$T/jobs_r/$R3' ]"
 check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
 
 # ---- the token, and an address that is not loopback ----

@@ -37,7 +37,6 @@ typedef struct server {
 
 /* The state of one request across the calls libmicrohttpd makes for it. */
 typedef struct request {
-    mx_serve_route route;
     mx_serve_error err;
     int failed; /* err holds the answer */
     /* POST /v1/jobs */
@@ -399,7 +398,6 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     if (s->stopping) return mx_serve_fail(&e, 503, "stopping", "the server is stopping"), answer_error(c, &e, NULL);
     if (!(rq = calloc(1, sizeof *rq))) return MHD_NO;
     *con_cls = rq;
-    rq->route = r;
     if (!upload_begin(s, c, rq)) return MHD_YES;
     rq->failed = 1;
     return answer_error(c, &rq->err, NULL); /* at once: the body is not read (the connection closes after) */

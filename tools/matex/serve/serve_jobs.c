@@ -89,19 +89,19 @@ static int remove_entry(const char *path, const struct stat *sb, int flag, struc
 /* rm -r without following links (nftw FTW_PHYS); only ever called on the server's own paths. */
 static void remove_tree(const char *path) { nftw(path, remove_entry, 16, FTW_DEPTH | FTW_PHYS); }
 
-static uint64_t tree_bytes_sum;
-static int add_bytes(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
-    (void)path, (void)flag, (void)ftw;
-    tree_bytes_sum += (uint64_t)sb->st_blocks * 512u;
-    return 0;
-}
-
-/* The space a job folder takes. nftw has no user pointer: the sum is a file-static, read and
- * written only under the queue's mutex. */
-static uint64_t tree_bytes(const char *path) {
-    tree_bytes_sum = 0;
-    nftw(path, add_bytes, 16, FTW_PHYS);
-    return tree_bytes_sum;
+/* The space a folder takes (links not followed), by blocks as du counts them. */
+static uint64_t tree_bytes(int at, const char *name) {
+    struct stat sb;
+    if (fstatat(at, name, &sb, AT_SYMLINK_NOFOLLOW)) return 0;
+    uint64_t bytes = (uint64_t)sb.st_blocks * 512u;
+    int fd = S_ISDIR(sb.st_mode) ? openat(at, name, O_RDONLY | O_DIRECTORY | O_CLOEXEC | O_NOFOLLOW) : -1;
+    DIR *d = fd >= 0 ? fdopendir(fd) : NULL;
+    struct dirent *e;
+    while (d && (e = readdir(d)))
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) bytes += tree_bytes(dirfd(d), e->d_name);
+    if (d) closedir(d);
+    else if (fd >= 0) close(fd);
+    return bytes;
 }
 
 static int is_job_entry(const struct dirent *d) { return mx_serve_id_valid(d->d_name); }
@@ -500,7 +500,7 @@ static void prune_finished(mx_serve_jobs *q) {
         mx_job_state s = mx_serve_jobs_state(q, ids[i]->d_name);
         if (s != MX_JOB_DONE && s != MX_JOB_FAILED && s != MX_JOB_CANCELLED) continue;
         mx_serve_jobs_path(q, ids[i]->d_name, NULL, path);
-        bytes += tree_bytes(path);
+        bytes += tree_bytes(AT_FDCWD, path);
         if (++finished > 1 && (finished > q->limits.keep_jobs || bytes > q->limits.keep_bytes)) remove_tree(path);
     }
     if (n >= 0) free_ids(ids, n);
