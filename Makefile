@@ -79,6 +79,18 @@ FORMAT_SRC  = $(filter-out $(IO_ADAPTER_C) pipeline/io/io_none.c,$(wildcard pipe
 IO_SRC      = pipeline/io/meshio.cpp pipeline/io/exrio.cpp pipeline/io/exr_read.cpp $(IO_ADAPTER_C)
 OIIO_SRC    = pipeline/io/imageio.cpp
 TOOL_SRC    = $(wildcard tools/matex/cmd_*.c tools/matex/cli_*.c)
+# `matex serve` and `matex batch --server` (tools/matex/serve/): the full build links libmicrohttpd and
+# libcurl; matex-core and the CUDA build link serve_none.c, which says the verb is not in the build.
+SERVE_SRC   = $(filter-out tools/matex/serve/serve_none.c,$(wildcard tools/matex/serve/*.c))
+SERVE_NONE  = $(BUILD)/tools/matex/serve/serve_none.o
+# The CUDA build goes to GPU machines without libmicrohttpd (make gpu-check-pack): no server there yet.
+ifeq ($(CUDA),1)
+SERVE_OBJ   = $(SERVE_NONE)
+SERVE_LIBS  =
+else
+SERVE_OBJ   = $(call obj,$(SERVE_SRC))
+SERVE_LIBS  = -lmicrohttpd -lcurl
+endif
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(patsubst %.cpp,$(BUILD)/%.o,$(1)))
 
@@ -104,8 +116,9 @@ all: $(LIBMATEX) $(LIB_IO) $(LIB_OIIO) matex
 matex: $(BUILD)/matex
 	ln -sf $< $@
 
-$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IO_CORE_LIBS) $(LDLIBS)
+$(BUILD)/matex: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(SERVE_OBJ) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) \
+                $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IO_CORE_LIBS) $(SERVE_LIBS) $(LDLIBS)
 
 # The OpenImageIO adapter: imageio.cpp and the status functions it reports through, position-
 # independent, only its two entry points exported.
@@ -216,6 +229,9 @@ FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
 FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/matex/cli_texture_opts.c tools/matex/cli_args.c tools/matex/cli_progress.c tools/matex/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
+# the request decoding of `matex serve`: its own objects on top (no HTTP library)
+$(BUILD)/tests/fuzz/replay_serve_request $(BUILD)/tests/fuzz/fuzz_serve_request: \
+    $(call obj,tools/matex/serve/serve_request.c tools/matex/serve/serve_auth.c tools/matex/cli_batch_manifest.c)
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)
@@ -235,9 +251,9 @@ fuzz-run: $(patsubst %,$(BUILD)/tests/fuzz/fuzz_%,$(FUZZ_NAMES))
 # allocation of each allocation site under ASan (FAULTS_SWEEP=sites) ----
 MATEX_FAULTS = $(BUILD)/tests/faults/matex_faults
 FAULT_WRAP   = $(foreach f,malloc calloc realloc aligned_alloc posix_memalign strdup strndup free _Znwm _Znam,-Wl,--wrap=$(f))
-$(MATEX_FAULTS): $(call obj,tools/matex/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(LIB_TEX) \
-                 $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
-	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS) -ldl
+$(MATEX_FAULTS): $(call obj,tools/matex/matex.c $(TOOL_SRC) $(wildcard tests/faults/*.c tests/faults/*.cpp)) $(SERVE_OBJ) \
+                 $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
+	$(CXX) $(LDFLAGS) $(FAULT_WRAP) -pthread -o $@ $^ $(IOLIBS) $(SERVE_LIBS) $(LDLIBS) -ldl
 .PHONY: faults faults-run
 faults:
 	$(MAKE) FAULTS_SWEEP=full faults-run
@@ -294,6 +310,11 @@ test-full: $(TEST_DEPS)
 test-slurm: all $(DEMO_WEIGHTS)
 	$(TEST_ENV) timeout 300 sh tests/slurm_cluster.sh
 
+# `matex serve` end to end with curl as the client (tests/cli_serve.sh; Debian's curl): about a minute.
+.PHONY: test-serve
+test-serve: all $(DEMO_WEIGHTS)
+	$(TEST_ENV) timeout 300 sh tests/cli_serve.sh
+
 # The Blender add-on (blender/matex_texture) as the zip Blender installs; `make test-blender` installs
 # it in a headless Blender (Debian's `blender`) and textures, renders, cancels (tests/blender/).
 ADDON_ZIP = $(BUILD)/matex_blender.zip
@@ -340,8 +361,8 @@ test-arm64: $(DEMO_WEIGHTS)
 arm64-build: core $(BUILD)/matex-core $(patsubst %,$(BUILD)/tests/%,$(ARM64_TESTS))
 # matex without the file I/O adapter, C only (io_none.c): `matex --version` and the verbs on
 # memory and weight files, for a cross-built core.
-$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) $(LIB_WEIGHTS) \
-                     $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
+$(BUILD)/matex-core: $(call obj,tools/matex/matex.c $(TOOL_SRC)) $(SERVE_NONE) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) \
+                     $(LIB_WEIGHTS) $(BUILD)/pipeline/io/io_none.o $(LIB_CORE)
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 # A test of the public API linked with the core library (no I/O adapter, no C++).
 $(BUILD)/tests/%_core: $(BUILD)/tests/%.o $(TEST_UTIL) $(LIB_MATEX_CORE)

@@ -12,7 +12,7 @@ import tempfile
 
 import bpy
 
-from . import export, material, stream
+from . import export, material, server, stream
 
 # The one job running (the add-on runs one matex at a time); the Cancel button reaches it here.
 _active = None
@@ -89,14 +89,17 @@ class Job:
     """mode: "texture", "enhance" or "transfer". Call start(), then poll() until it returns
     True; cancel() may come at any time."""
 
-    def __init__(self, obj, mode, settings, matex):
+    def __init__(self, obj, mode, settings, matex, server_url="", server_token=""):
+        """server_url: a `matex serve` that textures (enhance and transfer still run matex here)."""
         self.obj, self.mode, self.s, self.matex = obj, mode, settings, matex
+        self.server = (server_url, server_token) if server_url and mode == "texture" else None
         # saved beside the .blend only once there is one; packed until then
         self.storage = settings.storage if bpy.data.filepath else "PACK"
         self.added_uv = None
         self.uv_name = None
         self.tmp = None
         self.run = None
+        self.mesh_path = self.out = None
         self.slots = []
         self.fraction, self.status = 0.0, "matex: starting"
         self.error = None
@@ -107,14 +110,19 @@ class Job:
         global _active
         if _active is not None:
             raise ValueError("matex is already running (cancel it first)")
-        if self.mode != "transfer" and not self.s.weights:
+        if self.mode != "transfer" and not self.s.weights and self.server is None:
             raise ValueError("set the weight file (.mxw) in the matex panel")
         if self.mode == "texture" and not self.s.prompt.strip():
             raise ValueError("type a prompt in the matex panel")
         self.tmp = tempfile.mkdtemp(prefix="matex_blender_")
         try:
             argv = self._prepare(context)
-            self.run = stream.MatexRun(argv)
+            if self.server is not None:
+                style = [bpy.path.abspath(self.s.style_image)] if self.s.style_image else []
+                self.run = server.ServerRun(self.server[0], self.server[1], self.mesh_path,
+                                            server.options(self.s, self.s.extra_args), style, self.out)
+            else:
+                self.run = stream.MatexRun(argv)
         except Exception:
             self._undo()
             raise
@@ -128,8 +136,8 @@ class Job:
             self.added_uv = smart_uv_project(context, obj)
         self.uv_name = obj.data.uv_layers.active.name
         depsgraph = context.evaluated_depsgraph_get()
-        mesh_path = os.path.join(self.tmp, "input.obj")
-        out = os.path.join(self.tmp, "out")
+        mesh_path = self.mesh_path = os.path.join(self.tmp, "input.obj")
+        out = self.out = os.path.join(self.tmp, "out")
         textures = self._texture_files(obj, "input") if self.mode == "enhance" else None
         self.slots = self._write(obj, depsgraph, mesh_path, self.uv_name, None, textures)
         if self.mode == "texture":

@@ -51,11 +51,13 @@ class _MatexRunOperator:
         return obj is not None and obj.type == "MESH" and context.mode == "OBJECT" and job.active() is None
 
     def _start(self, context):
-        matex = stream.find_matex(settings.preferences(context).matex_path)
-        if matex is None:
+        prefs = settings.preferences(context)
+        url = prefs.server_url.strip()
+        matex = stream.find_matex(prefs.matex_path)
+        if matex is None and not (url and self.mode == "texture"):
             self.report({"ERROR"}, "matex not found: put it on PATH or set its path in the add-on's preferences")
             return None
-        j = job.Job(context.active_object, self.mode, context.scene.matex, matex)
+        j = job.Job(context.active_object, self.mode, context.scene.matex, matex, url, prefs.server_token)
         try:
             j.start(context)
         except (ValueError, OSError, RuntimeError) as e:

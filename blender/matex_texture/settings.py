@@ -1,4 +1,4 @@
-"""The panel's fields (per scene) and the add-on's preferences (the matex executable)."""
+"""The panel's fields (per scene) and the add-on's preferences (the matex executable, a server)."""
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
@@ -46,9 +46,16 @@ class MatexPreferences(bpy.types.AddonPreferences):
 
     matex_path: StringProperty(name="matex executable", subtype="FILE_PATH",
                                description="Path of the matex program (empty: `matex` on PATH)")
+    server_url: StringProperty(name="matex server", description="URL of a running `matex serve` "
+                               "(http://127.0.0.1:8421): Texture runs there, the models loaded once (empty: "
+                               "run matex here); its weights are the server's")
+    server_token: StringProperty(name="Server token", subtype="PASSWORD",
+                                 description="The server's token, when it has one (its --token-file)")
 
     def draw(self, context):
         self.layout.prop(self, "matex_path")
+        self.layout.prop(self, "server_url")
+        self.layout.prop(self, "server_token")
 
 
 def preferences(context):

@@ -6,7 +6,7 @@ not empty) and that the object's mesh and UVs are what they were; renders a fram
 on the CPU and checks the object is textured in it (against the same frame untextured);
 enhances and transfers; cancels a run in the middle and checks nothing changed; and checks a
 bad weight path and a style image that is not an image end in matex's message in the operator's
-report."""
+report; and textures through a running `matex serve` set in the preferences."""
 
 import json
 import math
@@ -372,6 +372,39 @@ def test_saved_beside_blend(s):
         check_image("saved", obj, image, "UVMap")
 
 
+def test_server(s):
+    """With a server in the preferences, Texture runs there: the matex path is made invalid, so
+    only the server can texture; a bad option ends in the server's message."""
+    jobs = os.path.join(TMP, "serve-jobs")
+    srv = subprocess.Popen([MATEX, "serve", "--weights", WEIGHTS, "--listen", "127.0.0.1:0", "--jobs", jobs],
+                           stderr=subprocess.PIPE, text=True)
+    line = srv.stderr.readline()
+    url = line.split("listening on ")[1].split("/v1")[0] if "listening on " in line else ""
+    check("server started: %s" % line.strip(), url.startswith("http://127.0.0.1:"))
+    prefs = bpy.context.preferences.addons["matex_texture"].preferences
+    prefs.server_url, prefs.matex_path = url, os.path.join(TMP, "no-such-matex")
+    try:
+        obj = add_monkey("Served", (6, 0, 0))
+        before = snapshot(obj)
+        res, err = run_operator(bpy.ops.matex.texture_selected, obj)
+        check("texture through the server finished: %s" % err, res == {"FINISHED"})
+        check("served: mesh and UVs unchanged", snapshot(obj) == before)
+        image = tex_image(obj.material_slots[0].material) if obj.material_slots else None
+        if image:
+            check_image("served", obj, image, "UVMap")
+        check("served: the server keeps no copy", [d for d in os.listdir(jobs) if not d.startswith(".")] == [])
+        extra = s.extra_args
+        s.extra_args = extra + " --colour red"
+        res, err = run_operator(bpy.ops.matex.texture_selected, add_monkey("Refused", (9, 0, 0)))
+        s.extra_args = extra
+        check("served: a bad option ends in the server's message (%s)" % err, res is None and "unknown key" in (err or ""))
+    finally:
+        prefs.server_url, prefs.matex_path = "", MATEX
+        srv.terminate()
+        srv.wait(timeout=30)
+    check("server stopped cleanly on SIGTERM", srv.returncode == 0)
+
+
 def main():
     t0 = time.time()
     s = setup()
@@ -385,6 +418,7 @@ def main():
     test_bad_weights(s, bare)
     test_style_image(s, bare)
     test_saved_beside_blend(s)
+    test_server(s)
     print("test_addon: %d check(s) failed, %.1f s (Blender %s)" % (failures, time.time() - t0, bpy.app.version_string))
     sys.exit(1 if failures else 0)
 

@@ -1,4 +1,4 @@
-/* matex-lite's PNG decoder (pipeline/io/png_zlib.c) on any bytes: it refuses them with a message
+/* matex's own PNG decoder (pipeline/io/png_zlib.c) on any bytes: it refuses them with a message
  * or returns an image of 1, 3 or 4 channels within its size limit, and that image encoded again
  * decodes to the same values. First byte odd: the chunks' CRCs are made right before decoding,
  * so that mutations reach the header, inflate and filter code instead of dying at the CRC. */

@@ -7,6 +7,7 @@
     X(texture, "texture a mesh from a text prompt (Make-A-Texture)")                              \
     X(enhance, "enhance the texture of a textured mesh (SDEdit over views)")                      \
     X(batch, "texture a catalogue (a manifest of meshes and prompts), sharded and resumable")    \
+    X(serve, "serve texturing jobs over HTTP, the model set loaded once")                       \
     X(transfer, "move the texture of a textured mesh onto another mesh or UV layout")             \
     X(render, "render turntable views and a contact sheet of a mesh")                             \
     X(info, "describe a mesh, an image (or compare two), a weight file or a checkpoint")          \

@@ -150,28 +150,67 @@ static int job_key(mx_batch_job *j, const char *key, const mx_json *v, const cha
     return 0;
 }
 
+/* The defaults, then every key of obj but mesh, prompt and name, then the checks of a whole job. */
+static void job_keys(mx_batch_job *j, const mx_json *obj, const char *dir, const char *const *defaults, int ndefaults) {
+    mx_status st;
+    for (int i = 0; i < 2 * ndefaults && !j->error[0]; i += 2)
+        if (mx_cli_texture_option(&j->c, defaults[i], defaults[i + 1], &st)) job_error(j, "%s", st.msg);
+    for (size_t i = 0; i < mx_json_len(obj) && !j->error[0]; i++) {
+        const char *key = mx_json_key(obj, i);
+        if (strcmp(key, "mesh") && strcmp(key, "prompt") && strcmp(key, "name")) job_key(j, key, mx_json_at(obj, i), dir);
+    }
+    mx_cli_texture *c = &j->c;
+    if (c->o.fast && !c->steps_given) c->o.steps = 4;
+    if (c->o.fast && !c->guidance_given) c->o.guidance = 1.0f;
+    if (!j->error[0] && (mx_options_check(&c->o, MX_VERB_TEXTURE, &st) || mx_style_check_inputs(&c->o, &st)))
+        job_error(j, "%s", st.msg);
+}
+
 /* The whole line when `options` is set, else only what names the job (for the uniqueness check). */
 static void parse_job(mx_batch_job *j, const char *text, size_t len, const char *dir, const char *const *defaults,
                       int ndefaults, const char *outroot, int options) {
     mx_status st;
     mx_json *obj = mx_json_parse(text, len, "line", &st);
     if (!obj) return job_error(j, "%s", st.msg);
-    if (mx_json_kind(obj) != MX_JSON_OBJ) {
-        job_error(j, "not a JSON object");
-    } else if (!job_head(j, obj, dir, outroot) && options) {
-        for (int i = 0; i < 2 * ndefaults && !j->error[0]; i += 2)
-            if (mx_cli_texture_option(&j->c, defaults[i], defaults[i + 1], &st)) job_error(j, "%s", st.msg);
-        for (size_t i = 0; i < mx_json_len(obj) && !j->error[0]; i++) {
-            const char *key = mx_json_key(obj, i);
-            if (strcmp(key, "mesh") && strcmp(key, "prompt") && strcmp(key, "name")) job_key(j, key, mx_json_at(obj, i), dir);
-        }
+    if (mx_json_kind(obj) != MX_JSON_OBJ) job_error(j, "not a JSON object");
+    else if (!job_head(j, obj, dir, outroot) && options) job_keys(j, obj, dir, defaults, ndefaults);
+    mx_json_free(obj);
+}
+
+int mx_batch_job_from_options(mx_batch_job *j, const char *text, size_t len, const char *mesh, const char *out_dir,
+                              const char *const *style_images, int nstyle) {
+    memset(j, 0, sizeof *j);
+    mx_status st;
+    mx_json *obj = NULL;
+    if (!(j->texts = calloc(JOB_MAX_TEXTS, sizeof *j->texts))) job_error(j, "out of memory");
+    else if (!(obj = mx_json_parse(text, len, "options", &st))) job_error(j, "%s", st.msg);
+    else if (mx_json_kind(obj) != MX_JSON_OBJ) job_error(j, "options: not a JSON object");
+    else if (mx_json_get(obj, "mesh") || mx_json_get(obj, "name") || mx_json_get(obj, "style_image") ||
+             mx_json_get(obj, "style-image"))
+        job_error(j, "\"%s\" is not an options key here: the mesh and style images are parts of the request, the job "
+                     "is named by the server", mx_json_get(obj, "mesh") ? "mesh" : mx_json_get(obj, "name") ? "name" : "style_image");
+    else if (!mx_json_get_str(obj, "prompt", NULL)) job_error(j, "no \"prompt\" (a string)");
+    else {
         mx_cli_texture *c = &j->c;
-        if (c->o.fast && !c->steps_given) c->o.steps = 4;
-        if (c->o.fast && !c->guidance_given) c->o.guidance = 1.0f;
-        if (!j->error[0] && (mx_options_check(&c->o, MX_VERB_TEXTURE, &st) || mx_style_check_inputs(&c->o, &st)))
-            job_error(j, "%s", st.msg);
+        matex_options_default(&c->o);
+        c->verb = MX_VERB_TEXTURE;
+        c->quiet = 1;
+        if (!(c->o.mesh_path = keep(j, mesh)) || !(c->o.prompt = keep(j, mx_json_get_str(obj, "prompt", ""))) ||
+            !(c->o.out_dir = keep(j, out_dir)))
+            job_error(j, "out of memory");
+        for (int i = 0; i < nstyle && !j->error[0]; i++)
+            if (mx_cli_texture_option(c, "style-image", style_images[i], &st)) job_error(j, "style_image: %s", st.msg);
+        if (!j->error[0]) job_keys(j, obj, "", NULL, 0);
     }
     mx_json_free(obj);
+    return j->error[0] ? -1 : 0;
+}
+
+void mx_batch_job_free(mx_batch_job *j) {
+    for (int k = 0; k < j->ntexts; k++) free(j->texts[k]);
+    free(j->texts);
+    j->texts = NULL;
+    j->ntexts = 0;
 }
 
 static int line_is_blank(const char *s, size_t n) {
@@ -226,10 +265,7 @@ int mx_batch_manifest_read(mx_batch_manifest *m, const char *path, const char *c
 }
 
 void mx_batch_manifest_free(mx_batch_manifest *m) {
-    for (int i = 0; i < m->njobs; i++) {
-        for (int k = 0; k < m->jobs[i].ntexts; k++) free(m->jobs[i].texts[k]);
-        free(m->jobs[i].texts);
-    }
+    for (int i = 0; i < m->njobs; i++) mx_batch_job_free(&m->jobs[i]);
     free(m->jobs);
     memset(m, 0, sizeof *m);
 }

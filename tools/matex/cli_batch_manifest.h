@@ -38,5 +38,12 @@ typedef struct mx_batch_manifest {
 int mx_batch_manifest_read(mx_batch_manifest *m, const char *path, const char *const *defaults, int ndefaults,
                            const char *outroot, int shard, int nshards, mx_status *st);
 void mx_batch_manifest_free(mx_batch_manifest *m);
+/* One job from a JSON object of job keys: those of a line but mesh, name and style_image (the
+ * client of `matex serve` sends the mesh and the style images as files; the server names the
+ * job), into out_dir. 0, or -1 with the message in j->error (the key's message, as for a line).
+ * The strings c borrows are j's: mx_batch_job_free releases them (also after a failure). */
+int mx_batch_job_from_options(mx_batch_job *j, const char *text, size_t len, const char *mesh, const char *out_dir,
+                              const char *const *style_images, int nstyle);
+void mx_batch_job_free(mx_batch_job *j);
 
 #endif

@@ -40,6 +40,11 @@ int mx_cli_progress_event(void *user, const mx_texture_progress *p) {
     return 0;
 }
 
+int mx_cli_progress_api_event(void *user, const matex_progress *p) {
+    mx_texture_progress q = {p->stage, p->step, p->steps, p->views_done, p->views_total, p->coverage, p->seconds, p->message};
+    return mx_cli_progress_event(user, &q);
+}
+
 void mx_cli_progress_result(FILE *f, int exit_code, const char *error, const char *out, const mx_texture_result *res) {
     mx_buf b = {0};
     mx_buf_printf(&b, "{\"event\":\"result\",\"ok\":%s,\"exit\":%d,", exit_code ? "false" : "true", exit_code);

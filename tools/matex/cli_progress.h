@@ -21,6 +21,8 @@ int mx_cli_progress_parse(const char *val, int *json);
 /* A progress callback (mx_texture_progress_fn): user is the FILE * the stream goes to.
  * Never cancels (returns 0). */
 int mx_cli_progress_event(void *user, const mx_texture_progress *p);
+/* The same for the public API's events (matex_options.progress; user: the FILE *). */
+int mx_cli_progress_api_event(void *user, const matex_progress *p);
 /* The final line. exit_code 0: ok with out and res; else error (the one-line message). */
 void mx_cli_progress_result(FILE *f, int exit_code, const char *error, const char *out, const mx_texture_result *res);
 

@@ -93,7 +93,7 @@ void mx_cli_signals_output(const char *out_dir) {
 }
 
 int mx_cli_signals_verb_catches(const char *verb) {
-    static const char *const verbs[] = {"texture", "enhance", "transfer", "batch", "render"};
+    static const char *const verbs[] = {"texture", "enhance", "transfer", "batch", "render", "serve"};
     for (size_t i = 0; i < sizeof verbs / sizeof verbs[0]; i++)
         if (!strcmp(verb, verbs[i])) return 1;
     return 0;

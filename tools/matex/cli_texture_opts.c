@@ -126,12 +126,6 @@ static int run_once(api_fn fn, const mx_cli_texture *c, matex_result **res, mate
     return rc;
 }
 
-/* The API's progress events as the stream's (tools/matex/cli_progress.h; user: its FILE *). */
-static int stream_event(void *user, const matex_progress *p) {
-    mx_texture_progress q = {p->stage, p->step, p->steps, p->views_done, p->views_total, p->coverage, p->seconds, p->message};
-    return mx_cli_progress_event(user, &q);
-}
-
 /* The stream's final line. */
 static void stream_result(const mx_cli_texture *c, int code, const char *error, const matex_result *r) {
     mx_texture_result res = {0};
@@ -161,7 +155,7 @@ static int run_failed(const mx_cli_texture *c, const char *verb, int code, const
 int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     if (c->json == MX_CLI_JSON_STREAM) { /* the events replace the human lines */
         c->quiet = 1;
-        c->o.progress = stream_event;
+        c->o.progress = mx_cli_progress_api_event;
         c->o.progress_user = stdout;
     }
     if (c->quiet) mx_log_set_level(MX_LOG_ERROR);

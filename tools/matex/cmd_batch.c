@@ -17,11 +17,13 @@
 #include "cli.h"
 #include "cli_batch_manifest.h"
 #include "cli_signals.h"
+#include "serve/serve_client.h"
 
 #define BATCH_MAX_DEFAULTS 64
 
 typedef struct batch_args {
     const char *manifest, *weights, *outroot;
+    const char *server, *token_file; /* --server URL: the jobs run on a `matex serve` (tools/matex/serve/serve_client.h) */
     int shard, nshards, json, quiet, verbose;
     int theme_from_first; /* the first job writes front.png, the style image of the jobs without their own */
     char theme_path[4200]; /* OUTROOT/NAME/front.png of the first job (theme_from_first) */
@@ -36,6 +38,7 @@ static const char *const STATUS_NAME[] = {"done", "skipped", "failed", "interrup
 typedef struct batch_run {
     const batch_args *a;
     matex_models *models; /* opened at the first job that runs */
+    mx_serve_client *client; /* --server: the jobs run there instead */
     int fatal;            /* the model set could not be opened: the batch stops */
     int count[4];
     double job_seconds; /* of the jobs done */
@@ -57,6 +60,9 @@ static void batch_usage(FILE *f) {
             "options:\n"
             "  --shard I/N               run the jobs whose index (0-based, manifest order) mod N is I (default\n"
             "                            SLURM_ARRAY_TASK_ID-SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT, else 0/1)\n"
+            "  --server URL              run the jobs on a running `matex serve` (its model set: no --weights);\n"
+            "                            the outputs are written here as a local batch writes them\n"
+            "  --token-file F            the server's token (Authorization: Bearer; F: one line, mode 0600)\n"
             "  --theme FILE              one style image for the whole catalogue (--style-image FILE for every job;\n"
             "                            a line's \"style_image\" replaces it)\n"
             "  --theme-from-first        the first job of the manifest also writes front.png (its textured mesh\n"
@@ -124,10 +130,13 @@ static int parse_args(batch_args *a, int argc, char **argv) {
             int rc = table_option(a, "--style-image", argv[++i]);
             if (rc >= 0) return rc;
         }
-        else if (!strcmp(arg, "--weights") || !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--shard")) {
+        else if (!strcmp(arg, "--weights") || !strcmp(arg, "-o") || !strcmp(arg, "--output") || !strcmp(arg, "--shard") ||
+                 !strcmp(arg, "--server") || !strcmp(arg, "--token-file")) {
             if (!val) return usage_error("missing value after", arg);
             i++;
             if (!strcmp(arg, "--weights")) a->weights = val;
+            else if (!strcmp(arg, "--server")) a->server = val;
+            else if (!strcmp(arg, "--token-file")) a->token_file = val;
             else if (!strcmp(arg, "--shard")) {
                 if (parse_shard(val, &a->shard, &a->nshards)) return usage_error("--shard must be I/N with 0 <= I < N, not", val);
                 have_shard = 1;
@@ -148,7 +157,9 @@ static int parse_args(batch_args *a, int argc, char **argv) {
         }
     }
     if (!a->manifest) return usage_error("missing MANIFEST", NULL);
-    if (!a->weights) return usage_error("missing --weights FILE", NULL);
+    if (!a->weights && !a->server) return usage_error("missing --weights FILE (or --server URL)", NULL);
+    if (a->weights && a->server) return usage_error("--server runs the jobs with the server's model set: give no --weights", NULL);
+    if (a->token_file && !a->server) return usage_error("--token-file is the token of a --server", NULL);
     if (!a->outroot) return usage_error("missing -o OUTROOT", NULL);
     if (a->theme_from_first && a->table.o.style_images[0])
         return usage_error("--theme-from-first takes the style image from the first job: give no --theme or --style-image", NULL);
@@ -308,7 +319,7 @@ static void batch_job(batch_run *r, const mx_batch_job *j) {
         return;
     }
     matex_error err;
-    if (!r->models && !(r->models = matex_models_open(r->a->weights, &r->a->table.o, &err))) {
+    if (!r->client && !r->models && !(r->models = matex_models_open(r->a->weights, &r->a->table.o, &err))) {
         fprintf(stderr, "matex batch: %s\n", err.message);
         r->fatal = 1;
         return;
@@ -316,7 +327,9 @@ static void batch_job(batch_run *r, const mx_batch_job *j) {
     double t = mx_now(), coverage = 0.0;
     char error[1024];
     mx_cli_signals_output(j->c.o.out_dir);
-    int rc = run_job(r, j, &coverage, error, sizeof error);
+    int rc = r->client ? mx_serve_client_run(r->client, r->a->manifest, j, r->a->defaults, r->a->ndefaults, r->stop,
+                                             &coverage, error, sizeof error)
+                       : run_job(r, j, &coverage, error, sizeof error);
     mx_cli_signals_output(NULL); /* the job's folder and lock are its own no more */
     if (rc < 0) record_failure(r, j, error);
     add_result(r, j, rc == 0 ? JOB_DONE : rc > 0 ? JOB_INTERRUPTED : JOB_FAILED, mx_now() - t, coverage,
@@ -359,7 +372,13 @@ int cmd_batch(int argc, char **argv) {
         return 1;
     }
     if (a.theme_from_first) theme_from_first(&a, &m);
-    batch_run r = {&a, NULL, 0, {0}, 0.0, {0}, mx_cli_signals_catch()};
+    mx_serve_client client;
+    if (a.server && mx_serve_client_open(&client, a.server, a.token_file, &st)) {
+        fprintf(stderr, "matex batch: %s\n", st.msg);
+        mx_batch_manifest_free(&m);
+        return st.code == MX_EUSAGE ? 2 : 1;
+    }
+    batch_run r = {&a, NULL, a.server ? &client : NULL, 0, {0}, 0.0, {0}, mx_cli_signals_catch()};
     forget_own_failures(&r, &m);
     double t0 = mx_now();
     int jobs = 0;

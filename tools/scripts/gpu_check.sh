@@ -118,7 +118,7 @@ if [ ! -x "$B/matex" ]; then
     B=build-cuda
 fi
 M="$B/matex"
-[ -d "$B/lib" ] && export LD_LIBRARY_PATH="$B/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" # matex-lite's libraries
+[ -d "$B/lib" ] && export LD_LIBRARY_PATH="$B/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" # the libraries matex needs that the GPU machine lacks
 [ -d "$B/data" ] && export MATEX_TESTDATA="$B/data" # the goldens packed beside the binaries
 
 say "GPU"
