@@ -18,8 +18,15 @@
  *   [Cout, Cin, kh, kw].
  * - All ops may use ctx->pool for threads and ctx->scratch for temporary memory
  *   (they restore the scratch mark before returning). Results never depend on the thread count.
- *   Scratch the SIMD kernels take per call: linear/conv2d (min(M, 4096) + min(N, 4096) + 44)
- *   · min(K, 320) + max(M, N) floats (conv: M = Cout, N = Ho·Wo, K = Cin·kh·kw; at most ~11 MB);
+ *   Scratch the SIMD kernels take per call: linear/conv2d, the GEMM engine (ops/cpu/gemm.c),
+ *   (A + B)·w + max(M, N) floats (AMX: + 16·M), where w = the words of a panel row: min(K, KC)
+ *   for fp32 panels, half that for bf16 ones (a k-pair per word), KC the K block (gemm.h: 640 on
+ *   the SIMD levels, 2048 on AMX); A = M rows (threads·96 when M has 32 or more blocks of 96; 0
+ *   for conv weights the context keeps packed);
+ *   B = min(N, 4096) columns, or 384 KiB per thread where each thread packs its own columns
+ *   (conv: M = Cout, N = Ho·Wo, K = Cin·kh·kw). conv2d adds the band of input rows it reads
+ *   (≤ 8 MiB, twice on AMX's fp32 layers) and, when the output takes several blocks of rows, the
+ *   weights' panels of all of K (≈ M·K floats) unless the context keeps them packed (wpack).
  *   attention B·H·D·(Tk + 63) + threads·64·(2D + 2) floats; layer norm 2C floats. With less
  *   (or no) scratch they use the heap, so a small arena costs speed, never correctness.
  *   32 MiB covers SD1.5 at 512×512 (UNet with CFG batch 2, VAE mid-block attention).
@@ -134,6 +141,8 @@ const mx_ctx *mx_run_ctx(const mx_ctx *c, const mx_arena *a);
 float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st);
 /* A placeholder handle for the outputs of a dry run (ops on a measuring context ignore it). */
 float *mx_act_placeholder(void);
+
+/* ---- the ready-made context (ops/ctx.c) ---- */
 
 /* A ready-to-use context: best kernels, a pool of nthreads (<=0: all CPUs) and a scratch
  * arena of scratch_bytes. Free with mx_ctx_destroy. */
