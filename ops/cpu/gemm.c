@@ -475,6 +475,7 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float),
                          g->to_pairs ? 2 : 4, mx_dtype_size(w.dtype));
     if (!f.dst) return NULL;
+    mx_wpack_fetch_source(c->wpack, w.data, source_bytes);
     fill_blocks(c, &f, operand_b);
     mx_wpack_release_source(c->wpack, w.data, source_bytes);
     return f.dst;
