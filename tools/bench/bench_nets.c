@@ -15,7 +15,7 @@
  * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
  * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
  * (well under 1 % here); --no-profile runs without.
- * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--no-profile]
+ * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--skip-unet] [--no-profile]
  *                   [--batch 1|2] (2, the default: a default job's CFG calls; 1: --fast's) */
 #include <stdio.h>
 #include <stdlib.h>
@@ -197,7 +197,7 @@ static void report_profile(const net_time *t, int p, double peak, int threads) {
 }
 
 typedef struct bench_opts {
-    int threads, skip_vae, skip_cn, profile;
+    int threads, skip_vae, skip_cn, skip_unet, profile;
     int batch; /* 2: CFG's calls (the default job); 1: --fast's */
     const char *weights;
 } bench_opts;
@@ -312,7 +312,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     mx_unet_input ui = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = B, .H = H, .W = W, .T = T,
                         .down_residuals = o->skip_cn ? NULL : (const float *const *)res,
                         .mid_residual = o->skip_cn ? NULL : res[nres]};
-    for (int p = 0; p < nprec; p++) {
+    for (int p = 0; p < nprec && !o->skip_unet; p++) {
         nt_unet.first[p] = mx_now();
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
         nt_unet.first[p] = mx_now() - nt_unet.first[p];
@@ -346,17 +346,18 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
            "GFLOP/s", "peak", "bf16 s", "GFLOP/s", "peak", "wall", "cpu");
     if (!o->skip_cn) report(&nt_cn, peak, nth);
     if (!o->skip_cn) report(&nt_cn_step, peak, nth);
-    report(&nt_unet, peak, nth);
-    if (cfg) report(&nt_unet_cfg, peak, nth);
+    if (!o->skip_unet) report(&nt_unet, peak, nth);
+    if (!o->skip_unet && cfg) report(&nt_unet_cfg, peak, nth);
     if (!o->skip_vae) report(&nt_vae, peak, nth);
-    report_first_calls((const net_time *[]){o->skip_cn ? NULL : &nt_cn, &nt_unet, o->skip_vae ? NULL : &nt_vae}, c, nprec);
+    report_first_calls((const net_time *[]){o->skip_cn ? NULL : &nt_cn, o->skip_unet ? NULL : &nt_unet,
+                                            o->skip_vae ? NULL : &nt_vae}, c, nprec);
     if (o->profile) {
         printf("where the time went (shares of each call's CPU time, all threads):\n");
         for (int p = 0; p < nprec; p++) {
             if (!o->skip_cn) report_profile(&nt_cn, p, peak[p], nth);
             if (!o->skip_cn) report_profile(&nt_cn_step, p, peak[p], nth);
-            report_profile(&nt_unet, p, peak[p], nth);
-            if (cfg) report_profile(&nt_unet_cfg, p, peak[p], nth);
+            if (!o->skip_unet) report_profile(&nt_unet, p, peak[p], nth);
+            if (!o->skip_unet && cfg) report_profile(&nt_unet_cfg, p, peak[p], nth);
             if (!o->skip_vae) report_profile(&nt_vae, p, peak[p], nth);
         }
     }
@@ -416,11 +417,12 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--skip-vae")) o.skip_vae = 1;
         else if (!strcmp(argv[i], "--skip-controlnet")) o.skip_cn = 1;
+        else if (!strcmp(argv[i], "--skip-unet")) o.skip_unet = 1;
         else if (!strcmp(argv[i], "--no-profile")) o.profile = 0;
         else if (!strcmp(argv[i], "--batch") && i + 1 < argc && (o.batch = atoi(argv[++i])) >= 1 && o.batch <= 2) continue;
         else {
             fprintf(stderr, "usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] "
-                            "[--no-profile] [--batch 1|2]\n");
+                            "[--skip-unet] [--no-profile] [--batch 1|2]\n");
             return 2;
         }
     }
