@@ -12,11 +12,14 @@
  * time of the call (what survives other people's load on a shared machine): each op, the GEMM's
  * parts (micro-kernel with the bias it adds, packing of A and B — B is the input band of a conv —,
  * the rest: task setup, waiting at the end of a phase), the micro-kernel's own GFLOP/s, the cores'
- * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
+ * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one; the
+ * call's line splits off the time its threads waited on the run queue, so that what is left is
+ * its own idle time — joins, serial parts — even on a shared machine) and
  * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
  * (well under 1 % here); --no-profile runs without.
  * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--skip-unet] [--no-profile]
  *                   [--batch 1|2] (2, the default: a default job's CFG calls; 1: --fast's) */
+#include <dirent.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -60,6 +63,7 @@ typedef struct net_time {
     const char *what;
     double first[2]; /* wall seconds of the untimed first call (packs the weights, touches the arena) */
     double secs[2], cpu[2], flops;
+    double waited[2]; /* seconds its threads waited for a CPU while runnable (runqueue_wait_seconds) */
     long faults[2];
     mx_profile prof[2];
 } net_time;
@@ -84,11 +88,33 @@ static long minor_faults(void) {
     return ru.ru_minflt;
 }
 
+/* Seconds the process's threads have waited for a CPU while runnable (their time on the run
+ * queue: other processes' load on a shared machine, not this one's joins), summed over its threads
+ * (/proc/self/task/N/schedstat, second field, ns); 0 where the kernel does not report it. */
+static double runqueue_wait_seconds(void) {
+    DIR *d = opendir("/proc/self/task");
+    double sum = 0;
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+        char path[300];
+        unsigned long long run, wait;
+        if (e->d_name[0] == '.') continue;
+        snprintf(path, sizeof path, "/proc/self/task/%s/schedstat", e->d_name);
+        FILE *f = fopen(path, "r");
+        if (f && fscanf(f, "%llu %llu", &run, &wait) == 2) sum += (double)wait * 1e-9;
+        if (f) fclose(f);
+    }
+    if (d) closedir(d);
+    return sum;
+}
+
 /* Starts (secs, cpu, faults; the context's profile when profiling) or, with stop, turns them
  * into elapsed values. */
 static void clock_net(net_time *t, mx_ctx *c, int p, int stop, int profile) {
     double now = mx_now(), cpu = bench_cpu_seconds(CLOCK_PROCESS_CPUTIME_ID);
     long faults = minor_faults();
+    double waited = runqueue_wait_seconds();
+    t->waited[p] = stop ? waited - t->waited[p] : waited;
     t->secs[p] = stop ? now - t->secs[p] : now;
     t->cpu[p] = stop ? cpu - t->cpu[p] : cpu;
     t->faults[p] = stop ? faults - t->faults[p] : faults;
@@ -174,8 +200,11 @@ static void report_floor(const mx_profile *pr, double wall) {
 static void report_profile(const net_time *t, int p, double peak, int threads) {
     const mx_profile *pr = &t->prof[p];
     double wall = t->secs[p], cpu = t->cpu[p], in_ops = 0;
-    printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall, %ld minor page faults\n", t->what,
-           p ? "bf16" : "fp32", wall, cpu, 100 * (threads * wall - cpu) / (threads * wall), t->faults[p]);
+    double tw = threads * wall;
+    printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall (%.1f%% waiting for a CPU that "
+           "others held, %.1f%% the call's own waits), %ld minor page faults\n",
+           t->what, p ? "bf16" : "fp32", wall, cpu, 100 * (tw - cpu) / tw, 100 * t->waited[p] / tw,
+           100 * (tw - cpu - t->waited[p]) / tw, t->faults[p]);
     for (int op = 0; op < MX_OP_COUNT; op++) in_ops += pr->op_secs[op];
     report_floor(pr, wall);
     report_gemm(pr, MX_GEMM_CONV, MX_OP_ID_conv2d, cpu, threads, peak);
