@@ -1,5 +1,6 @@
 /* The op wrappers (ops.h, generated from op_list.h), the table check, weight access, scratch
- * memory, the edges, the dry run and the ready-made context. */
+ * memory, the edges and the dry run. The ready-made context, which needs the backends, is
+ * ops/ctx.c (backend.c uses this file's tables, so this file never calls back into it). */
 #include "ops.h"
 
 #include <math.h>
@@ -7,7 +8,6 @@
 #include <string.h>
 
 #include "cpu/kernels.h"
-#include "cpu/wpack.h"
 
 float mx_w_get(mx_wptr w, size_t i) {
     switch (w.dtype) {
@@ -237,48 +237,4 @@ mx_ctx mx_ctx_fp32(const mx_ctx *c) {
     if (c->k && mx_isa_precision(c->k->isa) == MX_PREC_BF16)
         f.k = c->be && c->be->k_fp32 ? c->be->k_fp32 : mx_kernels_fp32_of(c->k);
     return f;
-}
-
-int mx_ctx_create(mx_ctx *c, int nthreads, mx_isa isa, size_t scratch_bytes, mx_status *st) {
-    return mx_ctx_create_on(c, MX_BACKEND_CPU, nthreads, isa, scratch_bytes, st);
-}
-
-int mx_ctx_create_on(mx_ctx *c, mx_backend_kind kind, int nthreads, mx_isa isa, size_t scratch_bytes,
-                     mx_status *st) {
-    memset(c, 0, sizeof *c);
-    if (mx_backend_create(&c->be, kind, isa, st)) return -1;
-    c->k = c->be->k;
-    c->pool = mx_pool_create(nthreads, st);
-    if (!c->pool) {
-        mx_ctx_destroy(c); /* the backend is already made */
-        return -1;
-    }
-    c->scratch = malloc(sizeof *c->scratch);
-    if (!c->scratch) {
-        mx_ctx_destroy(c);
-        return mx_fail(st, MX_ENOMEM, "ops context: out of memory");
-    }
-    if (mx_arena_create(c->scratch, scratch_bytes, st) != 0) {
-        free(c->scratch);
-        c->scratch = NULL;
-        mx_ctx_destroy(c);
-        return mx_fail_prefix(st, "ops context scratch");
-    }
-    return 0;
-}
-
-void mx_ctx_destroy(mx_ctx *c) {
-    if (c->scratch) {
-        mx_arena_destroy(c->scratch);
-        free(c->scratch);
-    }
-    mx_wpack_destroy(c->wpack);
-    mx_pool_destroy(c->pool);
-    mx_backend_destroy(c->be);
-    memset(c, 0, sizeof *c);
-}
-
-int mx_ctx_pack_weights(mx_ctx *c, size_t extra_bytes, int sources_mapped, mx_status *st) {
-    if (c->wpack || (c->be && c->be->kind != MX_BACKEND_CPU)) return 0;
-    return mx_wpack_create(&c->wpack, extra_bytes, sources_mapped, st);
 }

@@ -18,21 +18,18 @@
  *   [Cout, Cin, kh, kw].
  * - All ops may use ctx->pool for threads and ctx->scratch for temporary memory
  *   (they restore the scratch mark before returning). Results never depend on the thread count.
- *   Scratch the SIMD kernels take per call (floats; ops/cpu/gemm.c mx_gemm_run, attention_*.inc):
- *   linear/conv2d (M = Cout, N = Ho·Wo, K = Cin·kh·kw for conv) work in K blocks of
- *   kc = ceil(K / ceil(K / kc_max)) with kc_max = 640 on the SIMD levels and 2048 on AMX
- *   (gemm.h MX_GEMM_KC_SIMD, MX_GEMM_KC_MAX); w = a panel row's words (kc fp32, or (kc + 1) / 2
- *   bf16 pairs, on AMX rounded up to 16, twice that for the fp32-on-AMX split kernel). A: all of
- *   it, ceil(M / MR)·MR·w, when there are fewer than 32 blocks of 96 rows (every conv), else 96·w
- *   per thread. B: min(N, 4096)·w for tiles, 384 KiB per thread for column tasks, or batch·N·w
- *   for row tasks (all rounded up to whole NR panels). Plus the bias (M or N floats; a conv's
- *   ×17 where the kernel starts its sums at the bias: AVX-512, AMX); a weight
- *   packed once (wpack.h) takes none of its part. conv2d also prepares a band of input rows of
- *   at most 8 MiB (gemm_conv.c). attention: one head's packed keys (and values on the
- *   bf16 levels), about Tk·D, plus a per-thread state per block of queries (about 64 queries ×
- *   (2D + VL + 1) floats; AMX: up to 128 queries × (256 scores + 2D)); layer norm 2C floats.
- *   With less (or no) scratch they use the heap (attention: the reference), so a small arena
- *   costs speed, never correctness.
+ *   Scratch the SIMD kernels take per call: linear/conv2d, the GEMM engine (ops/cpu/gemm.c),
+ *   (A + B)·w + max(M, N) floats (AMX: + 16·M), where w = the words of a panel row: min(K, KC)
+ *   for fp32 panels, half that for bf16 ones (a k-pair per word), KC the K block (gemm.h: 640 on
+ *   the SIMD levels, 2048 on AMX); A = M rows (threads·96 when M has 32 or more blocks of 96; 0
+ *   for conv weights the context keeps packed);
+ *   B = min(N, 4096) columns, or 384 KiB per thread where each thread packs its own columns
+ *   (conv: M = Cout, N = Ho·Wo, K = Cin·kh·kw). conv2d adds the band of input rows it reads
+ *   (≤ 8 MiB, twice on AMX's fp32 layers) and, when the output takes several blocks of rows, the
+ *   weights' panels of all of K (≈ M·K floats) unless the context keeps them packed (wpack).
+ *   attention B·H·D·(Tk + 63) + threads·64·(2D + 2) floats; layer norm 2C floats. With less
+ *   (or no) scratch they use the heap, so a small arena costs speed, never correctness.
+ *   32 MiB covers SD1.5 at 512×512 (UNet with CFG batch 2, VAE mid-block attention).
  * - Output buffers must not alias inputs unless an op says "in place".
  */
 #ifndef MX_OPS_H
@@ -144,6 +141,8 @@ const mx_ctx *mx_run_ctx(const mx_ctx *c, const mx_arena *a);
 float *mx_act_alloc(mx_arena *a, size_t n, mx_status *st);
 /* A placeholder handle for the outputs of a dry run (ops on a measuring context ignore it). */
 float *mx_act_placeholder(void);
+
+/* ---- the ready-made context (ops/ctx.c) ---- */
 
 /* A ready-to-use context: best kernels, a pool of nthreads (<=0: all CPUs) and a scratch
  * arena of scratch_bytes. Free with mx_ctx_destroy. */

@@ -201,8 +201,8 @@ typedef struct {
     size_t bpack_stride;
     /* with a profile (c->prof): thread t's seconds of each part at part_secs[t·MX_GEMM_PARTS + part] */
     double *part_secs;
-    /* column tasks of a conv whose B panels of one output row are read in place (micro_rows) at
-     * these offsets (gemm_conv.c), not packed */
+    /* column tasks whose B panels are read in place (problem.rows_in_place) at these offsets,
+     * not packed */
     int rows_in_place;
     int32_t offs[MX_GEMM_KC_MAX + MX_GEMM_ROWS_AHEAD];
 } gemm_job;
@@ -276,7 +276,7 @@ static void compute_tile(const gemm_job *j, const mx_gemm_problem *p, const floa
     for (int np = np0; np < np1; np++, b += words * nr) {
         int n0 = j->n_off + np * nr, n = min_int(nr, j->n_end - n0);
         const uint32_t *half[2];
-        int in_place = j->rows_in_place && mx_gemm_conv_panel_in_place(p, j->g, n0, half);
+        int in_place = j->rows_in_place && p->panel_in_place(p, j->g, n0, half);
         for (int mp = mp0; mp < mp1; mp++) {
             int m0 = mp * mr, m = min_int(mr, p->M - m0);
             const float *ap = a + (size_t)(mp - mp0) * words * mr;
@@ -332,7 +332,7 @@ static void column_task(void *arg, int task, int thread) {
     double t0 = part_clock(j);
     const uint32_t *half[2];
     for (int np = np0; np < np1; np++)
-        if (!j->rows_in_place || !mx_gemm_conv_panel_in_place(&item, j->g, j->n_off + np * nr, half))
+        if (!j->rows_in_place || !item.panel_in_place(&item, j->g, j->n_off + np * nr, half))
             item.pack_b(&item, j->g, bbuf + (size_t)(np - np0) * words * nr, j->n_off + np * nr, nr, j->k0, j->kc);
     double t1 = part_clock(j);
     add_part(j, thread, MX_GEMM_PACK_B, t0, t1);
@@ -475,6 +475,7 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float),
                          g->to_pairs ? 2 : 4, mx_dtype_size(w.dtype));
     if (!f.dst) return NULL;
+    mx_wpack_fetch_source(c->wpack, w.data, source_bytes);
     fill_blocks(c, &f, operand_b);
     mx_wpack_release_source(c->wpack, w.data, source_bytes);
     return f.dst;
@@ -515,8 +516,8 @@ static void run_k_block(const mx_ctx *c, gemm_job *j, const mx_gemm_problem *p, 
         plan_tiles(j);
         if (j->split == GEMM_COLUMNS) {
             j->nc_panels = column_panels(g, j->kc_max);
-            j->rows_in_place = p->image && j->mpanels <= ROWS_IN_PLACE_PANELS_MAX &&
-                               mx_gemm_conv_rows_in_place(p, g, j->k0, j->kc, j->offs);
+            j->rows_in_place = p->rows_in_place && j->mpanels <= ROWS_IN_PLACE_PANELS_MAX &&
+                               p->rows_in_place(p, g, j->k0, j->kc, j->offs);
             mx_par_for(c, p->batch * ceil_div(j->npanels, j->nc_panels), column_task, j);
         } else {
             mx_par_for(c, p->batch * ceil_div(j->npanels, PACK_PANELS_PER_TASK), pack_b_items_task, j);

@@ -135,6 +135,15 @@ struct mx_gemm_problem {
     /* a split kernel's packers (pack_a = mx_gemm_pack_a_split, pack_b likewise): the high and
      * the low part's, in split_of's format */
     mx_gemm_pack_fn split_a[2], split_b[2];
+    /* NULL, or B panels read in place by the kernel's micro_rows instead of packed (conv,
+     * gemm_conv.c: a panel of pixels of one output row is rows of the band). rows_in_place
+     * fills offs[s] for the steps s of the K block k0..k0+kc, the word offset of B's row s from
+     * the panel's address (+ MX_GEMM_ROWS_AHEAD copies of the last), and returns 1, or returns 0
+     * where B must be packed. panel_in_place returns 1 when each half of the panel of columns
+     * first..first+nr can be read in place, half[h] then its address (row s of B: nr/2 words at
+     * half[0] + offs[s], nr/2 at half[1] + offs[s]); else 0. */
+    int (*rows_in_place)(const mx_gemm_problem *p, const mx_gemm_kernel *g, int k0, int kc, int32_t *offs);
+    int (*panel_in_place)(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first, const uint32_t *half[2]);
 };
 
 /* Packs rows of a row-major matrix (a_mat for pack_a, b_mat for pack_b: element (r, k) at
@@ -162,16 +171,6 @@ void mx_gemm_pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void
                          int k0, int kc);
 void mx_gemm_pack_b_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int cols,
                          int k0, int kc);
-/* conv, B read in place by the kernel's micro_rows (stride 1; not on a band of fp32 inputs
- * paired per panel): offs[s] for the steps s of the K block k0..k0+kc, the word offset of B's
- * row s in a panel from the panel's address (+ MX_GEMM_ROWS_AHEAD copies of the last); 0 where
- * B must be packed. */
-int mx_gemm_conv_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int k0, int kc, int32_t *offs);
-/* 1 when each half of the panel of columns first..first+nr is pixels of one output row: half[h]
- * is then its address in the band (row s of B: nr/2 words at half[0] + offs[s], nr/2 at
- * half[1] + offs[s]); else 0. */
-int mx_gemm_conv_panel_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first,
-                                const uint32_t *half[2]);
 /* The packers of a split kernel (split_of): the panel's high part by problem.split_a[0] (or
  * split_b[0]), then its low part by split_a[1] (split_b[1]). */
 void mx_gemm_pack_a_split(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,

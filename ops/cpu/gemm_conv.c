@@ -216,7 +216,8 @@ void mx_gemm_pack_b_conv_lo(const mx_gemm_problem *p, const mx_gemm_kernel *g, v
 
 /* ---- B read in place (the kernel's micro_rows): a panel of one output row needs no copy ---- */
 
-int mx_gemm_conv_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int k0, int kc, int32_t *offs) {
+/* problem.rows_in_place (gemm.h): stride 1, not on a band of fp32 inputs paired per panel. */
+static int band_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int k0, int kc, int32_t *offs) {
     if (!g->micro_rows || p->stride != 1 || p->band_fp32 || p->band_plane * (size_t)p->chans > INT32_MAX) return 0;
     int nq = (kc + k_per_word(g) - 1) / k_per_word(g);
     k_pos at = k_pos_of(p, k0 / k_per_word(g));
@@ -228,8 +229,8 @@ int mx_gemm_conv_rows_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g
     return 1;
 }
 
-int mx_gemm_conv_panel_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first,
-                                const uint32_t *half[2]) {
+/* problem.panel_in_place (gemm.h): each half of the panel within one output row. */
+static int band_panel_in_place(const mx_gemm_problem *p, const mx_gemm_kernel *g, int first, const uint32_t *half[2]) {
     int w = g->nr / 2;
     if (first + g->nr > p->N) return 0;
     for (int h = 0; h < 2; h++) { /* e.g. a 16-wide image: a panel is two rows */
@@ -290,7 +291,7 @@ static void prepare_band_task(void *arg, int task, int thread) {
  * pairs, K blocks of 576); groups of one word where even that is longer (then split over K
  * blocks). Groups of half that (B panels of 160 words, 20 KiB, that stay in L1 beside A) were
  * measured no faster on Zen 5. */
-static int group_words(int chans, int k_word, int taps, int kc) {
+static int channel_group_words(int chans, int k_word, int taps, int kc) {
     int most = kc / (taps * k_word);
     if (most < 1 || chans < 1) return 1;
     int groups = (chans + most - 1) / most;
@@ -352,7 +353,7 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
                    mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
     if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
-    int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = group_words(chans, k_per_word(g), taps, mx_gemm_kc(g));
+    int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = channel_group_words(chans, k_per_word(g), taps, mx_gemm_kc(g));
     int span = group * k_per_word(g) * taps; /* K blocks of whole groups, where a group fits one */
     /* no padding: the input rows are already a band (fp32; on pairs a 1×1 stride-1 conv) */
     int direct = pad == 0 && (!g->to_pairs || (taps == 1 && stride == 1)), split = g->split_of != NULL;
@@ -363,6 +364,7 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
                          .bias = bias, .bias_per_row = 1, .Cin = Cin,
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
                          .band_width = width, .band_fp32 = direct && g->to_pairs,
+                         .rows_in_place = band_rows_in_place, .panel_in_place = band_panel_in_place,
                          .kc_block = span <= mx_gemm_kc(g) ? span : mx_gemm_kc(g)};
     if (split) {
         use_split_kernel(&p);

@@ -142,6 +142,16 @@ float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t p
     return p;
 }
 
+/* The file's readahead of source[0 .. source_bytes), all of it at once: what the packers would
+ * otherwise fault in a readahead window at a time, each fault waiting for its read (a packed
+ * source was given back, so a weight is read from the disk at every first call). */
+void mx_wpack_fetch_source(const mx_wpack *w, const void *source, size_t source_bytes) {
+    if (!w->sources_mapped || source_bytes == 0) return;
+    uintptr_t page = (uintptr_t)sysconf(_SC_PAGESIZE), lo = (uintptr_t)source / page * page;
+    /* advice only: a failure changes nothing but the time the packers wait */
+    (void)madvise((void *)lo, (uintptr_t)source + source_bytes - lo, MADV_WILLNEED);
+}
+
 void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes) {
 #ifdef MADV_PAGEOUT
     if (!w->sources_mapped) return;

@@ -38,6 +38,9 @@ const float *mx_wpack_find(const mx_wpack *w, const mx_wpack_key *key);
  * whose elements take panel_elem bytes from weights whose elements take source_elem; NULL when
  * its excess would pass the budget or no memory could be had (the caller packs per call then). */
 float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem);
+/* Called before an entry is filled from source[0 .. source_bytes): starts reading the source's
+ * pages from the file in one go when the weights are mapped from a file. */
+void mx_wpack_fetch_source(const mx_wpack *w, const void *source, size_t source_bytes);
 /* Called once an entry is filled from source[0 .. source_bytes): hands the source's whole
  * pages back to the kernel when the weights are mapped from a file. */
 void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes);

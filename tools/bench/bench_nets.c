@@ -12,11 +12,14 @@
  * time of the call (what survives other people's load on a shared machine): each op, the GEMM's
  * parts (micro-kernel with the bias it adds, packing of A and B — B is the input band of a conv —,
  * the rest: task setup, waiting at the end of a phase), the micro-kernel's own GFLOP/s, the cores'
- * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one) and
+ * idle time (threads × wall − CPU: idle on a quiet machine, also preempted on a loaded one; the
+ * call's line splits off the time its threads waited on the run queue, so that what is left is
+ * its own idle time — joins, serial parts — even on a shared machine) and
  * the minor page faults. The timers read a CPU clock a few times per GEMM task and twice per op
  * (well under 1 % here); --no-profile runs without.
- * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--no-profile]
+ * Usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] [--skip-unet] [--no-profile]
  *                   [--batch 1|2] (2, the default: a default job's CFG calls; 1: --fast's) */
+#include <dirent.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -61,6 +64,7 @@ typedef struct net_time {
     const char *what;
     double first[2]; /* wall seconds of the untimed first call (packs the weights, touches the arena) */
     double secs[2], cpu[2], flops;
+    double waited[2]; /* seconds its threads waited for a CPU while runnable (runqueue_wait_seconds) */
     long faults[2];
     mx_profile prof[2];
 } net_time;
@@ -85,11 +89,33 @@ static long minor_faults(void) {
     return ru.ru_minflt;
 }
 
+/* Seconds the process's threads have waited for a CPU while runnable (their time on the run
+ * queue: other processes' load on a shared machine, not this one's joins), summed over its threads
+ * (/proc/self/task/N/schedstat, second field, ns); 0 where the kernel does not report it. */
+static double runqueue_wait_seconds(void) {
+    DIR *d = opendir("/proc/self/task");
+    double sum = 0;
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+        char path[300];
+        unsigned long long run, wait;
+        if (e->d_name[0] == '.') continue;
+        snprintf(path, sizeof path, "/proc/self/task/%s/schedstat", e->d_name);
+        FILE *f = fopen(path, "r");
+        if (f && fscanf(f, "%llu %llu", &run, &wait) == 2) sum += (double)wait * 1e-9;
+        if (f) fclose(f);
+    }
+    if (d) closedir(d);
+    return sum;
+}
+
 /* Starts (secs, cpu, faults; the context's profile when profiling) or, with stop, turns them
  * into elapsed values. */
 static void clock_net(net_time *t, mx_ctx *c, int p, int stop, int profile) {
     double now = mx_now(), cpu = bench_cpu_seconds(CLOCK_PROCESS_CPUTIME_ID);
     long faults = minor_faults();
+    double waited = runqueue_wait_seconds();
+    t->waited[p] = stop ? waited - t->waited[p] : waited;
     t->secs[p] = stop ? now - t->secs[p] : now;
     t->cpu[p] = stop ? cpu - t->cpu[p] : cpu;
     t->faults[p] = stop ? faults - t->faults[p] : faults;
@@ -175,8 +201,11 @@ static void report_floor(const mx_profile *pr, double wall) {
 static void report_profile(const net_time *t, int p, double peak, int threads) {
     const mx_profile *pr = &t->prof[p];
     double wall = t->secs[p], cpu = t->cpu[p], in_ops = 0;
-    printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall, %ld minor page faults\n", t->what,
-           p ? "bf16" : "fp32", wall, cpu, 100 * (threads * wall - cpu) / (threads * wall), t->faults[p]);
+    double tw = threads * wall;
+    printf("%s, %s: %.2f s wall, %.2f s CPU, cores idle %.1f%% of threads x wall (%.1f%% waiting for a CPU that "
+           "others held, %.1f%% the call's own waits), %ld minor page faults\n",
+           t->what, p ? "bf16" : "fp32", wall, cpu, 100 * (tw - cpu) / tw, 100 * t->waited[p] / tw,
+           100 * (tw - cpu - t->waited[p]) / tw, t->faults[p]);
     for (int op = 0; op < MX_OP_COUNT; op++) in_ops += pr->op_secs[op];
     report_floor(pr, wall);
     report_gemm(pr, MX_GEMM_CONV, MX_OP_ID_conv2d, cpu, threads, peak);
@@ -198,7 +227,7 @@ static void report_profile(const net_time *t, int p, double peak, int threads) {
 }
 
 typedef struct bench_opts {
-    int threads, skip_vae, skip_cn, profile;
+    int threads, skip_vae, skip_cn, skip_unet, profile;
     int batch; /* 2: CFG's calls (the default job); 1: --fast's */
     const char *weights;
 } bench_opts;
@@ -302,7 +331,7 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
     mx_unet_input ui = {.sample = sample, .timesteps = ts, .encoder_hidden_states = ehs, .B = B, .H = H, .W = W, .T = T,
                         .down_residuals = o->skip_cn ? NULL : (const float *const *)res,
                         .mid_residual = o->skip_cn ? NULL : res[nres]};
-    for (int p = 0; p < nprec; p++) {
+    for (int p = 0; p < nprec && !o->skip_unet; p++) {
         nt_unet.first[p] = mx_now();
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
         nt_unet.first[p] = mx_now() - nt_unet.first[p];
@@ -336,17 +365,18 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
            "GFLOP/s", "peak", "bf16 s", "GFLOP/s", "peak", "wall", "cpu");
     if (!o->skip_cn) report(&nt_cn, peak, nth);
     if (!o->skip_cn) report(&nt_cn_step, peak, nth);
-    report(&nt_unet, peak, nth);
-    if (cfg) report(&nt_unet_cfg, peak, nth);
+    if (!o->skip_unet) report(&nt_unet, peak, nth);
+    if (!o->skip_unet && cfg) report(&nt_unet_cfg, peak, nth);
     if (!o->skip_vae) report(&nt_vae, peak, nth);
-    report_first_calls((const net_time *[]){o->skip_cn ? NULL : &nt_cn, &nt_unet, o->skip_vae ? NULL : &nt_vae}, c, nprec);
+    report_first_calls((const net_time *[]){o->skip_cn ? NULL : &nt_cn, o->skip_unet ? NULL : &nt_unet,
+                                            o->skip_vae ? NULL : &nt_vae}, c, nprec);
     if (o->profile) {
         printf("where the time went (shares of each call's CPU time, all threads):\n");
         for (int p = 0; p < nprec; p++) {
             if (!o->skip_cn) report_profile(&nt_cn, p, peak[p], nth);
             if (!o->skip_cn) report_profile(&nt_cn_step, p, peak[p], nth);
-            report_profile(&nt_unet, p, peak[p], nth);
-            if (cfg) report_profile(&nt_unet_cfg, p, peak[p], nth);
+            if (!o->skip_unet) report_profile(&nt_unet, p, peak[p], nth);
+            if (!o->skip_unet && cfg) report_profile(&nt_unet_cfg, p, peak[p], nth);
             if (!o->skip_vae) report_profile(&nt_vae, p, peak[p], nth);
         }
     }
@@ -406,11 +436,12 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--skip-vae")) o.skip_vae = 1;
         else if (!strcmp(argv[i], "--skip-controlnet")) o.skip_cn = 1;
+        else if (!strcmp(argv[i], "--skip-unet")) o.skip_unet = 1;
         else if (!strcmp(argv[i], "--no-profile")) o.profile = 0;
         else if (!strcmp(argv[i], "--batch") && i + 1 < argc && (o.batch = atoi(argv[++i])) >= 1 && o.batch <= 2) continue;
         else {
             fprintf(stderr, "usage: bench_nets [--threads N] [--weights PATH] [--skip-vae] [--skip-controlnet] "
-                            "[--no-profile] [--batch 1|2]\n");
+                            "[--skip-unet] [--no-profile] [--batch 1|2]\n");
             return 2;
         }
     }
