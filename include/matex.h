@@ -135,7 +135,7 @@ typedef struct matex_options {
     int batch;                    /* most views generated in one batch */
     float guidance;               /* classifier-free guidance scale */
     float grid_depth_weight;      /* depth control weight of the grid */
-    float depth_weight[2];        /* depth control weight of the first, last later view */
+    float depth_weight[2];        /* depth control weight of the first, last later view (enhance: [0], every view) */
     float inpaint_weight[2];      /* inpainting control weight of the first, last later view */
     float frontal_threshold;      /* min |n.v| of a backprojected pixel */
     float coverage_stop;          /* stop adding views at this painted fraction */
