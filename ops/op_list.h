@@ -12,7 +12,9 @@
  *   it must move at least: its fp32 inputs read once, its outputs written once, weights at
  *   their stored size; read only when a profile is on (the roofline floor of bench_nets).
  * A new op: a line here (with its semantics), its scalar reference mx_<name>_ref in ops/cpu, its
- * CUDA kernel mx_cuda_<name> in ops/cuda, its tests. Faster CPU kernels are optional (dispatch.c).
+ * CUDA kernel mx_cuda_<name> in ops/cuda, its tests; an op with a weight (mx_wptr) also its strict
+ * wrapper in ops/backend.c (tests/test_ops_strict_wrappers.c fails without it). Faster CPU kernels
+ * are optional (dispatch.c).
  *
  * Conventions of all ops: ops.h. Output buffers never alias inputs unless an op says "in place". */
 #ifndef MX_OP_LIST_H
