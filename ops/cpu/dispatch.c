@@ -2,7 +2,8 @@
  * ones it lists as its own: MX_<LEVEL>_KERNELS below is the previous level's macro followed by
  * designated initializers of its own kernels, and a later initializer of a field replaces an
  * earlier one (C11 6.7.9 §19). The chain starts at the scalar level, generated from op_list.h,
- * so every table is full by construction (test_ops_backend checks every compiled table anyway: full, and each entry a kernel of its own op at the table's level or below).
+ * so every table is full by construction (test_ops_backend checks every compiled table anyway:
+ * full, and each entry a kernel of its own op at the table's level or below).
  * A new level: its MX_<LEVEL>_KERNELS, its table, its case in mx_kernels_compiled
  * (docs/DESIGN.md §4). */
 #include "kernels.h"
