@@ -1,6 +1,7 @@
 /* The network registry (pipeline/nn/registry.h) against the one list of networks
  * (weights/networks.h): every entry carries the four operations and names a listed network,
- * every listed network has an entry, names are unique, lookups find what they should. */
+ * every listed network has an entry, names are unique, lookups find what they should; every entry
+ * declares its tensors as slots (an input and an output at least, no name twice). */
 #include <stdio.h>
 #include <string.h>
 
@@ -10,7 +11,13 @@
 static void test_entries_complete(void) {
     for (size_t i = 0; i < mx_net_count; i++) {
         const mx_net_def *d = &mx_nets[i];
-        CHECK(d->name && d->help && d->load && d->arena_bytes && d->run && d->free);
+        CHECK(d->name && d->help && d->slots && d->load && d->arena_bytes && d->run && d->free);
+        int ins = 0, outs = 0;
+        for (const mx_net_slot *p = d->slots; p->name; p++) {
+            ins += !(p->flags & MX_SLOT_OUT), outs += (p->flags & MX_SLOT_OUT) != 0;
+            for (const mx_net_slot *q = d->slots; q < p; q++) CHECK(strcmp(p->name, q->name) != 0);
+        }
+        CHECK(ins > 0 && (outs > 0 || d->more_slots)); /* controlnet's outputs all come from its config */
         CHECK(mx_net_kind_named(d->kind) != NULL); /* the kind is one of the list's */
         CHECK(mx_net_named(d->name) == d);           /* names are unique */
         /* the entries of one network share its load and free */

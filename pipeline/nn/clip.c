@@ -179,10 +179,29 @@ int mx_clip_load_config(void **net, const char *text, size_t len, const char *wh
     return mx_clip_config_parse(&cfg, text, len, what, st) ? -1 : mx_clip_load((mx_clip **)net, &cfg, b, st);
 }
 
-/* run-net clip: input_ids [B,T] -> last_hidden_state, pooler_output, hidden_states.{i}. */
+/* run-net clip: input_ids [B,T] -> last_hidden_state, pooler_output, hidden_states.{i} (slot
+ * CLIP_HIDDEN + i, i = 0..num_hidden_layers). */
+enum { CLIP_IDS, CLIP_LAST, CLIP_POOLED, CLIP_HIDDEN };
+const mx_net_slot mx_clip_slots[] = {
+    [CLIP_IDS] = {"input_ids", MX_SLOT_IN},
+    [CLIP_LAST] = {"last_hidden_state", MX_SLOT_OUT},
+    [CLIP_POOLED] = {"pooler_output", MX_SLOT_OUT},
+    [CLIP_HIDDEN] = {NULL, 0},
+};
+
+int mx_clip_more_slots(const void *net, mx_net_slots *s, mx_status *st) {
+    const mx_clip *m = net;
+    for (int i = 0; i <= m->cfg.num_hidden_layers; i++) {
+        char name[48];
+        snprintf(name, sizeof name, "hidden_states.%d", i);
+        if (mx_net_slots_add(s, name, MX_SLOT_OUT, st)) return -1;
+    }
+    return 0;
+}
+
 static int input_ids_shape(const mx_clip *m, mx_net_io *io, int64_t is[2], mx_status *st) {
     is[0] = is[1] = -1;
-    if (io->shape(io, "input_ids", 2, is, st)) return -1;
+    if (io->shape(io, CLIP_IDS, 2, is, st)) return -1;
     if (is[1] > m->cfg.max_position_embeddings)
         return mx_fail(st, MX_EINPUT, "%s: input_ids has %lld tokens, the model takes at most %d", io->source,
                        (long long)is[1], m->cfg.max_position_embeddings);
@@ -198,7 +217,7 @@ int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a,
     const mx_clip *m = net;
     int L = m->cfg.num_hidden_layers, C = m->cfg.hidden_size, rc = -1;
     int64_t is[2];
-    const float *idf = input_ids_shape(m, io, is, st) ? NULL : io->host(io, "input_ids", 2, is, st);
+    const float *idf = input_ids_shape(m, io, is, st) ? NULL : io->host(io, CLIP_IDS, 2, is, st);
     if (!idf) return -1;
     int B = (int)is[0], T = (int)is[1];
     float **hs = calloc((size_t)L + 1, sizeof *hs), *last, *pooled;
@@ -209,14 +228,11 @@ int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a,
     }
     for (size_t i = 0; i < (size_t)B * T; i++) ids[i] = (int32_t)idf[i];
     int64_t hshape[3] = {B, T, C}, pshape[2] = {B, C};
-    if (!(last = io->output(io, "last_hidden_state", 3, hshape, st)) ||
-        !(pooled = io->output(io, "pooler_output", 2, pshape, st)))
+    if (!(last = io->output(io, CLIP_LAST, 3, hshape, st)) ||
+        !(pooled = io->output(io, CLIP_POOLED, 2, pshape, st)))
         goto done;
-    for (int i = 0; i <= L; i++) {
-        char name[48];
-        snprintf(name, sizeof name, "hidden_states.%d", i);
-        if (!(hs[i] = io->output(io, name, 3, hshape, st))) goto done;
-    }
+    for (int i = 0; i <= L; i++)
+        if (!(hs[i] = io->output(io, CLIP_HIDDEN + i, 3, hshape, st))) goto done;
     if (mx_clip_forward(m, c, a, ids, B, T, last, pooled, hs, st)) goto done;
     rc = 0;
 done:

@@ -68,5 +68,8 @@ int mx_clip_forward(const mx_clip *m, const mx_ctx *c, mx_arena *arena, const in
 int mx_clip_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
 int mx_clip_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
 int mx_clip_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
+/* Its slots (registry.h): the static table, and hidden_states.{i} after it. */
+extern const mx_net_slot mx_clip_slots[];
+int mx_clip_more_slots(const void *net, mx_net_slots *s, mx_status *st);
 
 #endif

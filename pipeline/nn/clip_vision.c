@@ -208,6 +208,15 @@ int mx_clip_vision_load_config(void **net, const char *text, size_t len, const c
 }
 
 /* run-net clip-vision: pixel_values [B,3,S,S] -> image_embeds, last_hidden_state, penultimate_hidden_state. */
+enum { CV_PIXELS, CV_EMBEDS, CV_LAST, CV_PENULT, CV_N };
+const mx_net_slot mx_clip_vision_slots[] = {
+    [CV_PIXELS] = {"pixel_values", MX_SLOT_IN},
+    [CV_EMBEDS] = {"image_embeds", MX_SLOT_OUT},
+    [CV_LAST] = {"last_hidden_state", MX_SLOT_OUT},
+    [CV_PENULT] = {"penultimate_hidden_state", MX_SLOT_OUT},
+    [CV_N] = {NULL, 0},
+};
+
 static void pixel_shape(const mx_clip_vision *m, int64_t ps[4]) {
     ps[0] = -1, ps[1] = m->cfg.num_channels, ps[2] = ps[3] = m->cfg.image_size;
 }
@@ -215,7 +224,7 @@ static void pixel_shape(const mx_clip_vision *m, int64_t ps[4]) {
 int mx_clip_vision_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
     int64_t ps[4];
     pixel_shape(net, ps);
-    return io->shape(io, "pixel_values", 4, ps, st) ? -1 : mx_clip_vision_arena_bytes(net, (int)ps[0], bytes, st);
+    return io->shape(io, CV_PIXELS, 4, ps, st) ? -1 : mx_clip_vision_arena_bytes(net, (int)ps[0], bytes, st);
 }
 
 int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
@@ -223,13 +232,13 @@ int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_ar
     const mx_clip_vision_config *cfg = &m->cfg;
     int64_t ps[4];
     pixel_shape(m, ps);
-    const float *pixels = mx_net_io_input(io, "pixel_values", 4, ps, st);
+    const float *pixels = mx_net_io_input(io, CV_PIXELS, 4, ps, st);
     if (!pixels) return -1;
     int B = (int)ps[0], T = mx_clip_vision_tokens(cfg);
     int64_t es[2] = {B, cfg->projection_dim}, hs[3] = {B, T, cfg->hidden_size};
     float *embeds, *last, *penult;
-    if (!(embeds = io->output(io, "image_embeds", 2, es, st)) || !(last = io->output(io, "last_hidden_state", 3, hs, st)) ||
-        !(penult = io->output(io, "penultimate_hidden_state", 3, hs, st)))
+    if (!(embeds = io->output(io, CV_EMBEDS, 2, es, st)) || !(last = io->output(io, CV_LAST, 3, hs, st)) ||
+        !(penult = io->output(io, CV_PENULT, 3, hs, st)))
         return -1;
     return mx_clip_vision_forward(m, c, a, pixels, B, embeds, last, penult, st);
 }

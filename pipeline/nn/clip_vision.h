@@ -80,5 +80,6 @@ int mx_clip_vision_load_config(void **net, const char *text, size_t len, const c
                                mx_status *st);
 int mx_clip_vision_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
 int mx_clip_vision_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
+extern const mx_net_slot mx_clip_vision_slots[]; /* its slots (registry.h) */
 
 #endif

@@ -241,12 +241,26 @@ int mx_controlnet_load_config(void **net, const char *text, size_t len, const ch
 }
 
 /* run-net controlnet: sample, timestep, encoder_hidden_states, controlnet_cond, optional
- * conditioning_scale -> the residuals. */
+ * conditioning_scale -> the residuals (CN_RES + i, the mid block's last). */
+enum { CN_SAMPLE, CN_TIMESTEP, CN_HIDDEN, CN_COND, CN_SCALE, CN_RES };
+const mx_net_slot mx_controlnet_slots[] = {
+    [CN_SAMPLE] = {"sample", MX_SLOT_IN},
+    [CN_TIMESTEP] = {"timestep", MX_SLOT_IN},
+    [CN_HIDDEN] = {"encoder_hidden_states", MX_SLOT_IN},
+    [CN_COND] = {"controlnet_cond", MX_SLOT_IN},
+    [CN_SCALE] = {"conditioning_scale", MX_SLOT_IN | MX_SLOT_OPTIONAL},
+    [CN_RES] = {NULL, 0},
+};
+
+int mx_controlnet_more_slots(const void *net, mx_net_slots *s, mx_status *st) {
+    return mx_unet_residual_slots(mx_controlnet_cfg(net), MX_SLOT_OUT, s, st);
+}
+
 static int conditioning_shapes(const mx_unet_config *cfg, mx_net_io *io, int64_t ss[4], int64_t es[3], mx_status *st) {
     ss[0] = ss[2] = ss[3] = -1, ss[1] = cfg->in_channels;
-    if (io->shape(io, "sample", 4, ss, st)) return -1;
+    if (io->shape(io, CN_SAMPLE, 4, ss, st)) return -1;
     es[0] = ss[0], es[1] = -1, es[2] = cfg->cross_attention_dim;
-    return io->shape(io, "encoder_hidden_states", 3, es, st);
+    return io->shape(io, CN_HIDDEN, 3, es, st);
 }
 
 int mx_controlnet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
@@ -261,26 +275,24 @@ int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_are
     int n = mx_unet_num_residuals(cfg), f = 1 << (cfg->n_cond_emb - 1), C, h, w;
     int64_t ss[4], es[3], one[1] = {1};
     if (conditioning_shapes(cfg, io, ss, es, st)) return -1;
-    mx_controlnet_input in = {.sample = mx_net_io_input(io, "sample", 4, ss, st), .scale = 1.0f};
+    mx_controlnet_input in = {.sample = mx_net_io_input(io, CN_SAMPLE, 4, ss, st), .scale = 1.0f};
     if (!in.sample) return -1;
-    if (!(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st))) return -1;
+    if (!(in.encoder_hidden_states = mx_net_io_input(io, CN_HIDDEN, 3, es, st))) return -1;
     in.B = (int)ss[0], in.H = (int)ss[2], in.W = (int)ss[3], in.T = (int)es[1];
-    if (!(in.timesteps = mx_net_io_timesteps(io, in.B, st))) return -1;
+    if (!(in.timesteps = mx_net_io_timesteps(io, CN_TIMESTEP, in.B, st))) return -1;
     int64_t cs[4] = {in.B, cfg->conditioning_channels, ss[2] * f, ss[3] * f};
-    if (!(in.cond = mx_net_io_input(io, "controlnet_cond", 4, cs, st))) return -1;
-    if (io->has(io, "conditioning_scale")) {
-        const float *scale = io->host(io, "conditioning_scale", 1, one, st);
+    if (!(in.cond = mx_net_io_input(io, CN_COND, 4, cs, st))) return -1;
+    if (mx_net_io_has(io, CN_SCALE)) {
+        const float *scale = io->host(io, CN_SCALE, 1, one, st);
         if (!scale) return -1;
         in.scale = scale[0];
     }
     if (check_cond_sizes(cfg, &in, st)) return -1;
     float *down[MX_UNET_MAX_RES + 1];
     for (int i = 0; i <= n; i++) {
-        char name[48];
-        mx_unet_residual_name(name, sizeof name, cfg, i);
         mx_unet_residual_shape(cfg, i, in.H, in.W, &C, &h, &w);
         int64_t rs[4] = {in.B, C, h, w};
-        if (!(down[i] = io->output(io, name, 4, rs, st))) return -1;
+        if (!(down[i] = io->output(io, CN_RES + i, 4, rs, st))) return -1;
     }
     return mx_controlnet_forward(c, m, &in, down, down[n], 0, a, st);
 }

@@ -51,5 +51,8 @@ int mx_controlnet_load_config(void **net, const char *text, size_t len, const ch
                               mx_status *st);
 int mx_controlnet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
 int mx_controlnet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
+/* Its slots (registry.h): the static table, and the residual outputs after it. */
+extern const mx_net_slot mx_controlnet_slots[];
+int mx_controlnet_more_slots(const void *net, mx_net_slots *s, mx_status *st);
 
 #endif

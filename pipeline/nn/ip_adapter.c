@@ -143,9 +143,16 @@ int mx_ip_adapter_load_config(void **net, const char *text, size_t len, const ch
 }
 
 /* run-net ip-adapter: image_embeds [B, n_images, E] -> image_tokens [B, n_images, num_tokens, D]. */
+enum { IP_EMBEDS, IP_TOKENS, IP_N };
+const mx_net_slot mx_ip_adapter_slots[] = {
+    [IP_EMBEDS] = {"image_embeds", MX_SLOT_IN},
+    [IP_TOKENS] = {"image_tokens", MX_SLOT_OUT},
+    [IP_N] = {NULL, 0},
+};
+
 static int embeds_shape(const mx_ip_adapter *ad, mx_net_io *io, int64_t es[3], mx_status *st) {
     es[0] = es[1] = -1, es[2] = ad->embed_dim;
-    if (io->shape(io, "image_embeds", 3, es, st)) return -1;
+    if (io->shape(io, IP_EMBEDS, 3, es, st)) return -1;
     return es[0] * es[1] > MAX_DIM ? mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld embeddings (at most %d)", io->source,
                                              (long long)(es[0] * es[1]), MAX_DIM)
                                    : 0;
@@ -159,8 +166,8 @@ int mx_ip_adapter_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_sta
 int mx_ip_adapter_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_ip_adapter *ad = net;
     int64_t es[3];
-    const float *embeds = embeds_shape(ad, io, es, st) ? NULL : mx_net_io_input(io, "image_embeds", 3, es, st);
+    const float *embeds = embeds_shape(ad, io, es, st) ? NULL : mx_net_io_input(io, IP_EMBEDS, 3, es, st);
     int64_t ts[4] = {es[0], es[1], ad->num_tokens, ad->cross_dim};
-    float *tokens = embeds ? io->output(io, "image_tokens", 4, ts, st) : NULL;
+    float *tokens = embeds ? io->output(io, IP_TOKENS, 4, ts, st) : NULL;
     return tokens ? mx_ip_adapter_tokens(c, ad, embeds, (int)(es[0] * es[1]), tokens, a, st) : -1;
 }

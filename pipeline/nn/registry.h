@@ -6,7 +6,9 @@
  *                free, also after a failure);
  *   arena_bytes  the activation arena one run on io's inputs needs (from their shapes);
  *   run          the run: inputs from io, outputs declared on io, activations on arena a of
- *                arena_bytes;
+ *                arena_bytes; both address the tensors by slot index only, the names (the
+ *                entry's slots, plus more_slots' from the loaded config) resolved once by
+ *                mx_net_bind;
  *   free         the loaded network.
  *
  * The list of networks (their names = weight-file prefixes, config classes) is
@@ -42,6 +44,9 @@ typedef struct mx_net_def {
     const char *kind; /* MX_NET_VAE: the network of weights/networks.h it runs */
     const char *help; /* its tensors, "latents [B,4,h,w] (unscaled) -> image" (lines after the first
                          indented by 15 spaces, under the usage's column) */
+    const mx_net_slot *slots; /* its inputs and outputs, NULL-terminated: slot i = slots[i] */
+    /* The slots its loaded network's config adds after those (NULL: none). */
+    int (*more_slots)(const void *net, mx_net_slots *s, mx_status *st);
     mx_net_load_fn load;
     mx_net_arena_fn arena_bytes;
     mx_net_run_fn run;
@@ -50,6 +55,11 @@ typedef struct mx_net_def {
 
 extern const mx_net_def mx_nets[];
 extern const size_t mx_net_count;
+
+/* The slots of def's run on net into s (freed by mx_net_slots_free, also after a failure), each
+ * input resolved through io->find; a required input the call lacks is refused, naming it. Sets
+ * io->slots = s: from here on arena_bytes and run address the tensors by slot index. */
+int mx_net_bind(const mx_net_def *def, const void *net, mx_net_io *io, mx_net_slots *s, mx_status *st);
 
 /* The entry named `name` ("vae-decode"), or NULL. */
 const mx_net_def *mx_net_named(const char *name);

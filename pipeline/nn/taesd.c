@@ -269,8 +269,21 @@ int mx_taesd_load_config(void **net, const char *text, size_t len, const char *w
     return mx_taesd_config_parse(&cfg, text, len, what, st) ? -1 : mx_taesd_load((mx_taesd **)net, &cfg, b, st);
 }
 
-/* image -> latents (encode) or latents -> image (decode), one input and one output: its shape
- * (-1 where any size goes). */
+/* image -> latents (encode) or latents -> image (decode): one input (slot TAESD_IN) and one
+ * output (slot TAESD_OUT). */
+enum { TAESD_IN, TAESD_OUT, TAESD_N };
+const mx_net_slot mx_taesd_encode_slots[] = {
+    [TAESD_IN] = {"image", MX_SLOT_IN},
+    [TAESD_OUT] = {"latents", MX_SLOT_OUT},
+    [TAESD_N] = {NULL, 0},
+};
+const mx_net_slot mx_taesd_decode_slots[] = {
+    [TAESD_IN] = {"latents", MX_SLOT_IN},
+    [TAESD_OUT] = {"image", MX_SLOT_OUT},
+    [TAESD_N] = {NULL, 0},
+};
+
+/* The input's shape (-1 where any size goes). */
 static void input_shape(const mx_taesd *t, int decode, int64_t is[4]) {
     is[0] = is[2] = is[3] = -1;
     is[1] = decode ? t->cfg.latent_channels : t->cfg.in_channels;
@@ -279,7 +292,7 @@ static void input_shape(const mx_taesd *t, int decode, int64_t is[4]) {
 static int arena_io(const mx_taesd *t, int decode, mx_net_io *io, size_t *bytes, mx_status *st) {
     int64_t is[4];
     input_shape(t, decode, is);
-    if (io->shape(io, decode ? "latents" : "image", 4, is, st)) return -1;
+    if (io->shape(io, TAESD_IN, 4, is, st)) return -1;
     int B = (int)is[0], H = (int)is[2], W = (int)is[3];
     return decode ? mx_taesd_decode_arena_bytes(t, B, H, W, bytes, st) : mx_taesd_encode_arena_bytes(t, B, H, W, bytes, st);
 }
@@ -287,12 +300,12 @@ static int arena_io(const mx_taesd *t, int decode, mx_net_io *io, size_t *bytes,
 static int run_io(const mx_ctx *c, const mx_taesd *t, int decode, mx_net_io *io, mx_arena *a, mx_status *st) {
     int64_t is[4];
     input_shape(t, decode, is);
-    const float *x = mx_net_io_input(io, decode ? "latents" : "image", 4, is, st);
+    const float *x = mx_net_io_input(io, TAESD_IN, 4, is, st);
     if (!x) return -1;
     int f = mx_taesd_factor(t), B = (int)is[0], H = (int)is[2], W = (int)is[3];
     int Ho = decode ? H * f : H / f, Wo = decode ? W * f : W / f;
     int64_t os[4] = {B, decode ? t->cfg.out_channels : t->cfg.latent_channels, Ho, Wo};
-    float *y = io->output(io, decode ? "image" : "latents", 4, os, st);
+    float *y = io->output(io, TAESD_OUT, 4, os, st);
     if (!y) return -1;
     return decode ? mx_taesd_decode(c, t, x, B, H, W, y, a, st) : mx_taesd_encode(c, t, x, B, H, W, y, a, st);
 }

@@ -52,5 +52,7 @@ int mx_taesd_encode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_s
 int mx_taesd_encode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 int mx_taesd_decode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
 int mx_taesd_decode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
+/* Their slots (registry.h). */
+extern const mx_net_slot mx_taesd_encode_slots[], mx_taesd_decode_slots[];
 
 #endif

@@ -299,9 +299,32 @@ int mx_unet_load_config(void **net, const char *text, size_t len, const char *wh
     return mx_unet_load((mx_unet **)net, &cfg, b, st);
 }
 
-void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int i) {
-    if (i < mx_unet_num_residuals(cfg)) snprintf(buf, cap, "down_block_res_sample.%d", i);
-    else snprintf(buf, cap, "mid_block_res_sample");
+int mx_unet_residual_slots(const mx_unet_config *cfg, int flags, mx_net_slots *s, mx_status *st) {
+    int n = mx_unet_num_residuals(cfg);
+    for (int i = 0; i < n; i++) {
+        char name[48];
+        snprintf(name, sizeof name, "down_block_res_sample.%d", i);
+        if (mx_net_slots_add(s, name, flags, st)) return -1;
+    }
+    return mx_net_slots_add(s, "mid_block_res_sample", flags, st);
+}
+
+/* run-net unet's tensors: the slots below, then the residuals (UNET_RES + i, the mid block's
+ * last). */
+enum { UNET_SAMPLE, UNET_TIMESTEP, UNET_HIDDEN, UNET_EMBEDS, UNET_IP_SCALE, UNET_OUT, UNET_TOKENS, UNET_RES };
+const mx_net_slot mx_unet_slots[] = {
+    [UNET_SAMPLE] = {"sample", MX_SLOT_IN},
+    [UNET_TIMESTEP] = {"timestep", MX_SLOT_IN},
+    [UNET_HIDDEN] = {"encoder_hidden_states", MX_SLOT_IN},
+    [UNET_EMBEDS] = {"image_embeds", MX_SLOT_IN | MX_SLOT_OPTIONAL},
+    [UNET_IP_SCALE] = {"ip_adapter_scale", MX_SLOT_IN | MX_SLOT_OPTIONAL},
+    [UNET_OUT] = {"out", MX_SLOT_OUT},
+    [UNET_TOKENS] = {"image_tokens", MX_SLOT_OUT},
+    [UNET_RES] = {NULL, 0},
+};
+
+int mx_unet_more_slots(const void *net, mx_net_slots *s, mx_status *st) {
+    return mx_unet_residual_slots(mx_unet_cfg(net), MX_SLOT_IN | MX_SLOT_OPTIONAL, s, st);
 }
 
 /* run-net unet: the call's sizes from its inputs' shapes (sample [B,C,H,W],
@@ -311,20 +334,20 @@ static int read_sizes(mx_net_io *io, const mx_unet *u, mx_unet_input *in, const 
                       mx_status *st) {
     const mx_unet_config *cfg = mx_unet_cfg(u);
     int64_t ss[4] = {-1, cfg->in_channels, -1, -1}, es[3] = {-1, -1, cfg->cross_attention_dim};
-    if (io->shape(io, "sample", 4, ss, st)) return -1;
+    if (io->shape(io, UNET_SAMPLE, 4, ss, st)) return -1;
     es[0] = ss[0];
-    if (io->shape(io, "encoder_hidden_states", 3, es, st)) return -1;
+    if (io->shape(io, UNET_HIDDEN, 3, es, st)) return -1;
     *in = (mx_unet_input){.B = (int)ss[0], .H = (int)ss[2], .W = (int)ss[3], .T = (int)es[1]};
     if (mx_unet_check_sizes(cfg, in->B, in->H, in->W, in->T, st)) return -1;
     *ad = NULL;
     *n_images = 0;
-    if (!io->has(io, "image_embeds"))
-        return io->has(io, "ip_adapter_scale")
+    if (!mx_net_io_has(io, UNET_EMBEDS))
+        return mx_net_io_has(io, UNET_IP_SCALE)
                    ? mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale without image_embeds", io->source)
                    : 0;
     if (!(*ad = io->network(io, MX_NET_IP_ADAPTER, st)) || mx_unet_check_ip(u, *ad, st)) return -1;
     int64_t is[3] = {in->B, -1, (*ad)->embed_dim};
-    if (io->shape(io, "image_embeds", 3, is, st)) return -1;
+    if (io->shape(io, UNET_EMBEDS, 3, is, st)) return -1;
     if (is[1] > MX_IP_MAX_TOKENS / (*ad)->num_tokens)
         return mx_fail(st, MX_EINPUT, "%s: image_embeds: %lld images of %d tokens (at most %d tokens)", io->source,
                        (long long)is[1], (*ad)->num_tokens, MX_IP_MAX_TOKENS);
@@ -352,16 +375,16 @@ int mx_unet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *s
 static int run_image_guidance(const mx_ctx *c, mx_net_io *io, const mx_ip_adapter *ad, int n_images, mx_unet_input *in,
                               mx_arena *a, mx_status *st) {
     int64_t es[3] = {in->B, n_images, ad->embed_dim}, ts[4] = {in->B, n_images, ad->num_tokens, ad->cross_dim};
-    const float *embeds = mx_net_io_input(io, "image_embeds", 3, es, st);
+    const float *embeds = mx_net_io_input(io, UNET_EMBEDS, 3, es, st);
     if (!embeds) return -1;
-    if (io->has(io, "ip_adapter_scale")) {
+    if (mx_net_io_has(io, UNET_IP_SCALE)) {
         size_t n;
-        const float *s = io->host_flat(io, "ip_adapter_scale", &n, st);
+        const float *s = io->host_flat(io, UNET_IP_SCALE, &n, st);
         if (!s) return -1;
         if (n != 1) return mx_fail(st, MX_EINPUT, "%s: ip_adapter_scale has %zu values, expected 1", io->source, n);
         in->ip_scale = s[0];
     }
-    float *tokens = io->output(io, "image_tokens", 4, ts, st);
+    float *tokens = io->output(io, UNET_TOKENS, 4, ts, st);
     in->ip_tokens = tokens;
     return tokens ? mx_ip_adapter_tokens(c, ad, embeds, n_images * in->B, tokens, a, st) : -1;
 }
@@ -375,26 +398,24 @@ int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a,
     int n_images;
     if (read_sizes(io, u, &in, &ad, &n_images, st)) return -1;
     int64_t ss[4] = {in.B, cfg->in_channels, in.H, in.W}, es[3] = {in.B, in.T, cfg->cross_attention_dim};
-    if (!(in.sample = mx_net_io_input(io, "sample", 4, ss, st)) ||
-        !(in.encoder_hidden_states = mx_net_io_input(io, "encoder_hidden_states", 3, es, st)) ||
-        !(in.timesteps = mx_net_io_timesteps(io, in.B, st)))
+    if (!(in.sample = mx_net_io_input(io, UNET_SAMPLE, 4, ss, st)) ||
+        !(in.encoder_hidden_states = mx_net_io_input(io, UNET_HIDDEN, 3, es, st)) ||
+        !(in.timesteps = mx_net_io_timesteps(io, UNET_TIMESTEP, in.B, st)))
         return -1;
     int n = mx_unet_num_residuals(cfg), C, h, w;
     const float *res[MX_UNET_MAX_RES];
-    int have = io->has(io, "down_block_res_sample.0");
-    for (int i = 0; i <= n && (have || io->has(io, "mid_block_res_sample")); i++) {
-        char name[48];
-        mx_unet_residual_name(name, sizeof name, cfg, i);
+    int have = mx_net_io_has(io, UNET_RES);
+    for (int i = 0; i <= n && (have || mx_net_io_has(io, UNET_RES + n)); i++) {
         mx_unet_residual_shape(cfg, i, in.H, in.W, &C, &h, &w);
         int64_t rs[4] = {in.B, C, h, w};
-        const float *p = mx_net_io_input(io, name, 4, rs, st);
+        const float *p = mx_net_io_input(io, UNET_RES + i, 4, rs, st);
         if (!p) return -1;
         if (i < n) res[i] = p;
         else in.mid_residual = p;
     }
     if (have) in.down_residuals = res;
     int64_t os[4] = {in.B, cfg->out_channels, in.H, in.W};
-    float *out = io->output(io, "out", 4, os, st);
+    float *out = io->output(io, UNET_OUT, 4, os, st);
     if (!out || (ad && run_image_guidance(c, io, ad, n_images, &in, a, st))) return -1;
     return mx_unet_forward(c, u, &in, out, a, st);
 }

@@ -90,11 +90,14 @@ enum { MX_FLOPS_REPLAYED = 1, MX_FLOPS_HALVES_EQUAL = 2 };
 /* Multiply-add count ×2 of one forward (for benchmarks); how: MX_FLOPS_* flags. */
 double mx_unet_flops(const mx_unet *u, int B, int H, int W, int T, int how);
 
-/* The registry's entry points (registry.h): config parse + load, the run-net adapter, and the name
- * of residual i in run-net's tensors (down_block_res_sample.{i}, then mid_block_res_sample). */
+/* The registry's entry points (registry.h): config parse + load, the run-net adapter and its slots. */
 int mx_unet_load_config(void **net, const char *text, size_t len, const char *what, mx_binder *b, mx_status *st);
 int mx_unet_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
 int mx_unet_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
-void mx_unet_residual_name(char *buf, size_t cap, const mx_unet_config *cfg, int i);
+/* Appends the residual slots of cfg (down_block_res_sample.{i}, then mid_block_res_sample) to s. */
+int mx_unet_residual_slots(const mx_unet_config *cfg, int flags, mx_net_slots *s, mx_status *st);
+/* run-net unet's slots (registry.h): the static table, and the residuals after it. */
+extern const mx_net_slot mx_unet_slots[];
+int mx_unet_more_slots(const void *net, mx_net_slots *s, mx_status *st);
 
 #endif

@@ -315,39 +315,54 @@ int mx_vae_load_config(void **net, const char *text, size_t len, const char *wha
 }
 
 /* run-net vae-encode: image [B,3,H,W] in [-1,1] -> mean, logvar. */
+enum { ENC_IMAGE, ENC_MEAN, ENC_LOGVAR, ENC_N };
+const mx_net_slot mx_vae_encode_slots[] = {
+    [ENC_IMAGE] = {"image", MX_SLOT_IN},
+    [ENC_MEAN] = {"mean", MX_SLOT_OUT},
+    [ENC_LOGVAR] = {"logvar", MX_SLOT_OUT},
+    [ENC_N] = {NULL, 0},
+};
+
 int mx_vae_encode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
     const mx_vae *v = net;
     int64_t is[4] = {-1, v->cfg.in_channels, -1, -1};
-    return io->shape(io, "image", 4, is, st) ? -1 : mx_vae_encode_arena_bytes(v, (int)is[0], (int)is[2], (int)is[3], bytes, st);
+    return io->shape(io, ENC_IMAGE, 4, is, st) ? -1 : mx_vae_encode_arena_bytes(v, (int)is[0], (int)is[2], (int)is[3], bytes, st);
 }
 
 int mx_vae_encode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_vae *v = net;
     int f = mx_vae_factor(v), lc = v->cfg.latent_channels;
     int64_t is[4] = {-1, v->cfg.in_channels, -1, -1};
-    const float *img = mx_net_io_input(io, "image", 4, is, st);
+    const float *img = mx_net_io_input(io, ENC_IMAGE, 4, is, st);
     if (!img) return -1;
     int B = (int)is[0], H = (int)is[2], W = (int)is[3];
     int64_t os[4] = {B, lc, H / f, W / f};
-    float *mean = io->output(io, "mean", 4, os, st), *logvar = mean ? io->output(io, "logvar", 4, os, st) : NULL;
+    float *mean = io->output(io, ENC_MEAN, 4, os, st), *logvar = mean ? io->output(io, ENC_LOGVAR, 4, os, st) : NULL;
     return logvar ? mx_vae_encode(c, v, img, B, H, W, mean, logvar, a, st) : -1;
 }
 
 /* run-net vae-decode: latents [B,4,h,w] (unscaled) -> image. */
+enum { DEC_LATENTS, DEC_IMAGE, DEC_N };
+const mx_net_slot mx_vae_decode_slots[] = {
+    [DEC_LATENTS] = {"latents", MX_SLOT_IN},
+    [DEC_IMAGE] = {"image", MX_SLOT_OUT},
+    [DEC_N] = {NULL, 0},
+};
+
 int mx_vae_decode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st) {
     const mx_vae *v = net;
     int64_t ls[4] = {-1, v->cfg.latent_channels, -1, -1};
-    return io->shape(io, "latents", 4, ls, st) ? -1 : mx_vae_decode_arena_bytes(v, (int)ls[0], (int)ls[2], (int)ls[3], bytes, st);
+    return io->shape(io, DEC_LATENTS, 4, ls, st) ? -1 : mx_vae_decode_arena_bytes(v, (int)ls[0], (int)ls[2], (int)ls[3], bytes, st);
 }
 
 int mx_vae_decode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st) {
     const mx_vae *v = net;
     int f = mx_vae_factor(v);
     int64_t ls[4] = {-1, v->cfg.latent_channels, -1, -1};
-    const float *lat = mx_net_io_input(io, "latents", 4, ls, st);
+    const float *lat = mx_net_io_input(io, DEC_LATENTS, 4, ls, st);
     if (!lat) return -1;
     int B = (int)ls[0], h = (int)ls[2], w = (int)ls[3];
     int64_t os[4] = {B, v->cfg.out_channels, (int64_t)h * f, (int64_t)w * f};
-    float *img = io->output(io, "image", 4, os, st);
+    float *img = io->output(io, DEC_IMAGE, 4, os, st);
     return img ? mx_vae_decode(c, v, lat, B, h, w, img, a, st) : -1;
 }

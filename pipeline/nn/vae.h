@@ -34,5 +34,7 @@ int mx_vae_encode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_sta
 int mx_vae_encode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
 int mx_vae_decode_arena_io(const void *net, mx_net_io *io, size_t *bytes, mx_status *st);
 int mx_vae_decode_run_io(const mx_ctx *c, const void *net, mx_net_io *io, mx_arena *a, mx_status *st);
+/* Their slots (registry.h). */
+extern const mx_net_slot mx_vae_encode_slots[], mx_vae_decode_slots[];
 
 #endif

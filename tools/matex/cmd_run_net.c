@@ -91,13 +91,16 @@ static float *new_floats(run_io *io, size_t n, mx_status *st) {
     return p;
 }
 
-/* Input tensor `name` with its shape checked: want[i] = -1 accepts any size (filled in). */
-static const mx_st_tensor *input_tensor(run_io *io, const char *name, int ndim, int64_t *want, mx_status *st) {
-    const mx_st_tensor *t = mx_st_find(&io->in, name);
-    if (!t) {
-        mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name);
-        return NULL;
-    }
+static const mx_st_tensor *missing(const run_io *io, const char *name, mx_status *st) {
+    mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name);
+    return NULL;
+}
+
+/* Input tensor t (NULL: missing), named `name`, with its shape checked: want[i] = -1 accepts any
+ * size (filled in). */
+static const mx_st_tensor *checked_tensor(run_io *io, const mx_st_tensor *t, const char *name, int ndim, int64_t *want,
+                                          mx_status *st) {
+    if (!t) return missing(io, name, st);
     int ok = t->ndim == ndim;
     for (int i = 0; ok && i < ndim; i++) ok = want[i] < 0 ? t->shape[i] > 0 : t->shape[i] == want[i];
     if (!ok) {
@@ -115,6 +118,11 @@ static const mx_st_tensor *input_tensor(run_io *io, const char *name, int ndim, 
         want[i] = t->shape[i];
     }
     return t;
+}
+
+/* Input tensor `name` with its shape checked (the pipelines' inputs). */
+static const mx_st_tensor *input_tensor(run_io *io, const char *name, int ndim, int64_t *want, mx_status *st) {
+    return checked_tensor(io, mx_st_find(&io->in, name), name, ndim, want, st);
 }
 
 /* The same as fp32 (freed by io_free). */
@@ -164,22 +172,37 @@ static float *dev_output(run_io *io, const char *name, int ndim, const int64_t *
     return d;
 }
 
-/* ---- the network's view of the call (net_io.h) ---- */
+/* ---- the network's view of the call (net_io.h): slots bound once, by index after that ---- */
 
-static int io_has(mx_net_io *n, const char *name) { return mx_st_find(&((run_io *)n->impl)->in, name) != NULL; }
-
-static int io_shape(mx_net_io *n, const char *name, int ndim, int64_t *shape, mx_status *st) {
-    return input_tensor(n->impl, name, ndim, shape, st) ? 0 : -1;
+/* The handle of input `name`: its index in the inputs' file. */
+static int io_find(mx_net_io *n, const char *name) {
+    const mx_safetensors *in = &((run_io *)n->impl)->in;
+    const mx_st_tensor *t = mx_st_find(in, name);
+    return t ? (int)(t - in->tensors) : -1;
 }
 
-static const float *io_host(mx_net_io *n, const char *name, int ndim, int64_t *shape, mx_status *st) {
-    return input(n->impl, name, ndim, shape, st);
+static const char *slot_name(const mx_net_io *n, int slot) { return n->slots->slot[slot].name; }
+
+/* The tensor of input `slot`, NULL when the call has none. */
+static const mx_st_tensor *slot_tensor(const mx_net_io *n, int slot) {
+    int at = n->slots->slot[slot].at;
+    return at < 0 ? NULL : &((run_io *)n->impl)->in.tensors[at];
 }
 
-static const float *io_host_flat(mx_net_io *n, const char *name, size_t *numel, mx_status *st) {
+static int io_shape(mx_net_io *n, int slot, int ndim, int64_t *shape, mx_status *st) {
+    return checked_tensor(n->impl, slot_tensor(n, slot), slot_name(n, slot), ndim, shape, st) ? 0 : -1;
+}
+
+static const float *io_host(mx_net_io *n, int slot, int ndim, int64_t *shape, mx_status *st) {
     run_io *io = n->impl;
-    const mx_st_tensor *t = mx_st_find(&io->in, name);
-    if (!t) return mx_fail(st, MX_EINPUT, "%s: missing input tensor %s", io->in_path, name), NULL;
+    const mx_st_tensor *t = checked_tensor(io, slot_tensor(n, slot), slot_name(n, slot), ndim, shape, st);
+    return t ? keep(io, mx_st_to_f32(&io->in, t, st)) : NULL;
+}
+
+static const float *io_host_flat(mx_net_io *n, int slot, size_t *numel, mx_status *st) {
+    run_io *io = n->impl;
+    const mx_st_tensor *t = slot_tensor(n, slot);
+    if (!t) return missing(io, slot_name(n, slot), st), NULL;
     *numel = t->ndim == 0 ? 1 : (size_t)mx_shape_numel(t->ndim, t->shape);
     return keep(io, mx_st_to_f32(&io->in, t, st));
 }
@@ -188,8 +211,8 @@ static const float *io_device(mx_net_io *n, const float *host, size_t count, mx_
     return on_device(n->impl, host, count, st);
 }
 
-static float *io_output(mx_net_io *n, const char *name, int ndim, const int64_t *shape, mx_status *st) {
-    return dev_output(n->impl, name, ndim, shape, st);
+static float *io_output(mx_net_io *n, int slot, int ndim, const int64_t *shape, mx_status *st) {
+    return dev_output(n->impl, slot_name(n, slot), ndim, shape, st);
 }
 
 /* The binder of the network under `prefix`: weight file, weights kept on the device. */
@@ -220,16 +243,17 @@ static const void *io_network(mx_net_io *n, const char *kind, mx_status *st) {
     return io->net2;
 }
 
-/* Any entry of the registry: its network's config and weights under `prefix`, loaded, its arena
- * sized from the inputs, run. */
+/* Any entry of the registry: its network's config and weights under `prefix`, loaded, its
+ * tensors bound to slots, its arena sized from the inputs, run. */
 static int run_network(run_io *io, const mx_net_def *def, const char *prefix, mx_status *st) {
     char key[96];
     void *net = NULL;
+    mx_net_slots slots = {0};
     const char *text = net_config(io, prefix, key, sizeof key, st);
     if (!text || bind_weights(io, prefix, st)) return -1;
     io->iface = (mx_net_io){.impl = io,
                             .source = io->in_path,
-                            .has = io_has,
+                            .find = io_find,
                             .shape = io_shape,
                             .host = io_host,
                             .host_flat = io_host_flat,
@@ -237,12 +261,13 @@ static int run_network(run_io *io, const mx_net_def *def, const char *prefix, mx
                             .output = io_output,
                             .network = io_network};
     size_t bytes;
-    int rc = def->load(&net, text, strlen(text), key, &io->b, st) || def->arena_bytes(net, &io->iface, &bytes, st) ||
-                     mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)
+    int rc = def->load(&net, text, strlen(text), key, &io->b, st) || mx_net_bind(def, net, &io->iface, &slots, st) ||
+                     def->arena_bytes(net, &io->iface, &bytes, st) || mx_arena_create_on(&io->arena, io->ctx.be, bytes, st)
                  ? -1
                  : 0;
     io->arena_ok = !rc;
     if (!rc) rc = def->run(&io->ctx, net, &io->iface, &io->arena, st);
+    mx_net_slots_free(&slots);
     def->free(net);
     return rc;
 }
