@@ -87,6 +87,8 @@ expect "health" 200 - "$URL/v1/health"
 check "health body" grep -qx '{"ok":true}' "$T/body"
 expect "info" 200 - "$URL/v1/info"
 check "info: version, device, weight digest" grep -q '"version":.*"device":"cpu".*"weights_digest":"[0-9a-f]\{16\}"' "$T/body"
+# the demo set holds every network but TAESD
+check "info: the networks, loaded or not" grep -q '"networks":\[{"name":"unet","class":"UNet2DConditionModel","loaded":true},{"name":"controlnet","class":"ControlNetModel","loaded":true},{"name":"vae","class":"AutoencoderKL","loaded":true},{"name":"text_encoder","class":"CLIPTextModel","loaded":true},{"name":"taesd","class":"AutoencoderTiny","loaded":false},{"name":"image_encoder","class":"CLIPVisionModelWithProjection","loaded":true},{"name":"ip_adapter","class":"IPAdapter","loaded":true}\]' "$T/body"
 
 # byte-identical to the CLI with the same options
 printf '{"prompt": "a wooden crate", "seed": 11, %s}\n' "$SMALL" > "$T/opts.json"

@@ -18,6 +18,7 @@
 #include "../../../pipeline/texture/digest.h"
 #include "../../../runtime/atomic_file.h"
 #include "../../../runtime/version.h"
+#include "../../../weights/networks.h"
 #include "../cli_signals.h"
 #include "serve.h"
 #include "serve_auth.h"
@@ -419,8 +420,22 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
 
 /* ---- the server's life ---- */
 
+/* "networks": every network of weights/networks.h's list, with its config class and whether m
+ * loaded it. */
+static void info_networks(const matex_models *m, mx_buf *b) {
+    mx_buf_printf(b, ",\"networks\":[");
+    for (size_t i = 0; i < mx_net_kind_count; i++) {
+        mx_buf_printf(b, "%s{\"name\":", i ? "," : "");
+        mx_buf_json_str(b, mx_net_kinds[i].name);
+        mx_buf_printf(b, ",\"class\":");
+        mx_buf_json_str(b, mx_net_kinds[i].class_name);
+        mx_buf_printf(b, ",\"loaded\":%s}", matex_models_has_network(m, mx_net_kinds[i].name) ? "true" : "false");
+    }
+    mx_buf_printf(b, "]");
+}
+
 /* GET /v1/info's answer, made once the model set is loaded; -1 when out of memory. */
-static int make_info(server *s) {
+static int make_info(server *s, const matex_models *m) {
     const mx_serve_config *cfg = s->cfg;
     char digest[32], *build = NULL;
     size_t build_len = 0;
@@ -438,6 +453,7 @@ static int make_info(server *s) {
     mx_buf_json_str(b, base);
     mx_buf_printf(b, ",\"weights_digest\":\"%s\",\"build\":", digest);
     mx_buf_json_str(b, build ? build : "");
+    info_networks(m, b);
     mx_buf_printf(b, ",\"max_queued\":%d,\"max_upload\":%llu}", cfg->limits.max_queued, (unsigned long long)cfg->max_upload);
     free(build);
     if (b->oom) return -1;
@@ -492,7 +508,7 @@ static int serve_until_signal(server *s, volatile sig_atomic_t *stop) {
     void *args[2] = {&s->q, m};
     int rc = 1;
     if (!m) fprintf(stderr, "matex serve: %s\n", err.message);
-    else if (make_info(s)) fprintf(stderr, "matex serve: out of memory\n");
+    else if (make_info(s, m)) fprintf(stderr, "matex serve: out of memory\n");
     else if (pthread_create(&worker, NULL, worker_main, args)) fprintf(stderr, "matex serve: cannot start the worker thread\n");
     else {
         int v6 = strchr(s->cfg->listen_addr, ':') != NULL;
