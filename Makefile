@@ -231,7 +231,7 @@ FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/matex/cli_texture_opts.c tool
 FUZZ_SECONDS ?= 20
 # the request decoding of `matex serve`: its own objects on top (no HTTP library)
 $(BUILD)/tests/fuzz/replay_serve_request $(BUILD)/tests/fuzz/fuzz_serve_request: \
-    $(call obj,tools/matex/serve/serve_request.c tools/matex/serve/serve_auth.c tools/matex/cli_batch_manifest.c)
+    $(call obj,tools/matex/serve/serve_request.c tools/matex/serve/serve_auth.c tools/matex/serve/serve_zip.c tools/matex/cli_batch_manifest.c)
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
 	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)

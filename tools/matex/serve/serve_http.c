@@ -23,6 +23,7 @@
 #include "serve.h"
 #include "serve_auth.h"
 #include "serve_request.h"
+#include "serve_zip.h"
 
 #define OPTIONS_PART_MAX ((size_t)64 << 10)
 #define POST_BUFFER 65536
@@ -47,6 +48,7 @@ typedef struct request {
     uint64_t bytes;
     int part_fd;           /* the file part being written, or -1 */
     char mesh_path[4300];  /* the stored mesh ("" until its part came) */
+    int mesh_zip;          /* mesh_path is a .zip of the mesh with its side files */
     char style_paths[MATEX_MAX_STYLE_IMAGES][4300];
     int nstyle;
     mx_buf options;
@@ -112,6 +114,7 @@ static int open_part(request *rq, const char *key, const char *filename) {
         if (!(kind = mx_serve_mesh_kind(filename, &rq->err))) return -1;
         path = rq->mesh_path;
         snprintf(path, sizeof rq->mesh_path, "%s/mesh.%s", rq->stage, kind);
+        rq->mesh_zip = !strcmp(kind, "zip");
     } else {
         if (rq->nstyle == MATEX_MAX_STYLE_IMAGES)
             return mx_serve_fail(&rq->err, 400, "bad_request", "more than %d parts \"style_image\"", MATEX_MAX_STYLE_IMAGES);
@@ -184,6 +187,16 @@ static int upload_begin(server *s, struct MHD_Connection *c, request *rq) {
     return 0;
 }
 
+/* A zip mesh part: unpacked into the upload folder (serve_zip.h), the archive removed; mesh_path
+ * becomes the mesh inside it. */
+static int unpack_mesh(request *rq) {
+    char zip[sizeof rq->mesh_path];
+    snprintf(zip, sizeof zip, "%s", rq->mesh_path);
+    if (mx_serve_zip_extract(zip, rq->stage, rq->mesh_path, sizeof rq->mesh_path, &rq->err)) return -1;
+    unlink(zip);
+    return 0;
+}
+
 /* The whole body came: the parts are checked as the CLI checks its inputs, then the job is queued. */
 static int upload_end(server *s, request *rq) {
     char out[4200], options[4300];
@@ -191,10 +204,11 @@ static int upload_end(server *s, request *rq) {
     close_part(rq);
     if (!rq->mesh_path[0]) return mx_serve_fail(&rq->err, 400, "bad_request", "no part \"mesh\" (a mesh file)");
     if (!rq->have_options) return mx_serve_fail(&rq->err, 400, "bad_request", "no part \"options\" (a JSON object)");
+    if (rq->mesh_zip && unpack_mesh(rq)) return -1;
     for (int i = 0; i < rq->nstyle; i++) styles[i] = rq->style_paths[i];
     mx_serve_jobs_path(&s->q, rq->id, "out", out);
     if (mx_serve_options_check(rq->options.p ? rq->options.p : "", rq->options.len, rq->mesh_path, out, styles, rq->nstyle, &rq->err) ||
-        mx_serve_mesh_check(rq->mesh_path, &rq->err))
+        mx_serve_mesh_check(rq->mesh_path, rq->mesh_zip ? rq->stage : NULL, &rq->err))
         return -1;
     snprintf(options, sizeof options, "%s/options.json", rq->stage);
     mx_status st;
