@@ -165,6 +165,11 @@ check "zip: a bomb: says why" grep -q "a zip bomb" "$T/body"
 head -c $(($(wc -c < "$T/crate.zip") - 30)) "$T/crate.zip" > "$T/trunc.zip"
 expect "zip: truncated" 400 bad_zip -F "mesh=@$T/trunc.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
 check "zip: truncated: says why" grep -q "truncated" "$T/body"
+printf 'newmtl wood\nmap_Kd ../../../../../../../../../../../../../../../..%s\n' "$T/cli/texture.png" > "$T/z/crate/crate.mtl"
+zipof outside crate/crate.obj crate/crate.mtl
+printf 'newmtl wood\nKd 1 1 1\nmap_Kd tex/wood.png\n' > "$T/z/crate/crate.mtl"
+expect "zip: a texture outside the archive" 400 bad_mesh -F "mesh=@$T/outside.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: a texture outside the archive: says why" grep -q "names a texture outside the archive" "$T/body"
 expect "zip: not a zip" 400 bad_zip -F "mesh=@$BOX;filename=box.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
 check "zip: nothing left behind by the refused archives" sh -c "[ -z \"\$(ls '$T/jobs/.incoming')\" ] && [ ! -e /tmp/ccrate.mtl ]"
 

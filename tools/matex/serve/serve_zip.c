@@ -99,7 +99,7 @@ int mx_serve_zip_check(const uint8_t *map, size_t len, mx_serve_zip *z, mx_serve
     size_t meshes = 0;
     uint64_t total = 0;
     memset(z, 0, sizeof *z);
-    if (len < 4 || !mx_zip_is_zip(map, len)) return mx_serve_fail(e, 400, "bad_zip", "part \"mesh\": not a zip file");
+    if (!mx_zip_is_zip(map, len)) return mx_serve_fail(e, 400, "bad_zip", "part \"mesh\": not a zip file");
     if (mx_zip_read(map, len, "part \"mesh\"", UINT64_MAX, &z->entries, &z->n, &st))
         return mx_serve_fail(e, st.code == MX_ENOMEM ? 503 : 400, st.code == MX_ENOMEM ? "internal" : "bad_zip", "%s", st.msg);
     if (z->n > MX_SERVE_ZIP_MAX_ENTRIES)
@@ -194,9 +194,10 @@ static int make_parents(const char *root, const char *name, mx_serve_error *e) {
     if (len < 0 || (size_t)len >= sizeof path) return mx_serve_fail(e, 400, "bad_zip", "part \"mesh\": a name is too long");
     for (char *s = path + strlen(root) + 1; (s = strchr(s, '/')); s++) {
         *s = 0;
-        int bad = mkdir(path, 0700) && errno != EEXIST;
+        int err = mkdir(path, 0700) && errno != EEXIST ? errno : 0;
         *s = '/';
-        if (bad) return mx_serve_fail(e, 503, "storage", "cannot store the upload: %s", strerror(errno));
+        if (err == ENOTDIR) return mx_serve_fail(e, 400, "bad_zip", "part \"mesh\": '%.200s' is both a file and a folder", name);
+        if (err) return mx_serve_fail(e, 503, "storage", "cannot store the upload: %s", strerror(err));
     }
     return 0;
 }
@@ -211,7 +212,7 @@ static int extract_entry(const mx_serve_zip *z, size_t i, const char *root, mx_s
     if (is_dir_entry(en)) return 0;
     snprintf(path, sizeof path, "%s/%s", root, name);
     int fd = open(path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0600);
-    if (fd < 0 && errno == EEXIST)
+    if (fd < 0 && (errno == EEXIST || errno == ENOTDIR || errno == EISDIR))
         return mx_serve_fail(e, 400, "bad_zip", "part \"mesh\": entry '%.200s' comes twice, or is also a folder", name);
     if (fd < 0) return mx_serve_fail(e, 503, "storage", "cannot store the upload: %s", strerror(errno));
     int rc = mx_serve_zip_unpack(z, i, fd, e);
