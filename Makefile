@@ -229,13 +229,14 @@ FUZZ_REPLAY = $(patsubst %,$(BUILD)/tests/fuzz/replay_%,$(FUZZ_NAMES))
 FUZZ_DEPS   = $(call obj,tests/fuzz/common.c tools/matex/cli_texture_opts.c tools/matex/cli_args.c tools/matex/cli_progress.c tools/matex/cli_signals.c) $(LIB_TEX) $(LIB_NN) $(LIB_FORMATS) $(LIB_GEOM) \
               $(LIB_WEIGHTS) $(LIB_IO) $(LIB_CORE)
 FUZZ_SECONDS ?= 20
-# the request decoding of `matex serve`: its own objects on top (no HTTP library)
+# the request decoding of `matex serve`: its own objects on top (no HTTP library). The links put
+# the objects before the libraries, so the libraries serve the objects named here too.
 $(BUILD)/tests/fuzz/replay_serve_request $(BUILD)/tests/fuzz/fuzz_serve_request: \
-    $(call obj,tools/matex/serve/serve_request.c tools/matex/serve/serve_auth.c tools/matex/cli_batch_manifest.c)
+    $(call obj,tools/matex/serve/serve_request.c tools/matex/serve/serve_auth.c tools/matex/serve/serve_zip.c tools/matex/cli_batch_manifest.c)
 $(BUILD)/tests/fuzz/replay_%: $(BUILD)/tests/fuzz/fuzz_%.o $(BUILD)/tests/fuzz/replay.o $(FUZZ_DEPS)
-	$(CXX) $(LDFLAGS) -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+	$(CXX) $(LDFLAGS) -pthread -o $@ $(filter %.o,$^) $(filter-out %.o,$^) $(IOLIBS) $(LDLIBS)
 $(BUILD)/tests/fuzz/fuzz_%: $(BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_DEPS)
-	$(CXX) $(LDFLAGS) -fsanitize=fuzzer -pthread -o $@ $^ $(IOLIBS) $(LDLIBS)
+	$(CXX) $(LDFLAGS) -fsanitize=fuzzer -pthread -o $@ $(filter %.o,$^) $(filter-out %.o,$^) $(IOLIBS) $(LDLIBS)
 .PHONY: fuzz fuzz-ci fuzz-run
 fuzz:
 	$(MAKE) BUILD=build-fuzz CC=clang CXX=clang++ SAN=fuzz OPT=-O1 fuzz-run

@@ -71,6 +71,9 @@ struct matex_options;
  * set computes there, whatever its own options say about those three. NULL on failure. */
 matex_models *matex_models_open(const char *weights_path, const struct matex_options *o, matex_error *err);
 void matex_models_close(matex_models *m);
+/* 1 when the set loaded a network of this kind (a name of weights/networks.h: "unet",
+ * "controlnet", "vae", "text_encoder", "taesd", "image_encoder", "ip_adapter"), else 0. */
+int matex_models_has_network(const matex_models *m, const char *name);
 
 /* ---- meshes and images in memory ---- */
 

@@ -87,6 +87,8 @@ expect "health" 200 - "$URL/v1/health"
 check "health body" grep -qx '{"ok":true}' "$T/body"
 expect "info" 200 - "$URL/v1/info"
 check "info: version, device, weight digest" grep -q '"version":.*"device":"cpu".*"weights_digest":"[0-9a-f]\{16\}"' "$T/body"
+# the demo set holds every network but TAESD
+check "info: the networks, loaded or not" grep -q '"networks":\[{"name":"unet","class":"UNet2DConditionModel","loaded":true},{"name":"controlnet","class":"ControlNetModel","loaded":true},{"name":"vae","class":"AutoencoderKL","loaded":true},{"name":"text_encoder","class":"CLIPTextModel","loaded":true},{"name":"taesd","class":"AutoencoderTiny","loaded":false},{"name":"image_encoder","class":"CLIPVisionModelWithProjection","loaded":true},{"name":"ip_adapter","class":"IPAdapter","loaded":true}\]' "$T/body"
 
 # byte-identical to the CLI with the same options
 printf '{"prompt": "a wooden crate", "seed": 11, %s}\n' "$SMALL" > "$T/opts.json"
@@ -111,6 +113,65 @@ check "events: progress events, then end" sh -c "grep -q '^event: progress' '$T/
 check "events: the CLI's progress stream" grep -q '^data: {"event":"step","stage":"grid","step":1,"steps":1,' "$T/events"
 expect "GET /v1/jobs lists it" 200 - "$URL/v1/jobs"
 check "list" grep -q "\"id\":\"$ID\"" "$T/body"
+
+# ---- a .zip mesh part: an OBJ with its .mtl and texture gives the CLI's outputs on the unzipped files ----
+mkdir -p "$T/z/crate/tex"
+{ echo 'mtllib crate.mtl'; echo 'usemtl wood'; cat "$BOX"; } > "$T/z/crate/crate.obj"
+printf 'newmtl wood\nKd 1 1 1\nmap_Kd tex/wood.png\n' > "$T/z/crate/crate.mtl"
+cp "$T/cli/texture.png" "$T/z/crate/tex/wood.png"
+(cd "$T/z" && zip -qr ../crate.zip crate)
+ZID=$(curl -s -F "mesh=@$T/crate.zip" -F "options=<$T/opts.json" "$URL/v1/jobs" | sed -n 's/^{"id":"\([0-9a-z]*\)"}$/\1/p')
+check "zip: 202 with an id" [ -n "$ZID" ]
+check "zip: unpacked in the job's folder, the archive removed" sh -c "[ -f '$T/jobs/$ZID/mesh/crate/tex/wood.png' ] && [ ! -e '$T/jobs/$ZID/mesh.zip' ]"
+check "zip: job done" wait_state "$ZID" done
+$M texture "$T/z/crate/crate.obj" "a wooden crate" --weights "$W" --seed 11 $SMALL_CLI --threads 2 --quiet -o "$T/zcli" 2> "$T/zcli.err"
+for f in mesh.glb mesh.obj mesh.mtl texture.png texture.exr; do
+    curl -s -o "$T/zsrv_$f" "$URL/v1/jobs/$ZID/files/$f"
+    check "zip: server = CLI on the unzipped files: $f" cmp -s "$T/zsrv_$f" "$T/zcli/$f"
+done
+# bad archives: each refused with its status and error body, nothing left in the upload folder.
+# Names the zip tool will not write are patched in place (same length: the offsets stay valid).
+zipof() { # zipof NAME FILE...: a zip of the files (paths relative to $T/z) as $T/NAME.zip
+    zn=$1
+    shift
+    rm -f "$T/$zn.zip"
+    (cd "$T/z" && zip -qry "../$zn.zip" "$@")
+}
+cp "$T/z/crate/crate.obj" "$T/z/crate/xx.obj"
+zipof two crate/crate.obj crate/xx.obj crate/crate.mtl
+rm "$T/z/crate/xx.obj"
+expect "zip: two meshes" 400 bad_zip -F "mesh=@$T/two.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: two meshes: says so" grep -q 'holds 2 mesh files' "$T/body"
+zipof none crate/crate.mtl crate/tex/wood.png
+expect "zip: no mesh" 400 bad_zip -F "mesh=@$T/none.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+zipof trav crate/crate.obj crate/crate.mtl crate/tex/wood.png
+LC_ALL=C sed -i 's|crate/tex/w|crate/../xw|g' "$T/trav.zip"
+expect "zip: traversal in an entry name" 400 bad_zip -F "mesh=@$T/trav.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: traversal in an entry name: says why" grep -q "entry 'crate/../xwood.png': not a plain relative name" "$T/body"
+zipof abs crate/crate.obj crate/crate.mtl
+LC_ALL=C sed -i 's|crate/crate\.mtl|/tmp/ccrate.mtl|g' "$T/abs.zip"
+expect "zip: an absolute entry name" 400 bad_zip -F "mesh=@$T/abs.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: an absolute entry name: says why" grep -q "entry '/tmp/ccrate.mtl': not a plain relative name" "$T/body"
+ln -s /etc/passwd "$T/z/crate/passwd.png"
+zipof link crate/crate.obj crate/passwd.png
+rm "$T/z/crate/passwd.png"
+expect "zip: a symbolic link" 400 bad_zip -F "mesh=@$T/link.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: a symbolic link: says why" grep -q "is a symbolic link" "$T/body"
+head -c 20000000 /dev/zero > "$T/z/crate/tex/bomb.png"
+zipof bomb crate/crate.obj crate/tex/bomb.png
+rm "$T/z/crate/tex/bomb.png"
+expect "zip: a bomb (20 MB of zeros in $(wc -c < "$T/bomb.zip") bytes)" 413 too_large -F "mesh=@$T/bomb.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: a bomb: says why" grep -q "a zip bomb" "$T/body"
+head -c $(($(wc -c < "$T/crate.zip") - 30)) "$T/crate.zip" > "$T/trunc.zip"
+expect "zip: truncated" 400 bad_zip -F "mesh=@$T/trunc.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: truncated: says why" grep -q "truncated" "$T/body"
+printf 'newmtl wood\nmap_Kd ../../../../../../../../../../../../../../../..%s\n' "$T/cli/texture.png" > "$T/z/crate/crate.mtl"
+zipof outside crate/crate.obj crate/crate.mtl
+printf 'newmtl wood\nKd 1 1 1\nmap_Kd tex/wood.png\n' > "$T/z/crate/crate.mtl"
+expect "zip: a texture outside the archive" 400 bad_mesh -F "mesh=@$T/outside.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: a texture outside the archive: says why" grep -q "names a texture outside the archive" "$T/body"
+expect "zip: not a zip" 400 bad_zip -F "mesh=@$BOX;filename=box.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
+check "zip: nothing left behind by the refused archives" sh -c "[ -z \"\$(ls '$T/jobs/.incoming')\" ] && [ ! -e /tmp/ccrate.mtl ]"
 
 # ---- bad requests: each answered with its status and error body ----
 printf '{"prompt": "x", %s' "$SMALL" > "$T/bad_json"
@@ -139,7 +200,6 @@ expect "no options part" 400 bad_request -F "mesh=@$BOX" "$URL/v1/jobs"
 expect "two mesh parts" 400 bad_request -F "mesh=@$BOX" -F "mesh=@$BOX" -F "options=<$T/opts.json" "$URL/v1/jobs"
 expect "unknown part" 400 bad_request -F "mesh=@$BOX" -F "weights=@$BOX" -F "options=<$T/opts.json" "$URL/v1/jobs"
 expect "mesh of an unknown kind" 415 unsupported_media_type -F "mesh=@$BOX;filename=box.exe" -F "options=<$T/opts.json" "$URL/v1/jobs"
-expect "a .zip mesh (not yet)" 415 unsupported_media_type -F "mesh=@$BOX;filename=box.zip" -F "options=<$T/opts.json" "$URL/v1/jobs"
 expect "style image of an unknown kind" 415 unsupported_media_type -F "mesh=@$BOX" -F "style_image=@$BOX" -F "options=<$T/opts.json" "$URL/v1/jobs"
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n' > "$T/hostile.obj"
 expect "hostile mesh (index out of range)" 400 bad_mesh -F "mesh=@$T/hostile.obj" -F "options=<$T/opts.json" "$URL/v1/jobs"

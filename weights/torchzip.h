@@ -3,9 +3,9 @@
  * storages PREFIX/data/KEY, PREFIX/byteorder ("little" when present) and PREFIX/version.
  * torch.save stores every entry uncompressed (PyTorchStreamWriter, miniz with compression
  * level 0), so only STORED entries are read: a compressed entry is refused by name (a zip bomb
- * gets no further). zip64 records (files over 4 GiB) are read. Every size and offset is
- * checked against the file. The result is an mx_safetensors whose tensors point into the
- * mmapped archive, closed with mx_st_close. */
+ * gets no further). The archive is read by runtime/zip.h: zip64 records (files over 4 GiB)
+ * are read, every size and offset is checked against the file. The result is an
+ * mx_safetensors whose tensors point into the mmapped archive, closed with mx_st_close. */
 #ifndef MX_TORCHZIP_H
 #define MX_TORCHZIP_H
 

@@ -101,6 +101,10 @@ matex_models *matex_models_open(const char *weights_path, const matex_options *o
     return NULL;
 }
 
+int matex_models_has_network(const matex_models *m, const char *name) {
+    return m && name && mx_models_has_kind(&m->m, name);
+}
+
 void matex_models_close(matex_models *m) {
     if (!m) return;
     if (m->m.wf) mx_models_free(&m->m);

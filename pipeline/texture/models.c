@@ -24,7 +24,9 @@ static int load_net(mx_models *m, const char *kind, const char *prefix, int slot
     if (mx_binder_wf(&m->wf_binders[slot], m->wf, p, st) ||
         mx_binder_device(&m->binders[slot], &m->wf_binders[slot], m->c, st))
         return -1;
-    return mx_net_load_kind(kind, net, m->wf, prefix, &m->binders[slot], st);
+    if (mx_net_load_kind(kind, net, m->wf, prefix, &m->binders[slot], st)) return -1;
+    m->kinds[slot] = kind;
+    return 0;
 }
 
 static int load_taesd(mx_models *m, mx_status *st) {
@@ -82,6 +84,12 @@ int mx_models_check(const mx_models *m, int needs, mx_status *st) {
     if ((needs & MX_MODELS_NEED_INPAINT) && !m->cn_inpaint)
         return mx_fail(st, MX_EINPUT, "%s: no inpainting ControlNet (controlnet_inpaint.*) in this weight file",
                        mx_wf_path(m->wf));
+    return 0;
+}
+
+int mx_models_has_kind(const mx_models *m, const char *kind) {
+    for (int i = 0; i < MX_MODELS_NETS; i++)
+        if (m->kinds[i] && !strcmp(m->kinds[i], kind)) return 1;
     return 0;
 }
 

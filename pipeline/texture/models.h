@@ -42,6 +42,7 @@ typedef struct mx_models {
     /* per network (text encoder, UNet, depth, inpaint, VAE, TAESD, IP-Adapter, image encoder):
      * its weights on the device, and the weight file's binder behind them */
     mx_binder binders[MX_MODELS_NETS], wf_binders[MX_MODELS_NETS];
+    const char *kinds[MX_MODELS_NETS]; /* per slot: the kind loaded there (MX_NET_*), NULL: none */
     char digest[32]; /* of the weight file (digest.h), for reports */
 } mx_models;
 
@@ -62,6 +63,8 @@ int mx_models_pack_weights(mx_ctx *c, mx_status *st);
 #define MX_MODELS_PACK_EXTRA ((size_t)0)
 /* The same check for a model set already open (needs: MX_MODELS_NEED_*). */
 int mx_models_check(const mx_models *m, int needs, mx_status *st);
+/* 1 when a network of this kind (weights/networks.h: MX_NET_CONTROLNET, ...) is loaded, else 0. */
+int mx_models_has_kind(const mx_models *m, const char *kind);
 /* The weight file's path. */
 const char *mx_models_path(const mx_models *m);
 

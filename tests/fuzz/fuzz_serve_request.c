@@ -1,8 +1,11 @@
 /* The request decoding and validation of `matex serve` (tools/matex/serve/serve_request.c and
- * serve_auth.c, no HTTP library): the input is up to four parts split at FUZZ_SEP,
+ * serve_auth.c, serve_zip.c; no HTTP library): the input is up to four parts split at FUZZ_SEP,
  *   "METHOD URL"  -> the route (an id or file name it yields must pass the alphabet checks),
  *   the options  -> the job's options check (the batch manifest's key table),
- *   "HOST\nORIGIN\nAUTHORIZATION\nFILENAME" -> the Host/Origin/token rules and the part kinds;
+ *   "HOST\nORIGIN\nAUTHORIZATION\nFILENAME" -> the Host/Origin/token rules and the part kinds,
+ *   a zip archive -> the checks of a zip mesh part (serve_zip.h), then every entry inflated and
+ *   checked (written nowhere): an archive that passes has exactly one mesh and only names that
+ *   cannot leave the job folder;
  * every refusal's error body must read back as JSON with its code and message. */
 #include <stdlib.h>
 #include <string.h>
@@ -10,6 +13,7 @@
 #include "../../runtime/json.h"
 #include "../../tools/matex/serve/serve_auth.h"
 #include "../../tools/matex/serve/serve_request.h"
+#include "../../tools/matex/serve/serve_zip.h"
 #include "fuzz.h"
 
 /* The error body of e must be the JSON {"error": {"code": C, "message": M}} (M as text: a byte
@@ -62,6 +66,38 @@ static void fuzz_headers(char *text) {
     if (!mx_serve_image_kind(name, &e)) check_error_body(&e);
 }
 
+/* A name the checks let through must be relative with no '.' or '..' component and no backslash. */
+static void check_safe_name(const char *name) {
+    if (name[0] == '/' || strchr(name, '\\') || strstr(name, "//")) abort();
+    for (const char *c = name; *c; c = strchr(c, '/') ? strchr(c, '/') + 1 : c + strlen(c)) {
+        size_t n = strcspn(c, "/");
+        if ((n == 1 && c[0] == '.') || (n == 2 && c[0] == '.' && c[1] == '.')) abort();
+    }
+}
+
+static void fuzz_zip(const uint8_t *data, size_t len) {
+    mx_serve_zip z;
+    mx_serve_error e;
+    if (mx_serve_zip_check(data, len, &z, &e)) {
+        check_error_body(&e);
+        mx_serve_zip_free(&z);
+        return;
+    }
+    if (z.mesh >= z.n) abort();
+    for (size_t i = 0; i < z.n; i++) {
+        const mx_zip_entry *en = &z.entries[i];
+        if (en->name_len >= 9 && !memcmp(en->name, "__MACOSX/", 9)) continue; /* skipped, never written */
+        char name[MX_SERVE_ZIP_NAME_MAX + 1];
+        if (en->name_len > MX_SERVE_ZIP_NAME_MAX || en->is_link) abort();
+        memcpy(name, en->name, en->name_len);
+        name[en->name_len] = 0;
+        if (!mx_serve_zip_name_valid(name)) abort();
+        check_safe_name(name);
+        if (mx_serve_zip_unpack(&z, i, -1, &e)) check_error_body(&e);
+    }
+    mx_serve_zip_free(&z);
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     fuzz_quiet();
     size_t first_len, rest_len, opt_len = 0, hdr_len = 0;
@@ -77,6 +113,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
             check_error_body(&e);
     }
     if (hdr) {
+        size_t zip_len = 0;
+        const uint8_t *zip = NULL;
+        fuzz_split(hdr, hdr_len, FUZZ_SEP, &hdr_len, &zip, &zip_len);
+        if (zip) fuzz_zip(zip, zip_len);
         char *h = text_of(hdr, hdr_len);
         fuzz_headers(h);
         free(h);

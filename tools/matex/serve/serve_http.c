@@ -18,10 +18,12 @@
 #include "../../../pipeline/texture/digest.h"
 #include "../../../runtime/atomic_file.h"
 #include "../../../runtime/version.h"
+#include "../../../weights/networks.h"
 #include "../cli_signals.h"
 #include "serve.h"
 #include "serve_auth.h"
 #include "serve_request.h"
+#include "serve_zip.h"
 
 #define OPTIONS_PART_MAX ((size_t)64 << 10)
 #define POST_BUFFER 65536
@@ -46,6 +48,7 @@ typedef struct request {
     uint64_t bytes;
     int part_fd;           /* the file part being written, or -1 */
     char mesh_path[4300];  /* the stored mesh ("" until its part came) */
+    int mesh_zip;          /* mesh_path is a .zip of the mesh with its side files */
     char style_paths[MATEX_MAX_STYLE_IMAGES][4300];
     int nstyle;
     mx_buf options;
@@ -111,6 +114,7 @@ static int open_part(request *rq, const char *key, const char *filename) {
         if (!(kind = mx_serve_mesh_kind(filename, &rq->err))) return -1;
         path = rq->mesh_path;
         snprintf(path, sizeof rq->mesh_path, "%s/mesh.%s", rq->stage, kind);
+        rq->mesh_zip = !strcmp(kind, "zip");
     } else {
         if (rq->nstyle == MATEX_MAX_STYLE_IMAGES)
             return mx_serve_fail(&rq->err, 400, "bad_request", "more than %d parts \"style_image\"", MATEX_MAX_STYLE_IMAGES);
@@ -183,6 +187,16 @@ static int upload_begin(server *s, struct MHD_Connection *c, request *rq) {
     return 0;
 }
 
+/* A zip mesh part: unpacked into the upload folder (serve_zip.h), the archive removed; mesh_path
+ * becomes the mesh inside it. */
+static int unpack_mesh(request *rq) {
+    char zip[sizeof rq->mesh_path];
+    snprintf(zip, sizeof zip, "%s", rq->mesh_path);
+    if (mx_serve_zip_extract(zip, rq->stage, rq->mesh_path, sizeof rq->mesh_path, &rq->err)) return -1;
+    unlink(zip);
+    return 0;
+}
+
 /* The whole body came: the parts are checked as the CLI checks its inputs, then the job is queued. */
 static int upload_end(server *s, request *rq) {
     char out[4200], options[4300];
@@ -190,10 +204,11 @@ static int upload_end(server *s, request *rq) {
     close_part(rq);
     if (!rq->mesh_path[0]) return mx_serve_fail(&rq->err, 400, "bad_request", "no part \"mesh\" (a mesh file)");
     if (!rq->have_options) return mx_serve_fail(&rq->err, 400, "bad_request", "no part \"options\" (a JSON object)");
+    if (rq->mesh_zip && unpack_mesh(rq)) return -1;
     for (int i = 0; i < rq->nstyle; i++) styles[i] = rq->style_paths[i];
     mx_serve_jobs_path(&s->q, rq->id, "out", out);
     if (mx_serve_options_check(rq->options.p ? rq->options.p : "", rq->options.len, rq->mesh_path, out, styles, rq->nstyle, &rq->err) ||
-        mx_serve_mesh_check(rq->mesh_path, &rq->err))
+        mx_serve_mesh_check(rq->mesh_path, rq->mesh_zip ? rq->stage : NULL, &rq->err))
         return -1;
     snprintf(options, sizeof options, "%s/options.json", rq->stage);
     mx_status st;
@@ -419,8 +434,22 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls, en
 
 /* ---- the server's life ---- */
 
+/* "networks": every network of weights/networks.h's list, with its config class and whether m
+ * loaded it. */
+static void info_networks(const matex_models *m, mx_buf *b) {
+    mx_buf_printf(b, ",\"networks\":[");
+    for (size_t i = 0; i < mx_net_kind_count; i++) {
+        mx_buf_printf(b, "%s{\"name\":", i ? "," : "");
+        mx_buf_json_str(b, mx_net_kinds[i].name);
+        mx_buf_printf(b, ",\"class\":");
+        mx_buf_json_str(b, mx_net_kinds[i].class_name);
+        mx_buf_printf(b, ",\"loaded\":%s}", matex_models_has_network(m, mx_net_kinds[i].name) ? "true" : "false");
+    }
+    mx_buf_printf(b, "]");
+}
+
 /* GET /v1/info's answer, made once the model set is loaded; -1 when out of memory. */
-static int make_info(server *s) {
+static int make_info(server *s, const matex_models *m) {
     const mx_serve_config *cfg = s->cfg;
     char digest[32], *build = NULL;
     size_t build_len = 0;
@@ -438,6 +467,7 @@ static int make_info(server *s) {
     mx_buf_json_str(b, base);
     mx_buf_printf(b, ",\"weights_digest\":\"%s\",\"build\":", digest);
     mx_buf_json_str(b, build ? build : "");
+    info_networks(m, b);
     mx_buf_printf(b, ",\"max_queued\":%d,\"max_upload\":%llu}", cfg->limits.max_queued, (unsigned long long)cfg->max_upload);
     free(build);
     if (b->oom) return -1;
@@ -492,7 +522,7 @@ static int serve_until_signal(server *s, volatile sig_atomic_t *stop) {
     void *args[2] = {&s->q, m};
     int rc = 1;
     if (!m) fprintf(stderr, "matex serve: %s\n", err.message);
-    else if (make_info(s)) fprintf(stderr, "matex serve: out of memory\n");
+    else if (make_info(s, m)) fprintf(stderr, "matex serve: out of memory\n");
     else if (pthread_create(&worker, NULL, worker_main, args)) fprintf(stderr, "matex serve: cannot start the worker thread\n");
     else {
         int v6 = strchr(s->cfg->listen_addr, ':') != NULL;

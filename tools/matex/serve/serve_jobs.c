@@ -16,6 +16,7 @@
 #include "../../../runtime/fileio.h"
 #include "../cli_batch_manifest.h"
 #include "../cli_progress.h"
+#include "serve_zip.h"
 
 #define MARKER ".matex-serve"
 #define INCOMING ".incoming"
@@ -434,7 +435,23 @@ static void clear_outputs(const mx_serve_jobs *q, const char *id) {
 
 static int is_style_entry(const struct dirent *d) { return !strncmp(d->d_name, "style_", 6); }
 
-/* The job's inputs as stored at submission: mesh.EXT and style_K.EXT (K in order). */
+/* The mesh of a job sent as a zip: the path inside the job folder that MX_SERVE_ZIP_MESH_FILE
+ * names (checked again as an entry name). */
+static int find_zip_mesh(const char *dir, char mesh[4200]) {
+    char path[4300], rel[MX_SERVE_ZIP_NAME_MAX + sizeof MX_SERVE_ZIP_DIR + 2];
+    snprintf(path, sizeof path, "%.4100s/" MX_SERVE_ZIP_MESH_FILE, dir);
+    int fd = open(path, O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+    ssize_t n = fd < 0 ? -1 : read(fd, rel, sizeof rel - 1);
+    if (fd >= 0) close(fd);
+    if (n <= 0) return -1;
+    rel[n] = 0;
+    if (strncmp(rel, MX_SERVE_ZIP_DIR "/", sizeof MX_SERVE_ZIP_DIR) || !mx_serve_zip_name_valid(rel + sizeof MX_SERVE_ZIP_DIR))
+        return -1;
+    snprintf(mesh, 4200, "%.3900s/%.270s", dir, rel);
+    return 0;
+}
+
+/* The job's inputs as stored at submission: mesh.EXT (or a zip's mesh) and style_K.EXT (K in order). */
 static int find_inputs(const mx_serve_jobs *q, const char *id, char mesh[4200], char styles[][4200], int *nstyle) {
     char dir[4200];
     mx_serve_jobs_path(q, id, NULL, dir);
@@ -445,6 +462,7 @@ static int find_inputs(const mx_serve_jobs *q, const char *id, char mesh[4200], 
         snprintf(mesh, 4200, "%.4100s/mesh.%s", dir, kinds[k]);
         if (lstat(mesh, &sb)) mesh[0] = 0;
     }
+    if (!mesh[0] && find_zip_mesh(dir, mesh)) mesh[0] = 0;
     struct dirent **names;
     int n = scandir(dir, &names, is_style_entry, alphasort);
     *nstyle = 0;

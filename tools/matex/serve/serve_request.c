@@ -1,8 +1,10 @@
 #include "serve_request.h"
 
 #include <ctype.h>
+#include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../../../pipeline/geom/mesh.h"
@@ -101,14 +103,14 @@ static const char *kind_of(const char *filename, const char *const *kinds, size_
     extension(filename, ext, sizeof ext);
     for (size_t i = 0; i < n; i++)
         if (!strcmp(ext, kinds[i])) return kinds[i];
-    mx_serve_fail(e, 415, "unsupported_media_type", "part \"%s\": the file name must end in %s%s", part, list,
-                  !strcmp(ext, "zip") ? " (a .zip of a mesh with its side files is not taken yet: send a GLB)" : "");
+    mx_serve_fail(e, 415, "unsupported_media_type", "part \"%s\": the file name must end in %s", part, list);
     return NULL;
 }
 
 const char *mx_serve_mesh_kind(const char *filename, mx_serve_error *e) {
-    static const char *const kinds[] = {"obj", "ply", "stl", "off", "glb"};
-    return kind_of(filename, kinds, sizeof kinds / sizeof kinds[0], "mesh", ".obj, .ply, .stl, .off or .glb", e);
+    static const char *const kinds[] = {"obj", "ply", "stl", "off", "glb", "zip"};
+    return kind_of(filename, kinds, sizeof kinds / sizeof kinds[0], "mesh",
+                   ".obj, .ply, .stl, .off, .glb, or .zip (a mesh with its side files)", e);
 }
 
 const char *mx_serve_image_kind(const char *filename, mx_serve_error *e) {
@@ -125,12 +127,32 @@ int mx_serve_options_check(const char *json, size_t len, const char *mesh, const
     return rc;
 }
 
-int mx_serve_mesh_check(const char *path, mx_serve_error *e) {
+/* Every texture file the mesh names that exists must lie inside root (an MTL or a glTF in a zip
+ * may name any path: "/home/someone/secret.png", "../../x.png"). A "#imageN" suffix (an image
+ * inside a .glb / .gltf) is dropped first; a file that does not exist is not read by a run. */
+static int textures_inside(const mx_mesh *m, const char *root, mx_serve_error *e) {
+    char real_root[PATH_MAX], file[sizeof m->mats[0].texture_path], real[PATH_MAX];
+    if (!realpath(root, real_root)) return mx_serve_fail(e, 503, "storage", "cannot resolve the job folder");
+    size_t rl = strlen(real_root);
+    for (int i = 0; i < m->nmat; i++) {
+        snprintf(file, sizeof file, "%s", m->mats[i].texture_path);
+        char *hash = strstr(file, "#image");
+        if (hash) *hash = 0;
+        if (!file[0] || !realpath(file, real)) continue;
+        if (strncmp(real, real_root, rl) || real[rl] != '/')
+            return mx_serve_fail(e, 400, "bad_mesh", "part \"mesh\": material '%.100s' names a texture outside the archive",
+                                 m->mats[i].name);
+    }
+    return 0;
+}
+
+int mx_serve_mesh_check(const char *path, const char *root, mx_serve_error *e) {
     mx_mesh m;
     mx_status st;
     memset(&m, 0, sizeof m);
     int rc = mx_mesh_load(path, &m, &st);
-    if (rc) mx_serve_fail(e, 400, "bad_mesh", "part \"mesh\": %s", st.msg);
-    else mx_mesh_free(&m);
+    if (rc) return mx_serve_fail(e, 400, "bad_mesh", "part \"mesh\": %s", st.msg);
+    if (root) rc = textures_inside(&m, root, e);
+    mx_mesh_free(&m);
     return rc;
 }

@@ -54,15 +54,17 @@ int mx_serve_id_valid(const char *id);
 /* An output file name: [A-Za-z0-9._-], not starting with '.', at most MX_SERVE_NAME_MAX. */
 int mx_serve_name_valid(const char *name);
 
-/* The extension a mesh part is stored under ("obj", "ply", "stl", "off", "glb"), from the file
+/* The extension a mesh part is stored under ("obj", "ply", "stl", "off", "glb", or "zip": a mesh
+ * with its side files, serve_zip.h), from the file
  * name the client gave (only its extension is used); NULL with a 415 in e for any other kind. */
 const char *mx_serve_mesh_kind(const char *filename, mx_serve_error *e);
 /* The same for a style image part ("png", "jpg", "jpeg", "tif", "tiff"). */
 const char *mx_serve_image_kind(const char *filename, mx_serve_error *e);
 
 /* Reads the stored mesh as a run reads it (pipeline/geom/mesh.h): 0, or 400 "bad_mesh" with the
- * reader's message (the stored name in it, never the client's). */
-int mx_serve_mesh_check(const char *path, mx_serve_error *e);
+ * reader's message (the stored name in it, never the client's). With root (an unpacked zip's
+ * folder), every texture file the mesh names must lie inside it. */
+int mx_serve_mesh_check(const char *path, const char *root, mx_serve_error *e);
 /* Checks a job's options object (len bytes) as `matex batch` checks a manifest line, with mesh and
  * the style images the stored files and out_dir the job's output folder: 0, or 400 "bad_options"
  * with the CLI's message. */
