@@ -1,6 +1,7 @@
 #include "fileio.h"
 
 #include <errno.h>
+#include <sys/stat.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -35,4 +36,18 @@ int mx_path_join(char *out, size_t cap, const char *dir, const char *name, mx_st
     int n = snprintf(out, cap, "%s/%s", dir, name);
     if (n < 0 || (size_t)n >= cap) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
     return 0;
+}
+
+int mx_make_folders(const char *path, unsigned mode, mx_status *st) {
+    char p[4096];
+    if ((size_t)snprintf(p, sizeof p, "%s", path) >= sizeof p) return mx_fail(st, MX_EINPUT, "%s: path too long", path);
+    for (char *s = p + 1;; s++) {
+        if (*s != '/' && *s) continue;
+        char c = *s;
+        *s = 0;
+        if (mkdir(p, (mode_t)mode) && errno != EEXIST)
+            return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", p, strerror(errno));
+        *s = c;
+        if (!c) return 0;
+    }
 }

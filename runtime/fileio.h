@@ -1,5 +1,5 @@
 /* Reading small whole files (configs, vocabularies, reports) with size limits and errors
- * that name the file; joining paths. */
+ * that name the file; joining paths; making folders. */
 #ifndef MX_FILEIO_H
 #define MX_FILEIO_H
 
@@ -13,5 +13,9 @@ char *mx_read_file(const char *path, size_t max_bytes, size_t *len, mx_status *s
 
 /* out = dir + "/" + name; -1 with "DIR: path too long" (MX_EINPUT) when it does not fit in cap. */
 int mx_path_join(char *out, size_t cap, const char *dir, const char *name, mx_status *st);
+
+/* mkdir -p: path and every missing folder above it, each with `mode` (less the umask); folders
+ * that exist are fine. */
+int mx_make_folders(const char *path, unsigned mode, mx_status *st);
 
 #endif

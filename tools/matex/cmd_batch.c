@@ -168,20 +168,6 @@ static int parse_args(batch_args *a, int argc, char **argv) {
     return -1;
 }
 
-/* mkdir -p */
-static int make_folders(const char *path, mx_status *st) {
-    char p[4096];
-    if ((size_t)snprintf(p, sizeof p, "%s", path) >= sizeof p) return mx_fail(st, MX_EINPUT, "%s: path too long", path);
-    for (char *s = p + 1;; s++) {
-        if (*s != '/' && *s) continue;
-        char c = *s;
-        *s = 0;
-        if (mkdir(p, 0777) && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", p, strerror(errno));
-        *s = c;
-        if (!c) return 0;
-    }
-}
-
 /* A job's output folder is complete when the run published it (report.json is in it). */
 static int job_complete(const mx_batch_job *j) {
     char p[4200];
@@ -366,7 +352,7 @@ int cmd_batch(int argc, char **argv) {
     mx_batch_manifest m;
     struct stat sb;
     int made_root = stat(a.outroot, &sb) != 0; /* removed at the end if still empty (rmdir: never a file in it) */
-    if (make_folders(a.outroot, &st) || mx_batch_manifest_read(&m, a.manifest, a.defaults, a.ndefaults, a.outroot, a.shard, a.nshards, &st)) {
+    if (mx_make_folders(a.outroot, 0777, &st) || mx_batch_manifest_read(&m, a.manifest, a.defaults, a.ndefaults, a.outroot, a.shard, a.nshards, &st)) {
         fprintf(stderr, "matex batch: %s\n", st.msg);
         if (made_root) rmdir(a.outroot);
         return 1;

@@ -128,19 +128,6 @@ static int count_active(mx_serve_jobs *q) {
 
 /* ---- open, close ---- */
 
-static int make_folders(const char *path, mx_status *st) {
-    char p[4096];
-    if ((size_t)snprintf(p, sizeof p, "%s", path) >= sizeof p) return mx_fail(st, MX_EINPUT, "%s: path too long", path);
-    for (char *s = p + 1;; s++) {
-        if (*s != '/' && *s) continue;
-        char c = *s;
-        *s = 0;
-        if (mkdir(p, 0700) && errno != EEXIST) return mx_fail(st, MX_EIO, "%s: cannot create folder: %s", p, strerror(errno));
-        *s = c;
-        if (!c) return 0;
-    }
-}
-
 static int folder_is_empty(const char *path) {
     DIR *d = opendir(path);
     struct dirent *e;
@@ -194,7 +181,7 @@ int mx_serve_jobs_open(mx_serve_jobs *q, const char *dir, const mx_serve_limits 
     q->lock_fd = -1;
     q->limits = *limits;
     if ((size_t)snprintf(q->dir, sizeof q->dir, "%s", dir) >= sizeof q->dir - 64) return mx_fail(st, MX_EINPUT, "%s: path too long", dir);
-    if (make_folders(dir, st) || claim_folder(q, st) || lock_folder(q, st)) return -1;
+    if (mx_make_folders(dir, 0700, st) || claim_folder(q, st) || lock_folder(q, st)) return -1;
     char incoming[4200];
     snprintf(incoming, sizeof incoming, "%s/%s", q->dir, INCOMING);
     remove_tree(incoming);
