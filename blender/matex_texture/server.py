@@ -16,6 +16,8 @@ import urllib.error
 import urllib.request
 import uuid
 
+from .stream import drain_events
+
 TIMEOUT = 30  # seconds for one request; the event stream sends keep-alives well within it
 
 
@@ -127,13 +129,7 @@ class ServerRun:
                 "coverage": progress.get("coverage", 0.0), "seconds": progress.get("seconds", 0.0)}
 
     def poll(self):
-        out = []
-        while not self.events.empty():
-            event = self.events.get_nowait()
-            out.append(event)
-            if event.get("event") == "result":
-                self.result = event
-        return out
+        return drain_events(self)
 
     def done(self):
         return self.result is not None

@@ -52,12 +52,7 @@ class MatexRun:
         if finished:
             for t in self._threads:
                 t.join(timeout=5)
-        out = []
-        while not self.events.empty():
-            event = self.events.get_nowait()
-            out.append(event)
-            if event.get("event") == "result":
-                self.result = event
+        out = drain_events(self)
         if finished and self.result is None:
             self.result = self._result_without_line()
         return out
@@ -81,6 +76,18 @@ class MatexRun:
     def wait(self, timeout=None):
         self.proc.wait(timeout=timeout)
         return self.poll()
+
+
+def drain_events(run):
+    """The events a run's reader threads queued since the last call; the result line, when among
+    them, is kept as run.result (MatexRun and server.ServerRun share this)."""
+    out = []
+    while not run.events.empty():
+        event = run.events.get_nowait()
+        out.append(event)
+        if event.get("event") == "result":
+            run.result = event
+    return out
 
 
 def progress_fraction(event):
