@@ -98,7 +98,10 @@ typedef struct matex_mesh {
 
 /* ---- options ---- */
 
-enum { MATEX_PRECISION_FP32 = 0, MATEX_PRECISION_BF16 = 1 }; /* of the networks' matrix products */
+/* Of the networks' matrix products: fp32; bf16 products with fp32 sums wherever the CPU has them; or
+ * auto (the default), bf16 only where this CPU computes them faster than fp32 (`matex --version` says
+ * which: AMX, AMD's AVX512_BF16, Arm's BF16), else fp32. A CUDA context ignores it. */
+enum { MATEX_PRECISION_FP32 = 0, MATEX_PRECISION_BF16 = 1, MATEX_PRECISION_AUTO = 2 };
 
 typedef struct matex_progress {
     const char *stage;   /* "load", "grid", "views 3-4", "enhance view 2", "finish" */
@@ -166,7 +169,7 @@ typedef struct matex_options {
     int through_model_image;      /* 1: each render goes through an image_size model image (crop, resize, back) */
     /* read by matex_models_open (a run uses those of its model set): */
     int threads;                  /* 0: all CPUs */
-    int precision;                /* MATEX_PRECISION_BF16 (default: used where the CPU has it) or _FP32 */
+    int precision;                /* MATEX_PRECISION_AUTO (default), _BF16 or _FP32 (see the enum) */
     const char *device;           /* "cpu" (default), "cpu-strict", "cuda" (a `make cuda` build) */
     int verbose;                  /* 1: progress lines on stderr */
     matex_progress_fn progress;   /* NULL: none */

@@ -58,6 +58,9 @@ mx_isa mx_isa_fp32_level(mx_isa isa);
 /* Best level for a precision: fp32 never gets a bf16 level; bf16 gets the best level, which is
  * an fp32 one when the CPU has no bf16 arithmetic (check with mx_isa_precision). */
 mx_isa mx_cpu_isa_for(mx_precision p);
+/* The precision auto picks: bf16 where this CPU computes bf16 products faster than fp32 ones,
+ * else fp32 (MATEX_ISA lowers it with the levels). */
+mx_precision mx_cpu_faster_precision(void);
 /* The precision a level computes in. */
 mx_precision mx_isa_precision(mx_isa isa);
 const char *mx_isa_name(mx_isa isa);

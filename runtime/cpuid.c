@@ -62,6 +62,12 @@ static mx_isa detect_isa(void) {
     if (!__get_cpuid_count(7, 1, &a, &b, &c, &d) || !((a >> 5) & 1)) return MX_ISA_AVX512;
     return amx_usable(leaf7_edx, xcr0) ? MX_ISA_AMX : MX_ISA_AVX512_BF16;
 }
+
+/* cpuid leaf 0's vendor string, "GenuineIntel", in EBX EDX ECX. */
+static int cpu_is_intel(void) {
+    unsigned int a, b, c, d;
+    return __get_cpuid(0, &a, &b, &c, &d) && b == 0x756e6547u && d == 0x49656e69u && c == 0x6c65746eu;
+}
 #elif defined(__aarch64__) && defined(__linux__) && defined(MX_WITH_NEON)
 #include <sys/auxv.h>
 
@@ -76,6 +82,9 @@ static mx_isa detect_isa(void) {
 }
 #else
 static mx_isa detect_isa(void) { return MX_ISA_SCALAR; }
+#endif
+#if !defined(__x86_64__) && !defined(__i386__)
+static int cpu_is_intel(void) { return 0; }
 #endif
 
 /* 0: scalar (on every ladder), 1: x86-64, 2: aarch64. */
@@ -114,6 +123,17 @@ mx_isa mx_cpu_best_isa(void) { return isa_from_env(detect_isa()); }
 mx_isa mx_cpu_isa_for(mx_precision p) {
     mx_isa best = mx_cpu_best_isa();
     return p == MX_PREC_FP32 ? mx_isa_fp32_level(best) : best;
+}
+
+/* Measured (docs/PERFORMANCE.md): AMX and AMD's AVX512_BF16 (Zen 4, Zen 5) run the networks'
+ * bf16 products 1.6-1.8x faster than fp32 FMAs. Intel's cores without usable AMX tiles
+ * (Emerald Rapids under a VM that hides them; the AMX Xeon lowered to avx512bf16) issue
+ * vdpbf16ps at half the FMA rate: the bf16 UNet took 1.6x the fp32 one's CPU time there, so fp32
+ * is both faster and closer. Arm's BF16 stays bf16 (BFMMLA: not yet measured on hardware). */
+mx_precision mx_cpu_faster_precision(void) {
+    mx_isa best = mx_cpu_best_isa();
+    if (best == MX_ISA_AVX512_BF16 && cpu_is_intel()) return MX_PREC_FP32;
+    return mx_isa_precision(best);
 }
 
 mx_precision mx_isa_precision(mx_isa isa) { return mx_isa_fp32_level(isa) != isa ? MX_PREC_BF16 : MX_PREC_FP32; }

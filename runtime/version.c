@@ -51,5 +51,6 @@ void mx_build_report(FILE *f) {
         if (mx_build_has_isa((mx_isa)i)) fprintf(f, " %s", mx_isa_name((mx_isa)i));
     fprintf(f, "\ncpu kernels used on this CPU: fp32 %s, bf16 %s%s\n", mx_isa_name(mx_cpu_isa_for(MX_PREC_FP32)),
             mx_isa_name(mx_cpu_isa_for(MX_PREC_BF16)), getenv("MATEX_ISA") ? " (MATEX_ISA lowers them)" : "");
+    fprintf(f, "precision auto on this CPU: %s\n", mx_precision_name(mx_cpu_faster_precision()));
     fprintf(f, "backends: %s\n", mx_backends_compiled());
 }

@@ -68,10 +68,17 @@ check "the message names the mesh" grep -q "none.obj" "$T/err"
 check "no output after a failure" [ ! -e "$T/a" ]
 check "texture runs" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" "a grey felt hat" --weights "$W" -o "$T/hat" --json $SMALL)" = 0 ]
 check "--json summary" grep -q '"ok":true' "$T/out"
-# the report names the arithmetic: bf16 by default where the CPU has AVX512_BF16 (the amx level too)
+# the report names the arithmetic: by default (auto) bf16 where the CPU's bf16 products are faster
+# than its fp32 ones (AMD's AVX512_BF16, Intel's AMX), fp32 elsewhere (Intel without AMX tiles)
 want=fp32
-case "${MATEX_ISA:-avx512bf16}" in avx512bf16 | amx) grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null && want=bf16 ;; esac
+if grep -q avx512_bf16 /proc/cpuinfo 2>/dev/null; then
+    case "${MATEX_ISA:-amx}" in
+    amx) { grep -q AuthenticAMD /proc/cpuinfo || grep -q amx_tile /proc/cpuinfo; } && want=bf16 ;;
+    avx512bf16) grep -q AuthenticAMD /proc/cpuinfo && want=bf16 ;;
+    esac
+fi
 check "report names the precision ($want)" grep -q "\"precision\": *\"$want\"" "$T/hat/report.json"
+check "--version names auto's precision ($want)" sh -c "'$M' --version | grep -q '^precision auto on this CPU: $want\$'"
 for f in texture.png texture.exr mesh.mtl; do
     check "texture wrote $f" [ -s "$T/hat/$f" ]
 done

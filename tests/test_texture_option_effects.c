@@ -21,7 +21,7 @@
 static const char *const SIDE_ONLY[] = {
     "weights", "output", "force", "quiet", "progress", "json", "help", /* where a run writes and what it prints */
     "threads",      /* the same texture on any thread count (test_texture_threads); report "threads" */
-    "precision",    /* fp32 on a CPU without AVX512_BF16 (most CI machines); report "precision", "kernels" */
+    "precision",    /* each value may compute as the default here (auto: fp32 or bf16); report "precision" */
     "device",       /* cpu-strict computes as cpu, with activation guards (test_ops_backend) */
     "front-render", /* writes front.png beside the texture (tests/cli_batch.sh checks it) */
 };

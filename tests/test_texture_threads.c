@@ -1,6 +1,6 @@
 /* Same seed, same bytes: the embedding API (include/matex.h) textures a cube in memory with the
- * demo weights (MATEX_DEMO_WEIGHTS) on model sets of 1 and 3 threads, in fp32 and in the default
- * precision (bf16 where the CPU has it), and the textures and UVs must be identical byte for byte.
+ * demo weights (MATEX_DEMO_WEIGHTS) on model sets of 1 and 3 threads, in fp32, in bf16 (where the CPU
+ * has it) and in the default (auto), and the textures and UVs must be identical byte for byte.
  * Uses nothing but the public API, so `make test-arm64` runs it on the core library under qemu. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -71,6 +71,7 @@ int main(void) {
         return MX_TEST_SKIP;
     }
     check_threads(weights, MATEX_PRECISION_FP32, "fp32");
-    check_threads(weights, -1, "default precision (bf16 where the CPU has it)");
+    check_threads(weights, MATEX_PRECISION_BF16, "bf16 (where the CPU has it)");
+    check_threads(weights, -1, "default precision (auto)");
     return mx_test_finish("test_texture_threads");
 }

@@ -112,10 +112,10 @@ static const mx_option_spec TABLE[] = {
      .verbs = ALL | BAT, .scope = MX_SCOPE_JOB, .help = "up axis of the mesh"},
     {.name = "threads", .arg = "N", .type = MX_OPTION_INT, .field = FIELD(threads, int), .lo = 0, .hi = 1024, .def = "0",
      .def_help = "0: all", .verbs = ALL | BAT, .scope = MX_SCOPE_MODELS, .help = "CPU threads"},
-    {.name = "precision", .arg = "fp32|bf16", .type = MX_OPTION_CHOICE, .field = FIELD(precision, int),
-     .choices = "fp32|bf16", .def = "bf16", .def_help = "bf16 where the CPU has AVX512_BF16, else fp32",
+    {.name = "precision", .arg = "fp32|bf16|auto", .type = MX_OPTION_CHOICE, .field = FIELD(precision, int),
+     .choices = "fp32|bf16|auto", .def = "auto", .def_help = "auto: bf16 where this CPU computes it faster, else fp32",
      .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_MODELS,
-     .help = "arithmetic of the networks: bf16 products with fp32 sums, about 2x faster"},
+     .help = "arithmetic of the networks: bf16 products with fp32 sums\n(1.6-1.8x faster with AMX or on AMD), or fp32"},
     {.name = "device", .arg = "D", .type = MX_OPTION_TEXT, .field = FIELD(device, text),
      .choices = "cpu|cpu-strict|cuda", .def = "cpu", .verbs = TEX | ENH | BAT, .scope = MX_SCOPE_MODELS,
      .help = "cpu, cpu-strict (activations guarded, for tests) or cuda\n(in binaries built by `make cuda`)"},
@@ -450,9 +450,12 @@ int mx_texture_opts_normals(const mx_texture_opts *o) {
 
 mx_up_axis mx_texture_opts_up(const mx_texture_opts *o) { return o->pub.z_up ? MX_UP_Z : MX_UP_Y; }
 
-mx_precision mx_texture_opts_precision(const mx_texture_opts *o) {
-    return o->pub.precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16;
+mx_precision mx_precision_of_option(int matex_precision) {
+    if (matex_precision == MATEX_PRECISION_AUTO) return mx_cpu_faster_precision();
+    return matex_precision == MATEX_PRECISION_FP32 ? MX_PREC_FP32 : MX_PREC_BF16;
 }
+
+mx_precision mx_texture_opts_precision(const mx_texture_opts *o) { return mx_precision_of_option(o->pub.precision); }
 
 mx_backend_kind mx_texture_opts_device(const mx_texture_opts *o) {
     mx_backend_kind kind = MX_BACKEND_CPU;

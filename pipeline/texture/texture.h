@@ -61,7 +61,9 @@ typedef struct mx_texture_opts {
 /* pub's choices in the pipeline's terms. */
 int mx_texture_opts_normals(const mx_texture_opts *o);           /* MX_NORMAL_GEOMETRIC or _FROM_DEPTH */
 mx_up_axis mx_texture_opts_up(const mx_texture_opts *o);
-mx_precision mx_texture_opts_precision(const mx_texture_opts *o);
+mx_precision mx_texture_opts_precision(const mx_texture_opts *o); /* auto resolved for this CPU */
+/* A MATEX_PRECISION_* value as the precision a CPU context computes in (auto resolved). */
+mx_precision mx_precision_of_option(int matex_precision);
 mx_backend_kind mx_texture_opts_device(const mx_texture_opts *o); /* a checked name (cpu when NULL) */
 const char *mx_texture_opts_device_name(const mx_texture_opts *o);
 

@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "../../../pipeline/texture/digest.h"
+#include "../../../pipeline/texture/texture.h"
 #include "../../../runtime/atomic_file.h"
 #include "../../../runtime/version.h"
 #include "../../../weights/networks.h"
@@ -463,7 +464,7 @@ static int make_info(server *s, const matex_models *m) {
     mx_buf_printf(b, ",\"device\":");
     mx_buf_json_str(b, cfg->models.o.device ? cfg->models.o.device : "cpu");
     mx_buf_printf(b, ",\"threads\":%d,\"precision\":\"%s\",\"weights\":", cfg->models.o.threads,
-                  cfg->models.o.precision == MATEX_PRECISION_FP32 ? "fp32" : "bf16");
+                  mx_precision_name(mx_precision_of_option(cfg->models.o.precision)));
     mx_buf_json_str(b, base);
     mx_buf_printf(b, ",\"weights_digest\":\"%s\",\"build\":", digest);
     mx_buf_json_str(b, build ? build : "");
