@@ -2,7 +2,8 @@
 # `--progress json` at the shell (README "Progress stream"; the JSON of every line is parsed by
 # tests/test_tools_progress.c): stdout holds only event lines and ends with the result line,
 # stderr holds no progress lines, `--progress text` keeps them on stderr, a bad value is a usage
-# error, and SIGINT in the middle of a run ends in a result line with exit 130 and no output.
+# error, and SIGINT in the middle of a run ends in a result line with exit 130 and no output (a
+# second signal too, at once, with its own result line).
 NAME=progress
 . "$(dirname "$0")/lib_cli.sh"
 A=$(data assets)
@@ -35,4 +36,23 @@ rc=$?
 check "SIGINT exits 130" [ $rc = 130 ]
 check "SIGINT: the result line says interrupted" sh -c "tail -n 1 '$T/int.out' | grep -q '^{\"event\":\"result\",\"ok\":false,\"exit\":130,\"error\":\"interrupted\"}\$'"
 check "SIGINT: no output folder, no staging folder" sh -c "! ls -d '$T'/int* 2>/dev/null | grep -v '\\.out\$\\|\\.err\$'"
+
+# a second signal ends the run at once with its own result line (the run is stopped while both are
+# sent, so both arrive before it can act on the first; SIGINT then SIGTERM: two SIGINTs would merge)
+"$M" texture "$MESH" hat --weights "$W" -o "$T/twice" --image-size 128 --steps 50 --texture-size 512 --render-size 512 \
+    --candidates 12 --progress json > "$T/twice.out" 2> "$T/twice.err" &
+pid=$!
+n=0
+while ! grep -q '"event":"step"' "$T/twice.out" 2>/dev/null && [ $n -lt 600 ]; do sleep 0.05; n=$((n + 1)); done
+kill -STOP $pid
+kill -INT $pid
+kill -TERM $pid
+kill -CONT $pid
+wait $pid
+rc=$?
+check "a second signal exits 130" [ $rc = 130 ]
+check "... the last line is its result line" sh -c "tail -n 1 '$T/twice.out' | grep -qx '{\"event\":\"result\",\"ok\":false,\"exit\":130,\"error\":\"interrupted again, stopped now; nothing written\"}'"
+check "... one result line, every line an event" sh -c "[ \$(grep -c '\"event\":\"result\"' '$T/twice.out') = 1 ] && ! grep -v '^{\"event\":\"[a-z]*\",.*}\$' '$T/twice.out'"
+check "... one line on stderr" [ "$(wc -l < "$T/twice.err")" = 1 ]
+check "... no output folder, no staging folder" sh -c "! ls -d '$T'/twice* 2>/dev/null | grep -v '\\.out\$\\|\\.err\$'"
 exit $fail
