@@ -24,12 +24,19 @@ check "transfer --progress xml exits 2" [ "$(rc_of "$M" transfer "$T/a/mesh.obj"
 check "a failure: the result line carries the message" sh -c "[ \"\$('$M' texture '$MESH' hat --weights '$T/no.mxw' -o '$T/c' --progress json 2>/dev/null)\" = \
 '{\"event\":\"result\",\"ok\":false,\"exit\":1,\"error\":\"$T/no.mxw: cannot open: No such file or directory\"}' ]"
 
-# SIGINT once the first denoising step is reported (a run long enough to be caught in the middle)
-"$M" texture "$MESH" hat --weights "$W" -o "$T/int" --image-size 128 --steps 50 --texture-size 512 --render-size 512 \
-    --candidates 12 --progress json > "$T/int.out" 2> "$T/int.err" &
-pid=$!
-n=0
-while ! grep -q '"event":"step"' "$T/int.out" 2>/dev/null && [ $n -lt 600 ]; do sleep 0.05; n=$((n + 1)); done
+# long_run NAME: a run long enough to be caught in the middle, -o $T/NAME, its stdout and stderr in
+# $T/NAME.out and .err, started in the background; returns once it reports its first denoising
+# step, its process in pid
+long_run() {
+    "$M" texture "$MESH" hat --weights "$W" -o "$T/$1" --image-size 128 --steps 50 --texture-size 512 --render-size 512 \
+        --candidates 12 --progress json > "$T/$1.out" 2> "$T/$1.err" &
+    pid=$!
+    n=0
+    while ! grep -q '"event":"step"' "$T/$1.out" 2>/dev/null && [ $n -lt 600 ]; do sleep 0.05; n=$((n + 1)); done
+}
+
+# SIGINT once the first denoising step is reported
+long_run int
 kill -INT $pid
 wait $pid
 rc=$?
@@ -37,18 +44,9 @@ check "SIGINT exits 130" [ $rc = 130 ]
 check "SIGINT: the result line says interrupted" sh -c "tail -n 1 '$T/int.out' | grep -q '^{\"event\":\"result\",\"ok\":false,\"exit\":130,\"error\":\"interrupted\"}\$'"
 check "SIGINT: no output folder, no staging folder" sh -c "! ls -d '$T'/int* 2>/dev/null | grep -v '\\.out\$\\|\\.err\$'"
 
-# a second signal ends the run at once with its own result line (the run is stopped while both are
-# sent, so both arrive before it can act on the first; SIGINT then SIGTERM: two SIGINTs would merge)
-"$M" texture "$MESH" hat --weights "$W" -o "$T/twice" --image-size 128 --steps 50 --texture-size 512 --render-size 512 \
-    --candidates 12 --progress json > "$T/twice.out" 2> "$T/twice.err" &
-pid=$!
-n=0
-while ! grep -q '"event":"step"' "$T/twice.out" 2>/dev/null && [ $n -lt 600 ]; do sleep 0.05; n=$((n + 1)); done
-kill -STOP $pid
-kill -INT $pid
-kill -TERM $pid
-kill -CONT $pid
-wait $pid
+# a second signal ends the run at once with its own result line
+long_run twice
+signal_twice $pid
 rc=$?
 check "a second signal exits 130" [ $rc = 130 ]
 check "... the last line is its result line" sh -c "tail -n 1 '$T/twice.out' | grep -qx '{\"event\":\"result\",\"ok\":false,\"exit\":130,\"error\":\"interrupted again, stopped now; nothing written\"}'"
