@@ -321,9 +321,9 @@ printf '{"mesh": "box.obj", "prompt": "x", "colour": "red"}\n' > "$T/cat/bad.jso
 check "batch --server: a bad line fails before the server" sh -c "! '$M' batch '$T/cat/bad.jsonl' --server '$URL' -o '$T/remote2' > /dev/null 2> '$T/b2.err' && grep -q 'unknown key' '$T/b2.err'"
 check "batch --server with --weights: usage error" sh -c "[ \$('$M' batch '$T/cat/m.jsonl' --server '$URL' --weights '$W' -o '$T/r3' 2> /dev/null; echo \$?) = 2 ]"
 # a mesh with side files goes as a zip of them (tools/matex/serve/serve_upload.h): an OBJ with its
-# .mtl and texture in folders below it, a glTF with its .bin and a %-escaped image. The server
-# unpacks exactly those files (its job folders, and upload folders, watched while the batch runs) and the outputs are a
-# local batch's.
+# .mtl and texture in folders below it, a glTF with its .bin and a %-escaped image, a GLB with its
+# .bin. The server unpacks exactly those files (its upload and job folders watched while the batch
+# runs) and the outputs are a local batch's.
 mkdir -p "$T/cat/crate/mat/tex" "$T/cat/tetra/geo" "$T/cat/tetra/tex"
 { echo 'mtllib mat/crate.mtl'; cat "$BOX"; } > "$T/cat/crate/crate.obj"
 printf 'newmtl oak\nKd 1 1 1\nmap_Kd -s 1 1 1 tex/wood.png\n' > "$T/cat/crate/mat/crate.mtl"
@@ -343,9 +343,16 @@ cat > "$T/cat/tetra/tetra.gltf" << 'GLTF'
  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]},
                {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}]}
 GLTF
+# the same tetrahedron as a .glb whose buffer is a file beside it (its JSON chunk padded to 4 bytes)
+mkdir -p "$T/cat/tetrab/buf"
+cp "$T/cat/tetra/geo/tetra.bin" "$T/cat/tetrab/buf/tetrab.bin"
+J='{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],"buffers":[{"uri":"buf/tetrab.bin","byteLength":72}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":48},{"buffer":0,"byteOffset":48,"byteLength":24}],"accessors":[{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,1]},{"bufferView":1,"componentType":5123,"count":12,"type":"SCALAR"}]}'
+while [ $((${#J} % 4)) != 0 ]; do J="$J "; done
+le32() { printf "$(printf '\\%03o\\%03o\\%03o\\%03o' $(($1 % 256)) $(($1 / 256 % 256)) $(($1 / 65536 % 256)) $(($1 / 16777216)))"; }
+{ printf 'glTF'; le32 2; le32 $((20 + ${#J})); le32 ${#J}; printf 'JSON'; printf '%s' "$J"; } > "$T/cat/tetrab/tetrab.glb"
 PARTS='"image-size": 64, "texture-size": 64, "render-size": 64, "candidates": 4, "views": 2, "steps": 12'
-printf '{"mesh": "crate/crate.obj", "prompt": "a crate", "name": "crate", "seed": 5, %s}\n{"mesh": "tetra/tetra.gltf", "prompt": "a tetrahedron", "name": "tetra", "seed": 6, %s}\n' \
-    "$PARTS" "$PARTS" > "$T/cat/parts.jsonl"
+job() { printf '{"mesh": "%s", "prompt": "a box", "name": "%s", "seed": %s, %s}\n' "$1" "$2" "$3" "$PARTS"; }
+{ job crate/crate.obj crate 5; job tetra/tetra.gltf tetra 6; job tetrab/tetrab.glb tetrab 7; } > "$T/cat/parts.jsonl"
 "$M" batch "$T/cat/parts.jsonl" --server "$URL" --quiet -o "$T/premote" > /dev/null 2> "$T/bp.err" &
 BP=$!
 : > "$T/seen"
@@ -356,10 +363,11 @@ done
 wait $BP
 check "batch --server, meshes with side files: done" [ $? = 0 ]
 sort -u "$T/seen" > "$T/seen_u"
-printf '%s\n' crate.obj mat/crate.mtl mat/tex/wood.png tetra.gltf geo/tetra.bin 'tex/base color.png' | sort > "$T/want_u"
+printf '%s\n' crate.obj mat/crate.mtl mat/tex/wood.png tetra.gltf geo/tetra.bin 'tex/base color.png' tetrab.glb buf/tetrab.bin |
+    sort > "$T/want_u"
 check "... the server got each mesh with exactly its side files" cmp -s "$T/seen_u" "$T/want_u"
 $M batch "$T/cat/parts.jsonl" --weights "$W" --threads 2 --quiet -o "$T/plocal" > /dev/null 2>&1
-for n in crate tetra; do
+for n in crate tetra tetrab; do
     for f in mesh.glb mesh.obj texture.png; do
         check "... = local batch: $n/$f" cmp -s "$T/premote/$n/$f" "$T/plocal/$n/$f"
     done

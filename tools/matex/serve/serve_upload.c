@@ -13,6 +13,9 @@
 #include "serve_zip.h"
 
 #define GLTF_MAX_BYTES ((size_t)64 << 20) /* the JSON of a .gltf; its data is in the buffers */
+#define GLB_MAGIC 0x46546C67u      /* "glTF" */
+#define GLB_CHUNK_JSON 0x4E4F534Au /* "JSON" */
+#define GLB_HEADER_BYTES 20        /* magic, version, length; the first chunk's length and type */
 
 /* The mesh and the side files found so far, named as in the zip (names[0]: the mesh). */
 typedef struct mesh_parts {
@@ -154,9 +157,38 @@ static int uri_parts(mesh_parts *p, const mx_json *list, int required, mx_status
     return 0;
 }
 
+static uint32_t le32(const uint8_t *b) { return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24; }
+
+/* The glTF JSON of a .gltf or .glb (the reader tells them by the magic, not the name): the file's
+ * text, or a GLB's first chunk, its length checked against the file's (malloc'ed, *len bytes). */
+static char *gltf_json(const char *path, size_t *len, mx_status *st) {
+    uint8_t h[GLB_HEADER_BYTES];
+    struct stat sb = {0};
+    FILE *f = fopen(path, "rb");
+    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open", path), NULL;
+    size_t got = fread(h, 1, sizeof h, f);
+    if (got < 4 || le32(h) != GLB_MAGIC) {
+        fclose(f);
+        return mx_read_file(path, GLTF_MAX_BYTES, len, st);
+    }
+    /* a GLB: the first chunk is its JSON; a length the file cannot hold is damage */
+    uint64_t n = got == sizeof h && le32(h + 16) == GLB_CHUNK_JSON && !fstat(fileno(f), &sb) ? le32(h + 12) : UINT64_MAX;
+    char *text = n <= GLTF_MAX_BYTES && n <= (uint64_t)sb.st_size - sizeof h ? malloc(n + 1) : NULL;
+    if (text && fread(text, 1, n, f) == n) {
+        text[n] = 0;
+        *len = n;
+    } else {
+        free(text);
+        text = NULL;
+        mx_fail(st, MX_EINPUT, "%s: a GLB whose JSON chunk is damaged or too large", path);
+    }
+    fclose(f);
+    return text;
+}
+
 static int gltf_parts(mesh_parts *p, mx_status *st) {
     size_t len;
-    char *text = mx_read_file(p->mesh, GLTF_MAX_BYTES, &len, st);
+    char *text = gltf_json(p->mesh, &len, st);
     mx_json *doc = text ? mx_json_parse(text, len, p->mesh, st) : NULL;
     free(text);
     int rc = !doc || uri_parts(p, mx_json_get(doc, "buffers"), 1, st) || uri_parts(p, mx_json_get(doc, "images"), 0, st);
@@ -190,9 +222,9 @@ static int write_zip(const mesh_parts *p, FILE **zip, mx_status *st) {
 }
 
 int mx_serve_upload_zip(const char *mesh_path, FILE **zip, mx_status *st) {
-    int gltf = has_extension(mesh_path, "gltf");
+    int gltf = has_extension(mesh_path, "gltf"), glb = has_extension(mesh_path, "glb");
     *zip = NULL;
-    if (!gltf && !has_extension(mesh_path, "obj")) return 0; /* PLY, STL, OFF, GLB: one file */
+    if (!gltf && !glb && !has_extension(mesh_path, "obj")) return 0; /* PLY, STL, OFF: one file */
     mesh_parts *p = calloc(1, sizeof *p);
     if (!p) return mx_fail(st, MX_ENOMEM, "%s: out of memory", mesh_path);
     size_t d = dir_len(mesh_path);
@@ -204,7 +236,7 @@ int mx_serve_upload_zip(const char *mesh_path, FILE **zip, mx_status *st) {
                      mesh_path);
     if (!rc) {
         snprintf(p->names[p->n++], sizeof p->names[0], "%s", mesh_path + d);
-        rc = gltf ? gltf_parts(p, st) : for_each_line(p, mesh_path, p->names[0], obj_line, st);
+        rc = gltf || glb ? gltf_parts(p, st) : for_each_line(p, mesh_path, p->names[0], obj_line, st);
     }
     if (!rc && (gltf || p->n > 1)) rc = write_zip(p, zip, st);
     free(p);

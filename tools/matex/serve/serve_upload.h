@@ -4,8 +4,8 @@
  * to the mesh's folder, as the mesh names it. A .gltf always goes as a zip: the server takes a
  * .gltf only inside one. The side files are those the mesh readers open (pipeline/io): an OBJ's
  * `mtllib` files (the rest of the line, relative to the OBJ) and their `map_Kd` textures (the
- * line's last word, relative to the .mtl); a glTF's buffer and image `uri`s (%XX decoded; data:
- * and remote URIs are not files). A .mtl or texture that is not there is left out, as a local run
+ * line's last word, relative to the .mtl); the buffer and image `uri`s of a glTF, .gltf or .glb
+ * (%XX decoded; data: and remote URIs are not files). A .mtl or texture that is not there is left out, as a local run
  * ignores it; a missing buffer is an error, as it is for a local run. A side file outside the
  * mesh's folder (an absolute path, a '..' that climbs out, a link that leads out) is refused
  * rather than sent: a mesh someone else made must not send the user's other files to a server.
