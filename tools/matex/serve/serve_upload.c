@@ -1,6 +1,7 @@
 /* The mesh part a client sends: the mesh alone, or a zip of it with its side files (serve_upload.h). */
 #include "serve_upload.h"
 
+#include <errno.h>
 #include <limits.h>
 #include <stdlib.h>
 #include <string.h>
@@ -110,7 +111,7 @@ static char *last_word(char *v) {
 static int for_each_line(mesh_parts *p, const char *path, const char *rel,
                          int (*fn)(mesh_parts *, const char *, char *, mx_status *), mx_status *st) {
     FILE *f = fopen(path, "rb");
-    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open", path);
+    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno));
     char *line = NULL;
     size_t cap = 0;
     int rc = 0;
@@ -165,7 +166,7 @@ static char *gltf_json(const char *path, size_t *len, mx_status *st) {
     uint8_t h[GLB_HEADER_BYTES];
     struct stat sb = {0};
     FILE *f = fopen(path, "rb");
-    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open", path), NULL;
+    if (!f) return mx_fail(st, MX_EINPUT, "%s: cannot open: %s", path, strerror(errno)), NULL;
     size_t got = fread(h, 1, sizeof h, f);
     if (got < 4 || le32(h) != GLB_MAGIC) {
         fclose(f);
@@ -230,15 +231,14 @@ int mx_serve_upload_zip(const char *mesh_path, FILE **zip, mx_status *st) {
     size_t d = dir_len(mesh_path);
     p->mesh = mesh_path;
     snprintf(p->dir, sizeof p->dir, "%.*s", (int)d, mesh_path);
+    snprintf(p->names[p->n++], sizeof p->names[0], "%s", mesh_path + d);
     int rc = realpath(d ? p->dir : ".", p->real_dir) ? 0 : mx_fail(st, MX_EINPUT, "%s: cannot resolve its folder", mesh_path);
-    if (!rc && !mx_serve_zip_name_valid(mesh_path + d))
+    if (!rc) rc = gltf || glb ? gltf_parts(p, st) : for_each_line(p, mesh_path, p->names[0], obj_line, st);
+    int zipped = !rc && (gltf || p->n > 1);
+    if (zipped && !mx_serve_zip_name_valid(mesh_path + d))
         rc = mx_fail(st, MX_EINPUT, "%s: not a file name a server takes in a zip (a backslash, colon or control byte, or too long)",
                      mesh_path);
-    if (!rc) {
-        snprintf(p->names[p->n++], sizeof p->names[0], "%s", mesh_path + d);
-        rc = gltf || glb ? gltf_parts(p, st) : for_each_line(p, mesh_path, p->names[0], obj_line, st);
-    }
-    if (!rc && (gltf || p->n > 1)) rc = write_zip(p, zip, st);
+    if (zipped && !rc) rc = write_zip(p, zip, st);
     free(p);
     return rc;
 }
