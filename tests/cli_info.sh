@@ -1,5 +1,5 @@
 #!/bin/sh
-# matex info: usage errors (exit 2), mesh statistics as text and JSON against
+# matex info: usage errors (exit 2, worded as the other verbs': mx_cli_usage_error), mesh statistics as text and JSON against
 # assets/MANIFEST.md, bad input (exit 1, message naming the file), weight-file dispatch.
 NAME=info
 . "$(dirname "$0")/lib_cli.sh"
@@ -8,7 +8,15 @@ A=$(data assets)
 check "--help exits 0" [ "$(rc_of "$M" info --help)" = 0 ]
 check "--help prints usage" grep -q "usage: matex info" "$T/out"
 check "no argument exits 2" [ "$(rc_of "$M" info)" = 2 ]
+check "... worded as the other verbs, with the --help hint" sh -c "grep -qx 'matex info: missing FILE' '$T/err' && grep -qx '(matex info --help for usage)' '$T/err'"
 check "unknown option exits 2" [ "$(rc_of "$M" info --frobnicate "$A/spot/spot_triangulated.obj")" = 2 ]
+check "... worded as the other verbs" sh -c "grep -qx 'matex info: unknown option --frobnicate' '$T/err' && grep -qx '(matex info --help for usage)' '$T/err' && [ \$(wc -l < '$T/err') = 2 ]"
+check "--compare without an image exits 2" [ "$(rc_of "$M" info tests/data/box.obj --compare)" = 2 ]
+check "... worded as the other verbs" grep -qx 'matex info: missing value after --compare' "$T/err"
+check "two files exit 2" [ "$(rc_of "$M" info tests/data/box.obj tests/data/box.obj)" = 2 ]
+check "... worded as the other verbs" grep -qx 'matex info: unexpected argument tests/data/box.obj' "$T/err"
+check "--json, a usage error: exit 2" [ "$(rc_of "$M" info --json --frobnicate tests/data/box.obj)" = 2 ]
+check "... in JSON on stdout" grep -qx '{"ok":false,"error":"unknown option --frobnicate"}' "$T/out"
 
 check "spot loads" [ "$(rc_of "$M" info "$A/spot/spot_triangulated.obj")" = 0 ]
 check "spot triangles" grep -q "^triangles: *5856$" "$T/out"

@@ -2,7 +2,8 @@
 # `--progress json` at the shell (README "Progress stream"; the JSON of every line is parsed by
 # tests/test_tools_progress.c): stdout holds only event lines and ends with the result line,
 # stderr holds no progress lines, `--progress text` keeps them on stderr, a bad value is a usage
-# error, and SIGINT in the middle of a run ends in a result line with exit 130 and no output.
+# error, and SIGINT in the middle of a run ends in a result line with exit 130 and no output (a
+# second signal too, at once, with its own result line).
 NAME=progress
 . "$(dirname "$0")/lib_cli.sh"
 A=$(data assets)
@@ -23,16 +24,33 @@ check "transfer --progress xml exits 2" [ "$(rc_of "$M" transfer "$T/a/mesh.obj"
 check "a failure: the result line carries the message" sh -c "[ \"\$('$M' texture '$MESH' hat --weights '$T/no.mxw' -o '$T/c' --progress json 2>/dev/null)\" = \
 '{\"event\":\"result\",\"ok\":false,\"exit\":1,\"error\":\"$T/no.mxw: cannot open: No such file or directory\"}' ]"
 
-# SIGINT once the first denoising step is reported (a run long enough to be caught in the middle)
-"$M" texture "$MESH" hat --weights "$W" -o "$T/int" --image-size 128 --steps 50 --texture-size 512 --render-size 512 \
-    --candidates 12 --progress json > "$T/int.out" 2> "$T/int.err" &
-pid=$!
-n=0
-while ! grep -q '"event":"step"' "$T/int.out" 2>/dev/null && [ $n -lt 600 ]; do sleep 0.05; n=$((n + 1)); done
+# long_run NAME: a run long enough to be caught in the middle, -o $T/NAME, its stdout and stderr in
+# $T/NAME.out and .err, started in the background; returns once it reports its first denoising
+# step, its process in pid
+long_run() {
+    "$M" texture "$MESH" hat --weights "$W" -o "$T/$1" --image-size 128 --steps 50 --texture-size 512 --render-size 512 \
+        --candidates 12 --progress json > "$T/$1.out" 2> "$T/$1.err" &
+    pid=$!
+    n=0
+    while ! grep -q '"event":"step"' "$T/$1.out" 2>/dev/null && [ $n -lt 600 ]; do sleep 0.05; n=$((n + 1)); done
+}
+
+# SIGINT once the first denoising step is reported
+long_run int
 kill -INT $pid
 wait $pid
 rc=$?
 check "SIGINT exits 130" [ $rc = 130 ]
 check "SIGINT: the result line says interrupted" sh -c "tail -n 1 '$T/int.out' | grep -q '^{\"event\":\"result\",\"ok\":false,\"exit\":130,\"error\":\"interrupted\"}\$'"
 check "SIGINT: no output folder, no staging folder" sh -c "! ls -d '$T'/int* 2>/dev/null | grep -v '\\.out\$\\|\\.err\$'"
+
+# a second signal ends the run at once with its own result line
+long_run twice
+signal_twice $pid
+rc=$?
+check "a second signal exits 130" [ $rc = 130 ]
+check "... the last line is its result line" sh -c "tail -n 1 '$T/twice.out' | grep -qx '{\"event\":\"result\",\"ok\":false,\"exit\":130,\"error\":\"interrupted again, stopped now; nothing written\"}'"
+check "... one result line, every line an event" sh -c "[ \$(grep -c '\"event\":\"result\"' '$T/twice.out') = 1 ] && ! grep -v '^{\"event\":\"[a-z]*\",.*}\$' '$T/twice.out'"
+check "... one line on stderr" [ "$(wc -l < "$T/twice.err")" = 1 ]
+check "... no output folder, no staging folder" sh -c "! ls -d '$T'/twice* 2>/dev/null | grep -v '\\.out\$\\|\\.err\$'"
 exit $fail

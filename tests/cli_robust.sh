@@ -265,11 +265,7 @@ check "... no staging or lock left" no_staging "$T/both"
 "$M" texture "$A/fedora_hat/fedora.obj" "a hat" --weights "$W" -o "$T/twice" $LONG > /dev/null 2> "$T/err" &
 pid=$!
 wait_staging "$T/twice" $pid
-kill -STOP $pid
-kill -INT $pid
-kill -TERM $pid
-kill -CONT $pid
-wait $pid
+signal_twice $pid
 rc=$?
 check "two signals: exit 130" [ $rc = 130 ]
 check "... stopped at the second" grep -q "interrupted again, stopped now" "$T/err"

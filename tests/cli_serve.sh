@@ -3,7 +3,7 @@
 # server gives the CLI's outputs byte for byte; the bad requests, each with its status and error
 # body while the server keeps serving; the token, Host and Origin rules; 4 clients submitting 20
 # jobs; kill -9 during a job and a restart (the job runs again once, then fails); the jobs folder's
-# marker and lock; retention; matex batch --server.
+# marker and lock; retention; matex batch --server, with meshes that come with side files (a zip).
 NAME=serve
 . tests/lib_cli.sh
 W=${MATEX_DEMO_WEIGHTS:-build/demo/demo.mxw}
@@ -320,6 +320,71 @@ check "batch --server: the server keeps no copy" sh -c "[ \$(ls '$T/jobs_c' | gr
 printf '{"mesh": "box.obj", "prompt": "x", "colour": "red"}\n' > "$T/cat/bad.jsonl"
 check "batch --server: a bad line fails before the server" sh -c "! '$M' batch '$T/cat/bad.jsonl' --server '$URL' -o '$T/remote2' > /dev/null 2> '$T/b2.err' && grep -q 'unknown key' '$T/b2.err'"
 check "batch --server with --weights: usage error" sh -c "[ \$('$M' batch '$T/cat/m.jsonl' --server '$URL' --weights '$W' -o '$T/r3' 2> /dev/null; echo \$?) = 2 ]"
+# a mesh with side files goes as a zip of them (tools/matex/serve/serve_upload.h): an OBJ with its
+# .mtl and texture in folders below it, a glTF with its .bin and a %-escaped image, a GLB with its
+# .bin. The server unpacks exactly those files (its upload and job folders watched while the batch
+# runs) and the outputs are a local batch's.
+mkdir -p "$T/cat/crate/mat/tex" "$T/cat/tetra/geo" "$T/cat/tetra/tex"
+{ echo 'mtllib mat/crate.mtl'; cat "$BOX"; } > "$T/cat/crate/crate.obj"
+printf 'newmtl oak\nKd 1 1 1\nmap_Kd -s 1 1 1 tex/wood.png\n' > "$T/cat/crate/mat/crate.mtl"
+cp "$T/cli/texture.png" "$T/cat/crate/mat/tex/wood.png"
+echo "not a side file" > "$T/cat/crate/notes.txt"
+# a tetrahedron: 4 float positions and 12 uint16 indices
+printf '%s' AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAAAAAAAAAAAAIA/AAACAAEAAAABAAMAAAADAAIAAQACAAMA |
+    base64 -d > "$T/cat/tetra/geo/tetra.bin"
+cp "$T/cli/texture.png" "$T/cat/tetra/tex/base color.png"
+cat > "$T/cat/tetra/tetra.gltf" << 'GLTF'
+{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+ "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+ "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+ "textures": [{"source": 0}], "images": [{"uri": "tex/base%20color.png"}],
+ "buffers": [{"uri": "geo/tetra.bin", "byteLength": 72}],
+ "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+ "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]},
+               {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}]}
+GLTF
+# the same tetrahedron as a .glb whose buffer is a file beside it (its JSON chunk padded to 4 bytes)
+mkdir -p "$T/cat/tetrab/buf"
+cp "$T/cat/tetra/geo/tetra.bin" "$T/cat/tetrab/buf/tetrab.bin"
+J='{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],"buffers":[{"uri":"buf/tetrab.bin","byteLength":72}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":48},{"buffer":0,"byteOffset":48,"byteLength":24}],"accessors":[{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,1]},{"bufferView":1,"componentType":5123,"count":12,"type":"SCALAR"}]}'
+while [ $((${#J} % 4)) != 0 ]; do J="$J "; done
+le32() { printf "$(printf '\\%03o\\%03o\\%03o\\%03o' $(($1 % 256)) $(($1 / 256 % 256)) $(($1 / 65536 % 256)) $(($1 / 16777216)))"; }
+{ printf 'glTF'; le32 2; le32 $((20 + ${#J})); le32 ${#J}; printf 'JSON'; printf '%s' "$J"; } > "$T/cat/tetrab/tetrab.glb"
+PARTS='"image-size": 64, "texture-size": 64, "render-size": 64, "candidates": 4, "views": 2, "steps": 12'
+job() { printf '{"mesh": "%s", "prompt": "a box", "name": "%s", "seed": %s, %s}\n' "$1" "$2" "$3" "$PARTS"; }
+{ job crate/crate.obj crate 5; job tetra/tetra.gltf tetra 6; job tetrab/tetrab.glb tetrab 7; } > "$T/cat/parts.jsonl"
+"$M" batch "$T/cat/parts.jsonl" --server "$URL" --quiet -o "$T/premote" > /dev/null 2> "$T/bp.err" &
+BP=$!
+: > "$T/seen"
+while kill -0 $BP 2> /dev/null; do
+    find "$T/jobs_c" -path '*/mesh/*' -type f | sed -e 's|^.*/jobs_c/||' -e 's|^\.incoming/||' -e 's|^[0-9a-z]*/mesh/||' >> "$T/seen"
+    sleep 0.02
+done
+wait $BP
+check "batch --server, meshes with side files: done" [ $? = 0 ]
+sort -u "$T/seen" > "$T/seen_u"
+printf '%s\n' crate.obj mat/crate.mtl mat/tex/wood.png tetra.gltf geo/tetra.bin 'tex/base color.png' tetrab.glb buf/tetrab.bin |
+    sort > "$T/want_u"
+check "... the server got each mesh with exactly its side files" cmp -s "$T/seen_u" "$T/want_u"
+$M batch "$T/cat/parts.jsonl" --weights "$W" --threads 2 --quiet -o "$T/plocal" > /dev/null 2>&1
+for n in crate tetra tetrab; do
+    for f in mesh.glb mesh.obj texture.png; do
+        check "... = local batch: $n/$f" cmp -s "$T/premote/$n/$f" "$T/plocal/$n/$f"
+    done
+done
+# refused before anything is sent: a side file outside the mesh's folder (named with '..', or a link
+# leading out: a mesh must not send the user's other files), a glTF buffer that is not there
+head -n 1 "$T/cat/parts.jsonl" > "$T/cat/crate.jsonl"
+sed -n 2p "$T/cat/parts.jsonl" > "$T/cat/tetra.jsonl"
+cp "$T/cli/texture.png" "$T/cat/secret.png"
+printf 'newmtl oak\nmap_Kd ../../secret.png\n' > "$T/cat/crate/mat/crate.mtl"
+check "batch --server: a texture named outside the mesh's folder is refused" sh -c "! '$M' batch '$T/cat/crate.jsonl' --server '$URL' -o '$T/pout1' > /dev/null 2> '$T/po.err' && grep -q \"crate.mtl: names '../../secret.png', outside the mesh's folder\" '$T/po.err'"
+ln -s "$T/cat/secret.png" "$T/cat/crate/mat/tex/link.png"
+printf 'newmtl oak\nmap_Kd tex/link.png\n' > "$T/cat/crate/mat/crate.mtl"
+check "batch --server: a link leading out of the mesh's folder is refused" sh -c "! '$M' batch '$T/cat/crate.jsonl' --server '$URL' -o '$T/pout2' > /dev/null 2> '$T/po.err' && grep -q \"crate.mtl: names 'tex/link.png', outside the mesh's folder\" '$T/po.err'"
+rm "$T/cat/tetra/geo/tetra.bin"
+check "batch --server: a glTF buffer that is not there" sh -c "! '$M' batch '$T/cat/tetra.jsonl' --server '$URL' -o '$T/pout3' > /dev/null 2> '$T/po.err' && grep -q \"tetra.gltf: names 'geo/tetra.bin', which is not there\" '$T/po.err'"
+check "... none of them sent: the server holds its 20 jobs only" sh -c "[ \$(ls '$T/jobs_c' | grep -c .) = 20 ]"
 check "server stopped cleanly (exit 0: no leak under ASan)" stop_server
 
 # ---- kill -9 during a job: it runs again once after a restart, then fails if killed again ----

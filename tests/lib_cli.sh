@@ -9,6 +9,16 @@ check() { # check NAME COMMAND...: the command must succeed
     if "$@"; then echo "ok   $name"; else echo "FAIL $name"; fail=1; fi
 }
 rc_of() { "$@" > "$T/out" 2> "$T/err"; echo $?; } # runs a command, prints its exit code
+# signal_twice PID: SIGINT then SIGTERM, both sent while the process is stopped (SIGSTOP) so that
+# both arrive before it can act on the first (two SIGINTs would merge into one); then waits for it
+# and returns its exit code
+signal_twice() {
+    kill -STOP "$1"
+    kill -INT "$1"
+    kill -TERM "$1"
+    kill -CONT "$1"
+    wait "$1"
+}
 # Test data as in tests/util_test.h: data REL prints tests/data/<REL> when the repository ships it,
 # else $MATEX_TESTDATA/REL (default ../shared). have REL is true when it exists; otherwise it
 # prints a SKIP line (a failure when CI=true, where that data must be there).

@@ -45,17 +45,22 @@ int mx_cli_progress_api_event(void *user, const matex_progress *p) {
     return mx_cli_progress_event(user, &q);
 }
 
+void mx_cli_progress_result_line(mx_buf *b, int exit_code, const char *error, const char *out,
+                                 const mx_texture_result *res) {
+    mx_buf_printf(b, "{\"event\":\"result\",\"ok\":%s,\"exit\":%d,", exit_code ? "false" : "true", exit_code);
+    if (exit_code) {
+        mx_buf_printf(b, "\"error\":");
+        mx_buf_json_str(b, error);
+    } else {
+        mx_buf_printf(b, "\"out\":");
+        mx_buf_json_str(b, out);
+        mx_buf_printf(b, ",\"coverage\":%.6f,\"views\":%d,\"seconds\":%.3f", res->coverage, res->views, res->seconds);
+    }
+    mx_buf_printf(b, "}");
+}
+
 void mx_cli_progress_result(FILE *f, int exit_code, const char *error, const char *out, const mx_texture_result *res) {
     mx_buf b = {0};
-    mx_buf_printf(&b, "{\"event\":\"result\",\"ok\":%s,\"exit\":%d,", exit_code ? "false" : "true", exit_code);
-    if (exit_code) {
-        mx_buf_printf(&b, "\"error\":");
-        mx_buf_json_str(&b, error);
-    } else {
-        mx_buf_printf(&b, "\"out\":");
-        mx_buf_json_str(&b, out);
-        mx_buf_printf(&b, ",\"coverage\":%.6f,\"views\":%d,\"seconds\":%.3f", res->coverage, res->views, res->seconds);
-    }
-    mx_buf_printf(&b, "}");
+    mx_cli_progress_result_line(&b, exit_code, error, out, res);
     put_line(f, &b);
 }

@@ -9,6 +9,7 @@
 #include <stdio.h>
 
 #include "../../pipeline/texture/texture.h"
+#include "../../runtime/buf.h"
 
 /* What a verb prints on stdout: nothing, the one-line --json summary, or the stream. */
 enum { MX_CLI_JSON_NONE = 0, MX_CLI_JSON_SUMMARY = 1, MX_CLI_JSON_STREAM = 2 };
@@ -25,5 +26,8 @@ int mx_cli_progress_event(void *user, const mx_texture_progress *p);
 int mx_cli_progress_api_event(void *user, const matex_progress *p);
 /* The final line. exit_code 0: ok with out and res; else error (the one-line message). */
 void mx_cli_progress_result(FILE *f, int exit_code, const char *error, const char *out, const mx_texture_result *res);
+/* The same line, without its newline, appended to b (cli_signals.c writes it from its handler). */
+void mx_cli_progress_result_line(mx_buf *b, int exit_code, const char *error, const char *out,
+                                 const mx_texture_result *res);
 
 #endif

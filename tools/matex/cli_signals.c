@@ -6,12 +6,18 @@
 #include <unistd.h>
 
 #include "../../pipeline/texture/outdir.h"
+#include "cli_progress.h"
+
+/* What a second signal says: on stderr, and as the result line's error with --progress json. */
+#define SECOND_SIGNAL "interrupted again, stopped now; nothing written"
 
 /* Set by SIGINT/SIGTERM; a run checks it between stages and denoising steps. A signal handler
  * can only reach a flag and the paths below with static storage. */
 static volatile sig_atomic_t interrupted;
-/* 1: the first signal says nothing (--progress json: the run's one error line reports it). */
-static volatile sig_atomic_t quiet_first;
+/* --progress json: the result line a second signal writes on stdout, newline included ("" without
+ * the stream: then the first signal says it stops on stderr; with it the run's own result line
+ * and its one error line report the first). */
+static char stream_result[512];
 /* What a second signal removes before ending the process: the run's staging folder (files only)
  * and its output folder's lock; "" when there is none. */
 static char stage_path[4200], lock_path[4200];
@@ -35,9 +41,9 @@ static void remove_flat_folder(const char *dir) {
     rmdir(dir);
 }
 
-static void say(const char *s) {
-    ssize_t n = write(STDERR_FILENO, s, strlen(s)); /* async-signal-safe, unlike stdio */
-    (void)n;                                        /* nothing to do if stderr is gone */
+static void say(int fd, const char *s) {
+    ssize_t n = write(fd, s, strlen(s)); /* async-signal-safe, unlike stdio */
+    (void)n;                             /* nothing to do if the stream is gone */
 }
 
 /* The first signal asks the run to stop after its current step (it then removes its staging
@@ -46,12 +52,14 @@ static void on_signal(int sig) {
     (void)sig;
     if (!interrupted) {
         interrupted = 1;
-        if (!quiet_first) say("matex: interrupted, stopping after the current step (interrupt again to stop now)\n");
+        if (!stream_result[0]) say(STDERR_FILENO, "matex: interrupted, stopping after the current step (interrupt again to stop now)\n");
         return;
     }
     if (stage_path[0]) remove_flat_folder(stage_path);
     if (lock_path[0]) unlink(lock_path);
-    say("matex: interrupted again, stopped now; nothing written\n");
+    say(STDERR_FILENO, "matex: " SECOND_SIGNAL "\n");
+    say(STDOUT_FILENO, stream_result); /* after whole events: each is flushed as one write, and a line
+                                          still in stdio's buffer is dropped by _exit, not cut */
     _exit(130);
 }
 
@@ -74,14 +82,23 @@ volatile sig_atomic_t *mx_cli_signals_catch(void) {
     sa.sa_flags = SA_RESTART;
     sigemptyset(&sa.sa_mask);
     interrupted = 0;
-    quiet_first = 0;
+    stream_result[0] = 0;
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     set_mask(SIG_UNBLOCK);
     return &interrupted;
 }
 
-void mx_cli_signals_quiet(void) { quiet_first = 1; }
+void mx_cli_signals_progress_json(void) {
+    mx_buf b = {0};
+    mx_cli_progress_result_line(&b, 130, SECOND_SIGNAL, NULL, NULL);
+    mx_buf_printf(&b, "\n");
+    int ok = !b.oom && b.len < sizeof stream_result;
+    set_mask(SIG_BLOCK); /* the handler never sees a half-copied line */
+    memcpy(stream_result, ok ? b.p : "", ok ? b.len + 1 : 1);
+    set_mask(SIG_UNBLOCK);
+    mx_buf_free(&b);
+}
 
 void mx_cli_signals_output(const char *out_dir) {
     char stage[sizeof stage_path], lock[sizeof lock_path];

@@ -16,9 +16,11 @@ void mx_cli_signals_default(void);
 /* Installs the handler (it sets the returned flag and says "interrupted" once on stderr),
  * clears the flag, then unblocks the signals. */
 volatile sig_atomic_t *mx_cli_signals_catch(void);
-/* After mx_cli_signals_catch: the first signal prints nothing (--progress json promises one line on
- * stderr for a failed run: its error). */
-void mx_cli_signals_quiet(void);
+/* After mx_cli_signals_catch, for --progress json: the first signal prints nothing (the stream
+ * promises one line on stderr for a failed run: its error, and the run's result line reports it);
+ * a second one writes the stream's result line on stdout, {"event":"result","ok":false,"exit":130,
+ * "error":"interrupted again, ..."}, as well as its line on stderr, before the process ends. */
+void mx_cli_signals_progress_json(void);
 /* The output folder of the run the signals stop: a second SIGINT/SIGTERM removes its staging
  * folder and lock (pipeline/texture/outdir.h) and ends the process at once with 130 (NULL: none). */
 void mx_cli_signals_output(const char *out_dir);

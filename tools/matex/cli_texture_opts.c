@@ -165,7 +165,7 @@ int mx_cli_texture_run(mx_cli_texture *c, const char *verb, api_fn run) {
     if (mx_options_check(&c->o, c->verb, &st)) return mx_cli_usage_error(verb, c->json, "%s", st.msg);
     if (mx_style_check_inputs(&c->o, &st)) return run_failed(c, verb, st.code, st.msg); /* before the weights */
     c->o.cancel = mx_cli_signals_catch();
-    if (c->json == MX_CLI_JSON_STREAM) mx_cli_signals_quiet();
+    if (c->json == MX_CLI_JSON_STREAM) mx_cli_signals_progress_json();
     mx_cli_signals_output(c->o.out_dir);
     matex_result *r = NULL;
     int rc = run_once(run, c, c->json ? &r : NULL, &err);

@@ -14,6 +14,7 @@
 #include "../../weights/single_file.h"
 #include "../../weights/wfinfo.h"
 #include "cli.h"
+#include "cli_texture_opts.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex info [--json] FILE\n"
@@ -228,62 +229,53 @@ done:
     return rc;
 }
 
-int cmd_info(int argc, char **argv) {
-    const char *file = NULL, *compare = NULL;
-    int json = 0;
+typedef struct info_args {
+    const char *file, *compare;
+    int json;
+} info_args;
+
+/* 0 ok, 1 --help printed, 2 usage error (worded as the other verbs': mx_cli_usage_error). */
+static int parse_args(int argc, char **argv, info_args *a) {
+    memset(a, 0, sizeof *a);
+    for (int i = 1; i < argc; i++) a->json |= !strcmp(argv[i], "--json"); /* usage errors in JSON too */
     for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
-            usage(stdout);
-            return 0;
-        } else if (!strcmp(argv[i], "--json")) {
-            json = 1;
-        } else if (!strcmp(argv[i], "--compare")) {
-            if (i + 1 >= argc) {
-                fprintf(stderr, "matex info: --compare needs an image\n");
-                return 2;
-            }
-            compare = argv[++i];
-        } else if (argv[i][0] == '-' && argv[i][1]) {
-            fprintf(stderr, "matex info: unknown option '%s'\n", argv[i]);
-            usage(stderr);
-            return 2;
-        } else if (file) {
-            fprintf(stderr, "matex info: one FILE expected, got '%s' and '%s'\n", file, argv[i]);
-            return 2;
-        } else {
-            file = argv[i];
-        }
+        const char *o = argv[i];
+        if (!strcmp(o, "--help") || !strcmp(o, "-h")) return usage(stdout), 1;
+        else if (!strcmp(o, "--json")) continue;
+        else if (!strcmp(o, "--compare") && i + 1 < argc) a->compare = argv[++i];
+        else if (!strcmp(o, "--compare")) return mx_cli_usage_error("info", a->json, "missing value after %s", o);
+        else if (o[0] == '-' && o[1]) return mx_cli_usage_error("info", a->json, "unknown option %s", o);
+        else if (a->file) return mx_cli_usage_error("info", a->json, "unexpected argument %s", o);
+        else a->file = o;
     }
-    if (!file) {
-        usage(stderr);
-        return 2;
-    }
-    if (compare) return image_compare(file, compare, json);
-    if (mx_wf_is_weightfile(file)) {
-        if (json) {
-            fprintf(stderr, "matex info: --json is for meshes; %s is a weight file\n", file);
-            return 2;
-        }
+    if (!a->file) return mx_cli_usage_error("info", a->json, "missing FILE");
+    return 0;
+}
+
+int cmd_info(int argc, char **argv) {
+    info_args a;
+    int rc = parse_args(argc, argv, &a);
+    if (rc) return rc == 1 ? 0 : rc;
+    if (a.compare) return image_compare(a.file, a.compare, a.json);
+    if (mx_wf_is_weightfile(a.file)) {
+        if (a.json) return mx_cli_usage_error("info", a.json, "--json is for meshes and images; %s is a weight file", a.file);
         mx_status st;
-        if (mx_wf_print_info(file, stdout, &st)) {
+        if (mx_wf_print_info(a.file, stdout, &st)) {
             fprintf(stderr, "matex info: %s\n", st.msg);
             return 1;
         }
         return 0;
     }
-    if (is_checkpoint_name(file)) {
-        if (json) {
-            fprintf(stderr, "matex info: --json is for meshes and images; %s is a checkpoint\n", file);
-            return 2;
-        }
-        return checkpoint_info(file);
+    if (is_checkpoint_name(a.file)) {
+        if (a.json) return mx_cli_usage_error("info", a.json, "--json is for meshes and images; %s is a checkpoint", a.file);
+        return checkpoint_info(a.file);
     }
     const char *kind;
     int definite;
     mx_status st;
-    if (mx_file_kind_of(file, "a mesh, an image, a weight file or a checkpoint", &kind, &definite, &st)) {
+    if (mx_file_kind_of(a.file, "a mesh, an image, a weight file or a checkpoint", &kind, &definite, &st)) {
         fprintf(stderr, "matex info: %s\n", st.msg);
         return 1;
     }
-    return strstr(kind, " image") ? image_info(file, json) : mesh_info(file, json);
+    return strstr(kind, " image") ? image_info(a.file, a.json) : mesh_info(a.file, a.json);
 }

@@ -11,6 +11,7 @@
 #include "../../../runtime/fileio.h"
 #include "../../../runtime/json.h"
 #include "serve_auth.h"
+#include "serve_upload.h"
 
 #define MANIFEST_MAX_BYTES ((size_t)1 << 30)
 #define POLL_US 100000
@@ -145,19 +146,41 @@ static void answer_error(long status, const mx_buf *body, char *error, size_t ca
     mx_json_free(j);
 }
 
-/* POST /v1/jobs: the job's id into id. */
-static int submit(const mx_serve_client *c, const mx_batch_job *j, const mx_buf *options, char *id, size_t idcap,
-                  char *error, size_t cap) {
+/* curl's reader and seeker of a mesh part made as a zip (a FILE *: serve_upload.h). */
+static size_t read_zip(char *p, size_t size, size_t n, void *zip) { return fread(p, size, n, zip); }
+static int seek_zip(void *zip, curl_off_t offset, int origin) {
+    return fseeko(zip, (off_t)offset, origin) ? CURL_SEEKFUNC_FAIL : CURL_SEEKFUNC_OK;
+}
+
+/* The mesh part: the file itself, or zip (not NULL) as MESHNAME.zip. */
+static void add_mesh_part(curl_mime *mime, const char *mesh, FILE *zip) {
+    curl_mimepart *p = curl_mime_addpart(mime);
+    curl_mime_name(p, "mesh");
+    if (!zip) {
+        curl_mime_filedata(p, mesh);
+        return;
+    }
+    char name[300];
+    const char *base = strrchr(mesh, '/');
+    snprintf(name, sizeof name, "%.250s.zip", base ? base + 1 : mesh);
+    fseeko(zip, 0, SEEK_END);
+    curl_off_t size = (curl_off_t)ftello(zip);
+    rewind(zip);
+    curl_mime_data_cb(p, size, read_zip, seek_zip, NULL, zip);
+    curl_mime_filename(p, name);
+}
+
+/* POST /v1/jobs (the mesh, or zip: the mesh with its side files): the job's id into id. */
+static int submit(const mx_serve_client *c, const mx_batch_job *j, FILE *zip, const mx_buf *options, char *id,
+                  size_t idcap, char *error, size_t cap) {
     CURL *h = curl_easy_init();
     curl_mime *mime = h ? curl_mime_init(h) : NULL;
     mx_buf body = {0};
     long status = -1;
     if (!mime) snprintf(error, cap, "cannot start libcurl");
     else {
+        add_mesh_part(mime, j->c.o.mesh_path, zip);
         curl_mimepart *p = curl_mime_addpart(mime);
-        curl_mime_name(p, "mesh");
-        curl_mime_filedata(p, j->c.o.mesh_path);
-        p = curl_mime_addpart(mime);
         curl_mime_name(p, "options");
         curl_mime_data(p, options->p, options->len);
         curl_mime_type(p, "application/json");
@@ -237,13 +260,15 @@ int mx_serve_client_run(const mx_serve_client *c, const char *manifest, const mx
     mx_buf options = {0};
     char id[MX_SERVE_ID_MAX + 1] = "", path[128];
     int interrupted = 0, rc = -1;
+    FILE *zip = NULL;
+    mx_status st;
     error[0] = 0;
-    if (options_json(manifest, j->line, defaults, ndefaults, &options, error, cap) ||
-        submit(c, j, &options, id, sizeof id, error, cap)) {
-        mx_buf_free(&options);
-        return -1;
-    }
+    if (mx_serve_upload_zip(j->c.o.mesh_path, &zip, &st)) snprintf(error, cap, "%s", st.msg);
+    int failed = error[0] || options_json(manifest, j->line, defaults, ndefaults, &options, error, cap) ||
+                 submit(c, j, zip, &options, id, sizeof id, error, cap);
+    if (zip) fclose(zip);
     mx_buf_free(&options);
+    if (failed) return -1;
     mx_json *d = await_job(c, id, stop, &interrupted, error, cap);
     const char *state = d ? mx_json_get_str(d, "state", "") : "";
     const mx_json *progress = d ? mx_json_get(d, "progress") : NULL;

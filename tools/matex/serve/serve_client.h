@@ -1,6 +1,7 @@
 /* The client side of `matex batch --server URL [--token-file F]` (libcurl): a manifest's job is
- * sent to a running `matex serve` (POST /v1/jobs: the mesh, the job's options as the manifest
- * line and the batch's defaults give them, the style images), followed until it ends, and its
+ * sent to a running `matex serve` (POST /v1/jobs: the mesh, or a zip of it with its side files
+ * (serve_upload.h), the job's options as the manifest line and the batch's defaults give them,
+ * the style images), followed until it ends, and its
  * files are written into the job's output folder exactly as a local run publishes it (a staging
  * folder moved in place with its marker: pipeline/texture/outdir.h), so that a rerun resumes
  * the same way; then the job is removed from the server. In the builds without libcurl,

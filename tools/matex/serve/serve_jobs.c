@@ -331,9 +331,13 @@ static int describe(mx_serve_jobs *q, const char *id, mx_buf *b) {
     return 0;
 }
 
+/* Under the mutex: a job reads as finished only once finish_job has also removed the finished
+ * jobs beyond the retention limits (a client that sees "done" sees the retention applied). */
 int mx_serve_jobs_describe(mx_serve_jobs *q, const char *id, mx_buf *out, mx_serve_error *e) {
-    if (!describe(q, id, out)) return 0;
-    return mx_serve_fail(e, 404, "not_found", "no job %s", id);
+    pthread_mutex_lock(&q->mu);
+    int rc = describe(q, id, out);
+    pthread_mutex_unlock(&q->mu);
+    return rc ? mx_serve_fail(e, 404, "not_found", "no job %s", id) : 0;
 }
 
 void mx_serve_jobs_list(mx_serve_jobs *q, mx_buf *out) {
