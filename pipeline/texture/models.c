@@ -99,6 +99,13 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
     memset(m, 0, sizeof *m);
     m->c = c;
     if (mx_wf_open(&m->wf, path, st)) return -1;
+    size_t len;
+    const void *map = mx_wf_map(m->wf, &len);
+    /* On a GPU the whole file goes to the device in one pass before the networks bind into it. */
+    if (mx_dev_weight_file(c, mx_wf_fd(m->wf), map, len, path, st)) {
+        mx_models_free(m);
+        return -1;
+    }
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_net(m, MX_NET_TEXT_ENCODER, NULL, 0, (void **)&m->clip, st) ||
         load_net(m, MX_NET_UNET, NULL, 1, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
         load_net(m, MX_NET_VAE, NULL, 4, (void **)&m->vae, st) || load_taesd(m, st) || load_ip_adapter(m, st) || load_image_encoder(m, st) ||
@@ -135,6 +142,10 @@ void mx_models_free(mx_models *m) {
         mx_binder_free(&m->wf_binders[i]);
     }
     mx_tok_free(m->tok);
+    if (m->wf) {
+        size_t len;
+        mx_dev_weight_file_drop(m->c, mx_wf_map(m->wf, &len));
+    }
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);
 }
