@@ -123,7 +123,8 @@ static void fail_now(stream *s, const mx_status *why) {
 
 /* The caller's part: every chunk in order to the sink; then the copies still queued waited for
  * (also after a failure: the buffers must not be freed under a running copy). */
-static void copy_in_order(stream *s, const mx_stream_sink *sink, mx_stream_stats *stats) {
+static void copy_in_order(stream *s, const mx_stream_sink *sink, const mx_stream_observer *obs,
+                          mx_stream_stats *stats) {
     const mx_stream_ring *r = s->ring;
     uint64_t queued = 0, released = 0;
     for (uint64_t k = 0; k < s->nchunks; k++) {
@@ -137,6 +138,11 @@ static void copy_in_order(stream *s, const mx_stream_sink *sink, mx_stream_stats
         }
         queued = k + 1;
         stats->bytes += n;
+        if (obs) {
+            double t0 = mx_now();
+            obs->seen(obs->arg, r->bufs[slot], n, k * r->chunk);
+            stats->seen_s += mx_now() - t0;
+        }
         if (queued - released > (uint64_t)r->in_flight && release_chunk(s, sink, released++, stats)) break;
     }
     while (released < queued) release_chunk(s, sink, released++, stats);
@@ -200,7 +206,7 @@ static int readers_wanted(const stream *s) {
 }
 
 int mx_file_stream(int fd, const char *path, uint64_t len, const mx_stream_ring *ring, const mx_stream_sink *sink,
-                   mx_stream_stats *stats, mx_status *st) {
+                   const mx_stream_observer *obs, mx_stream_stats *stats, mx_status *st) {
     mx_stream_stats local;
     if (!stats) stats = &local;
     memset(stats, 0, sizeof *stats);
@@ -217,7 +223,7 @@ int mx_file_stream(int fd, const char *path, uint64_t len, const mx_stream_ring 
     }
     /* Every path out of it either copied all chunks (so each reader has run out of chunks) or
      * marked the stream failed (which wakes each reader): the joins cannot hang. */
-    copy_in_order(&s, sink, stats);
+    copy_in_order(&s, sink, obs, stats);
     for (int i = 0; i < started; i++) pthread_join(tid[i], NULL);
     int rc = s.failed ? -1 : 0;
     if (rc && st) *st = s.err;

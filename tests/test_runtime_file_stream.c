@@ -1,4 +1,4 @@
-/* The file stream of runtime/file_stream.h with a fake device: a copy is only recorded when
+/* The file stream of runtime/file_stream.h with a fake device and observer: a copy is only recorded when
  * queued and done (memcpy into host memory) when its buffer is waited for, as an asynchronous
  * device copy reads its buffer some time after it was queued. So a ring that refilled a buffer
  * before waiting for its copy, lost a copy, or queued chunks out of order gives wrong bytes or a
@@ -28,7 +28,21 @@ typedef struct {
     int bad_order, overwrite; /* a chunk out of order; a slot refilled under a queued copy */
     long copies, fail_copy_at, fail_wait_at, waits;
     const char *cut_path;     /* cut the file to half its length at the first copy */
+    unsigned char *seen;      /* what the observer saw, where it saw it */
+    uint64_t seen_next;
+    int seen_bad_order;
 } fake_device;
+
+/* The observer (a digest in real use): every chunk once, in order, while its copy is queued. */
+static void fake_seen(void *arg, const void *buf, size_t n, uint64_t off) {
+    fake_device *d = arg;
+    if (off != d->seen_next || off + n > d->len) {
+        d->seen_bad_order = 1;
+        return;
+    }
+    memcpy(d->seen + off, buf, n);
+    d->seen_next = off + n;
+}
 
 static int fake_copy(void *arg, int slot, const void *buf, size_t n, uint64_t off, mx_status *st) {
     fake_device *d = arg;
@@ -93,10 +107,12 @@ static int stream_into(const test_file *f, int fd, uint64_t len, const ring_shap
     for (int i = 0; i < r->nbufs; i++) bufs[i] = malloc(r->chunk);
     mx_stream_ring ring = {bufs, r->nbufs, r->chunk, r->readers, r->in_flight};
     d->dst = calloc(1, f->len + 1);
+    d->seen = calloc(1, f->len + 1);
     d->len = len;
     d->bufs = bufs;
     mx_stream_sink sink = {d, fake_copy, fake_wait};
-    int rc = mx_file_stream(fd, f->path, len, &ring, &sink, stats, st);
+    mx_stream_observer obs = {fake_seen, d};
+    int rc = mx_file_stream(fd, f->path, len, &ring, &sink, &obs, stats, st);
     for (int i = 0; i < r->nbufs; i++) free(bufs[i]);
     return rc;
 }
@@ -119,7 +135,8 @@ static void test_sizes(void) {
             }
             int fd = open(f.path, O_RDONLY);
             int rc = stream_into(&f, fd, f.len, &rings[r], &d, &stats, &st);
-            int same = f.len == 0 || memcmp(d.dst, f.data, f.len) == 0;
+            int same = f.len == 0 || (memcmp(d.dst, f.data, f.len) == 0 && memcmp(d.seen, f.data, f.len) == 0);
+            same = same && !d.seen_bad_order && d.seen_next == f.len;
             if (rc || !same || d.bad_order || d.overwrite || any_queued(&d) || stats.bytes != f.len)
                 fprintf(stderr, "ring %zu (%d bufs of %zu, %d in flight, %d readers), %llu bytes: rc %d same %d order %d "
                         "overwrite %d bytes %llu: %s\n", r, rings[r].nbufs, c, rings[r].in_flight, rings[r].readers,
@@ -129,6 +146,7 @@ static void test_sizes(void) {
             CHECK(stats.readers >= (f.len ? 1 : 0) && stats.readers <= rings[r].readers);
             close(fd);
             free(d.dst);
+            free(d.seen);
             file_free(&f);
         }
     }
@@ -143,6 +161,7 @@ static void expect_failure(const char *what, const test_file *f, int fd, uint64_
     if (rc == 0 || !named || any_queued(d)) fprintf(stderr, "%s: rc %d, message '%s'\n", what, rc, st.msg);
     CHECK(rc == -1 && named && !any_queued(d));
     free(d->dst);
+    free(d->seen);
 }
 
 static void test_errors(void) {
@@ -176,7 +195,7 @@ static void test_errors(void) {
     mx_stream_sink sink = {&d, fake_copy, fake_wait};
     mx_status st = {0};
     fd = open(f.path, O_RDONLY);
-    CHECK(mx_file_stream(fd, f.path, f.len, &bad, &sink, NULL, &st) == -1 && st.code == MX_EINTERNAL &&
+    CHECK(mx_file_stream(fd, f.path, f.len, &bad, &sink, NULL, NULL, &st) == -1 && st.code == MX_EINTERNAL &&
           strstr(st.msg, "bad staging ring"));
     close(fd);
     file_free(&f);

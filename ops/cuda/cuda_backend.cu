@@ -143,12 +143,14 @@ static void add_stream_stats(mx_stream_stats *sum, const mx_stream_stats *s) {
     sum->read_s += s->read_s;
     sum->fill_wait_s += s->fill_wait_s;
     sum->copy_wait_s += s->copy_wait_s;
+    sum->seen_s += s->seen_s;
     sum->bytes += s->bytes;
     sum->readers = s->readers;
 }
 
 /* The whole file in one device allocation, streamed by the backend's readers (mx_dev_weight_file). */
-static int cuda_weight_file(mx_backend *be, int fd, const void *map, size_t len, const char *path, mx_status *st) {
+static int cuda_weight_file(mx_backend *be, int fd, const void *map, size_t len, const char *path,
+                            const mx_stream_observer *obs, mx_status *st) {
     cuda_backend *b = (cuda_backend *)be->impl;
     if (image_of_host(b, map, len)) return 0;
     if (report_failure(b, st)) return -1;
@@ -162,14 +164,14 @@ static int cuda_weight_file(mx_backend *be, int fd, const void *map, size_t len,
     unsigned char *dev = (unsigned char *)cuda_alloc(be, len, st);
     if (!dev) return mx_fail_prefix(st, "%s: the weight file on the device", path);
     mx_stream_stats s;
-    if (mx_cuda_upload_file(b->cc, dev, fd, path, len, b->load_readers, &s, st)) {
+    if (mx_cuda_upload_file(b->cc, dev, fd, path, len, b->load_readers, obs, &s, st)) {
         mx_cuda_free(dev);
         return -1;
     }
     add_stream_stats(&b->file, &s);
     b->files++;
     b->images[b->nimages++] = (weight_image){(const unsigned char *)map, len, dev};
-    return 0;
+    return 1;
 }
 
 static void cuda_weight_file_drop(mx_backend *be, const void *map) {
@@ -245,6 +247,7 @@ void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out) {
     out->file_read_s = b->file.read_s;
     out->file_fill_wait_s = b->file.fill_wait_s;
     out->file_copy_wait_s = b->file.copy_wait_s;
+    out->file_seen_s = b->file.seen_s;
     out->file_readers = b->file.readers;
 }
 

@@ -197,7 +197,7 @@ static int ring_make(file_ring *r, int nbufs, mx_status *st) {
 }
 
 int mx_cuda_upload_file(mx_cuda_ctx *c, void *dst, int fd, const char *path, size_t len, int readers,
-                        mx_stream_stats *stats, mx_status *st) {
+                        const mx_stream_observer *obs, mx_stream_stats *stats, mx_status *st) {
     file_ring r;
     memset(&r, 0, sizeof r);
     r.c = c;
@@ -209,7 +209,7 @@ int mx_cuda_upload_file(mx_cuda_ctx *c, void *dst, int fd, const char *path, siz
     }
     mx_stream_ring ring = {r.bufs, r.n, FILE_CHUNK_BYTES, readers, FILE_IN_FLIGHT};
     mx_stream_sink sink = {&r, ring_copy, ring_wait};
-    int rc = mx_file_stream(fd, path, len, &ring, &sink, stats, st);
+    int rc = mx_file_stream(fd, path, len, &ring, &sink, obs, stats, st);
     ring_free(&r);
     return rc;
 }

@@ -55,7 +55,7 @@ static double run_stream(int fd, const char *path, size_t len, unsigned char **b
     mx_stream_sink sink = {NULL, noop_copy, noop_wait};
     mx_stream_stats stats;
     mx_status st;
-    if (mx_file_stream(fd, path, len, &ring, &sink, &stats, &st)) {
+    if (mx_file_stream(fd, path, len, &ring, &sink, NULL, &stats, &st)) {
         fprintf(stderr, "bench_file_stream: %s\n", st.msg);
         return -1;
     }
