@@ -6,8 +6,8 @@
  *               upload of before: a page fault per 4 KiB page of the mapping)
  *   stream xN   runtime/file_stream.h with N reader threads into a ring of 4 MiB buffers, the
  *               device copy a no-op (the copy engine's part is not the host's)
- *   digest      the weight file's digest (pipeline/texture/digest.h), which loading also computes,
- *               on a pool of all CPUs
+ *   digest      the weight file's digest (pipeline/texture/digest.h) read alone, on a pool of all CPUs
+ *   stream x2 + digest   the stream with the digest taken from it (what loading onto a GPU does)
  * Prints the median of each in seconds and GB/s. */
 #include <fcntl.h>
 #include <stdio.h>
@@ -28,7 +28,7 @@
 #define CHUNK ((size_t)4 << 20)
 #define IN_FLIGHT 4
 #define MAX_READERS 8
-#define MODES (2 + 4) /* mapped, digest, stream x1 x2 x4 x8 */
+#define MODES (3 + 4) /* mapped, digest, stream x2 + digest, stream x1 x2 x4 x8 */
 
 static int noop_copy(void *arg, int slot, const void *buf, size_t n, uint64_t off, mx_status *st) {
     (void)arg, (void)slot, (void)buf, (void)n, (void)off, (void)st;
@@ -50,16 +50,24 @@ static double run_mapped(int fd, size_t len, unsigned char *staging) {
     return mx_now() - t0;
 }
 
-static double run_stream(int fd, const char *path, size_t len, unsigned char **bufs, int readers) {
+static void digest_seen(void *arg, const void *buf, size_t n, uint64_t off) { mx_digest_stream_add(arg, buf, n, off); }
+
+/* The stream with `readers` threads, the digest taken from it when pool is not NULL. */
+static double run_stream(int fd, const char *path, size_t len, unsigned char **bufs, int readers, mx_pool *pool) {
     mx_stream_ring ring = {bufs, readers + IN_FLIGHT, CHUNK, readers, IN_FLIGHT};
     mx_stream_sink sink = {NULL, noop_copy, noop_wait};
+    mx_digest_stream d;
+    mx_digest_stream_init(&d, pool, len);
+    mx_stream_observer obs = {digest_seen, &d};
     mx_stream_stats stats;
     mx_status st;
-    if (mx_file_stream(fd, path, len, &ring, &sink, NULL, &stats, &st)) {
+    if (mx_file_stream(fd, path, len, &ring, &sink, pool ? &obs : NULL, &stats, &st)) {
         fprintf(stderr, "bench_file_stream: %s\n", st.msg);
         return -1;
     }
-    return stats.wall_s;
+    char hex[32];
+    mx_digest_stream_hex(&d, hex);
+    return pool && !strcmp(hex, "unreadable") ? -1 : stats.wall_s;
 }
 
 static double run_digest(mx_pool *pool, const char *path) {
@@ -90,16 +98,18 @@ int main(int argc, char **argv) {
     mx_pool *pool = mx_pool_create(0, &st);
     unsigned char *bufs[MAX_READERS + IN_FLIGHT], *staging = malloc(STAGING);
     for (int i = 0; i < MAX_READERS + IN_FLIGHT; i++) bufs[i] = malloc(CHUNK);
-    const char *names[MODES] = {"mapped, 1 thread", "digest, pool", "stream x1", "stream x2", "stream x4", "stream x8"};
+    const char *names[MODES] = {"mapped, 1 thread", "digest, pool", "stream x2 + digest", "stream x1", "stream x2",
+                                "stream x4", "stream x8"};
     double t[MODES][ROUNDS];
     printf("%s: %.2f GB, %ld CPUs, %d rounds alternated\n", path, len / 1e9, cpus, ROUNDS);
-    run_stream(fd, path, len, bufs, 1); /* into the page cache */
+    run_stream(fd, path, len, bufs, 1, NULL); /* into the page cache */
     int rc = 0;
     for (int r = 0; r < ROUNDS && !rc; r++)
         for (int m = 0; m < MODES && !rc; m++) {
-            t[m][r] = m == 0 ? run_mapped(fd, len, staging)
+            t[m][r] = m == 0   ? run_mapped(fd, len, staging)
                       : m == 1 ? run_digest(pool, path)
-                               : run_stream(fd, path, len, bufs, 1 << (m - 2));
+                      : m == 2 ? run_stream(fd, path, len, bufs, 2, pool)
+                               : run_stream(fd, path, len, bufs, 1 << (m - 3), NULL);
             rc = t[m][r] < 0;
         }
     for (int m = 0; m < MODES && !rc; m++) {
