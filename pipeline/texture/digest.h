@@ -21,6 +21,7 @@ uint64_t mx_digest64(const void *data, uint64_t len);
  * mx_file_digest_hex would, or "unreadable" unless exactly the len bytes were added that way. */
 typedef struct mx_digest_stream {
     mx_pool *pool;
+    int simd; /* the lanes in one AVX-512 register (digest.c) */
     uint64_t lane[8];
     uint64_t len, next; /* the file's length; the offset the next chunk must start at */
     int broken;         /* a chunk out of order or misaligned */
