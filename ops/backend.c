@@ -7,7 +7,9 @@
  * each op pays two mprotect calls per live allocation. It is a device context, as CUDA is:
  * weights are device copies (mx_dev_weight, mapped read-only, outside the per-op mprotect), and
  * an op handed a weight that is not one (a host pointer, bound through a host binder) is refused
- * without running, its message kept and reported by the next download, as a CUDA kernel fault is. */
+ * without running, its message kept and reported by the next download, as a CUDA kernel fault is.
+ * A whole weight file is put on it as on CUDA (mx_dev_weight_file: streamed by runtime/file_stream.h
+ * into one read-only mapping, weights bound as places in it), so tests without a GPU run that path. */
 #include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -121,6 +123,7 @@ typedef struct strict_map {
     void *p;
     size_t bytes;
     int weight; /* a weight's copy: read-only, never opened by enter */
+    const void *file_map; /* a whole weight file's copy: the host mapping it was read from; else NULL */
 } strict_map;
 
 typedef struct strict_state {
@@ -175,7 +178,19 @@ static void *strict_alloc(mx_backend *be, size_t bytes, mx_status *st) {
     return strict_map_new(be, bytes, s->depth > 0 ? PROT_READ | PROT_WRITE : PROT_NONE, 0, st);
 }
 
+/* The copy of a weight file whose host mapping holds [src, src + bytes), or NULL. */
+static const strict_map *strict_file_of(const strict_state *s, const void *src, size_t bytes) {
+    uintptr_t a = (uintptr_t)src;
+    for (size_t i = 0; i < s->n; i++) {
+        uintptr_t m = (uintptr_t)s->maps[i].file_map;
+        if (m && a >= m && a - m <= s->maps[i].bytes && bytes <= s->maps[i].bytes - (a - m)) return &s->maps[i];
+    }
+    return NULL;
+}
+
 static void *strict_weight(mx_backend *be, const void *src, size_t bytes, mx_status *st) {
+    const strict_map *f = strict_file_of(be->impl, src, bytes);
+    if (f) return (unsigned char *)f->p + ((uintptr_t)src - (uintptr_t)f->file_map);
     void *p = strict_map_new(be, bytes, PROT_READ | PROT_WRITE, 1, st);
     if (!p) return NULL;
     if (bytes) memcpy(p, src, bytes);
@@ -189,6 +204,56 @@ static void strict_release(mx_backend *be, void *p) {
         if (s->maps[i].p == p) {
             munmap(p, s->maps[i].bytes);
             s->maps[i] = s->maps[--s->n];
+            return;
+        }
+}
+
+/* The device side of the file stream: copies at once (so waits have nothing to wait for). */
+static int strict_stream_copy(void *arg, int slot, const void *buf, size_t n, uint64_t off, mx_status *st) {
+    (void)slot, (void)st;
+    memcpy((unsigned char *)arg + off, buf, n);
+    return 0;
+}
+
+static int strict_stream_wait(void *arg, int slot, mx_status *st) {
+    (void)arg, (void)slot, (void)st;
+    return 0;
+}
+
+enum { STRICT_STREAM_BUFS = 3, STRICT_STREAM_CHUNK = 1 << 20 };
+
+static int strict_weight_file(mx_backend *be, int fd, const void *map, size_t len, const char *path,
+                              const mx_stream_observer *obs, mx_status *st) {
+    strict_state *s = be->impl;
+    if (strict_file_of(s, map, len)) return 0;
+    unsigned char *p = strict_map_new(be, len, PROT_READ | PROT_WRITE, 1, st);
+    unsigned char *ring = malloc((size_t)STRICT_STREAM_BUFS * STRICT_STREAM_CHUNK);
+    if (!p || !ring) {
+        free(ring);
+        if (p) strict_release(be, p);
+        return p ? mx_fail(st, MX_ENOMEM, "cpu-strict: out of memory") : -1;
+    }
+    unsigned char *bufs[STRICT_STREAM_BUFS];
+    for (int i = 0; i < STRICT_STREAM_BUFS; i++) bufs[i] = ring + (size_t)i * STRICT_STREAM_CHUNK;
+    mx_stream_ring r = {bufs, STRICT_STREAM_BUFS, STRICT_STREAM_CHUNK, 2, 1};
+    mx_stream_sink sink = {p, strict_stream_copy, strict_stream_wait};
+    int rc = mx_file_stream(fd, path, len, &r, &sink, obs, NULL, st);
+    free(ring);
+    if (rc) {
+        strict_release(be, p);
+        return -1;
+    }
+    if (mprotect(p, len ? len : 1, PROT_READ) != 0) abort();
+    for (size_t i = 0; i < s->n; i++)
+        if (s->maps[i].p == p) s->maps[i].file_map = map;
+    return 1;
+}
+
+static void strict_weight_file_drop(mx_backend *be, const void *map) {
+    strict_state *s = be->impl;
+    for (size_t i = 0; i < s->n; i++)
+        if (s->maps[i].file_map == map) {
+            strict_release(be, s->maps[i].p);
             return;
         }
 }
@@ -313,6 +378,8 @@ static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
     be->host_visible = 0;
     be->alloc = strict_alloc;
     be->weight = strict_weight;
+    be->weight_file = strict_weight_file;
+    be->weight_file_drop = strict_weight_file_drop;
     be->release = strict_release;
     be->to_device = strict_copy;
     be->to_host = strict_to_host;

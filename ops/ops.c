@@ -211,6 +211,17 @@ void *mx_dev_weight(const mx_ctx *c, const void *src, size_t bytes, mx_status *s
     return p;
 }
 
+int mx_dev_weight_file(const mx_ctx *c, int fd, const void *map, size_t len, const char *path,
+                       const mx_stream_observer *obs, mx_status *st) {
+    mx_backend *be = c ? c->be : NULL;
+    return be && be->weight_file ? be->weight_file(be, fd, map, len, path, obs, st) : 0;
+}
+
+void mx_dev_weight_file_drop(const mx_ctx *c, const void *map) {
+    mx_backend *be = c ? c->be : NULL;
+    if (be && be->weight_file_drop) be->weight_file_drop(be, map);
+}
+
 /* ---- the dry run ---- */
 
 static const mx_ctx measuring_ctx = {.measuring = 1};

@@ -40,6 +40,7 @@
 
 #include "../runtime/arena.h"
 #include "../runtime/backend.h"
+#include "../runtime/file_stream.h"
 #include "../runtime/half.h"
 #include "../runtime/tensor.h"
 #include "../runtime/threadpool.h"
@@ -129,6 +130,16 @@ float *mx_dev_from_host(const mx_ctx *c, const float *src, size_t n, mx_status *
  * mx_binder_device binds on a device context; cpu-strict refuses any other weight pointer).
  * NULL with a message when out of memory. Free with mx_dev_free. */
 void *mx_dev_weight(const mx_ctx *c, const void *src, size_t bytes, mx_status *st);
+/* A whole weight file (open as fd, mapped at map, len bytes) onto c's device in one pass where
+ * the backend can (CUDA: one allocation, read by several threads while the chunks read are
+ * copied), each chunk shown to obs (runtime/file_stream.h; NULL: none) in file order; 1 then, and
+ * mx_dev_weight gives places in that copy for bytes inside the mapping. 0 and nothing done where
+ * it cannot (the CPU backends, c NULL) or when the file is there already: weights are then copied
+ * one by one, and obs saw nothing. mx_dev_weight_file_drop frees that copy, after every weight
+ * bound from it is released. */
+int mx_dev_weight_file(const mx_ctx *c, int fd, const void *map, size_t len, const char *path,
+                       const mx_stream_observer *obs, mx_status *st);
+void mx_dev_weight_file_drop(const mx_ctx *c, const void *map);
 
 /* ---- the dry run ---- */
 

@@ -69,6 +69,7 @@ const char *mx_precision_name(mx_precision p);
 int mx_precision_parse(const char *s, mx_precision *p);
 
 struct mx_kernels;
+struct mx_stream_observer; /* file_stream.h */
 
 typedef struct mx_backend mx_backend;
 struct mx_backend {
@@ -88,6 +89,14 @@ struct mx_backend {
     /* A device copy of a weight's bytes, only read by kernels (mx_dev_weight; NULL: alloc and
      * to_device); freed with release. */
     void *(*weight)(mx_backend *be, const void *src, size_t bytes, mx_status *st);
+    /* Optional (NULL: weight() copies each tensor): a whole weight file, open as fd and mapped at
+     * map (len bytes), put on the device in one allocation and one pass that shows obs (may be
+     * NULL) every chunk; weight() then returns the place in that copy of any bytes inside the
+     * mapping, and release() of such a place does nothing. 1 when done (0 is for a file already
+     * there: obs saw nothing). weight_file_drop frees the copy of the file mapped at map. */
+    int (*weight_file)(mx_backend *be, int fd, const void *map, size_t len, const char *path,
+                       const struct mx_stream_observer *obs, mx_status *st);
+    void (*weight_file_drop)(mx_backend *be, const void *map);
     /* Around every kernel call (NULL: nothing to do); calls nest. */
     void (*enter)(mx_backend *be);
     void (*leave)(mx_backend *be);

@@ -8,6 +8,7 @@
  * embedding ops (pad, copy, fill, axpy, lincomb, clamp, affine, embed_tokens) on known values, on
  * the strict backend. */
 #include <dlfcn.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -172,6 +173,71 @@ static void test_strict_weights(void) {
     mx_ctx_destroy(&c);
 }
 
+/* A whole weight file on a device context (mx_dev_weight_file, as CUDA does it; cpu-strict streams
+ * it too): the file's bytes land in one read-only copy that the observer saw in order; a weight
+ * inside the mapping is its place in that copy (same bytes, usable by an op), one outside is its
+ * own copy; freeing a place does nothing; a second call for the same file does nothing; a file
+ * that is not the length said fails naming it. The CPU backend streams nothing. */
+static void seen_sum(void *arg, const void *buf, size_t n, uint64_t off) {
+    uint64_t *sum = arg; /* position-weighted, so order and offsets count */
+    for (size_t i = 0; i < n; i++) *sum += ((const unsigned char *)buf)[i] * (off + i + 1);
+}
+
+static void test_weight_file(void) {
+    enum { N = (3 << 20) / 4 + 5 }; /* 3 MiB + 20 bytes: several chunks, the last one short */
+    float *data = malloc(N * sizeof *data);
+    char dir[] = "/tmp/matex_test_wfile.XXXXXX", path[64];
+    CHECK(data && mkdtemp(dir) != NULL);
+    if (!data) return;
+    snprintf(path, sizeof path, "%s/w.bin", dir);
+    uint64_t want_sum = 0, sum = 0;
+    for (int i = 0; i < N; i++) data[i] = (float)(i % 1000) * 0.25f;
+    for (size_t i = 0; i < N * sizeof *data; i++) want_sum += ((unsigned char *)data)[i] * (i + 1);
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(data, sizeof *data, N, f) == N);
+    if (f) fclose(f);
+    int fd = open(path, O_RDONLY);
+    mx_ctx c, cpu;
+    mx_status st = {0};
+    CHECK(mx_ctx_create_on(&c, MX_BACKEND_CPU_STRICT, 2, mx_cpu_best_isa(), 1 << 20, &st) == 0);
+    CHECK(mx_ctx_create_on(&cpu, MX_BACKEND_CPU, 1, mx_cpu_best_isa(), 1 << 20, &st) == 0);
+    mx_stream_observer obs = {seen_sum, &sum};
+    /* data stands in for the file's mapping: weights are found by their place in it */
+    CHECK(mx_dev_weight_file(&cpu, fd, data, N * sizeof *data, path, &obs, &st) == 0 && sum == 0);
+    CHECK(mx_dev_weight_file(&c, fd, data, N * sizeof *data, path, &obs, &st) == 1 && sum == want_sum);
+    CHECK(mx_dev_weight_file(&c, fd, data, N * sizeof *data, path, NULL, &st) == 0);
+    const float x[3] = {1, 2, 3}, w_out[6] = {4, 0, 0, 0, 1, 1};
+    float got[2] = {0, 0}, want[2];
+    float *w_in = mx_dev_weight(&c, data + 1000, 6 * sizeof(float), &st); /* data[1000..1005] = 0, .25, ... */
+    float *w_own = mx_dev_weight(&c, w_out, sizeof w_out, &st);
+    float *w_tail = mx_dev_weight(&c, data + N - 6, 6 * sizeof(float), &st);
+    float *dx = mx_dev_from_host(&c, x, 3, &st), *dy = mx_dev_alloc(&c, 2, &st);
+    CHECK(w_in && w_own && w_tail && dx && dy && w_in != data + 1000 && w_own != w_out);
+    if (w_in && w_own && w_tail && dx && dy) {
+        CHECK(memcmp(w_in, data + 1000, 6 * sizeof(float)) == 0 && memcmp(w_tail, data + N - 6, 6 * sizeof(float)) == 0);
+        CHECK(child_signal(write_one, w_in) == SIGSEGV);
+        mx_dev_free(&c, w_in); /* a place in the file's copy: nothing is freed */
+        mx_linear(&c, dy, dx, mx_w_f32(w_in), mx_w_none(), 1, 2, 3);
+        want[0] = data[1000] * 1 + data[1001] * 2 + data[1002] * 3;
+        want[1] = data[1003] * 1 + data[1004] * 2 + data[1005] * 3;
+        CHECK(mx_download(&c, got, dy, 2, &st) == 0);
+        mx_check_close("cpu-strict: linear on a weight inside the file's copy", got, want, 2, 0);
+    }
+    mx_dev_free(&c, w_own);
+    mx_dev_free(&c, dx);
+    mx_dev_free(&c, dy);
+    mx_dev_weight_file_drop(&c, data);
+    float other[4];
+    CHECK(mx_dev_weight_file(&c, fd, other, N * sizeof *data - 4, path, NULL, &st) == -1 &&
+          strstr(st.msg, path) && strstr(st.msg, "expected"));
+    close(fd);
+    unlink(path);
+    rmdir(dir);
+    mx_ctx_destroy(&cpu);
+    mx_ctx_destroy(&c);
+    free(data);
+}
+
 static void test_measuring(void) {
     const mx_ctx *m = mx_ctx_measuring();
     mx_arena a;
@@ -266,6 +332,7 @@ int main(void) {
     test_tables_full();
     test_strict_guard();
     test_strict_weights();
+    test_weight_file();
     test_measuring();
     mx_ctx c;
     mx_status st = {0};

@@ -22,6 +22,7 @@
 
 struct mx_weightfile {
     char *path;
+    int fd; /* kept open for mx_wf_fd (the same file as the mapping); -1: none */
     const uint8_t *map;
     size_t len;
     size_t count;
@@ -211,8 +212,11 @@ static int map_file(mx_weightfile *wf, mx_status *st) {
                        (long long)sb.st_size);
     }
     void *m = mmap(NULL, (size_t)sb.st_size, PROT_READ, MAP_PRIVATE, fd, 0);
-    close(fd);
-    if (m == MAP_FAILED) return mx_fail(st, MX_EIO, "%s: mmap failed: %s", wf->path, strerror(errno));
+    if (m == MAP_FAILED) {
+        close(fd);
+        return mx_fail(st, MX_EIO, "%s: mmap failed: %s", wf->path, strerror(errno));
+    }
+    wf->fd = fd;
     wf->map = m;
     wf->len = (size_t)sb.st_size;
     return 0;
@@ -239,6 +243,7 @@ int mx_wf_open(mx_weightfile **out, const char *path, mx_status *st) {
         free(wf);
         return mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
     }
+    wf->fd = -1;
     if (map_file(wf, st) || load_tables(wf, st)) {
         mx_wf_close(wf);
         return -1;
@@ -250,6 +255,7 @@ int mx_wf_open(mx_weightfile **out, const char *path, mx_status *st) {
 void mx_wf_close(mx_weightfile *wf) {
     if (!wf) return;
     if (wf->map) munmap((void *)wf->map, wf->len);
+    if (wf->fd >= 0) close(wf->fd);
     free(wf->tensors);
     free(wf->meta_keys);
     free(wf->meta_vals);
@@ -258,6 +264,12 @@ void mx_wf_close(mx_weightfile *wf) {
 }
 
 const char *mx_wf_path(const mx_weightfile *wf) { return wf->path; }
+int mx_wf_fd(const mx_weightfile *wf) { return wf->fd; }
+
+const void *mx_wf_map(const mx_weightfile *wf, size_t *len) {
+    *len = wf->len;
+    return wf->map;
+}
 size_t mx_wf_count(const mx_weightfile *wf) { return wf->count; }
 const mx_wtensor *mx_wf_tensor(const mx_weightfile *wf, size_t i) { return i < wf->count ? &wf->tensors[i] : NULL; }
 

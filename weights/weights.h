@@ -27,6 +27,10 @@ typedef struct mx_weightfile mx_weightfile;
 int mx_wf_open(mx_weightfile **out, const char *path, mx_status *st);
 void mx_wf_close(mx_weightfile *wf);
 const char *mx_wf_path(const mx_weightfile *wf);
+/* The open file and its whole mapping (len bytes): what mx_dev_weight_file streams to a device
+ * (the fd is the file mapped, open until mx_wf_close; tensors' data point into the mapping). */
+int mx_wf_fd(const mx_weightfile *wf);
+const void *mx_wf_map(const mx_weightfile *wf, size_t *len);
 
 size_t mx_wf_count(const mx_weightfile *wf);
 const mx_wtensor *mx_wf_tensor(const mx_weightfile *wf, size_t i);

@@ -8,13 +8,26 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "cuda_common.cuh"
 extern "C" {
-#include "../../runtime/log.h" /* mx_now; a C header without its own extern "C" */
+#include "../../runtime/file_stream.h" /* C headers without their own extern "C" */
+#include "../../runtime/log.h"         /* mx_now */
 }
 
 #define CUDA_SCRATCH_BYTES ((size_t)64 << 20)
+/* Host threads reading a weight file (MATEX_CUDA_LOAD_THREADS overrides): enough that the reads
+ * (pread from the page cache, ~3-6 GB/s a thread) outrun a host-to-device link of 25-50 GB/s. */
+#define CUDA_LOAD_READERS 8
+
+/* A weight file's bytes on the device (mx_dev_weight_file): the mapping they were read from and
+ * the one allocation holding their copy, at the same offsets. */
+typedef struct weight_image {
+    const unsigned char *map;
+    size_t len;
+    unsigned char *dev;
+} weight_image;
 
 typedef struct cuda_backend {
     mx_backend be;
@@ -26,6 +39,11 @@ typedef struct cuda_backend {
     const char *last_op; /* the op queued last (an op_list.h name) */
     double alloc_s;      /* time in device allocations (weights, arenas) and their count */
     unsigned long long allocs;
+    weight_image *images; /* the weight files on the device */
+    int nimages, images_cap;
+    int load_readers;
+    mx_stream_stats file; /* of the weight files streamed, summed */
+    int files;
 } cuda_backend;
 
 static cuda_backend *of(const mx_ctx *c) { return (cuda_backend *)c->be->impl; }
@@ -69,9 +87,27 @@ static void *cuda_alloc(mx_backend *be, size_t bytes, mx_status *st) {
     return rc ? NULL : p;
 }
 
+/* The image holding device bytes [p, p + 1), or NULL. */
+static const weight_image *image_of_device(const cuda_backend *b, const void *p) {
+    const unsigned char *q = (const unsigned char *)p;
+    for (int i = 0; i < b->nimages; i++)
+        if (q >= b->images[i].dev && q < b->images[i].dev + b->images[i].len) return &b->images[i];
+    return NULL;
+}
+
+/* The image whose mapping holds host bytes [src, src + bytes), or NULL. */
+static const weight_image *image_of_host(const cuda_backend *b, const void *src, size_t bytes) {
+    const unsigned char *q = (const unsigned char *)src;
+    for (int i = 0; i < b->nimages; i++) {
+        const weight_image *im = &b->images[i];
+        if (q >= im->map && q < im->map + im->len && bytes <= (size_t)(im->map + im->len - q)) return im;
+    }
+    return NULL;
+}
+
+/* Places inside a weight file's copy belong to the copy (freed with it). */
 static void cuda_release(mx_backend *be, void *p) {
-    (void)be;
-    mx_cuda_free(p);
+    if (!image_of_device((const cuda_backend *)be->impl, p)) mx_cuda_free(p);
 }
 
 /* The error a queued op raised, once (the backend is usable again after it is reported). */
@@ -88,6 +124,64 @@ static int cuda_to_device(mx_backend *be, void *dst, const void *src, size_t byt
     cuda_backend *b = (cuda_backend *)be->impl;
     if (report_failure(b, st)) return -1;
     return mx_cuda_upload_staged(b->cc, dst, src, bytes, "cuda upload", st);
+}
+
+/* A weight inside a weight file on the device is its place there; any other is copied. */
+static void *cuda_weight(mx_backend *be, const void *src, size_t bytes, mx_status *st) {
+    const weight_image *im = image_of_host((const cuda_backend *)be->impl, src, bytes);
+    if (im) return im->dev + ((const unsigned char *)src - im->map);
+    void *p = cuda_alloc(be, bytes, st);
+    if (p && cuda_to_device(be, p, src, bytes, st)) {
+        mx_cuda_free(p);
+        return NULL;
+    }
+    return p;
+}
+
+static void add_stream_stats(mx_stream_stats *sum, const mx_stream_stats *s) {
+    sum->wall_s += s->wall_s;
+    sum->read_s += s->read_s;
+    sum->fill_wait_s += s->fill_wait_s;
+    sum->copy_wait_s += s->copy_wait_s;
+    sum->seen_s += s->seen_s;
+    sum->bytes += s->bytes;
+    sum->readers = s->readers;
+}
+
+/* The whole file in one device allocation, streamed by the backend's readers (mx_dev_weight_file). */
+static int cuda_weight_file(mx_backend *be, int fd, const void *map, size_t len, const char *path,
+                            const mx_stream_observer *obs, mx_status *st) {
+    cuda_backend *b = (cuda_backend *)be->impl;
+    if (image_of_host(b, map, len)) return 0;
+    if (report_failure(b, st)) return -1;
+    if (b->nimages == b->images_cap) {
+        int cap = b->images_cap ? 2 * b->images_cap : 4;
+        weight_image *im = (weight_image *)realloc(b->images, (size_t)cap * sizeof *im);
+        if (!im) return mx_fail(st, MX_ENOMEM, "%s: out of host memory", path);
+        b->images = im;
+        b->images_cap = cap;
+    }
+    unsigned char *dev = (unsigned char *)cuda_alloc(be, len, st);
+    if (!dev) return mx_fail_prefix(st, "%s: the weight file on the device", path);
+    mx_stream_stats s;
+    if (mx_cuda_upload_file(b->cc, dev, fd, path, len, b->load_readers, obs, &s, st)) {
+        mx_cuda_free(dev);
+        return -1;
+    }
+    add_stream_stats(&b->file, &s);
+    b->files++;
+    b->images[b->nimages++] = (weight_image){(const unsigned char *)map, len, dev};
+    return 1;
+}
+
+static void cuda_weight_file_drop(mx_backend *be, const void *map) {
+    cuda_backend *b = (cuda_backend *)be->impl;
+    for (int i = 0; i < b->nimages; i++)
+        if (b->images[i].map == map) {
+            mx_cuda_free(b->images[i].dev);
+            b->images[i] = b->images[--b->nimages];
+            return;
+        }
 }
 
 /* A fault found while waiting belongs to some queued op: name the last one, and how to find the
@@ -147,12 +241,31 @@ void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out) {
     out->bytes = b->cc->upload_bytes;
     out->alloc_s = b->alloc_s;
     out->allocs = b->allocs;
+    out->files = b->files;
+    out->file_bytes = b->file.bytes;
+    out->file_s = b->file.wall_s;
+    out->file_read_s = b->file.read_s;
+    out->file_fill_wait_s = b->file.fill_wait_s;
+    out->file_copy_wait_s = b->file.copy_wait_s;
+    out->file_seen_s = b->file.seen_s;
+    out->file_readers = b->file.readers;
 }
 
 static void cuda_destroy(mx_backend *be) {
     cuda_backend *b = (cuda_backend *)be->impl;
+    for (int i = 0; i < b->nimages; i++) mx_cuda_free(b->images[i].dev);
+    free(b->images);
     mx_cuda_ctx_destroy(b->cc);
     free(b);
+}
+
+/* MATEX_CUDA_LOAD_THREADS, else CUDA_LOAD_READERS, at most the CPUs online. */
+static int load_readers(void) {
+    const char *env = getenv("MATEX_CUDA_LOAD_THREADS");
+    int n = env ? atoi(env) : 0;
+    if (n >= 1) return n;
+    long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+    return cpus >= 1 && cpus < CUDA_LOAD_READERS ? (int)cpus : CUDA_LOAD_READERS;
 }
 
 int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
@@ -169,6 +282,7 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
     mx_cuda_fill_kernels(&b->k);
     const char *sync = getenv("MATEX_CUDA_SYNC");
     b->sync_each_op = sync && strcmp(sync, "1") == 0;
+    b->load_readers = load_readers();
     b->be.kind = MX_BACKEND_CUDA;
     b->be.k = &b->k;
     b->be.host_visible = 0;
@@ -176,6 +290,9 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
     b->be.release = cuda_release;
     b->be.to_device = cuda_to_device;
     b->be.to_host = cuda_to_host;
+    b->be.weight = cuda_weight;
+    b->be.weight_file = cuda_weight_file;
+    b->be.weight_file_drop = cuda_weight_file_drop;
     b->be.destroy = cuda_destroy;
     b->be.impl = b;
     *out = &b->be;

@@ -58,6 +58,15 @@ int mx_cuda_download(mx_cuda_ctx *ctx, void *dst, const void *src, size_t bytes,
  * synchronous copy per tensor). */
 int mx_cuda_upload_staged(mx_cuda_ctx *ctx, void *dst, const void *src, size_t bytes, const char *what,
                           mx_status *st);
+/* The whole open file fd ([0, len), named path in messages) copied to dst (device memory of len
+ * bytes): `readers` host threads read it into a ring of pinned chunks while earlier chunks are
+ * copied, each chunk shown to obs (NULL: none) (runtime/file_stream.h); returns when every byte
+ * is on the device, or -1 naming the file, the offset and the cause (a file of another length,
+ * one cut while read, an I/O error, a failed copy). stats (may be NULL) gets where the time went. */
+struct mx_stream_stats;
+struct mx_stream_observer;
+int mx_cuda_upload_file(mx_cuda_ctx *ctx, void *dst, int fd, const char *path, size_t len, int readers,
+                        const struct mx_stream_observer *obs, struct mx_stream_stats *stats, mx_status *st);
 int mx_cuda_memset_zero(mx_cuda_ctx *ctx, void *dptr, size_t bytes, const char *what, mx_status *st);
 
 /* ---- ops: one per op of ops/op_list.h, with the same arguments and semantics as its mx_* wrapper
@@ -87,13 +96,19 @@ unsigned long long mx_cuda_ctx_half_products(const mx_cuda_ctx *c);
 unsigned long long mx_cuda_ctx_cudnn_convs(const mx_cuda_ctx *c);
 /* The attention calls of a context that the fused kernel ran (MATEX_CUDA_FLASH=1, cuda_flash.cu). */
 unsigned long long mx_cuda_ctx_flash_calls(const mx_cuda_ctx *c);
-/* Where loading weights onto the GPU spends its time, since the backend was created: host copies
- * into the pinned staging halves, waits for a half the copy engine still reads, bytes uploaded, and
- * device allocations (time and count). bench_cuda prints them after loading (issue 39: the 3.6 GB
- * set takes 2.5-3 s; the goal is under 1 s). */
+/* Where loading weights onto the GPU spends its time, since the backend was created. Weight files
+ * (mx_dev_weight_file): their count, bytes, the wall time of their streams, the reader threads'
+ * time in pread (summed), the waits for a chunk to be read and for a chunk's copy, the time in
+ * the observer (the weight digest), the readers.
+ * Other uploads through the pinned staging halves: host copies, waits for a half the copy engine
+ * still reads, bytes. Device allocations: time and count. bench_cuda and gpu-check print them
+ * (issue 39: the 3.6 GB set took 2.5-3 s with a copy per tensor; the goal is under 1 s). */
 typedef struct mx_cuda_upload_stats {
     double copy_s, wait_s, alloc_s;
     unsigned long long bytes, allocs;
+    int files, file_readers;
+    unsigned long long file_bytes;
+    double file_s, file_read_s, file_fill_wait_s, file_copy_wait_s, file_seen_s;
 } mx_cuda_upload_stats;
 void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out);
 /* Captures what queue(arg) queues on the backend's stream into one CUDA graph (relaxed mode), without

@@ -95,10 +95,33 @@ int mx_models_has_kind(const mx_models *m, const char *kind) {
 
 const char *mx_models_path(const mx_models *m) { return mx_wf_path(m->wf); }
 
+static void digest_seen(void *arg, const void *buf, size_t n, uint64_t off) {
+    mx_digest_stream_add(arg, buf, n, off);
+}
+
+/* The weight file onto c's device in one pass (mx_dev_weight_file), its digest from that pass:
+ * 1 when streamed, 0 when the backend does not stream files (the digest is then not started). */
+static int stream_to_device(mx_models *m, const mx_ctx *c, const char *path, mx_digest_stream *digest,
+                            mx_status *st) {
+    size_t len;
+    const void *map = mx_wf_map(m->wf, &len);
+    mx_digest_stream_init(digest, c ? c->pool : NULL, len);
+    mx_stream_observer obs = {digest_seen, digest};
+    return mx_dev_weight_file(c, mx_wf_fd(m->wf), map, len, path, &obs, st);
+}
+
 int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, mx_status *st) {
     memset(m, 0, sizeof *m);
     m->c = c;
     if (mx_wf_open(&m->wf, path, st)) return -1;
+    /* On a GPU the whole file goes to the device in one pass before the networks bind into it,
+     * and the digest is taken from that pass; elsewhere the digest reads the file at the end. */
+    mx_digest_stream digest;
+    int streamed = stream_to_device(m, c, path, &digest, st);
+    if (streamed < 0) {
+        mx_models_free(m);
+        return -1;
+    }
     if (mx_tok_load_weights(&m->tok, m->wf, st) || load_net(m, MX_NET_TEXT_ENCODER, NULL, 0, (void **)&m->clip, st) ||
         load_net(m, MX_NET_UNET, NULL, 1, (void **)&m->unet, st) || load_controlnets(m, needs, st) ||
         load_net(m, MX_NET_VAE, NULL, 4, (void **)&m->vae, st) || load_taesd(m, st) || load_ip_adapter(m, st) || load_image_encoder(m, st) ||
@@ -113,7 +136,8 @@ int mx_models_load(mx_models *m, const mx_ctx *c, const char *path, int needs, m
         mx_models_free(m);
         return -1;
     }
-    mx_file_digest_hex(c ? c->pool : NULL, path, m->digest);
+    if (streamed) mx_digest_stream_hex(&digest, m->digest);
+    else mx_file_digest_hex(c ? c->pool : NULL, path, m->digest);
     return 0;
 }
 
@@ -135,6 +159,10 @@ void mx_models_free(mx_models *m) {
         mx_binder_free(&m->wf_binders[i]);
     }
     mx_tok_free(m->tok);
+    if (m->wf) {
+        size_t len;
+        mx_dev_weight_file_drop(m->c, mx_wf_map(m->wf, &len));
+    }
     mx_wf_close(m->wf);
     memset(m, 0, sizeof *m);
 }

@@ -1,13 +1,16 @@
 /* CUDA ops against the scalar CPU references (the ops/cpu _ref.c files, through mx_kernels_scalar) on random
  * inputs of awkward sizes: relative L2 error <= 1e-5 for fp32 math, <= 1e-2 for fp16/bf16 math;
- * Philox normals equal bit for bit; the kernel table full. Without a CUDA device it checks the
- * table, prints a skip line and exits 77 (built by `make cuda`, run by `make test-cuda`, which stops there). */
+ * Philox normals equal bit for bit; the kernel table full; a file through the pinned upload ring.
+ * Without a CUDA device it checks the table, prints a skip line and exits 77 (built by `make cuda`,
+ * run by `make test-cuda`, which stops there). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../../ops/cuda/cuda_backend.h"
+#include "../../runtime/file_stream.h"
 #include "../../runtime/rng.h"
 #include "../util_test.h"
 
@@ -606,6 +609,57 @@ static void test_other_ops(env *e) {
     test_small_ops(e);
 }
 
+/* A file onto the GPU through the pinned ring (mx_cuda_upload_file, what a weight file takes):
+ * every byte lands at its offset for 1, 3 and 12 readers on a size of several 4 MiB chunks and a
+ * short last one, the observer sees each byte once in order, and a file of another length than
+ * said fails naming the file. */
+static void seen_sum(void *arg, const void *buf, size_t n, uint64_t off) {
+    uint64_t *sum = arg; /* position-weighted: order and offsets count */
+    for (size_t i = 0; i < n; i++) *sum += ((const unsigned char *)buf)[i] * (off + i + 1);
+}
+
+static void test_upload_file(env *e) {
+    const size_t len = ((size_t)13 << 20) + 37;
+    unsigned char *data = malloc(len), *back = malloc(len);
+    char dir[] = "/tmp/matex_test_cuda_file.XXXXXX", path[64];
+    if (!data || !back || !mkdtemp(dir)) abort();
+    snprintf(path, sizeof path, "%s/w.bin", dir);
+    uint64_t want_sum = 0;
+    for (size_t i = 0; i < len; i++) {
+        data[i] = (unsigned char)((i * 2654435761u) >> 13);
+        want_sum += data[i] * (i + 1);
+    }
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(data, 1, len, f) == len);
+    if (f) fclose(f);
+    FILE *rf = fopen(path, "rb");
+    void *dev = NULL;
+    if (rf && !gpu_ok(e, mx_cuda_alloc(&dev, len, "test file", &e->st), "alloc")) {
+        static const int readers[] = {1, 3, 12};
+        for (int r = 0; r < 3; r++) {
+            uint64_t sum = 0;
+            mx_stream_observer obs = {seen_sum, &sum};
+            mx_stream_stats stats;
+            int ok = !gpu_ok(e, mx_cuda_memset_zero(e->gpu, dev, len, "test file", &e->st), "memset") &&
+                     !gpu_ok(e, mx_cuda_upload_file(e->gpu, dev, fileno(rf), path, len, readers[r], &obs, &stats, &e->st),
+                             "upload file") &&
+                     !gpu_ok(e, mx_cuda_download(e->gpu, back, dev, len, "test file", &e->st), "download");
+            ok = ok && memcmp(back, data, len) == 0 && sum == want_sum && stats.bytes == len;
+            printf("cuda upload_file, %d readers: %zu bytes %s (%.1f ms)\n", readers[r], len, ok ? "ok" : "FAIL",
+                   1e3 * stats.wall_s);
+            CHECK(ok);
+        }
+        CHECK(mx_cuda_upload_file(e->gpu, dev, fileno(rf), path, len + 64, 3, NULL, NULL, &e->st) == -1 &&
+              strstr(e->st.msg, path) && strstr(e->st.msg, "expected"));
+    }
+    if (rf) fclose(rf);
+    mx_cuda_free(dev);
+    unlink(path);
+    rmdir(dir);
+    free(data);
+    free(back);
+}
+
 /* The CUDA kernel table has every op of ops/op_list.h (no device needed). */
 static void test_table_full(void) {
     mx_kernels k;
@@ -672,6 +726,7 @@ int main(void) {
     test_attention_ops(&e);
     test_flash_attention(&e);
     test_other_ops(&e);
+    test_upload_file(&e);
     mx_arena_destroy(&e.cpu_scratch);
     mx_cuda_ctx_destroy(e.gpu);
     return mx_test_finish("test-cuda");

@@ -12,7 +12,7 @@
 # Issue 39 adds, each beside today's path in the same run: conv2d through cuDNN (MATEX_CUDNN=1) and
 # the fused attention (MATEX_CUDA_FLASH=1): the op tests, the goldens, bench_cuda for each path, a
 # timed texture, two runs of one seed byte-equal, their PSNR against the CPU; and the diffusers peer (../shared/peer, packed) with the ratios matex / eager and
-# matex / compiled. cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
+# matex / compiled; the weight file's load against its 1 s goal (bench_cuda --load). cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
 # Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s),
 # before issue 39's steps (never run yet; the peer alone ~200 s with torch.compile).
 set -u
@@ -146,6 +146,15 @@ run "memcheck tiny pipeline" 120 env MX_TEST_DEVICE=cuda "$SAN" --tool memcheck 
 
 say "SD1.5-size random weights (fp16, with LCM-LoRA and TAESD)"
 run "make_sd15_weights --fast" 180 sh tools/scripts/make_sd15_weights.sh "$M" "$W" --fast || exit 1
+
+# Issue 39 item 5: the weight file (in the page cache: just written) onto the GPU in under 1 s, in a
+# new process each time; the default readers twice, then fewer and more (MATEX_CUDA_LOAD_THREADS).
+say "load: the SD1.5-size fp16 set onto the GPU (goal: under 1 s for 3.6 GB; bench_cuda --load)"
+for threads in default default 4 12; do
+    if [ "$threads" = default ]; then lt=""; else lt="MATEX_CUDA_LOAD_THREADS=$threads"; fi
+    # shellcheck disable=SC2086
+    run "bench_cuda --load, readers: $threads" 60 env $lt "$B/bench_cuda" "$W" --load && grep "^load:" "$LOG" | tail -4
+done
 
 # The timed runs and the parity first, the slow SD1.5-size memchecks last: a device call that runs
 # out of time still brings back the speed and the PSNR.
