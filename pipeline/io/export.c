@@ -379,8 +379,7 @@ static int write_textures(const char *dir, const mx_mesh *m, const mx_image *tex
     return 0;
 }
 
-int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
-                     mx_status *st) {
+int mx_write_output_files(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, mx_status *st) {
     if (ntex < 1 || !textures || !textures[0].data) return mx_fail(st, MX_EINPUT, "%s: no texture to write", dir);
     if (ntex > 1 && ntex != m->nmat)
         return mx_fail(st, MX_EINPUT, "%s: %d textures for %d materials (give 1 or one per material)", dir, ntex, m->nmat);
@@ -405,11 +404,20 @@ int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures
     for (int i = 0; i < ntex; i++) name_ptrs[i] = textures[i].data ? names[i] : NULL;
     if (mx_path_join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
     if (mx_path_join(path, sizeof path, dir, "mesh.glb", st) || mx_export_glb(path, &one, textures, ntex, st)) goto done;
-    const char *report = report_json ? report_json : "{}";
-    if (mx_path_join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st)) goto done;
     rc = 0;
 done:
     free(names);
     free(name_ptrs);
     return rc;
+}
+
+int mx_write_report(const char *dir, const char *report_json, mx_status *st) {
+    char path[1200];
+    const char *report = report_json ? report_json : "{}";
+    return mx_path_join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st) ? -1 : 0;
+}
+
+int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
+                     mx_status *st) {
+    return mx_write_output_files(dir, m, textures, ntex, st) || mx_write_report(dir, report_json, st) ? -1 : 0;
 }

@@ -4,6 +4,8 @@
 
 #include <stdlib.h>
 
+#include "../../runtime/log.h"
+
 #include "../geom/masks.h"
 #include "../geom/raster.h"
 #include "../geom/uvfill.h"
@@ -80,10 +82,12 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
 
 int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, const mx_image *current,
                          mx_status *st) {
+    double t = mx_now();
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
     int rc = place_control(&depth, v->crop, j->o->pub.image_size, p->depth, p->plane_w, p->x0, st);
     mx_image_free(&depth);
-    if (rc || !p->inpaint) return rc;
-    return inpaint_inputs(j, v, current, p, st);
+    if (!rc && p->inpaint) rc = inpaint_inputs(j, v, current, p, st);
+    mx_job_work_since(j, MX_WORK_CONTROLS, t);
+    return rc;
 }
