@@ -95,7 +95,7 @@ static int write_front_render(mx_job *j, const mx_image *tex, mx_status *st) {
     char path[4300];
     int rc = mx_job_view_prepare(j, &v, st) ||
              mx_render_textured(&v.vb.gb, &j->mesh, tex, j->nlayers, mx_job_grey, j->gen.ctx->pool, &rgb, st) ||
-             mx_crop_resize(&rgb, v.crop, j->o->pub.image_size, &small, st) ||
+             mx_crop_resize(&rgb, v.crop, j->o->pub.image_size, j->gen.ctx->pool, &small, st) ||
              mx_path_join(path, sizeof path, j->out.stage, "front.png", st) || mx_io_write_png(path, &small, st);
     mx_image_free(&rgb);
     mx_image_free(&small);

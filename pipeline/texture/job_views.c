@@ -123,7 +123,7 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         mx_image_free(&gen);
         return -1;
     }
-    mx_crop_paste(&gen, v->crop, &canvas);
+    mx_crop_paste(&gen, v->crop, j->gen.ctx->pool, &canvas);
     mx_job_work_since(j, MX_WORK_BACKPROJECT, t); /* mx_job_backproject_render adds its own time */
     int rc = mx_job_backproject_render(j, v, &canvas, v->vb.mask, st);
     mx_image_free(&gen);

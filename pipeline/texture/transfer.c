@@ -62,9 +62,9 @@ static int source_place(mx_job *j, source *s, mx_status *st) {
  * to the destination's object, resized to image_size, pasted back bilinearly. */
 static int through_model_image(const mx_job *j, const mx_job_view *v, mx_image *img, mx_status *st) {
     mx_image small = {0};
-    if (mx_crop_resize(img, v->crop, j->o->pub.image_size, &small, st)) return -1;
+    if (mx_crop_resize(img, v->crop, j->o->pub.image_size, j->gen.ctx->pool, &small, st)) return -1;
     memset(img->data, 0, (size_t)img->w * img->h * (size_t)img->c * sizeof *img->data);
-    mx_crop_paste(&small, v->crop, img);
+    mx_crop_paste(&small, v->crop, j->gen.ctx->pool, img);
     mx_image_free(&small);
     return 0;
 }
