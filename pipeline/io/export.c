@@ -393,27 +393,29 @@ static void material_texture_name(const mx_mesh *m, int i, char names[][160]) {
 
 /* "<base>.png" (8-bit, its encoding png) and "<base>.exr" (float) of one texture; names[i] becomes
  * the PNG's name. */
-static int write_texture_pair(const char *dir, const mx_image *tex, const png_blob *png, char *name, mx_status *st) {
+static int write_texture_pair(const char *dir, const mx_image *tex, const png_blob *png, int threads, char *name,
+                              mx_status *st) {
     char path[1200];
     size_t len = strlen(name);
     snprintf(name + len, 160 - len, ".exr");
-    if (mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_exr(path, tex, st)) return -1;
+    if (mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_exr(path, tex, threads, st)) return -1;
     snprintf(name + len, 160 - len, ".png");
     return mx_path_join(path, sizeof path, dir, name, st) || mx_atomic_write(path, png->data, png->len, st) ? -1 : 0;
 }
 
 /* texture.png/.exr for one texture, else texture_<material>.png/.exr per textured material. */
 static int write_textures(const char *dir, const mx_mesh *m, const mx_image *textures, const png_blob *png, int ntex,
-                          char names[][160], mx_status *st) {
+                          int threads, char names[][160], mx_status *st) {
     for (int i = 0; i < ntex; i++) {
         if (ntex == 1) snprintf(names[0], 160, "texture");
         else material_texture_name(m, i, names);
-        if (textures[i].data && write_texture_pair(dir, &textures[i], &png[i], names[i], st)) return -1;
+        if (textures[i].data && write_texture_pair(dir, &textures[i], &png[i], threads, names[i], st)) return -1;
     }
     return 0;
 }
 
-int mx_write_output_files(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, mx_status *st) {
+int mx_write_output_files(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, int threads,
+                          mx_status *st) {
     if (ntex < 1 || !textures || !textures[0].data) return mx_fail(st, MX_EINPUT, "%s: no texture to write", dir);
     if (ntex > 1 && ntex != m->nmat)
         return mx_fail(st, MX_EINPUT, "%s: %d textures for %d materials (give 1 or one per material)", dir, ntex, m->nmat);
@@ -435,7 +437,7 @@ int mx_write_output_files(const char *dir, const mx_mesh *m, const mx_image *tex
         mx_fail(st, MX_ENOMEM, "%s: out of memory", dir);
         goto done;
     }
-    if (!(png = encode_pngs(textures, ntex, dir, st)) || write_textures(dir, &one, textures, png, ntex, names, st)) goto done;
+    if (!(png = encode_pngs(textures, ntex, dir, st)) || write_textures(dir, &one, textures, png, ntex, threads, names, st)) goto done;
     for (int i = 0; i < ntex; i++) name_ptrs[i] = textures[i].data ? names[i] : NULL;
     if (mx_path_join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
     if (mx_path_join(path, sizeof path, dir, "mesh.glb", st) || export_glb(path, &one, png, ntex, st)) goto done;
@@ -455,5 +457,5 @@ int mx_write_report(const char *dir, const char *report_json, mx_status *st) {
 
 int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
                      mx_status *st) {
-    return mx_write_output_files(dir, m, textures, ntex, st) || mx_write_report(dir, report_json, st) ? -1 : 0;
+    return mx_write_output_files(dir, m, textures, ntex, 1, st) || mx_write_report(dir, report_json, st) ? -1 : 0;
 }

@@ -107,7 +107,7 @@ static int write_front_render(mx_job *j, const mx_image *tex, mx_status *st) {
 static int write_files(mx_job *j, const mx_image *tex, mx_status *st) {
     if (j->o->pub.front_render && write_front_render(j, tex, st)) return -1;
     double t = mx_now();
-    if (mx_write_output_files(j->out.stage, &j->mesh, tex, j->nlayers, st)) return -1;
+    if (mx_write_output_files(j->out.stage, &j->mesh, tex, j->nlayers, mx_pool_threads(j->gen.ctx->pool), st)) return -1;
     mx_job_work_since(j, MX_WORK_WRITE, t);
     return 0;
 }

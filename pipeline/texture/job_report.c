@@ -18,7 +18,7 @@ void mx_job_emit_progress(mx_job *j, int step, int steps, const char *message) {
                              .steps = steps,
                              .views_done = j->rep.views_done,
                              .views_total = o->pub.views,
-                             .coverage = j->sched.chart ? mx_job_coverage(j) : 0.0,
+                             .coverage = j->rep.coverage, /* not counted again at every denoising step */
                              .seconds = mx_now() - j->rep.t0,
                              .message = message};
     if (o->progress(o->progress_user, &p)) j->rep.stop = 1;

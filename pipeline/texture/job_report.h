@@ -40,6 +40,7 @@ typedef struct mx_job_rep {
     char phase[32]; /* stage of the progress events */
     int stop;       /* the progress callback asked to cancel */
     int views_done;
+    double coverage; /* mx_job_coverage as of the latest backprojection: what every progress event says */
     double t0;
     double last_denoise_s, last_decode_s; /* of the latest mx_job_generate, for the report */
     double work_s[MX_WORK_COUNT];         /* summed over the run: the report's work_s */

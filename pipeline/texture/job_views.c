@@ -137,6 +137,7 @@ int mx_job_backproject_render(mx_job *j, mx_job_view *v, const mx_image *img, co
     mx_job_work_since(j, MX_WORK_BACKPROJECT, t);
     if (rc) return -1;
     j->rep.views_done++;
+    j->rep.coverage = mx_job_coverage(j);
     mx_job_emit_progress(j, 0, 0, "view backprojected");
     return 0;
 }
