@@ -30,12 +30,12 @@ int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
     return 0;
 }
 
-/* crop + resize of a render to the model size, then into the planes. */
-static int place_control(const mx_image *full, mx_crop crop, int S, mx_pool *pool, float *planes, int plane_w, int x0,
-                         mx_status *st) {
+/* crop + resize of the depth control to the model size, then into each of the 3 planes. */
+static int place_depth(const mx_image *depth, mx_crop crop, int S, mx_pool *pool, float *planes, int plane_w, int x0,
+                       mx_status *st) {
     mx_image small;
-    if (mx_crop_resize(full, crop, S, pool, &small, st)) return -1;
-    mx_image_to_planes(&small, planes, plane_w, x0);
+    if (mx_crop_resize(depth, crop, S, pool, &small, st)) return -1;
+    for (int k = 0; k < 3; k++) mx_image_to_planes(&small, planes + (size_t)k * S * plane_w, plane_w, x0);
     mx_image_free(&small);
     return 0;
 }
@@ -85,7 +85,7 @@ int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, con
     double t = mx_now();
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
-    int rc = place_control(&depth, v->crop, j->o->pub.image_size, j->gen.ctx->pool, p->depth, p->plane_w, p->x0, st);
+    int rc = place_depth(&depth, v->crop, j->o->pub.image_size, j->gen.ctx->pool, p->depth, p->plane_w, p->x0, st);
     mx_image_free(&depth);
     if (!rc && p->inpaint) rc = inpaint_inputs(j, v, current, p, st);
     mx_job_work_since(j, MX_WORK_CONTROLS, t);
