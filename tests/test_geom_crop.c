@@ -3,13 +3,16 @@
  * per-pixel reference of their definition (camera.h: pixel centres at +0.5, taps clamped to the
  * border, ss x ss samples per output pixel), on no pool, 1 and 3 threads; mx_uv_dilate gives the
  * same texture on any pool, fills exactly `rings` rings around the known texels and changes no
- * texel beyond them. */
+ * texel beyond them; mx_mask_inpaint and mx_bake_texture equal their per-pixel definition on any
+ * pool (sizes that are not a multiple of the tasks'). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "../pipeline/geom/backproject.h"
 #include "../pipeline/geom/camera.h"
+#include "../pipeline/geom/masks.h"
 #include "../pipeline/geom/uvfill.h"
 #include "util_test.h"
 
@@ -155,6 +158,69 @@ static void test_dilate(mx_pool *const *pools, const char *const *names, int npo
     free(ring);
 }
 
+/* A random view of a 2-material mesh over 2 texture layers: mx_mask_inpaint against its definition. */
+static void test_mask_inpaint(mx_pool *const *pools, const char *const *names, int npools) {
+    enum { W = 301, H = 157, T = 64 };
+    mx_status st;
+    mx_gbuffer gb;
+    CHECK(mx_gbuffer_init(&gb, W, H, &st) == 0);
+    float *uv = malloc(sizeof(float) * 2 * W * H);
+    uint8_t *known = malloc(2 * T * T), *want = malloc(W * H), *got = malloc(W * H);
+    int32_t face_mat[5] = {0, 1, 1, 0, 1};
+    mx_mesh m = {0};
+    m.nfaces = 5;
+    m.nmat = 2;
+    m.face_mat = face_mat;
+    mx_fill_random(uv, 2 * W * H, 3, -0.5f, 1.5f); /* UVs repeat */
+    for (int i = 0; i < W * H; i++) {
+        gb.face[i] = (int32_t)((i * 7 + i / W) % 6) - 1; /* -1: background */
+        if (i % 97 == 0) uv[2 * i] = NAN;                 /* a face without UVs */
+    }
+    for (int t = 0; t < 2 * T * T; t++) known[t] = (t * 13) % 5 < 2;
+    gb.uv = uv;
+    for (int i = 0; i < W * H; i++) {
+        int f = gb.face[i];
+        want[i] = f >= 0 && isfinite(uv[2 * i]) && !known[(size_t)face_mat[f] * T * T + (size_t)mx_uv_texel(uv[2 * i], uv[2 * i + 1], T, T)];
+    }
+    for (int p = 0; p < npools; p++) {
+        memset(got, 7, W * H);
+        mx_mask_inpaint(&gb, &m, NULL, known, T, T, pools[p], got);
+        int same = !memcmp(want, got, W * H);
+        CHECK(same);
+        printf("inpaint mask %dx%d, %-8s %s\n", W, H, names[p], same ? "as defined" : "DIFFERS");
+    }
+    gb.uv = NULL; /* not the gbuffer's own storage */
+    mx_gbuffer_free(&gb);
+    free(uv), free(known), free(want), free(got);
+}
+
+/* mx_bake_texture of layer 1 of 2 against sum(w c) / sum(w) where known, the fill elsewhere. */
+static void test_bake_texture(mx_pool *const *pools, const char *const *names, int npools) {
+    enum { T = 131 };
+    mx_status st;
+    mx_bake b;
+    CHECK(mx_bake_init(&b, T, T, 2, &st) == 0);
+    const float fill[3] = {0.5f, 0.25f, 0.125f};
+    mx_fill_random(b.sum_wc, 2 * T * T * 3, 4, 0.0f, 2.0f);
+    mx_fill_random(b.sum_w, 2 * T * T, 5, 0.5f, 2.0f);
+    for (int t = 0; t < 2 * T * T; t++) b.known[t] = t % 3 != 0;
+    mx_image want;
+    CHECK(mx_image_alloc(&want, T, T, 3, &st) == 0);
+    for (int t = 0; t < T * T; t++)
+        for (int c = 0; c < 3; c++)
+            want.data[3 * t + c] = b.known[T * T + t] ? b.sum_wc[3 * (T * T + t) + c] / b.sum_w[T * T + t] : fill[c];
+    for (int p = 0; p < npools; p++) {
+        mx_image got;
+        CHECK(mx_bake_texture(&b, 1, fill, pools[p], &got, &st) == 0);
+        int same = same_image(&want, &got);
+        CHECK(same);
+        printf("bake texture %dx%d, %-8s %s\n", T, T, names[p], same ? "as defined" : "DIFFERS");
+        mx_image_free(&got);
+    }
+    mx_image_free(&want);
+    mx_bake_free(&b);
+}
+
 int main(void) {
     mx_status st;
     mx_pool *p1 = mx_pool_create(1, &st), *p3 = mx_pool_create(3, &st);
@@ -163,6 +229,8 @@ int main(void) {
     CHECK(p1 && p3);
     test_crops(pools, names, 3);
     test_dilate(pools, names, 3);
+    test_mask_inpaint(pools, names, 3);
+    test_bake_texture(pools, names, 3);
     mx_pool_destroy(p1);
     mx_pool_destroy(p3);
     return mx_test_finish("test_geom_crop");

@@ -22,7 +22,7 @@
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
     size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
-        if (mx_bake_texture(&j->bake, l, mx_job_grey, &tex[l], st) ||
+        if (mx_bake_texture(&j->bake, l, mx_job_grey, j->gen.ctx->pool, &tex[l], st) ||
             mx_uv_dilate(&tex[l], j->bake.known + l * plane, CURRENT_DILATE_TEXELS, j->gen.ctx->pool, st)) {
             for (int k = 0; k <= l; k++) mx_image_free(&tex[k]);
             return -1;
@@ -57,7 +57,8 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
         mx_bake_open_texels(&j->bake, &v->vb.gb, &j->mesh, v->vb.mask, open);
         known = open;
     }
-    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, mask);
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, j->gen.ctx->pool,
+                    mask);
     free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, mx_job_grey, j->gen.ctx->pool, &rgb, st) &&
