@@ -87,6 +87,13 @@ check "texture.exr is 256 x 256 with content" image_ok "$T/hat/texture.exr" 256 
 check "mesh.obj has triangles and UVs" mesh_ok "$T/hat/mesh.obj"
 check "mesh.glb has triangles and UVs" mesh_ok "$T/hat/mesh.glb"
 check "report.json has its keys" report_ok "$T/hat"
+# work_s: the parts of the stages (MX_JOB_WORK_PARTS, job_report.h), each timed where it runs: a
+# texture run with later views runs every one, so none may read 0
+work_parts() { tr -d '\n ' < "$1/report.json" | grep -o '"work_s":{[^}]*}' | sed 's/^"work_s":{//; s/}$//' | tr ',' '\n'; }
+host_parts_named() { [ "$(work_parts "$1" | grep -c '"\(render\|controls\|select\|encode_text\|encode_image\|write\)":')" = 6 ]; }
+all_parts_measured() { work_parts "$1" > "$T/parts" && [ -s "$T/parts" ] && ! grep -qv ':[0-9.e-]*[1-9]' "$T/parts"; }
+check "work_s has the parts of the host work" host_parts_named "$T/hat"
+check "... every part measured (none 0)" all_parts_measured "$T/hat"
 # --fast: refused clearly without the LCM-LoRA mark and TAESD, runs 4 LCM steps with them
 WF=${MATEX_DEMO_FAST_WEIGHTS:-build/demo/demo_fast.mxw}
 check "--fast without LCM/TAESD exits 1" [ "$(rc_of "$M" texture "$A/fedora_hat/fedora.obj" x --weights "$W" -o "$T/f" --fast $SMALL)" = 1 ]

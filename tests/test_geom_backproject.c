@@ -302,7 +302,7 @@ int main(void) {
     /* UV fill: every chart texel gets a value, gutter texels around the chart too */
     mx_image tex;
     const float fill[3] = {-1, -1, -1};
-    CHECK(mx_bake_texture(&a, 0, fill, &tex, &st) == 0);
+    CHECK(mx_bake_texture(&a, 0, fill, NULL, &tex, &st) == 0);
     uint8_t *chart = malloc(T * T);
     CHECK(mx_uv_chart_mask(&m, 0, 1, T, T, chart, &st) == 0);
     CHECK(mx_uv_fill(&tex, a.known, chart, 2, &st) == 0);

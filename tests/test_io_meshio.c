@@ -426,7 +426,7 @@ static void test_images(void) {
     CHECK(mx_io_decode_image("GIF89a", 6, "gif bytes", &back, &st) == -1 && strstr(st.msg, "not a PNG"));
     tmp_path(p, sizeof p, "img.exr");
     img.data[0] = 3.25f; /* float EXR keeps values outside [0,1] */
-    CHECK(mx_io_write_exr(p, &img, &st) == 0);
+    CHECK(mx_io_write_exr(p, &img, 1, &st) == 0);
     CHECK(mx_io_read_image(p, &back, &st) == 0 && back.w == 7 && back.c == 3);
     CHECK(back.data && !memcmp(back.data, img.data, sizeof(float) * 7 * 5 * 3));
     mx_image_free(&back);

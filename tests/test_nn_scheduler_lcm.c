@@ -1,6 +1,7 @@
 /* LCMScheduler against diffusers (golden/scheduler_lcm: 4 and 6 steps, fixed model outputs, the
  * noise of each step given): timesteps exactly equal, samples and denoised predictions after every
- * step <= 1e-5 rel L2; plus the config parse and the misuse errors. */
+ * step <= 1e-5 rel L2, also with every step's noise drawn before the first (mx_sched_prepare); plus the
+ * config parse and the misuse errors. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -20,8 +21,15 @@ static int give_noise(void *user, int step, float *noise, size_t numel) {
     return 0;
 }
 
-/* Host-memory scheduler (context NULL), as test_nn_scheduler. */
-static void run_case(const mx_safetensors *f, const char *name, int steps) {
+/* A noise source that has none: after mx_sched_prepare no step may ask for noise. */
+static int refuse_noise(void *user, int step, float *noise, size_t numel) {
+    (void)user, (void)step, (void)noise, (void)numel;
+    return -1;
+}
+
+/* Host-memory scheduler (context NULL), as test_nn_scheduler. prepared: every step's noise drawn by
+ * mx_sched_prepare before the first step (as the denoising loop does), the source refusing after it. */
+static void run_case(const mx_safetensors *f, const char *name, int steps, int prepared) {
     char key[64], label[128];
     mx_status st;
     size_t n_lat, n_mo, n_noise, n_after, n_den, n_ts;
@@ -48,6 +56,10 @@ static void run_case(const mx_safetensors *f, const char *name, int steps) {
         double worst_x = 0, worst_d = 0;
         s.noise_fn = give_noise;
         s.noise_user = noise;
+        if (prepared) {
+            CHECK(mx_sched_prepare(&s, &st) == 0);
+            s.noise_fn = refuse_noise; /* a step that still draws its own noise fails */
+        }
         for (int i = 0; equal && i < steps; i++) {
             CHECK(mx_sched_needs_noise(&s) == (i < steps - 1));
             if (mx_sched_step(&s, mo + (size_t)i * n_lat, x, &st)) {
@@ -59,9 +71,9 @@ static void run_case(const mx_safetensors *f, const char *name, int steps) {
             if (!(ex <= worst_x)) worst_x = ex;
             if (!(ed <= worst_d)) worst_d = ed;
         }
-        snprintf(label, sizeof label, "%s samples (worst step)", name);
+        snprintf(label, sizeof label, "%s%s samples (worst step)", name, prepared ? " prepared" : "");
         printf("%-40s rel_l2=%.3e (bound 1e-05) %s\n", label, worst_x, worst_x <= 1e-5 ? "ok" : "FAIL");
-        snprintf(label, sizeof label, "%s denoised (worst step)", name);
+        snprintf(label, sizeof label, "%s%s denoised (worst step)", name, prepared ? " prepared" : "");
         printf("%-40s rel_l2=%.3e (bound 1e-05) %s\n", label, worst_d, worst_d <= 1e-5 ? "ok" : "FAIL");
         CHECK(worst_x <= 1e-5 && worst_d <= 1e-5);
         CHECK(mx_sched_step(&s, mo, x, &st) == -1 && strstr(st.msg, "past the last"));
@@ -114,6 +126,8 @@ static void test_strength(void) {
         float noise[3 * 4] = {0}, mo[4] = {0}, x[4] = {1, 1, 1, 1}; /* noise: steps 0..2 */
         s.noise_fn = give_noise;
         s.noise_user = noise;
+        CHECK(mx_sched_prepare(&s, &st) == 0); /* the steps left after the strength cut */
+        s.noise_fn = refuse_noise;
         for (int i = 0; i < cases[k].steps; i++) CHECK(mx_sched_step(&s, mo, x, &st) == 0);
         CHECK(mx_sched_step(&s, mo, x, &st) == -1); /* past the last */
         mx_sched_free(&s);
@@ -123,8 +137,10 @@ static void test_strength(void) {
 int main(void) {
     mx_safetensors f;
     CHECK(golden_open(&f, "scheduler_lcm", "cases.safetensors") == 0);
-    run_case(&f, "steps4", 4);
-    run_case(&f, "steps6", 6);
+    run_case(&f, "steps4", 4, 0);
+    run_case(&f, "steps6", 6, 0);
+    run_case(&f, "steps4", 4, 1);
+    run_case(&f, "steps6", 6, 1);
     mx_st_close(&f);
     test_config_and_errors();
     test_strength();

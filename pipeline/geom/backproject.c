@@ -584,16 +584,35 @@ void mx_bake_open_texels(const mx_bake *b, const mx_gbuffer *gb, const mx_mesh *
     }
 }
 
-int mx_bake_texture(const mx_bake *b, int layer, const float fill[3], mx_image *out, mx_status *st) {
+/* Texels of a mx_bake_texture task (by size only: the same texture on any pool). */
+#define BAKE_TEXELS_PER_TASK 16384
+
+typedef struct bake_texture_job {
+    const mx_bake *b;
+    size_t layer_start;
+    const float *fill;
+    mx_image *out;
+} bake_texture_job;
+
+static void bake_texels(void *arg, int task, int thread) {
+    (void)thread;
+    const bake_texture_job *j = arg;
+    const mx_bake *b = j->b;
+    size_t plane = j->layer_start, n = (size_t)b->w * b->h;
+    for (size_t t = (size_t)task * BAKE_TEXELS_PER_TASK; t < (size_t)(task + 1) * BAKE_TEXELS_PER_TASK && t < n; t++) {
+        float w = b->sum_w[plane + t];
+        for (int c = 0; c < 3; c++)
+            j->out->data[3 * t + c] = b->known[plane + t] ? b->sum_wc[3 * (plane + t) + c] / w : j->fill[c];
+    }
+}
+
+int mx_bake_texture(const mx_bake *b, int layer, const float fill[3], mx_pool *pool, mx_image *out, mx_status *st) {
     if (layer < 0 || layer >= b->nlayers)
         return mx_fail(st, MX_EINPUT, "backprojection: no texture layer %d", layer);
     if (mx_image_alloc(out, b->w, b->h, 3, st)) return -1;
-    size_t plane = (size_t)layer * b->w * b->h;
-    for (size_t t = 0; t < (size_t)b->w * b->h; t++) {
-        float w = b->sum_w[plane + t];
-        for (int c = 0; c < 3; c++)
-            out->data[3 * t + c] = b->known[plane + t] ? b->sum_wc[3 * (plane + t) + c] / w : fill[c];
-    }
+    bake_texture_job j = {b, (size_t)layer * b->w * b->h, fill, out};
+    size_t n = (size_t)b->w * b->h;
+    mx_pool_for(pool, (int)((n + BAKE_TEXELS_PER_TASK - 1) / BAKE_TEXELS_PER_TASK), bake_texels, &j);
     return 0;
 }
 

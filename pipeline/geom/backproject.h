@@ -60,8 +60,8 @@ void mx_bake_open_texels(const mx_bake *b, const mx_gbuffer *gb, const mx_mesh *
                          uint8_t *out);
 
 /* The texture of one layer: out (w x h x 3, allocated here) = sum(w c)/sum(w) where known,
- * `fill` elsewhere. */
-int mx_bake_texture(const mx_bake *b, int layer, const float fill[3], mx_image *out, mx_status *st);
+ * `fill` elsewhere; texels on pool (NULL: serial). */
+int mx_bake_texture(const mx_bake *b, int layer, const float fill[3], mx_pool *pool, mx_image *out, mx_status *st);
 /* Texels in T^B (all layers). */
 int64_t mx_bake_known_count(const mx_bake *b);
 

@@ -149,62 +149,118 @@ mx_crop mx_crop_from_mask(const unsigned char *mask, int w, int h, float margin)
     return c;
 }
 
-/* Bilinear sample of channel-interleaved pixels at continuous position (x, y) (pixel
- * centres at +0.5), clamped to the border. */
-static void sample_bilinear_clamp(const mx_image *img, float x, float y, float *out) {
-    float fx = x - 0.5f, fy = y - 0.5f;
-    int ix = (int)floorf(fx), iy = (int)floorf(fy);
-    float tx = fx - (float)ix, ty = fy - (float)iy;
-    int xs[2] = {ix, ix + 1}, ys[2] = {iy, iy + 1};
-    for (int k = 0; k < 2; k++) {
-        xs[k] = xs[k] < 0 ? 0 : xs[k] >= img->w ? img->w - 1 : xs[k];
-        ys[k] = ys[k] < 0 ? 0 : ys[k] >= img->h ? img->h - 1 : ys[k];
-    }
+/* The bilinear taps of one sample position along an axis (pixel centres at +0.5), clamped to the
+ * border: source indices i0, i1 and the weight t of i1. */
+typedef struct axis_tap {
+    int i0, i1;
+    float t;
+} axis_tap;
+
+static axis_tap tap_at(float x, int n) {
+    float fx = x - 0.5f;
+    int ix = (int)floorf(fx);
+    axis_tap a = {ix < 0 ? 0 : ix >= n ? n - 1 : ix, ix + 1 < 0 ? 0 : ix + 1 >= n ? n - 1 : ix + 1, fx - (float)ix};
+    return a;
+}
+
+/* Bilinear sample of channel-interleaved pixels at the taps (tx, ty). */
+static void sample_taps(const mx_image *img, axis_tap tx, axis_tap ty, float *out) {
+    const float *r0 = img->data + (size_t)ty.i0 * img->w * img->c, *r1 = img->data + (size_t)ty.i1 * img->w * img->c;
     for (int c = 0; c < img->c; c++) {
-        float a = img->data[((size_t)ys[0] * img->w + xs[0]) * img->c + c];
-        float b = img->data[((size_t)ys[0] * img->w + xs[1]) * img->c + c];
-        float d = img->data[((size_t)ys[1] * img->w + xs[0]) * img->c + c];
-        float e = img->data[((size_t)ys[1] * img->w + xs[1]) * img->c + c];
-        out[c] = (a * (1 - tx) + b * tx) * (1 - ty) + (d * (1 - tx) + e * tx) * ty;
+        float a = r0[tx.i0 * img->c + c], b = r0[tx.i1 * img->c + c];
+        float d = r1[tx.i0 * img->c + c], e = r1[tx.i1 * img->c + c];
+        out[c] = (a * (1 - tx.t) + b * tx.t) * (1 - ty.t) + (d * (1 - tx.t) + e * tx.t) * ty.t;
     }
 }
 
-int mx_crop_resize(const mx_image *src, mx_crop crop, int size, mx_image *dst, mx_status *st) {
-    if (size <= 0 || crop.size <= 0 || src->c > 4)
-        return mx_fail(st, MX_EINPUT, "crop resize: bad size %d or crop %d", size, crop.size);
-    if (mx_image_alloc(dst, size, size, src->c, st)) return -1;
-    float scale = (float)crop.size / (float)size;
-    /* supersample when shrinking so that every source pixel contributes (area filter) */
-    int ss = (int)ceilf(scale);
-    if (ss < 1) ss = 1;
+/* Rows of an image per task of the resamplers (by size only: the same result on any pool). */
+#define CROP_ROWS_PER_TASK 16
+
+/* mx_crop_resize's work: its taps per output column and row (ss samples each, the sample
+ * positions of the area filter), the output rows of a task. */
+typedef struct resize_job {
+    const mx_image *src;
+    mx_image *dst;
+    const axis_tap *xt, *yt;
+    int ss;
+} resize_job;
+
+static void resize_rows(void *arg, int task, int thread) {
+    (void)thread;
+    const resize_job *r = arg;
+    int size = r->dst->w, ss = r->ss, nc = r->src->c;
     float px[4];
-    for (int y = 0; y < size; y++)
+    for (int y = task * CROP_ROWS_PER_TASK; y < (task + 1) * CROP_ROWS_PER_TASK && y < size; y++)
         for (int x = 0; x < size; x++) {
             float acc[4] = {0, 0, 0, 0};
             for (int sy = 0; sy < ss; sy++)
                 for (int sx = 0; sx < ss; sx++) {
-                    float u = (float)crop.x0 + ((float)x + ((float)sx + 0.5f) / (float)ss) * scale;
-                    float v = (float)crop.y0 + ((float)y + ((float)sy + 0.5f) / (float)ss) * scale;
-                    sample_bilinear_clamp(src, u, v, px);
-                    for (int c = 0; c < src->c; c++) acc[c] += px[c];
+                    sample_taps(r->src, r->xt[x * ss + sx], r->yt[y * ss + sy], px);
+                    for (int c = 0; c < nc; c++) acc[c] += px[c];
                 }
-            float *o = dst->data + ((size_t)y * size + x) * src->c;
-            for (int c = 0; c < src->c; c++) o[c] = acc[c] / (float)(ss * ss);
+            float *o = r->dst->data + ((size_t)y * size + x) * nc;
+            for (int c = 0; c < nc; c++) o[c] = acc[c] / (float)(ss * ss);
         }
+}
+
+int mx_crop_resize(const mx_image *src, mx_crop crop, int size, mx_pool *pool, mx_image *dst, mx_status *st) {
+    if (size <= 0 || crop.size <= 0 || src->c > 4)
+        return mx_fail(st, MX_EINPUT, "crop resize: bad size %d or crop %d", size, crop.size);
+    float scale = (float)crop.size / (float)size;
+    /* supersample when shrinking so that every source pixel contributes (area filter) */
+    int ss = (int)ceilf(scale);
+    if (ss < 1) ss = 1;
+    axis_tap *xt = malloc(sizeof *xt * 2 * (size_t)size * ss), *yt = xt ? xt + (size_t)size * ss : NULL;
+    if (!xt) return mx_fail(st, MX_ENOMEM, "crop resize: out of memory");
+    if (mx_image_alloc(dst, size, size, src->c, st)) {
+        free(xt);
+        return -1;
+    }
+    for (int x = 0; x < size; x++)
+        for (int k = 0; k < ss; k++) {
+            float o = ((float)x + ((float)k + 0.5f) / (float)ss) * scale;
+            xt[x * ss + k] = tap_at((float)crop.x0 + o, src->w);
+            yt[x * ss + k] = tap_at((float)crop.y0 + o, src->h);
+        }
+    resize_job r = {src, dst, xt, yt, ss};
+    mx_pool_for(pool, (size + CROP_ROWS_PER_TASK - 1) / CROP_ROWS_PER_TASK, resize_rows, &r);
+    free(xt);
     return 0;
 }
 
-void mx_crop_paste(const mx_image *src, mx_crop crop, mx_image *dst) {
-    float scale = (float)src->w / (float)crop.size;
-    int c = src->c < dst->c ? src->c : dst->c;
+/* mx_crop_paste's work: the box of dst it writes ([x0, x1) x [y0, y1)), the rows of a task. */
+typedef struct paste_job {
+    const mx_image *src;
+    mx_image *dst;
+    mx_crop crop;
+    int x0, x1, y0, y1, nc;
+    float scale;
+} paste_job;
+
+static void paste_rows(void *arg, int task, int thread) {
+    (void)thread;
+    const paste_job *p = arg;
     float px[4];
-    for (int y = crop.y0; y < crop.y0 + crop.size && y < dst->h; y++)
-        for (int x = crop.x0; x < crop.x0 + crop.size && x < dst->w; x++) {
-            if (x < 0 || y < 0) continue;
-            float u = ((float)(x - crop.x0) + 0.5f) * scale;
-            float v = ((float)(y - crop.y0) + 0.5f) * scale;
-            sample_bilinear_clamp(src, u, v, px);
-            float *o = dst->data + ((size_t)y * dst->w + x) * dst->c;
-            for (int k = 0; k < c; k++) o[k] = px[k];
+    for (int y = p->y0 + task * CROP_ROWS_PER_TASK; y < p->y0 + (task + 1) * CROP_ROWS_PER_TASK && y < p->y1; y++) {
+        axis_tap ty = tap_at(((float)(y - p->crop.y0) + 0.5f) * p->scale, p->src->h);
+        for (int x = p->x0; x < p->x1; x++) {
+            sample_taps(p->src, tap_at(((float)(x - p->crop.x0) + 0.5f) * p->scale, p->src->w), ty, px);
+            float *o = p->dst->data + ((size_t)y * p->dst->w + x) * p->dst->c;
+            for (int k = 0; k < p->nc; k++) o[k] = px[k];
         }
+    }
+}
+
+void mx_crop_paste(const mx_image *src, mx_crop crop, mx_pool *pool, mx_image *dst) {
+    paste_job p = {.src = src,
+                   .dst = dst,
+                   .crop = crop,
+                   .x0 = crop.x0 < 0 ? 0 : crop.x0,
+                   .x1 = crop.x0 + crop.size < dst->w ? crop.x0 + crop.size : dst->w,
+                   .y0 = crop.y0 < 0 ? 0 : crop.y0,
+                   .y1 = crop.y0 + crop.size < dst->h ? crop.y0 + crop.size : dst->h,
+                   .nc = src->c < dst->c ? src->c : dst->c,
+                   .scale = (float)src->w / (float)crop.size};
+    if (p.y1 > p.y0 && p.x1 > p.x0)
+        mx_pool_for(pool, (p.y1 - p.y0 + CROP_ROWS_PER_TASK - 1) / CROP_ROWS_PER_TASK, paste_rows, &p);
 }

@@ -10,6 +10,7 @@
 #define MX_CAMERA_H
 
 #include "../../runtime/status.h"
+#include "../../runtime/threadpool.h"
 #include "image.h"
 
 typedef struct mx_camera {
@@ -53,10 +54,10 @@ typedef struct mx_crop {
  * the mask is empty. */
 mx_crop mx_crop_from_mask(const unsigned char *mask, int w, int h, float margin);
 /* dst (allocated here, size x size, src->c channels) = the crop of src resampled by area
- * averaging / bilinear filtering. */
-int mx_crop_resize(const mx_image *src, mx_crop crop, int size, mx_image *dst, mx_status *st);
+ * averaging / bilinear filtering; rows in bands on pool (NULL: serial), the same result on any pool. */
+int mx_crop_resize(const mx_image *src, mx_crop crop, int size, mx_pool *pool, mx_image *dst, mx_status *st);
 /* Inverse: writes src (the model image) back into the crop box of dst (full render size),
- * bilinear; pixels of dst outside the box are left as they are. */
-void mx_crop_paste(const mx_image *src, mx_crop crop, mx_image *dst);
+ * bilinear; pixels of dst outside the box are left as they are. Rows on pool as mx_crop_resize. */
+void mx_crop_paste(const mx_image *src, mx_crop crop, mx_pool *pool, mx_image *dst);
 
 #endif

@@ -107,24 +107,44 @@ int64_t mx_uv_texel(float u, float v, int tex_w, int tex_h) {
     return (int64_t)y * tex_w + x;
 }
 
-void mx_mask_inpaint(const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *allowed,
-                     const uint8_t *known, int tex_w, int tex_h, uint8_t *mask) {
-    size_t plane = (size_t)tex_w * tex_h;
-    for (size_t i = 0; i < (size_t)gb->w * gb->h; i++) {
+/* Pixels of an inpainting-mask task (by size only: the same mask on any pool). */
+#define INPAINT_PIXELS_PER_TASK 16384
+
+typedef struct inpaint_job {
+    const mx_gbuffer *gb;
+    const mx_mesh *m;
+    const uint8_t *allowed, *known;
+    int tex_w, tex_h;
+    uint8_t *mask;
+} inpaint_job;
+
+static void inpaint_pixels(void *arg, int task, int thread) {
+    (void)thread;
+    const inpaint_job *p = arg;
+    const mx_gbuffer *gb = p->gb;
+    size_t plane = (size_t)p->tex_w * p->tex_h, n = (size_t)gb->w * gb->h;
+    for (size_t i = (size_t)task * INPAINT_PIXELS_PER_TASK; i < (size_t)(task + 1) * INPAINT_PIXELS_PER_TASK && i < n; i++) {
         int f = gb->face[i];
-        if (f < 0 || (allowed && !allowed[i]) || !gb->uv) {
-            mask[i] = 0;
+        if (f < 0 || (p->allowed && !p->allowed[i]) || !gb->uv) {
+            p->mask[i] = 0;
             continue;
         }
-        int mat = m->face_mat ? m->face_mat[f] : 0;
-        if (mat < 0 || mat >= (m->nmat > 0 ? m->nmat : 1)) mat = 0;
+        int mat = p->m->face_mat ? p->m->face_mat[f] : 0;
+        if (mat < 0 || mat >= (p->m->nmat > 0 ? p->m->nmat : 1)) mat = 0;
         if (!isfinite(gb->uv[2 * i]) || !isfinite(gb->uv[2 * i + 1])) {
-            mask[i] = 0; /* a face without UVs: nothing to paint into */
+            p->mask[i] = 0; /* a face without UVs: nothing to paint into */
             continue;
         }
-        int64_t t = mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], tex_w, tex_h);
-        mask[i] = !known[(size_t)mat * plane + (size_t)t];
+        int64_t t = mx_uv_texel(gb->uv[2 * i], gb->uv[2 * i + 1], p->tex_w, p->tex_h);
+        p->mask[i] = !p->known[(size_t)mat * plane + (size_t)t];
     }
+}
+
+void mx_mask_inpaint(const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *allowed,
+                     const uint8_t *known, int tex_w, int tex_h, mx_pool *pool, uint8_t *mask) {
+    inpaint_job p = {gb, m, allowed, known, tex_w, tex_h, mask};
+    size_t n = (size_t)gb->w * gb->h;
+    mx_pool_for(pool, (int)((n + INPAINT_PIXELS_PER_TASK - 1) / INPAINT_PIXELS_PER_TASK), inpaint_pixels, &p);
 }
 
 void mx_mask_and_not(const uint8_t *a, const uint8_t *b, uint8_t *dst, int64_t n) {

@@ -5,6 +5,7 @@
 
 #include <stdint.h>
 
+#include "../../runtime/threadpool.h"
 #include "raster.h"
 
 enum { MX_NORMAL_GEOMETRIC = 0, MX_NORMAL_FROM_DEPTH = 1 };
@@ -34,9 +35,10 @@ int64_t mx_uv_texel(float u, float v, int tex_w, int tex_h);
 
 /* Inpainting mask of a view: 1 where visible (allowed != 0, or every foreground pixel when
  * allowed is NULL) and the texel under the pixel is not yet in T^B (`known`, tex_w x tex_h,
- * for the face's material: `known` holds nmat planes when the mesh has several). Needs uv. */
+ * for the face's material: `known` holds nmat planes when the mesh has several). Needs uv. Rows
+ * on pool (NULL: serial). */
 void mx_mask_inpaint(const mx_gbuffer *gb, const mx_mesh *m, const uint8_t *allowed,
-                     const uint8_t *known, int tex_w, int tex_h, uint8_t *mask);
+                     const uint8_t *known, int tex_w, int tex_h, mx_pool *pool, uint8_t *mask);
 
 /* dst = a & ~b (pixelwise), n pixels. */
 void mx_mask_and_not(const uint8_t *a, const uint8_t *b, uint8_t *dst, int64_t n);

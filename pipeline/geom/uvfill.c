@@ -165,11 +165,23 @@ static int push_pull(const mx_image *tex, const uint8_t *known, float *colour, m
     return 0;
 }
 
-/* One ring of dilation: texels not valid take the mean of their valid 8-neighbours. */
-static void dilate_once(mx_image *tex, uint8_t *valid, uint8_t *next) {
+/* Rows of a dilation task (by size only: the same result on any pool). */
+#define DILATE_ROWS_PER_TASK 32
+
+typedef struct dilate_job {
+    mx_image *tex;
+    const uint8_t *valid;
+    uint8_t *next;
+} dilate_job;
+
+/* The rows of one task: a texel reads only valid neighbours, which no task writes in this ring. */
+static void dilate_rows(void *arg, int task, int thread) {
+    (void)thread;
+    const dilate_job *d = arg;
+    mx_image *tex = d->tex;
+    const uint8_t *valid = d->valid;
     int w = tex->w, h = tex->h;
-    memcpy(next, valid, (size_t)w * h);
-    for (int y = 0; y < h; y++)
+    for (int y = task * DILATE_ROWS_PER_TASK; y < (task + 1) * DILATE_ROWS_PER_TASK && y < h; y++)
         for (int x = 0; x < w; x++) {
             size_t i = (size_t)y * w + x;
             if (valid[i]) continue;
@@ -184,9 +196,17 @@ static void dilate_once(mx_image *tex, uint8_t *valid, uint8_t *next) {
                 }
             if (!n) continue;
             for (int k = 0; k < 3; k++) tex->data[3 * i + k] = c[k] / (float)n;
-            next[i] = 1;
+            d->next[i] = 1;
         }
-    memcpy(valid, next, (size_t)w * h);
+}
+
+/* One ring of dilation: texels not valid take the mean of their valid 8-neighbours (rows on pool). */
+static void dilate_once(mx_image *tex, uint8_t *valid, uint8_t *next, mx_pool *pool) {
+    size_t n = (size_t)tex->w * tex->h;
+    dilate_job d = {tex, valid, next};
+    memcpy(next, valid, n);
+    mx_pool_for(pool, (tex->h + DILATE_ROWS_PER_TASK - 1) / DILATE_ROWS_PER_TASK, dilate_rows, &d);
+    memcpy(valid, next, n);
 }
 
 int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gutter, mx_status *st) {
@@ -208,13 +228,13 @@ int mx_uv_fill(mx_image *tex, const uint8_t *known, const uint8_t *chart, int gu
                 for (int k = 0; k < 3; k++) tex->data[3 * i + k] = colour[3 * i + k];
             valid[i] = known[i] || chart[i];
         }
-        for (int g = 0; g < gutter; g++) dilate_once(tex, valid, next);
+        for (int g = 0; g < gutter; g++) dilate_once(tex, valid, next, NULL);
     }
     free(colour), free(valid), free(next);
     return rc;
 }
 
-int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st) {
+int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_pool *pool, mx_status *st) {
     if (tex->c != 3) return mx_fail(st, MX_EINPUT, "uv dilate: texture must be RGB (has %d channels)", tex->c);
     size_t n = (size_t)tex->w * tex->h;
     uint8_t *valid = malloc(n), *next = malloc(n);
@@ -223,7 +243,7 @@ int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st) 
         return mx_fail(st, MX_ENOMEM, "uv dilate: out of memory");
     }
     memcpy(valid, known, n);
-    for (int r = 0; r < rings; r++) dilate_once(tex, valid, next);
+    for (int r = 0; r < rings; r++) dilate_once(tex, valid, next, pool);
     free(valid), free(next);
     return 0;
 }
@@ -460,7 +480,7 @@ int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, i
     if (build_graph(m, canon, face, chart, known, &links, w, h, &g, st)) goto done;
     if (solve_harmonic(&g, tex->data, ticker, st)) goto done;
     for (size_t i = 0; i < n; i++) valid[i] = known[i] || chart[i];
-    for (int r = 0; r < gutter; r++) dilate_once(tex, valid, next);
+    for (int r = 0; r < gutter; r++) dilate_once(tex, valid, next, NULL);
     rc = 0;
 done:
     fill_graph_free(&g);

@@ -7,6 +7,7 @@
 
 #include <stdint.h>
 
+#include "../../runtime/threadpool.h"
 #include "image.h"
 #include "mesh.h"
 
@@ -48,7 +49,8 @@ int mx_uv_fill_harmonic(mx_image *tex, const uint8_t *known, const mx_mesh *m, i
 
 /* Spreads the colour of known texels `rings` texels into the unknown ones around them (each
  * ring: an unknown texel takes the mean of its already filled 8-neighbours), so that bilinear
- * sampling at the border of the known region does not mix in the colour of unknown texels. */
-int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_status *st);
+ * sampling at the border of the known region does not mix in the colour of unknown texels. Rows on
+ * pool (NULL: serial), the same result on any pool. */
+int mx_uv_dilate(mx_image *tex, const uint8_t *known, int rings, mx_pool *pool, mx_status *st);
 
 #endif

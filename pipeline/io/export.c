@@ -241,21 +241,40 @@ static int add_primitives(glb_build *b, const mx_mesh *m, const glb_verts *g, in
     return 0;
 }
 
-/* Materials (+ textures, images embedded as PNG buffer views). */
-static int add_materials(glb_build *b, bytes *mats, bytes *texs, const mx_mesh *m, const mx_image *textures, int ntex,
-                         mx_status *st) {
+/* A texture encoded as PNG, once for its file and the GLB (data NULL: no texture). */
+typedef struct png_blob {
+    unsigned char *data;
+    size_t len;
+} png_blob;
+
+static void free_pngs(png_blob *png, int n) {
+    for (int i = 0; png && i < n; i++) free(png[i].data);
+    free(png);
+}
+
+/* The PNGs of textures[0..ntex) (an entry without data has none); what = the messages' prefix. */
+static png_blob *encode_pngs(const mx_image *textures, int ntex, const char *what, mx_status *st) {
+    png_blob *png = calloc(ntex > 0 ? (size_t)ntex : 1, sizeof *png);
+    if (!png) return mx_fail(st, MX_ENOMEM, "%s: out of memory", what), NULL;
+    for (int i = 0; textures && i < ntex; i++)
+        if (textures[i].data && mx_io_encode_png(&textures[i], &png[i].data, &png[i].len, st)) {
+            mx_fail_prefix(st, "%s: texture %d", what, i);
+            free_pngs(png, ntex);
+            return NULL;
+        }
+    return png;
+}
+
+/* Materials (+ textures, images embedded as PNG buffer views; png[i] of material i, ntex entries). */
+static int add_materials(glb_build *b, bytes *mats, bytes *texs, const mx_mesh *m, const png_blob *png, int ntex) {
     for (int i = 0; i < m->nmat; i++) {
-        const mx_image *img = textures && i < ntex && textures[i].data ? &textures[i] : NULL;
+        const png_blob *img = i < ntex && png[i].data ? &png[i] : NULL;
         mx_buf_printf(mats, "%s{\"name\":", i ? "," : "");
         mx_buf_json_str(mats, m->mats[i].name);
         mx_buf_printf(mats, ",\"doubleSided\":true,\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":1");
         if (img) {
-            unsigned char *png;
-            size_t len;
-            if (mx_io_encode_png(img, &png, &len, st)) return mx_fail_prefix(st, "material %s", m->mats[i].name);
-            size_t off = b->bin.len;
-            mx_buf_put(&b->bin, png, len);
-            free(png);
+            size_t off = b->bin.len, len = img->len;
+            mx_buf_put(&b->bin, img->data, len);
             pad4(&b->bin, 0);
             add_view(b, off, len, 0);
             mx_buf_printf(&b->images, "%s{\"bufferView\":%d,\"mimeType\":\"image/png\"}", b->nimg ? "," : "", b->nview - 1);
@@ -296,20 +315,26 @@ static void put_u32(bytes *b, uint32_t v) {
     mx_buf_put(b, p, 4);
 }
 
-int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, int ntex, mx_status *st) {
+static int check_glb_mesh(const char *path, const mx_mesh *m, mx_status *st) {
+    if (m->nfaces <= 0 || m->nmat <= 0) return mx_fail(st, MX_EINPUT, "%s: nothing to export (no faces or materials)", path);
+    return 0;
+}
+
+/* mx_export_glb with its textures already encoded. */
+static int export_glb(const char *path, const mx_mesh *m, const png_blob *png, int ntex, mx_status *st) {
     glb_verts g;
     glb_build b = {0};
     bytes mats = {0}, texs = {0}, json = {0}, out = {0};
     int rc = -1;
-    if (m->nfaces <= 0 || m->nmat <= 0) return mx_fail(st, MX_EINPUT, "%s: nothing to export (no faces or materials)", path);
+    if (check_glb_mesh(path, m, st)) return -1;
     if (split_vertices(m, &g, st)) return -1;
     float mm[6];
     position_bounds(&g, mm);
     int a_pos = add_accessor(&b, g.pos, g.nv, 3, 5126, "VEC3", 34962, mm);
     int a_nrm = add_accessor(&b, g.nrm, g.nv, 3, 5126, "VEC3", 34962, NULL);
     int a_uv = m->face_uv ? add_accessor(&b, g.uv, g.nv, 2, 5126, "VEC2", 34962, NULL) : -1;
-    if (add_primitives(&b, m, &g, a_pos, a_nrm, a_uv, st) || add_materials(&b, &mats, &texs, m, textures, ntex, st))
-        goto done;
+    if (add_primitives(&b, m, &g, a_pos, a_nrm, a_uv, st)) goto done;
+    add_materials(&b, &mats, &texs, m, png, ntex);
     glb_json(&json, &b, &mats, &texs);
     if (b.bin.oom || json.oom || b.accs.oom || b.views.oom || b.prims.oom || mats.oom) {
         mx_fail(st, MX_ENOMEM, "%s: out of memory", path);
@@ -337,6 +362,14 @@ done:
     return rc;
 }
 
+int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, int ntex, mx_status *st) {
+    if (check_glb_mesh(path, m, st)) return -1; /* before the encoding */
+    png_blob *png = encode_pngs(textures, ntex, path, st);
+    int rc = png ? export_glb(path, m, png, ntex, st) : -1;
+    free_pngs(png, ntex);
+    return rc;
+}
+
 /* ---- the output folder ---- */
 
 /* names[i] = "texture_<name>" with the material name reduced to [A-Za-z0-9_-]; the material
@@ -358,29 +391,31 @@ static void material_texture_name(const mx_mesh *m, int i, char names[][160]) {
         }
 }
 
-/* "<base>.png" (8-bit) and "<base>.exr" (float) of one texture; names[i] becomes the PNG's name. */
-static int write_texture_pair(const char *dir, const mx_image *tex, char *name, mx_status *st) {
+/* "<base>.png" (8-bit, its encoding png) and "<base>.exr" (float) of one texture; names[i] becomes
+ * the PNG's name. */
+static int write_texture_pair(const char *dir, const mx_image *tex, const png_blob *png, int threads, char *name,
+                              mx_status *st) {
     char path[1200];
     size_t len = strlen(name);
     snprintf(name + len, 160 - len, ".exr");
-    if (mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_exr(path, tex, st)) return -1;
+    if (mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_exr(path, tex, threads, st)) return -1;
     snprintf(name + len, 160 - len, ".png");
-    return mx_path_join(path, sizeof path, dir, name, st) || mx_io_write_png(path, tex, st) ? -1 : 0;
+    return mx_path_join(path, sizeof path, dir, name, st) || mx_atomic_write(path, png->data, png->len, st) ? -1 : 0;
 }
 
 /* texture.png/.exr for one texture, else texture_<material>.png/.exr per textured material. */
-static int write_textures(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, char names[][160],
-                          mx_status *st) {
+static int write_textures(const char *dir, const mx_mesh *m, const mx_image *textures, const png_blob *png, int ntex,
+                          int threads, char names[][160], mx_status *st) {
     for (int i = 0; i < ntex; i++) {
         if (ntex == 1) snprintf(names[0], 160, "texture");
         else material_texture_name(m, i, names);
-        if (textures[i].data && write_texture_pair(dir, &textures[i], names[i], st)) return -1;
+        if (textures[i].data && write_texture_pair(dir, &textures[i], &png[i], threads, names[i], st)) return -1;
     }
     return 0;
 }
 
-int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
-                     mx_status *st) {
+int mx_write_output_files(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, int threads,
+                          mx_status *st) {
     if (ntex < 1 || !textures || !textures[0].data) return mx_fail(st, MX_EINPUT, "%s: no texture to write", dir);
     if (ntex > 1 && ntex != m->nmat)
         return mx_fail(st, MX_EINPUT, "%s: %d textures for %d materials (give 1 or one per material)", dir, ntex, m->nmat);
@@ -397,19 +432,30 @@ int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures
     const char **name_ptrs = calloc((size_t)ntex, sizeof *name_ptrs);
     char path[1200];
     int rc = -1;
+    png_blob *png = NULL;
     if (!names || !name_ptrs) {
         mx_fail(st, MX_ENOMEM, "%s: out of memory", dir);
         goto done;
     }
-    if (write_textures(dir, &one, textures, ntex, names, st)) goto done;
+    if (!(png = encode_pngs(textures, ntex, dir, st)) || write_textures(dir, &one, textures, png, ntex, threads, names, st)) goto done;
     for (int i = 0; i < ntex; i++) name_ptrs[i] = textures[i].data ? names[i] : NULL;
     if (mx_path_join(path, sizeof path, dir, "mesh.obj", st) || mx_export_obj(path, &one, name_ptrs, ntex, st)) goto done;
-    if (mx_path_join(path, sizeof path, dir, "mesh.glb", st) || mx_export_glb(path, &one, textures, ntex, st)) goto done;
-    const char *report = report_json ? report_json : "{}";
-    if (mx_path_join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st)) goto done;
+    if (mx_path_join(path, sizeof path, dir, "mesh.glb", st) || export_glb(path, &one, png, ntex, st)) goto done;
     rc = 0;
 done:
+    free_pngs(png, ntex);
     free(names);
     free(name_ptrs);
     return rc;
+}
+
+int mx_write_report(const char *dir, const char *report_json, mx_status *st) {
+    char path[1200];
+    const char *report = report_json ? report_json : "{}";
+    return mx_path_join(path, sizeof path, dir, "report.json", st) || mx_atomic_write(path, report, strlen(report), st) ? -1 : 0;
+}
+
+int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, const char *report_json,
+                     mx_status *st) {
+    return mx_write_output_files(dir, m, textures, ntex, 1, st) || mx_write_report(dir, report_json, st) ? -1 : 0;
 }

@@ -30,5 +30,11 @@ int mx_export_glb(const char *path, const mx_mesh *m, const mx_image *textures, 
  *   or "{}" when NULL). */
 int mx_write_outputs(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex,
                      const char *report_json, mx_status *st);
+/* mx_write_outputs in its two parts, for a caller whose report states how long the files took:
+ * every file but report.json (the folder created if missing; the EXR compressed on `threads`,
+ * mx_io_write_exr), then report.json. */
+int mx_write_output_files(const char *dir, const mx_mesh *m, const mx_image *textures, int ntex, int threads,
+                          mx_status *st);
+int mx_write_report(const char *dir, const char *report_json, mx_status *st);
 
 #endif

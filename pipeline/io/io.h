@@ -68,8 +68,10 @@ int mx_io_write_png(const char *path, const mx_image *img, mx_status *st);
 int mx_io_encode_png(const mx_image *img, unsigned char **data, size_t *len, mx_status *st);
 
 /* Writes a float (32-bit) EXR with channels Y, RGB or RGBA (c = 1, 3, 4), ZIP compression,
- * values as given (no clamping, no colour conversion). */
-int mx_io_write_exr(const char *path, const mx_image *img, mx_status *st);
+ * values as given (no clamping, no colour conversion). threads > 1: its blocks are compressed on
+ * that many of OpenEXR's threads (its one process-wide pool, grown to that size by the first such
+ * call); the file's bytes are the same for any count. */
+int mx_io_write_exr(const char *path, const mx_image *img, int threads, mx_status *st);
 
 #ifdef __cplusplus
 }

@@ -39,7 +39,7 @@ int mx_io_encode_png(const mx_image *img, unsigned char **data, size_t *len, mx_
     return no_file_io("PNG", st);
 }
 
-int mx_io_write_exr(const char *path, const mx_image *img, mx_status *st) {
-    (void)img;
+int mx_io_write_exr(const char *path, const mx_image *img, int threads, mx_status *st) {
+    (void)img, (void)threads;
     return no_file_io(path, st);
 }

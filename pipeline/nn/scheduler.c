@@ -361,13 +361,15 @@ int mx_sched_init(mx_sched *s, const mx_ctx *c, const mx_sched_config *cfg, int 
         return -1;
     }
     s->numel = numel;
-    s->buf = mx_dev_alloc(c, numel * 5, st);
+    size_t noise_steps = cfg->kind == MX_SCHED_LCM ? (size_t)s->n_steps - 1 : 0; /* the last step draws none */
+    s->buf = mx_dev_alloc(c, numel * (5 + noise_steps), st);
     if (!s->buf) return mx_fail_prefix(st, "scheduler: %zu latents", numel);
     for (int i = 0; i < 3; i++) s->model_outputs[i] = s->buf + (size_t)i * numel;
     s->work[0] = s->buf + 3 * numel;
     s->work[1] = s->buf + 4 * numel;
-    if (cfg->kind == MX_SCHED_LCM && !(s->noise_host = malloc(numel * sizeof(float))))
-        return mx_fail(st, MX_ENOMEM, "scheduler: out of memory for %zu noise values", numel);
+    s->noise_dev = s->buf + 5 * numel;
+    if (noise_steps && !(s->noise_host = malloc(noise_steps * numel * sizeof(float))))
+        return mx_fail(st, MX_ENOMEM, "scheduler: out of memory for %zu noise values", noise_steps * numel);
     return 0;
 }
 
@@ -388,6 +390,7 @@ int mx_sched_set_strength(mx_sched *s, float strength, mx_status *st) {
     if (t_start < 0) t_start = 0;
     if (t_start > s->n_steps) t_start = s->n_steps;
     s->begin = s->step_index = t_start;
+    s->noise_ready = 0; /* drawn for the steps now left */
     return 0;
 }
 

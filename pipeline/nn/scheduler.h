@@ -92,7 +92,9 @@ typedef struct mx_sched {
     float *work[2];                       /* LCM: work[0] holds the last step's denoised prediction */
     mx_sched_noise_fn noise_fn;           /* LCM: the fresh noise of a step (set after init) */
     void *noise_user;
-    float *noise_host;                    /* LCM: numel host floats noise_fn fills */
+    float *noise_host;                    /* LCM: [n_steps - 1][numel] host floats noise_fn fills */
+    float *noise_dev;                     /* LCM: their device copy in buf, from step noise_first on */
+    int noise_ready, noise_first;         /* LCM: the noise of every step left is on the device */
 } mx_sched;
 
 /* Computes the schedule for num_inference_steps and allocates history for latents of numel
@@ -111,6 +113,12 @@ int mx_sched_steps(const mx_sched *s);
 int64_t mx_sched_timestep(const mx_sched *s, int i);
 /* Scale of the initial noise (1.0 for both samplers here). */
 float mx_sched_init_noise_sigma(const mx_sched *s);
+
+/* Before the first step (after mx_sched_set_strength and setting noise_fn): what the steps take
+ * from the host goes to the device at once — LCM: the fresh noise of every step left, one upload —
+ * so that no step waits on a host copy (the denoising loop calls it; a step does it itself when
+ * it was not called). Nothing for the other samplers. */
+int mx_sched_prepare(mx_sched *s, mx_status *st);
 
 /* One step: sample (numel floats, backend memory) is replaced by the previous sample given the
  * model output (epsilon, v or x0 per prediction_type) at the current timestep. */

@@ -45,13 +45,24 @@ int mx_sched_needs_noise(const mx_sched *s) {
     return s->cfg.kind == MX_SCHED_LCM && s->step_index < s->n_steps - 1;
 }
 
-/* The fresh noise of the current step, on the device (model_outputs[1], unused by LCM). */
+int mx_sched_prepare(mx_sched *s, mx_status *st) {
+    if (s->cfg.kind != MX_SCHED_LCM || s->noise_ready) return 0;
+    int first = s->step_index - s->begin, left = s->n_steps - 1 - s->step_index; /* steps that draw noise */
+    if (left > 0 && !s->noise_fn)
+        return mx_fail(st, MX_EUSAGE, "LCM scheduler: step %d needs a noise source", s->step_index);
+    for (int k = 0; k < left; k++)
+        if (s->noise_fn(s->noise_user, first + k, s->noise_host + (size_t)k * s->numel, s->numel))
+            return mx_fail(st, MX_EINTERNAL, "LCM scheduler: no noise for step %d", first + k + 1);
+    if (left > 0 && mx_upload(s->c, s->noise_dev, s->noise_host, (size_t)left * s->numel, st)) return -1;
+    s->noise_ready = 1;
+    s->noise_first = s->step_index;
+    return 0;
+}
+
+/* The fresh noise of the current step, on the device (drawn with every later step's by mx_sched_prepare). */
 static const float *step_noise(mx_sched *s, mx_status *st) {
-    float *z = s->model_outputs[1];
-    if (!s->noise_fn) return mx_fail(st, MX_EUSAGE, "LCM scheduler: step %d needs a noise source", s->step_index), NULL;
-    if (s->noise_fn(s->noise_user, s->step_index - s->begin, s->noise_host, s->numel))
-        return mx_fail(st, MX_EINTERNAL, "LCM scheduler: no noise for step %d", s->step_index - s->begin + 1), NULL;
-    return mx_upload(s->c, z, s->noise_host, s->numel, st) ? NULL : z;
+    if (mx_sched_prepare(s, st)) return NULL;
+    return s->noise_dev + (size_t)(s->step_index - s->noise_first) * s->numel;
 }
 
 int mx_sched_lcm_step(mx_sched *s, const float *mo, float *x, mx_status *st) {

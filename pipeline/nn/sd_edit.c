@@ -47,7 +47,7 @@ static int blend_known(void *user, const mx_ctx *c, int step, int n_steps, float
 }
 
 static int check_edit(const mx_sd_request *rq, const mx_sd_edit *e, int n, int h, int w, mx_status *st) {
-    if ((!e->vae && !e->taesd) || !e->image || !e->noise || !rq->sched || n < 1 || h < 1 || w < 1)
+    if ((!e->vae && !e->taesd) || !e->noise || !rq->sched || n < 1 || h < 1 || w < 1)
         return mx_fail(st, MX_EUSAGE, "sd edit: missing VAE, image, noise or scheduler, or bad sizes");
     if (!(e->strength > 0.0f && e->strength <= 1.0f))
         return mx_fail(st, MX_EUSAGE, "sd edit: strength must be in (0, 1], not %g", (double)e->strength);
@@ -73,8 +73,17 @@ static int upload_state(const mx_ctx *c, edit_state *es, const float *host, size
                : 0;
 }
 
-int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
-                   float *latents, mx_status *st) {
+int mx_sd_edit_encode(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
+                      float *image_latents, mx_status *st) {
+    if (check_edit(rq, e, n, h, w, st)) return -1;
+    if (!e->image) return mx_fail(st, MX_EUSAGE, "sd edit: no image");
+    int f = e->taesd ? mx_taesd_factor(e->taesd) : mx_vae_factor(e->vae);
+    return e->taesd ? mx_taesd_encode_image(c, e->taesd, e->image, n, h * f, w * f, image_latents, st)
+                    : mx_sd_encode_image(c, e->vae, e->image, n, h * f, w * f, image_latents, st);
+}
+
+int mx_sd_edit_run_encoded(const mx_sd_request *rq, const mx_sd_edit *e, const float *image_latents, const mx_ctx *c,
+                           int n, int h, int w, float *latents, mx_status *st) {
     if (check_edit(rq, e, n, h, w, st)) return -1;
     int f = e->taesd ? mx_taesd_factor(e->taesd) : mx_vae_factor(e->vae);
     edit_state es = {.sched = rq->sched,
@@ -87,10 +96,8 @@ int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c
     float *host = malloc((2 * es.numel + 2 * plane) * sizeof(float)); /* image latents, noise, paint, keep */
     if (!host) return mx_fail(st, MX_ENOMEM, "sd edit: out of memory");
     int rc = -1;
-    if ((e->taesd ? mx_taesd_encode_image(c, e->taesd, e->image, n, h * f, w * f, host, st)
-                  : mx_sd_encode_image(c, e->vae, e->image, n, h * f, w * f, host, st)) ||
-        mx_sched_set_strength(rq->sched, e->strength, st))
-        goto done;
+    memcpy(host, image_latents, es.numel * sizeof(float));
+    if (mx_sched_set_strength(rq->sched, e->strength, st)) goto done;
     memcpy(host + es.numel, e->noise, es.numel * sizeof(float));
     if (e->mask && e->strength >= 1.0f) {
         memcpy(latents, e->noise, es.numel * sizeof(float));
@@ -109,5 +116,18 @@ int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c
 done:
     mx_dev_free(c, es.block);
     free(host);
+    return rc;
+}
+
+int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
+                   float *latents, mx_status *st) {
+    if (check_edit(rq, e, n, h, w, st)) return -1;
+    float *image_latents = malloc((size_t)n * 4 * h * w * sizeof(float));
+    if (!image_latents) return mx_fail(st, MX_ENOMEM, "sd edit: out of memory");
+    int rc = mx_sd_edit_encode(rq, e, c, n, h, w, image_latents, st) ||
+                     mx_sd_edit_run_encoded(rq, e, image_latents, c, n, h, w, latents, st)
+                 ? -1
+                 : 0;
+    free(image_latents);
     return rc;
 }

@@ -34,5 +34,12 @@ typedef struct mx_sd_edit {
  * the latents after the blending of each step. */
 int mx_sd_edit_run(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
                    float *latents, mx_status *st);
+/* mx_sd_edit_run in its two parts, for a caller that times the encoding apart from the loop: the
+ * image latents of e->image [n, 4, h, w] (host; the request checked first), then the run from them
+ * (e->image unused). */
+int mx_sd_edit_encode(const mx_sd_request *rq, const mx_sd_edit *e, const mx_ctx *c, int n, int h, int w,
+                      float *image_latents, mx_status *st);
+int mx_sd_edit_run_encoded(const mx_sd_request *rq, const mx_sd_edit *e, const float *image_latents, const mx_ctx *c,
+                           int n, int h, int w, float *latents, mx_status *st);
 
 #endif

@@ -279,6 +279,7 @@ int mx_sd_denoise(const mx_sd_request *rq, const mx_ctx *c, float *latents, int 
     sd_work wk;
     if (check_request(rq, c, n, h, w, &d, st) || work_alloc(rq, c, &d, &wk, st)) return -1;
     int steps = mx_sched_steps(rq->sched), rc = upload_inputs(rq, c, &d, &wk, latents, st);
+    if (rc == 0) rc = mx_sched_prepare(rq->sched, st); /* no step copies from the host */
     for (int i = 0; i < steps && rc == 0; i++) {
         int64_t t = mx_sched_timestep(rq->sched, i);
         rc = denoise_step(rq, c, &d, &wk, t, st);

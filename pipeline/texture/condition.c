@@ -5,7 +5,7 @@
 #include <string.h>
 
 int mx_depth_image(const mx_gbuffer *gb, mx_image *out, mx_status *st) {
-    if (mx_image_alloc(out, gb->w, gb->h, 3, st)) return -1;
+    if (mx_image_alloc(out, gb->w, gb->h, 1, st)) return -1;
     int64_t n = (int64_t)gb->w * gb->h;
     float near = INFINITY, far = -INFINITY;
     for (int64_t i = 0; i < n; i++) {
@@ -15,8 +15,7 @@ int mx_depth_image(const mx_gbuffer *gb, mx_image *out, mx_status *st) {
     }
     float range = far - near > 1e-12f ? far - near : 1.0f;
     for (int64_t i = 0; i < n; i++) {
-        float v = gb->face[i] < 0 ? 0.0f : 0.2f + 0.8f * (far - gb->depth[i]) / range;
-        out->data[3 * i] = out->data[3 * i + 1] = out->data[3 * i + 2] = v;
+        out->data[i] = gb->face[i] < 0 ? 0.0f : 0.2f + 0.8f * (far - gb->depth[i]) / range;
     }
     return 0;
 }

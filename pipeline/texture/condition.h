@@ -8,8 +8,10 @@
 #include "../geom/image.h"
 #include "../geom/raster.h"
 
-/* Depth control of ControlNet depth v1.1 (3 channels, in [0, 1], near = bright): over the
- * visible pixels, value = 0.2 + 0.8 (d_far - d) / (d_far - d_near); background 0. */
+/* Depth control of ControlNet depth v1.1 (in [0, 1], near = bright): over the visible pixels,
+ * value = 0.2 + 0.8 (d_far - d) / (d_far - d_near); background 0. One channel: the network's three
+ * are this one repeated (mx_job_view_controls copies it into each after the resize, which then
+ * samples one channel instead of three equal ones). */
 int mx_depth_image(const mx_gbuffer *gb, mx_image *out, mx_status *st);
 /* A uint8 mask as a 1-channel float image (1 where set). */
 int mx_mask_image(const uint8_t *mask, int w, int h, mx_image *out, mx_status *st);

@@ -74,8 +74,10 @@ static int enhance_view(mx_job *j, const mx_image *orig, mx_job_view *v, int ind
     float *depth = buf, *inpaint = buf + per, *init = buf + 2 * per, *image = buf + 3 * per, *paint = buf + 4 * per;
     mx_job_view_prompt(j, v, 0);
     mx_view_planes vp = {.depth = depth, .inpaint = inpaint, .init = init, .paint = paint, .plane_w = S, .x0 = 0};
+    double t = mx_now();
     if (merge_textures(j, orig, current, st)) goto done;
     merged = 1;
+    mx_job_work_since(j, MX_WORK_CONTROLS, t);
     if (mx_job_view_prepare(j, v, st) || mx_job_view_controls(j, v, &vp, current, st)) goto done;
     const char *prompts[1] = {v->prompt};
     char stage[32];
@@ -155,7 +157,8 @@ int mx_enhance_run(const mx_texture_opts *o, mx_texture_result *res, mx_status *
     j.write_flags = 0; /* the first enhanced view of a texel keeps it: later views blend it in */
     if (!rc) rc = original_textures(&j, orig, st);
     if (!rc) rc = enhance_views(&j, orig, st);
-    if (!rc) rc = merge_textures(&j, orig, out, st);
+    double t = mx_now();
+    if (!rc && !(rc = merge_textures(&j, orig, out, st))) mx_job_work_since(&j, MX_WORK_FILL, t);
     if (!rc) rc = mx_job_finish(&j, out, res, st);
     for (int l = 0; orig && l < j.nlayers; l++) mx_image_free(&orig[l]);
     for (int l = 0; out && l < j.nlayers; l++) mx_image_free(&out[l]);

@@ -4,6 +4,8 @@
 
 #include <stdlib.h>
 
+#include "../../runtime/log.h"
+
 #include "../geom/masks.h"
 #include "../geom/raster.h"
 #include "../geom/uvfill.h"
@@ -20,20 +22,20 @@
 int mx_job_current_textures(mx_job *j, mx_image *tex, mx_status *st) {
     size_t plane = (size_t)j->o->pub.texture_size * j->o->pub.texture_size;
     for (int l = 0; l < j->nlayers; l++)
-        if (mx_bake_texture(&j->bake, l, mx_job_grey, &tex[l], st) ||
-            mx_uv_dilate(&tex[l], j->bake.known + l * plane, CURRENT_DILATE_TEXELS, st)) {
+        if (mx_bake_texture(&j->bake, l, mx_job_grey, j->gen.ctx->pool, &tex[l], st) ||
+            mx_uv_dilate(&tex[l], j->bake.known + l * plane, CURRENT_DILATE_TEXELS, j->gen.ctx->pool, st)) {
             for (int k = 0; k <= l; k++) mx_image_free(&tex[k]);
             return -1;
         }
     return 0;
 }
 
-/* crop + resize of a render to the model size, then into the planes. */
-static int place_control(const mx_image *full, mx_crop crop, int S, float *planes, int plane_w, int x0,
-                         mx_status *st) {
+/* crop + resize of the depth control to the model size, then into each of the 3 planes. */
+static int place_depth(const mx_image *depth, mx_crop crop, int S, mx_pool *pool, float *planes, int plane_w, int x0,
+                       mx_status *st) {
     mx_image small;
-    if (mx_crop_resize(full, crop, S, &small, st)) return -1;
-    mx_image_to_planes(&small, planes, plane_w, x0);
+    if (mx_crop_resize(depth, crop, S, pool, &small, st)) return -1;
+    for (int k = 0; k < 3; k++) mx_image_to_planes(&small, planes + (size_t)k * S * plane_w, plane_w, x0);
     mx_image_free(&small);
     return 0;
 }
@@ -55,12 +57,13 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
         mx_bake_open_texels(&j->bake, &v->vb.gb, &j->mesh, v->vb.mask, open);
         known = open;
     }
-    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, mask);
+    mx_mask_inpaint(&v->vb.gb, &j->mesh, NULL, known, j->o->pub.texture_size, j->o->pub.texture_size, j->gen.ctx->pool,
+                    mask);
     free(open);
     v->untextured_pixels = mx_mask_count(mask, (int64_t)R * R);
     if (!mx_render_textured(&v->vb.gb, &j->mesh, tex, j->nlayers, mx_job_grey, j->gen.ctx->pool, &rgb, st) &&
-        !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, &rgb_s, st) &&
-        !mx_crop_resize(&mask_img, v->crop, S, &mask_s, st) &&
+        !mx_mask_image(mask, R, R, &mask_img, st) && !mx_crop_resize(&rgb, v->crop, S, j->gen.ctx->pool, &rgb_s, st) &&
+        !mx_crop_resize(&mask_img, v->crop, S, j->gen.ctx->pool, &mask_s, st) &&
         !mx_paint_mask_cells(&mask_s, mx_vae_factor(j->gen.models->vae), PAINT_DILATE_CELLS, &paint, st) &&
         !mx_inpaint_image(&rgb_s, &paint, &ctl, st)) {
         mx_image_to_planes(&ctl, p->inpaint, p->plane_w, p->x0);
@@ -80,10 +83,12 @@ static int inpaint_inputs(mx_job *j, mx_job_view *v, const mx_image *tex, const 
 
 int mx_job_view_controls(mx_job *j, mx_job_view *v, const mx_view_planes *p, const mx_image *current,
                          mx_status *st) {
+    double t = mx_now();
     mx_image depth;
     if (mx_depth_image(&v->vb.gb, &depth, st)) return -1;
-    int rc = place_control(&depth, v->crop, j->o->pub.image_size, p->depth, p->plane_w, p->x0, st);
+    int rc = place_depth(&depth, v->crop, j->o->pub.image_size, j->gen.ctx->pool, p->depth, p->plane_w, p->x0, st);
     mx_image_free(&depth);
-    if (rc || !p->inpaint) return rc;
-    return inpaint_inputs(j, v, current, p, st);
+    if (!rc && p->inpaint) rc = inpaint_inputs(j, v, current, p, st);
+    mx_job_work_since(j, MX_WORK_CONTROLS, t);
+    return rc;
 }

@@ -33,7 +33,9 @@ int mx_job_encode_negative(mx_job *j, mx_status *st) {
     j->gen.uncond = malloc(sizeof(float) * MX_CLIP_CONTEXT * (size_t)C);
     if (!j->gen.uncond) return mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
     int dropped = 0;
+    double t = mx_now();
     if (mx_models_encode_text(j->gen.models, j->gen.ctx, j->o->pub.negative_prompt, j->gen.uncond, &dropped, st)) return -1;
+    mx_job_work_since(j, MX_WORK_ENCODE_TEXT, t);
     if (dropped) mx_warn("negative prompt longer than 77 tokens: truncated (%d tokens dropped)", dropped);
     return 0;
 }
@@ -78,12 +80,14 @@ static const float *prompt_embedding(mx_job *j, const char *text, mx_status *st)
     float *emb = malloc(floats * sizeof *emb);
     char *copy = strdup(text);
     int dropped = 0;
+    double t = mx_now();
     if (!emb || !copy || mx_models_encode_text(j->gen.models, j->gen.ctx, text, emb, &dropped, st)) {
         free(emb);
         free(copy);
         if (!st->msg[0]) mx_fail(st, MX_ENOMEM, "prompt embeddings: out of memory");
         return NULL;
     }
+    mx_job_work_since(j, MX_WORK_ENCODE_TEXT, t);
     if (dropped && mx_job_warn_if_truncated(j, "view prompt", text, st)) {
         free(emb);
         free(copy);
@@ -107,15 +111,19 @@ static int batch_embeddings(mx_job *j, const mx_gen_batch *b, float *cond, float
 }
 
 /* Runs the denoising of a batch from seeded noise (item i: stream first_stream + i): plain
- * text-to-image, or the inpaint / img2img pipeline when the batch has init images. */
+ * text-to-image, or the inpaint / img2img pipeline when the batch has init images (their
+ * encoding into image_lat, timed as its own part of the report, then the loop). */
 static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, float *lat, float *noise,
-                         size_t per_item, int h, int w, mx_status *st) {
+                         float *image_lat, size_t per_item, int h, int w, mx_status *st) {
     for (int i = 0; i < b->n; i++)
         mx_rng_fill_normal(noise + i * per_item, per_item, j->o->pub.seed, b->first_stream + (uint64_t)i, 0);
     if (!b->init_images) {
         memcpy(lat, noise, per_item * b->n * sizeof *lat);
         mx_sched_scale_initial(rq->sched, lat, per_item * b->n);
-        return mx_sd_denoise(rq, j->gen.ctx, lat, b->n, h, w, st);
+        double t = mx_now();
+        int rc = mx_sd_denoise(rq, j->gen.ctx, lat, b->n, h, w, st);
+        j->rep.last_denoise_s = mx_job_work_since(j, MX_WORK_DENOISE, t);
+        return rc;
     }
     mx_sd_edit e = {.vae = j->gen.models->vae,
                     .image = b->init_images,
@@ -123,7 +131,13 @@ static int denoise_batch(mx_job *j, const mx_gen_batch *b, mx_sd_request *rq, fl
                     .noise = noise,
                     .strength = b->strength,
                     .taesd = j->o->pub.fast ? j->gen.models->taesd : NULL};
-    return mx_sd_edit_run(rq, &e, j->gen.ctx, b->n, h, w, lat, st);
+    double t = mx_now();
+    if (mx_sd_edit_encode(rq, &e, j->gen.ctx, b->n, h, w, image_lat, st)) return -1;
+    mx_job_work_since(j, MX_WORK_ENCODE_IMAGE, t);
+    t = mx_now();
+    int rc = mx_sd_edit_run_encoded(rq, &e, image_lat, j->gen.ctx, b->n, h, w, lat, st);
+    j->rep.last_denoise_s = mx_job_work_since(j, MX_WORK_DENOISE, t);
+    return rc;
 }
 
 /* LCM step noise: item i draws from its own stream (first_stream + i) after its start latents,
@@ -168,7 +182,8 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                        b->image_h, f);
     int h = b->image_h / f, w = b->image_w / f;
     size_t per_item = (size_t)4 * h * w, per_text = (size_t)MX_CLIP_CONTEXT * mx_models_text_dim(j->gen.models);
-    float *lat = malloc(2 * per_item * b->n * sizeof *lat), *noise = lat + per_item * b->n;
+    float *lat = malloc(3 * per_item * b->n * sizeof *lat), *noise = lat + per_item * b->n;
+    float *image_lat = noise + per_item * b->n;
     float *cond = malloc(per_text * b->n * sizeof *cond), *uncond = malloc(per_text * b->n * sizeof *uncond);
     mx_sched s;
     mx_sched_config scfg = j->gen.models->sched;
@@ -204,17 +219,13 @@ int mx_job_generate(mx_job *j, const mx_gen_batch *b, float *images, mx_status *
                         .progress = mx_job_report_step,
                         .progress_user = j,
                         .image = style_guide(j, &guide)};
-    double t = mx_now();
-    if (denoise_batch(j, b, &rq, lat, noise, per_item, h, w, st)) {
+    if (denoise_batch(j, b, &rq, lat, noise, image_lat, per_item, h, w, st)) {
         mx_job_check_cancel(j, st); /* a stop asked by report_step reads "interrupted" */
         goto done;
     }
-    j->rep.last_denoise_s = mx_now() - t;
-    j->rep.denoise_s += j->rep.last_denoise_s;
-    t = mx_now();
+    double t = mx_now();
     rc = decode_images(j, lat, b->n, h, w, images, st);
-    j->rep.last_decode_s = mx_now() - t;
-    j->rep.decode_s += j->rep.last_decode_s;
+    j->rep.last_decode_s = mx_job_work_since(j, MX_WORK_DECODE, t);
 done:
     if (sched_ready) mx_sched_free(&s);
     free(lat);

@@ -9,6 +9,7 @@
 #include "../../runtime/log.h"
 #include "../geom/raster.h"
 #include "../geom/uvfill.h"
+#include "../io/export.h"
 #include "../io/io.h"
 
 #define UV_GUTTER 4
@@ -45,6 +46,7 @@ int mx_job_fill_textures(mx_job *j, mx_image *tex, mx_status *st) {
         mx_uv_fill_ticker ticker = {.tick = fill_tick, .user = &ticks};
         if (mx_uv_fill_harmonic(&tex[l], j->bake.known + l * plane, &j->mesh, l, j->nlayers, UV_GUTTER, &ticker, st))
             return -1;
+        mx_job_work_since(j, MX_WORK_FILL, t);
         mx_job_progress(j, "uv fill: texture %d/%d done in %.1fs", l + 1, j->nlayers, mx_now() - t);
         if (mx_job_check_cancel(j, st)) return -1;
     }
@@ -93,7 +95,7 @@ static int write_front_render(mx_job *j, const mx_image *tex, mx_status *st) {
     char path[4300];
     int rc = mx_job_view_prepare(j, &v, st) ||
              mx_render_textured(&v.vb.gb, &j->mesh, tex, j->nlayers, mx_job_grey, j->gen.ctx->pool, &rgb, st) ||
-             mx_crop_resize(&rgb, v.crop, j->o->pub.image_size, &small, st) ||
+             mx_crop_resize(&rgb, v.crop, j->o->pub.image_size, j->gen.ctx->pool, &small, st) ||
              mx_path_join(path, sizeof path, j->out.stage, "front.png", st) || mx_io_write_png(path, &small, st);
     mx_image_free(&rgb);
     mx_image_free(&small);
@@ -101,19 +103,25 @@ static int write_front_render(mx_job *j, const mx_image *tex, mx_status *st) {
     return rc ? -1 : 0;
 }
 
+/* The output files but the report into the staging folder (timed: the report's work_s.write). */
+static int write_files(mx_job *j, const mx_image *tex, mx_status *st) {
+    if (j->o->pub.front_render && write_front_render(j, tex, st)) return -1;
+    double t = mx_now();
+    if (mx_write_output_files(j->out.stage, &j->mesh, tex, j->nlayers, mx_pool_threads(j->gen.ctx->pool), st)) return -1;
+    mx_job_work_since(j, MX_WORK_WRITE, t);
+    return 0;
+}
+
 int mx_job_finish(mx_job *j, mx_image *tex, mx_texture_result *res, mx_status *st) {
     double t = mx_now();
     mx_job_set_phase(j, "finish");
     if (mx_job_check_cancel(j, st) || (!j->keep_unreached && mx_job_fill_textures(j, tex, st))) return -1;
     mx_job_stage_done(j, "uv_fill", mx_now() - t);
+    if (mx_job_check_cancel(j, st) || (j->o->pub.out_dir && write_files(j, tex, st))) return -1;
     const char *text = mx_job_report_end(j);
     if (!text) return mx_fail(st, MX_ENOMEM, "report: out of memory");
-    if (mx_job_check_cancel(j, st) || (res && result_reserve(j, text, res, st))) return -1;
-    if (j->o->pub.out_dir && j->o->pub.front_render && write_front_render(j, tex, st)) {
-        if (res) mx_texture_result_free(res);
-        return -1;
-    }
-    if (j->o->pub.out_dir && mx_outdir_commit(&j->out, &j->mesh, tex, j->nlayers, text, j->o->pub.cancel, st)) {
+    if (res && result_reserve(j, text, res, st)) return -1;
+    if (j->o->pub.out_dir && (mx_write_report(j->out.stage, text, st) || mx_outdir_publish(&j->out, j->o->pub.cancel, st))) {
         if (res) mx_texture_result_free(res);
         return -1;
     }

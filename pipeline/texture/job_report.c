@@ -18,7 +18,7 @@ void mx_job_emit_progress(mx_job *j, int step, int steps, const char *message) {
                              .steps = steps,
                              .views_done = j->rep.views_done,
                              .views_total = o->pub.views,
-                             .coverage = j->sched.chart ? mx_job_coverage(j) : 0.0,
+                             .coverage = j->rep.coverage, /* not counted again at every denoising step */
                              .seconds = mx_now() - j->rep.t0,
                              .message = message};
     if (o->progress(o->progress_user, &p)) j->rep.stop = 1;
@@ -40,6 +40,12 @@ void mx_job_set_phase(mx_job *j, const char *stage) { snprintf(j->rep.phase, siz
 int mx_job_check_cancel(const mx_job *j, mx_status *st) {
     if (j->rep.stop || (j->o->pub.cancel && *j->o->pub.cancel)) return mx_fail(st, MX_ECANCEL, "interrupted");
     return 0;
+}
+
+double mx_job_work_since(mx_job *j, mx_job_work part, double t0) {
+    double s = mx_now() - t0;
+    j->rep.work_s[part] += s;
+    return s;
 }
 
 void mx_job_stage_done(mx_job *j, const char *name, double seconds) {
@@ -161,10 +167,10 @@ const char *mx_job_report_end(mx_job *j) {
     mx_jw_begin_obj(w, "stages_s");
     for (int i = 0; i < j->rep.nstages; i++) mx_jw_num(w, j->rep.stage_name[i], j->rep.stage_s[i]);
     mx_jw_end_obj(w);
-    mx_jw_begin_obj(w, "work_s"); /* inside grid and views: the networks and the backprojection */
-    mx_jw_num(w, "denoise", j->rep.denoise_s);
-    mx_jw_num(w, "decode", j->rep.decode_s);
-    mx_jw_num(w, "backproject", j->rep.backproject_s);
+    mx_jw_begin_obj(w, "work_s"); /* the parts of the stages (MX_JOB_WORK_PARTS) */
+#define MX_JOB_WORK_KEY_(id, key, what) mx_jw_num(w, key, j->rep.work_s[MX_WORK_##id]);
+    MX_JOB_WORK_PARTS(MX_JOB_WORK_KEY_)
+#undef MX_JOB_WORK_KEY_
     mx_jw_end_obj(w);
     mx_jw_num(w, "load_s", j->rep.load_s); /* the weights onto the device: inside stages_s.load */
     mx_jw_num(w, "total_s", mx_now() - j->rep.t0);

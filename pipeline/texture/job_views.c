@@ -20,6 +20,7 @@ void mx_job_camera(mx_camera *cam, float azimuth, float elevation) {
 }
 
 int mx_job_build_candidates(mx_job *j, mx_status *st) {
+    double t = mx_now();
     int n = j->o->pub.candidates;
     mx_camera tmpl, *cams = calloc((size_t)n, sizeof *cams);
     if (!cams) return mx_fail(st, MX_ENOMEM, "candidate cameras: out of memory");
@@ -38,6 +39,7 @@ int mx_job_build_candidates(mx_job *j, mx_status *st) {
     if (!j->sched.visible) return mx_fail(st, MX_ENOMEM, "visibility mask: out of memory");
     mx_view_cache_visible(&j->sched.vc, j->sched.visible);
     j->sched.n_visible = mx_mask_count(j->sched.visible, (int64_t)texels);
+    mx_job_work_since(j, MX_WORK_CANDIDATES, t);
     if (j->sched.n_visible == 0)
         return mx_fail(st, MX_EINPUT, "%s: no view sees any texel of the mesh (are all its faces of zero area?)",
                        j->o->pub.mesh_path);
@@ -57,6 +59,7 @@ int mx_job_build_chart(mx_job *j, mx_status *st) {
 }
 
 int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
+    double t = mx_now();
     int R = j->o->pub.render_size;
     if (mx_view_buffers_init(&v->vb, R, st)) return -1;
     v->vb_ready = 1;
@@ -70,6 +73,7 @@ int mx_job_view_prepare(mx_job *j, mx_job_view *v, mx_status *st) {
     v->crop = mx_crop_from_mask(fg, R, R, CROP_MARGIN);
     v->untextured_pixels = mx_mask_count(fg, (int64_t)R * R);
     free(fg);
+    mx_job_work_since(j, MX_WORK_RENDER, t);
     return 0;
 }
 
@@ -89,17 +93,21 @@ void mx_job_view_prompt(const mx_job *j, mx_job_view *v, int grid) {
 }
 
 int mx_job_schedule_begin(mx_job *j, int max_batch, mx_status *st) {
+    double t = mx_now();
     mx_view_schedule_params p = {.budget = j->o->pub.views - 2,
                                  .max_batch = max_batch,
                                  .coverage_stop = j->o->pub.coverage_stop,
                                  .min_gain = MX_JOB_MIN_UNTEXTURED_PIXELS};
     if (mx_view_schedule_init(&j->sched.schedule, &j->sched.vc, &p, st)) return -1;
     j->sched.schedule_ready = 1;
+    mx_job_work_since(j, MX_WORK_SELECT, t);
     return 0;
 }
 
 int mx_job_schedule_next(mx_job *j, int *cand, int *n, mx_status *st) {
+    double t = mx_now();
     if (mx_view_schedule_next(&j->sched.schedule, j->bake.known, cand, n, st)) return -1;
+    mx_job_work_since(j, MX_WORK_SELECT, t);
     if (*n == 0)
         mx_job_progress(j, "view selection: schedule ended after %d views (budget, coverage or gain floor)",
                         j->rep.views_done);
@@ -115,8 +123,8 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
         mx_image_free(&gen);
         return -1;
     }
-    mx_crop_paste(&gen, v->crop, &canvas);
-    j->rep.backproject_s += mx_now() - t; /* mx_job_backproject_render adds its own time */
+    mx_crop_paste(&gen, v->crop, j->gen.ctx->pool, &canvas);
+    mx_job_work_since(j, MX_WORK_BACKPROJECT, t); /* mx_job_backproject_render adds its own time */
     int rc = mx_job_backproject_render(j, v, &canvas, v->vb.mask, st);
     mx_image_free(&gen);
     mx_image_free(&canvas);
@@ -126,9 +134,10 @@ int mx_job_backproject(mx_job *j, mx_job_view *v, const float *planes, int plane
 int mx_job_backproject_render(mx_job *j, mx_job_view *v, const mx_image *img, const uint8_t *mask, mx_status *st) {
     double t = mx_now();
     int rc = mx_backproject(&j->bake, &v->vb.gb, &j->mesh, img, mask, j->write_flags, j->gen.ctx->pool, st);
-    j->rep.backproject_s += mx_now() - t;
+    mx_job_work_since(j, MX_WORK_BACKPROJECT, t);
     if (rc) return -1;
     j->rep.views_done++;
+    j->rep.coverage = mx_job_coverage(j);
     mx_job_emit_progress(j, 0, 0, "view backprojected");
     return 0;
 }

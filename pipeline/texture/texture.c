@@ -110,8 +110,10 @@ static int view_batch(mx_job *j, const int *cand, int n, int k, int n_later, int
     }
     if (batch_alloc(&bb, n, S, st)) goto done;
     /* the views of a batch all see T as it is before the batch */
+    double t = mx_now();
     if (mx_job_current_textures(j, current, st)) goto done;
     have_current = 1;
+    mx_job_work_since(j, MX_WORK_CONTROLS, t);
     char stage[32];
     snprintf(stage, sizeof stage, "views %d-%d", k + 3, k + 2 + n);
     mx_job_set_phase(j, stage);
@@ -189,7 +191,9 @@ static int view_stage(mx_job *j, mx_status *st) {
  * (mx_job_finish), then the outputs. */
 static int fill_stage(mx_job *j, mx_texture_result *res, mx_status *st) {
     mx_image tex[j->nlayers];
+    double t = mx_now();
     if (mx_job_current_textures(j, tex, st)) return -1;
+    mx_job_work_since(j, MX_WORK_FILL, t);
     int rc = mx_job_finish(j, tex, res, st);
     for (int l = 0; l < j->nlayers; l++) mx_image_free(&tex[l]);
     return rc;

@@ -62,9 +62,9 @@ static int source_place(mx_job *j, source *s, mx_status *st) {
  * to the destination's object, resized to image_size, pasted back bilinearly. */
 static int through_model_image(const mx_job *j, const mx_job_view *v, mx_image *img, mx_status *st) {
     mx_image small = {0};
-    if (mx_crop_resize(img, v->crop, j->o->pub.image_size, &small, st)) return -1;
+    if (mx_crop_resize(img, v->crop, j->o->pub.image_size, j->gen.ctx->pool, &small, st)) return -1;
     memset(img->data, 0, (size_t)img->w * img->h * (size_t)img->c * sizeof *img->data);
-    mx_crop_paste(&small, v->crop, img);
+    mx_crop_paste(&small, v->crop, j->gen.ctx->pool, img);
     mx_image_free(&small);
     return 0;
 }
@@ -75,10 +75,12 @@ static int transfer_view(mx_job *j, source *s, const mx_camera *cam, int index, 
     v.cam = *cam;
     mx_job_view_prompt(j, &v, 0);
     mx_image img = {0};
-    int rc = mx_job_view_prepare(j, &v, st) ||
-             mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->gen.ctx->pool, &s->gb, st) ||
-             mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->pub.background, j->gen.ctx->pool, &img, st) ||
-             (j->o->pub.through_model_image && through_model_image(j, &v, &img, st));
+    int rc = mx_job_view_prepare(j, &v, st);
+    double t = mx_now(); /* the source's render: a render of the view */
+    rc = rc || mx_rasterize(&s->mesh, s->pos, cam, MX_RASTER_CULL_BACK | MX_RASTER_UV, j->gen.ctx->pool, &s->gb, st) ||
+         mx_render_textured(&s->gb, &s->mesh, s->tex, s->ntex, j->o->pub.background, j->gen.ctx->pool, &img, st) ||
+         (j->o->pub.through_model_image && through_model_image(j, &v, &img, st));
+    mx_job_work_since(j, MX_WORK_RENDER, t);
     if (!rc) {
         for (size_t i = 0; i < (size_t)img.w * img.h; i++) v.vb.mask[i] &= s->gb.face[i] >= 0;
         rc = mx_job_backproject_render(j, &v, &img, v.vb.mask, st);
@@ -137,8 +139,10 @@ static double psnr_against_source(const mx_job *j, const source *s, const mx_ima
 static int finish(mx_job *j, const source *s, mx_texture_result *res, mx_status *st) {
     mx_image *tex = calloc((size_t)j->nlayers, sizeof *tex);
     if (!tex) return mx_fail(st, MX_ENOMEM, "transfer: out of memory");
+    double t = mx_now();
     int rc = mx_job_current_textures(j, tex, st);
     if (!rc) {
+        mx_job_work_since(j, MX_WORK_FILL, t);
         if (j->o->pub.mesh_path && !strcmp(j->o->pub.source_path, j->o->pub.mesh_path)) { /* a mesh in memory: no path */
             j->rep.psnr_db = psnr_against_source(j, s, tex);
             mx_job_progress(j, "transfer onto the source's own UVs: PSNR %.2f dB", j->rep.psnr_db);

@@ -121,7 +121,7 @@ static void bake_view(const mx_mesh *m, const float *pos, const mx_camera *cam, 
         for (int i = 0; i < VIEW * VIEW * 3; i++) img.data[i] = (float)(i % 7) / 6.0f;
         const float fill[3] = {0.5f, 0.5f, 0.5f};
         if (!mx_backproject(&bake, &vb.gb, m, &img, vb.mask, (flags >> 5) & 1, NULL, &st) &&
-            !mx_bake_texture(&bake, nlayers - 1, fill, &tex, &st) &&
+            !mx_bake_texture(&bake, nlayers - 1, fill, NULL, &tex, &st) &&
             !mx_uv_chart_mask(m, nlayers - 1, nlayers, TEX, TEX, chart, &st))
             mx_uv_fill(&tex, bake.known + (size_t)(nlayers - 1) * TEX * TEX, chart, 2, &st);
     }

@@ -138,10 +138,10 @@ static int render_views(const render_args *a, const char *dir, const volatile si
         snprintf(path, sizeof path, "%s/view_%02d.png", dir, v);
         rc = rc || mx_io_write_png(path, &img, st);
         mx_crop full = {0, 0, a->size};
-        rc = rc || mx_crop_resize(&img, full, tile, &small, st);
+        rc = rc || mx_crop_resize(&img, full, tile, pool, &small, st);
         if (!rc) {
             mx_crop at = {(v % cols) * tile, (v / cols) * tile, tile};
-            mx_crop_paste(&small, at, sheet);
+            mx_crop_paste(&small, at, pool, sheet);
         }
         mx_image_free(&img);
         mx_image_free(&small);
