@@ -4,11 +4,13 @@
  * used by two levels (a bf16 context and its mx_ctx_fp32 view share one cache) gets one entry
  * per level; the cache grows past its first table; panels that would take more than their
  * weight beyond the budget are not kept (packed per call, the same results), panels of the
- * weight's own size are. */
+ * weight's own size are; packing split over several threads gives the panels one thread gives, byte
+ * for byte; a linear weight's panels hold the layout of gemm.h, value by value. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "../ops/cpu/gemm.h"
 #include "../ops/cpu/wpack.h"
 #include "../ops/ops.h"
 #include "util_test.h"
@@ -164,6 +166,119 @@ static void check_two_levels(const mx_kernels *bf16, mx_pool *pool, mx_arena *sc
     mx_wpack_destroy(cached.wpack);
 }
 
+/* Entries of cache a that cache b holds too, byte for byte; -1 when one is missing or differs. */
+static int same_entries(const mx_wpack *a, const mx_wpack *b) {
+    int n = 0;
+    for (size_t i = 0; i < mx_wpack_slots(a); i++) {
+        mx_wpack_key key;
+        size_t bytes, other;
+        const float *p = mx_wpack_slot(a, i, &key, &bytes), *q = p ? mx_wpack_find_sized(b, &key, &other) : NULL;
+        if (!p) continue;
+        if (!q || other != bytes || memcmp(p, q, bytes) != 0) return -1;
+        n++;
+    }
+    return n;
+}
+
+/* The cases' weights packed by one thread and by a pool of three (fill_blocks splits a weight's
+ * panels over the threads): the same entries, byte for byte. */
+static void check_threads_same_panels(const mx_kernels *k, mx_arena *scratch) {
+    mx_status st;
+    mx_pool *three = mx_pool_create(3, &st);
+    CHECK(three != NULL);
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        const shapes *s = &cases[c];
+        size_t nx = (size_t)s->M * s->K, ncx = (size_t)s->B * s->Cin * s->H * s->W;
+        nx = ncx > nx ? ncx : nx;
+        size_t nlw = (size_t)s->N * s->K, ncw = (size_t)s->Cout * s->Cin * s->k * s->k;
+        float *x = malloc(nx * sizeof *x), *y = malloc(case_outputs(s) * sizeof *y);
+        float *lw = malloc(nlw * sizeof *lw), *cw = malloc(ncw * sizeof *cw);
+        CHECK(x && y && lw && cw);
+        mx_fill_random(x, nx, 30 + c, -1, 1);
+        mx_fill_random(lw, nlw, 40 + c, -0.5f, 0.5f);
+        mx_fill_random(cw, ncw, 50 + c, -0.5f, 0.5f);
+        uint16_t *lw16 = to_f16(lw, nlw), *cw16 = to_f16(cw, ncw);
+        CHECK(lw16 && cw16);
+        mx_ctx one = {.pool = NULL, .k = k, .scratch = scratch}, many = {.pool = three, .k = k, .scratch = scratch};
+        CHECK(mx_ctx_pack_weights(&one, (size_t)1 << 30, 0, &st) == 0);
+        CHECK(mx_ctx_pack_weights(&many, (size_t)1 << 30, 0, &st) == 0);
+        mx_wptr wl[2] = {mx_w_f32(lw), {lw16, MX_F16}}, wc[2] = {mx_w_f32(cw), {cw16, MX_F16}};
+        for (int d = 0; d < 2; d++) {
+            run_case(&one, s, y, x, wl[d], mx_w_none(), wc[d], mx_w_none());
+            run_case(&many, s, y, x, wl[d], mx_w_none(), wc[d], mx_w_none());
+        }
+        int n = same_entries(one.wpack, many.wpack);
+        if (n < 0 || n != same_entries(many.wpack, one.wpack) || (k->isa != MX_ISA_SCALAR && n < 4)) {
+            fprintf(stderr, "%s case %zu: panels packed by 3 threads differ from 1 thread's (%d entries)\n",
+                    mx_isa_name(k->isa), c, n);
+            mx_test_failures++;
+        }
+        mx_wpack_destroy(one.wpack);
+        mx_wpack_destroy(many.wpack);
+        free(lw16), free(cw16), free(x), free(y), free(lw), free(cw);
+    }
+    mx_pool_destroy(three);
+}
+
+/* Word q of row r of a B panel of weight w (row-major [N][K], fp16) for the K block k0..k0+kc, as
+ * gemm.h lays it out: the value (fp32 panels) or the bf16 pair of k0+2q and k0+2q+1 (rounded to
+ * nearest even; an odd last k paired with zero); zero past the rows and the K block. */
+static uint32_t panel_word(const mx_gemm_kernel *g, const uint16_t *w, int N, int K, int n, int k0, int kc, int q) {
+    if (n >= N) return 0;
+    const uint16_t *row = w + (size_t)n * K + k0;
+    if (!g->to_pairs) return q < kc ? mx_f32_bits(mx_half_to_float(row[q])) : 0;
+    if (2 * q >= kc) return 0;
+    uint32_t lo = mx_float_to_bf16(mx_half_to_float(row[2 * q]));
+    return 2 * q + 1 < kc ? lo | (uint32_t)mx_float_to_bf16(mx_half_to_float(row[2 * q + 1])) << 16 : lo;
+}
+
+/* A linear's fp16 weight [N][K] (three K blocks, N not a multiple of any NR) as the cache keeps it:
+ * K blocks as equal as can be of at most the kernel's, each ceil(N/NR) k-major panels
+ * [words][NR], word by word. */
+static void check_panel_layout(const mx_kernels *k, mx_pool *pool, mx_arena *scratch) {
+    enum { M = 3, N = 70, K = 1301 };
+    float *x = malloc(M * K * sizeof *x), *w = malloc(N * K * sizeof *w), y[M * N];
+    CHECK(x && w);
+    mx_fill_random(x, M * K, 60, -1, 1);
+    mx_fill_random(w, N * K, 61, -2, 2);
+    uint16_t *w16 = to_f16(w, N * K);
+    CHECK(w16 != NULL);
+    mx_status st;
+    mx_ctx c = {.pool = pool, .k = k, .scratch = scratch};
+    CHECK(mx_ctx_pack_weights(&c, (size_t)1 << 30, 0, &st) == 0);
+    mx_linear(&c, y, x, (mx_wptr){w16, MX_F16}, mx_w_none(), M, N, K);
+    int found = 0, wrong = 0;
+    for (size_t i = 0; i < mx_wpack_slots(c.wpack); i++) {
+        mx_wpack_key key;
+        size_t bytes;
+        const uint32_t *p = (const uint32_t *)(const void *)mx_wpack_slot(c.wpack, i, &key, &bytes);
+        if (!p || key.data != w16) continue;
+        found++;
+        const mx_gemm_kernel *g = key.kernel;
+        int most = mx_gemm_kc(g), kc_max = (K + (K + most - 1) / most - 1) / ((K + most - 1) / most);
+        int nr = g->nr, panels = (N + nr - 1) / nr;
+        size_t at = 0;
+        for (int k0 = 0; k0 < K; k0 += kc_max) {
+            int kc = K - k0 < kc_max ? K - k0 : kc_max;
+            size_t words = mx_gemm_panel_words(g, kc);
+            for (int pn = 0; pn < panels; pn++)
+                for (size_t q = 0; q < words; q++)
+                    for (int r = 0; r < nr; r++)
+                        wrong += p[at + ((size_t)pn * words + q) * nr + r] !=
+                                 panel_word(g, w16, N, K, pn * nr + r, k0, kc, (int)q);
+            at += (size_t)panels * mx_gemm_panel_words(g, kc_max) * nr;
+        }
+        CHECK(bytes == at * sizeof *p); /* every K block takes the room of a whole one */
+    }
+    if (found != (k->isa != MX_ISA_SCALAR) || wrong) {
+        fprintf(stderr, "%s: linear weight panels: %d entries, %d words off the layout\n", mx_isa_name(k->isa), found,
+                wrong);
+        mx_test_failures++;
+    }
+    mx_wpack_destroy(c.wpack);
+    free(x), free(w), free(w16);
+}
+
 int main(void) {
     mx_status st;
     mx_pool *pool = mx_pool_create(2, &st);
@@ -181,6 +296,8 @@ int main(void) {
         for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) check_case(k, pool, &scratch, &cases[i], 100 + i);
         check_many_and_budget(k, pool, &scratch);
         if (mx_isa_precision(isa) == MX_PREC_BF16) check_two_levels(k, pool, &scratch);
+        check_threads_same_panels(k, &scratch);
+        check_panel_layout(k, pool, &scratch);
         printf("%s: packed-once weights give the per-call results\n", mx_isa_name(isa));
         tested++;
     }

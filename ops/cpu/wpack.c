@@ -19,6 +19,7 @@
 typedef struct {
     mx_wpack_key key;
     float *panels; /* NULL: an empty slot */
+    size_t bytes;  /* the panels' size, as asked of mx_wpack_add */
 } wpack_entry;
 
 #define WPACK_CHUNK ((size_t)256 << 20)
@@ -84,6 +85,20 @@ const float *mx_wpack_find(const mx_wpack *w, const mx_wpack_key *key) {
     return slot_of(w->slots, w->cap, key)->panels;
 }
 
+const float *mx_wpack_find_sized(const mx_wpack *w, const mx_wpack_key *key, size_t *bytes) {
+    const wpack_entry *e = slot_of(w->slots, w->cap, key);
+    *bytes = e->panels ? e->bytes : 0;
+    return e->panels;
+}
+
+size_t mx_wpack_slots(const mx_wpack *w) { return w ? w->cap : 0; }
+
+const float *mx_wpack_slot(const mx_wpack *w, size_t i, mx_wpack_key *key, size_t *bytes) {
+    const wpack_entry *e = &w->slots[i];
+    if (e->panels) *key = e->key, *bytes = e->bytes;
+    return e->panels;
+}
+
 static int grow(mx_wpack *w) {
     size_t cap = w->cap * 2;
     wpack_entry *slots = calloc(cap, sizeof *slots);
@@ -135,7 +150,7 @@ float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t p
     if (e->panels) return NULL; /* already there: the caller looks up first */
     float *p = take_panels(w, bytes);
     if (!p) return NULL;
-    *e = (wpack_entry){.key = *key, .panels = p};
+    *e = (wpack_entry){.key = *key, .panels = p, .bytes = bytes};
     w->used++;
     w->bytes += bytes;
     w->extra += extra;

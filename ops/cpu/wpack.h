@@ -44,6 +44,12 @@ void mx_wpack_fetch_source(const mx_wpack *w, const void *source, size_t source_
 /* Called once an entry is filled from source[0 .. source_bytes): hands the source's whole
  * pages back to the kernel when the weights are mapped from a file. */
 void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes);
+/* The entries, for tests that compare two caches: slot i (i < mx_wpack_slots) holds an entry when
+ * this returns its panels (NULL: an empty slot), its key then in *key and its size in *bytes. */
+size_t mx_wpack_slots(const mx_wpack *w);
+const float *mx_wpack_slot(const mx_wpack *w, size_t i, mx_wpack_key *key, size_t *bytes);
+/* The panels stored under key and their size in *bytes, or NULL. */
+const float *mx_wpack_find_sized(const mx_wpack *w, const mx_wpack_key *key, size_t *bytes);
 /* Bytes of panels held, and their excess over the weights they replace (for reports and tests). */
 size_t mx_wpack_bytes(const mx_wpack *w);
 size_t mx_wpack_extra_bytes(const mx_wpack *w);
