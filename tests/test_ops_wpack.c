@@ -180,14 +180,21 @@ static int same_entries(const mx_wpack *a, const mx_wpack *b) {
     return n;
 }
 
-/* The cases' weights packed by one thread and by a pool of three (fill_blocks splits a weight's
- * panels over the threads): the same entries, byte for byte. */
+/* Weights of many panels, so that every thread of a pool packs some (a few tasks are all done by
+ * the calling thread before the others wake). */
+static const shapes large[] = {
+    {.M = 4, .N = 1500, .K = 1300, .B = 1, .Cin = 256, .H = 6, .W = 6, .Cout = 300, .k = 3, .stride = 1, .pad = 1},
+    {.M = 2, .N = 2049, .K = 321, .B = 1, .Cin = 640, .H = 4, .W = 4, .Cout = 1281, .k = 1, .stride = 1, .pad = 0},
+};
+
+/* The weights of these shapes packed by one thread and by a pool of three (fill_blocks splits a
+ * weight's panels over the threads): the same entries, byte for byte. */
 static void check_threads_same_panels(const mx_kernels *k, mx_arena *scratch) {
     mx_status st;
     mx_pool *three = mx_pool_create(3, &st);
     CHECK(three != NULL);
-    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
-        const shapes *s = &cases[c];
+    for (size_t c = 0; c < sizeof large / sizeof large[0]; c++) {
+        const shapes *s = &large[c];
         size_t nx = (size_t)s->M * s->K, ncx = (size_t)s->B * s->Cin * s->H * s->W;
         nx = ncx > nx ? ncx : nx;
         size_t nlw = (size_t)s->N * s->K, ncw = (size_t)s->Cout * s->Cin * s->k * s->k;
