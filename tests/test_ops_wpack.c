@@ -5,10 +5,14 @@
  * per level; the cache grows past its first table; panels that would take more than their
  * weight beyond the budget are not kept (packed per call, the same results), panels of the
  * weight's own size are; packing split over several threads gives the panels one thread gives, byte
- * for byte; a linear weight's panels hold the layout of gemm.h, value by value. */
+ * for byte; a linear weight's panels hold the layout of gemm.h, value by value; a weight mapped from
+ * a file is dropped from the process once packed but stays in the page cache. */
+#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include "../ops/cpu/gemm.h"
 #include "../ops/cpu/wpack.h"
@@ -286,6 +290,64 @@ static void check_panel_layout(const mx_kernels *k, mx_pool *pool, mx_arena *scr
     free(x), free(w), free(w16);
 }
 
+/* Whether page i of p..p+pages·page is mapped in this process (/proc/self/pagemap: bit 63, present). */
+static int page_mapped(const char *p, size_t page) {
+    int fd = open("/proc/self/pagemap", O_RDONLY);
+    uint64_t e = 0;
+    off_t at = (off_t)((uintptr_t)p / page * sizeof e);
+    int ok = fd >= 0 && pread(fd, &e, sizeof e, at) == (ssize_t)sizeof e;
+    if (fd >= 0) close(fd);
+    return ok && (e >> 63) & 1;
+}
+
+/* fp16 weights mapped from a file (sources_mapped): once a linear has packed them, their pages are
+ * no longer mapped in the process (its RSS) but still in the page cache (mincore), for the next job;
+ * the results are the per-call ones. */
+static void check_source_release(const mx_kernels *k, mx_pool *pool, mx_arena *scratch) {
+    enum { M = 3, N = 256, K = 512 };
+    size_t page = (size_t)sysconf(_SC_PAGESIZE), bytes = (size_t)N * K * sizeof(uint16_t), pages = bytes / page;
+    char path[64];
+    snprintf(path, sizeof path, "/tmp/matex_test_wpack_%d.bin", (int)getpid());
+    float *w = malloc(N * K * sizeof *w), x[M * K], want[M * N], got[M * N];
+    CHECK(w != NULL);
+    mx_fill_random(w, N * K, 70, -1, 1);
+    mx_fill_random(x, M * K, 71, -1, 1);
+    uint16_t *w16 = to_f16(w, N * K);
+    FILE *f = fopen(path, "wb");
+    /* written back (fsync): clean pages, as a weight file's are, which the kernel could evict */
+    CHECK(w16 && f && fwrite(w16, 1, bytes, f) == bytes && fflush(f) == 0 && fsync(fileno(f)) == 0);
+    CHECK(fclose(f) == 0);
+    int fd = open(path, O_RDONLY);
+    const char *map = fd >= 0 ? mmap(NULL, bytes, PROT_READ, MAP_PRIVATE, fd, 0) : MAP_FAILED;
+    CHECK(map != MAP_FAILED);
+    mx_status st;
+    mx_ctx plain = {.pool = pool, .k = k, .scratch = scratch}, cached = plain;
+    CHECK(mx_ctx_pack_weights(&cached, (size_t)1 << 30, 1, &st) == 0);
+    mx_wptr wm = {map, MX_F16};
+    mx_linear(&plain, want, x, wm, mx_w_none(), M, N, K);
+    mx_linear(&cached, got, x, wm, mx_w_none(), M, N, K);
+    CHECK(same_bits(got, want, M * N));
+    unsigned char *in_cache = malloc(pages);
+    CHECK(in_cache && mincore((void *)map, bytes, in_cache) == 0);
+    size_t mapped = 0, cached_pages = 0;
+    for (size_t i = 0; i < pages; i++) {
+        mapped += page_mapped(map + i * page, page);
+        cached_pages += in_cache[i] & 1;
+    }
+    if (mapped != 0 || cached_pages != pages) {
+        fprintf(stderr, "%s: a packed weight's %zu pages: %zu still mapped, %zu in the page cache\n",
+                mx_isa_name(k->isa), pages, mapped, cached_pages);
+        mx_test_failures++;
+    }
+    mx_linear(&cached, got, x, wm, mx_w_none(), M, N, K); /* from the panels: the weight is not read */
+    CHECK(same_bits(got, want, M * N));
+    mx_wpack_destroy(cached.wpack);
+    munmap((void *)map, bytes);
+    close(fd);
+    unlink(path);
+    free(in_cache), free(w16), free(w);
+}
+
 int main(void) {
     mx_status st;
     mx_pool *pool = mx_pool_create(2, &st);
@@ -305,6 +367,7 @@ int main(void) {
         if (mx_isa_precision(isa) == MX_PREC_BF16) check_two_levels(k, pool, &scratch);
         check_threads_same_panels(k, &scratch);
         check_panel_layout(k, pool, &scratch);
+        if (isa != MX_ISA_SCALAR) check_source_release(k, pool, &scratch); /* the scalar level packs nothing */
         printf("%s: packed-once weights give the per-call results\n", mx_isa_name(isa));
         tested++;
     }
