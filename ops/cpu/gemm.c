@@ -69,53 +69,69 @@ static void pack_rows_pairs_rowmajor(const mx_gemm_kernel *g, uint32_t *dst, mx_
     }
 }
 
-/* bf16 pairs, k-major: each row converted to kc/2 words of pairs, MX_GEMM_WIDEN_ROWS rows at a time,
- * then transposed as 32-bit words into dst[kp][width]. */
-static void pack_rows_pairs(const mx_gemm_kernel *g, uint32_t *dst, mx_wptr src, size_t ld, int first, int valid,
-                            int total, int width, int k0, int kc, int lo) {
-    enum { WORDS = MX_GEMM_KC_MAX / 2 };
-    uint32_t tmp[MX_GEMM_WIDEN_ROWS * WORDS];
-    int kp = (kc + 1) / 2;
-    for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
-        int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
-        mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(MX_GEMM_WIDEN_ROWS, total - r0 - n), k0, kc);
-        for (int i = 0; i < n; i++) row_to_pairs(g, tmp + (size_t)i * WORDS, src, ld, first + r0 + i, k0, kc, lo);
+/* k per chunk of the k-major packers: a chunk of a panel (width rows × PACK_CHUNK k, 8 KiB of fp32
+ * at NR = 32) is gathered in L1 and then written whole, one contiguous run of the panel. Packing
+ * MX_GEMM_WIDEN_ROWS rows of the whole K block at a time instead wrote a quarter of each panel row
+ * per pass (32-byte pieces of every 128-byte row), each pass reading back from memory the lines the
+ * previous one had left half written. */
+#define PACK_CHUNK 64
+
+/* Rows first..first+valid-1 of src, columns k .. k+n (n <= PACK_CHUNK), as rows *ld apart from
+ * the address returned: fp32 weights in place, 16-bit ones widened into tmp[r][PACK_CHUNK], or with
+ * pairs (n+1)/2 words of bf16 pairs there (of the low parts with lo). */
+static const float *gather_chunk(const mx_gemm_kernel *g, float *tmp, mx_wptr src, size_t ld, int first, int valid,
+                                 int k, int n, int pairs, int lo, size_t *tmp_ld) {
+    size_t base = (size_t)first * ld + (size_t)k;
+    if (!pairs && src.dtype == MX_F32) {
+        *tmp_ld = ld;
+        return (const float *)src.data + base;
+    }
+    for (int r = 0; r < valid; r++) {
+        float *t = tmp + (size_t)r * PACK_CHUNK;
+        if (pairs)
+            row_to_pairs(g, (uint32_t *)(void *)t, src, ld, first + r, k, n, lo);
+        else
+            g->widen(t, src, base + (size_t)r * ld, (size_t)n);
+    }
+    *tmp_ld = PACK_CHUNK;
+    return tmp;
+}
+
+/* k-major panels dst[words][width] of `valid` rows of src (of the `total` rows from `first` on),
+ * chunk by chunk (PACK_CHUNK): fp32 values, or bf16 pairs (to_pairs kernels; of the low parts with
+ * lo); the chunk's source lines of the next chunk (at the last one, the next panel's first) are
+ * fetched meanwhile. */
+static void pack_rows_kmajor(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int valid,
+                             int total, int width, int k0, int kc, int lo) {
+    float tmp[MX_GEMM_PANEL_MAX * PACK_CHUNK];
+    int pairs = g->to_pairs != NULL, per_word = pairs ? 2 : 1;
+    uint32_t *dst = dstv;
+    for (int k = 0; k < kc; k += PACK_CHUNK) {
+        int n = min_int(PACK_CHUNK, kc - k), next = min_int(PACK_CHUNK, kc - k - n);
+        if (next > 0)
+            mx_gemm_prefetch_rows(src, ld, first, valid, k0 + k + n, next);
+        else
+            mx_gemm_prefetch_rows(src, ld, first + valid, min_int(width, total - valid), k0, min_int(PACK_CHUNK, kc));
+        size_t rows_ld;
+        const float *rows = gather_chunk(g, tmp, src, ld, first, valid, k0 + k, n, pairs, lo, &rows_ld);
         /* a bit-exact copy: the transpose only shuffles 32-bit lanes */
-        g->transpose((float *)(void *)dst + r0, (size_t)width, (const float *)(const void *)tmp, WORDS, n, kp);
+        g->transpose((float *)(void *)(dst + (size_t)(k / per_word) * width), (size_t)width, rows, rows_ld, valid,
+                     (n + per_word - 1) / per_word);
     }
     mx_gemm_zero_panel_tail(g, dst, width, valid, kc);
 }
 
-/* Transposes `valid` rows of src (element (r, k) at r*ld + k) into dst[k][width]; 16-bit
- * weights are widened MX_GEMM_WIDEN_ROWS rows at a time first, the next rows (of the `total` rows the
- * matrix has from `first` on: into the next panel) fetched meanwhile. bf16 kernels:
- * pack_rows_pairs, or pack_rows_pairs_rowmajor for row_major (the A panels of a_rows kernels),
- * of the rows' low parts with lo (bf16 kernels only). */
+/* Transposes `valid` rows of src (element (r, k) at r*ld + k) into the k-major panel dst[k][width]
+ * (pack_rows_kmajor; bf16 kernels: pairs), or for row_major the row-major pairs of
+ * pack_rows_pairs_rowmajor (the A panels of a_rows kernels); of the rows' low parts with lo (bf16
+ * kernels only). */
 static void pack_rows(const mx_gemm_kernel *g, void *dstv, mx_wptr src, size_t ld, int first, int total,
                       int width, int k0, int kc, int row_major, int lo) {
     int valid = min_int(width, total);
-    if (g->to_pairs) {
-        if (row_major)
-            pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc, lo);
-        else
-            pack_rows_pairs(g, dstv, src, ld, first, valid, total, width, k0, kc, lo);
-        return;
-    }
-    float *dst = dstv;
-    size_t base = (size_t)first * ld + (size_t)k0;
-    if (src.dtype == MX_F32)
-        g->transpose(dst, (size_t)width, (const float *)src.data + base, ld, valid, kc);
-    else {
-        float tmp[MX_GEMM_WIDEN_ROWS * MX_GEMM_KC_MAX];
-        for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
-            int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
-            mx_gemm_prefetch_rows(src, ld, first + r0 + n, min_int(MX_GEMM_WIDEN_ROWS, total - r0 - n), k0, kc);
-            for (int i = 0; i < n; i++)
-                g->widen(tmp + (size_t)i * MX_GEMM_KC_MAX, src, base + (size_t)(r0 + i) * ld, (size_t)kc);
-            g->transpose(dst + r0, (size_t)width, tmp, MX_GEMM_KC_MAX, n, kc);
-        }
-    }
-    mx_gemm_zero_panel_tail(g, dst, width, valid, kc);
+    if (g->to_pairs && row_major)
+        pack_rows_pairs_rowmajor(g, dstv, src, ld, first, valid, width, k0, kc, lo);
+    else
+        pack_rows_kmajor(g, dstv, src, ld, first, valid, total, width, k0, kc, lo);
 }
 
 void mx_gemm_pack_a_rows(const mx_gemm_problem *p, const mx_gemm_kernel *g, void *dst, int first, int rows,

@@ -5,9 +5,9 @@
  * thread that calls the ops. Entries are never freed before the cache: the weights must stay
  * unchanged at their addresses while the context lives.
  * Memory: the panels replace their weight (with sources_mapped, the weights being pages of a
- * read-only file mapping, a weight's pages are handed back to the kernel once packed,
- * MADV_PAGEOUT; it reads them back from the file if ever needed), so what counts is what
- * widening adds: bf16 pairs of fp16 weights add nothing, fp32 panels of fp16 weights one more
+ * read-only file mapping, a weight's pages are dropped from the process once packed,
+ * MADV_DONTNEED: they stay in the page cache for the next job, read back if ever needed), so
+ * what counts is what widening adds: bf16 pairs of fp16 weights add nothing, fp32 panels of fp16 weights one more
  * weight (the panels' edge padding, ~1 %, is not counted). That excess, summed over the entries,
  * stays within `extra_budget` bytes; a weight past it is packed per call as without a cache. */
 #ifndef MX_OPS_CPU_WPACK_H
@@ -41,9 +41,15 @@ float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t p
 /* Called before an entry is filled from source[0 .. source_bytes): starts reading the source's
  * pages from the file in one go when the weights are mapped from a file. */
 void mx_wpack_fetch_source(const mx_wpack *w, const void *source, size_t source_bytes);
-/* Called once an entry is filled from source[0 .. source_bytes): hands the source's whole
- * pages back to the kernel when the weights are mapped from a file. */
+/* Called once an entry is filled from source[0 .. source_bytes): drops the source's whole pages
+ * from the process (not from the page cache) when the weights are mapped from a file. */
 void mx_wpack_release_source(const mx_wpack *w, const void *source, size_t source_bytes);
+/* The entries, for tests that compare two caches: slot i (i < mx_wpack_slots) holds an entry when
+ * this returns its panels (NULL: an empty slot), its key then in *key and its size in *bytes. */
+size_t mx_wpack_slots(const mx_wpack *w);
+const float *mx_wpack_slot(const mx_wpack *w, size_t i, mx_wpack_key *key, size_t *bytes);
+/* The panels stored under key and their size in *bytes, or NULL. */
+const float *mx_wpack_find_sized(const mx_wpack *w, const mx_wpack_key *key, size_t *bytes);
 /* Bytes of panels held, and their excess over the weights they replace (for reports and tests). */
 size_t mx_wpack_bytes(const mx_wpack *w);
 size_t mx_wpack_extra_bytes(const mx_wpack *w);

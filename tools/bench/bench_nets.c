@@ -8,7 +8,9 @@
  * load on the machine), with the share of the measured peak of these cores (bench_sd15.h).
  * Each context keeps the weights packed once (mx_ctx_pack_weights), as a texture job does, and
  * each network's first call there (it packs them and touches the arena's pages) runs untimed
- * before the timed one: the timed call is one of the many calls of a job. Then, per network and precision, where the time went (ops/profile.h), as shares of the CPU
+ * before the timed one: the timed call is one of the many calls of a job; the first call's extra
+ * time over it and the panels it packed are reported (the packing of a job's first calls).
+ * Then, per network and precision, where the time went (ops/profile.h), as shares of the CPU
  * time of the call (what survives other people's load on a shared machine): each op, the GEMM's
  * parts (micro-kernel with the bias it adds, packing of A and B — B is the input band of a conv —,
  * the rest: task setup, waiting at the end of a phase), the micro-kernel's own GFLOP/s, the cores'
@@ -63,6 +65,7 @@ static int load_net(const mx_weightfile *wf, const char *kind, const char *prefi
 typedef struct net_time {
     const char *what;
     double first[2]; /* wall seconds of the untimed first call (packs the weights, touches the arena) */
+    size_t packed[2]; /* bytes of panels its first call added to the context's cache */
     double secs[2], cpu[2], flops;
     double waited[2]; /* seconds its threads waited for a CPU while runnable (runqueue_wait_seconds) */
     long faults[2];
@@ -132,7 +135,17 @@ static void set_roofline(net_time *const *nets, int n, const double peak[2], dou
         }
 }
 
-/* The first calls' wall times and the packed weights they left in each context. */
+/* Starts (or, with stop, ends) timing network t's untimed first call on context c of precision p:
+ * its wall time and the bytes of panels it packs into the context's cache. */
+static void clock_first_call(net_time *t, const mx_ctx *c, int p, int stop) {
+    t->first[p] = stop ? mx_now() - t->first[p] : mx_now();
+    t->packed[p] = stop ? mx_wpack_bytes(c->wpack) - t->packed[p] : mx_wpack_bytes(c->wpack);
+}
+
+/* The first calls' wall times and the packed weights they left in each context; then per network
+ * and precision what the first call costs beyond a later one (packing its weights — reading them
+ * from the file, widening, writing the panels into fresh memory — and touching the arena) and the
+ * panels it packed. */
 static void report_first_calls(const net_time *const nets[3], const mx_ctx *c, int nprec) {
     printf("first calls, untimed (they pack the weights and touch the arena), wall s fp32%s:", nprec == 2 ? "/bf16" : "");
     for (int i = 0; i < 3; i++)
@@ -140,6 +153,11 @@ static void report_first_calls(const net_time *const nets[3], const mx_ctx *c, i
     printf("; weights packed: %.0f MB fp32", mx_wpack_bytes(c[0].wpack) / 1e6);
     if (nprec == 2) printf(", %.0f MB bf16", mx_wpack_bytes(c[1].wpack) / 1e6);
     printf("\n");
+    for (int i = 0; i < 3; i++)
+        for (int p = 0; p < nprec && nets[i]; p++)
+            printf("  packing, %-32s %s: first call %.2f s - later call %.2f s = %.2f s for %.0f MB of panels\n",
+                   nets[i]->what, p ? "bf16" : "fp32", nets[i]->first[p], nets[i]->secs[p],
+                   nets[i]->first[p] - nets[i]->secs[p], nets[i]->packed[p] / 1e6);
 }
 
 /* ---- where the time went ---- */
@@ -313,9 +331,9 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         mx_controlnet_input ci = {sample, ts, ehs, cond, B, H, W, T, 0.8f, 0};
         mx_controlnet_input ci_cfg = {sample_cfg, ts_cfg, ehs, cond, B, H, W, T, 0.8f, 1};
         if (!cfg) ci_cfg = ci;
-        nt_cn.first[p] = mx_now();
+        clock_first_call(&nt_cn, &c[p], p, 0);
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
-        nt_cn.first[p] = mx_now() - nt_cn.first[p];
+        clock_first_call(&nt_cn, &c[p], p, 1);
         clock_net(&nt_cn, &c[p], p, 0, o->profile);
         if (mx_controlnet_forward(&c[p], cn[0], &ci, res, res[nres], 0, &a, st)) return -1;
         clock_net(&nt_cn, &c[p], p, 1, o->profile);
@@ -332,9 +350,9 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
                         .down_residuals = o->skip_cn ? NULL : (const float *const *)res,
                         .mid_residual = o->skip_cn ? NULL : res[nres]};
     for (int p = 0; p < nprec && !o->skip_unet; p++) {
-        nt_unet.first[p] = mx_now();
+        clock_first_call(&nt_unet, &c[p], p, 0);
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
-        nt_unet.first[p] = mx_now() - nt_unet.first[p];
+        clock_first_call(&nt_unet, &c[p], p, 1);
         clock_net(&nt_unet, &c[p], p, 0, o->profile);
         if (mx_unet_forward(&c[p], u, &ui, out, &a, st)) return -1;
         clock_net(&nt_unet, &c[p], p, 1, o->profile);
@@ -346,9 +364,9 @@ static int run_benchmarks(const bench_opts *o, mx_status *st) {
         clock_net(&nt_unet_cfg, &c[p], p, 1, o->profile);
     }
     for (int p = 0; p < nprec && !o->skip_vae; p++) {
-        nt_vae.first[p] = mx_now();
+        clock_first_call(&nt_vae, &c[p], p, 0);
         if (mx_vae_decode(&c[p], v, sample, 1, H, W, img, &a, st)) return -1;
-        nt_vae.first[p] = mx_now() - nt_vae.first[p];
+        clock_first_call(&nt_vae, &c[p], p, 1);
         clock_net(&nt_vae, &c[p], p, 0, o->profile);
         if (mx_vae_decode(&c[p], v, sample, 1, H, W, img, &a, st)) return -1;
         clock_net(&nt_vae, &c[p], p, 1, o->profile);
