@@ -351,7 +351,7 @@ ARM64_CC    ?= aarch64-linux-gnu-gcc
 ARM64_BUILD ?= build-arm64
 ARM64_TESTS  = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision test_nn_clip test_nn_clip_vision \
                test_nn_transformer test_nn_unet test_nn_controlnet test_nn_vae test_nn_taesd test_nn_pipeline \
-               test_texture_threads_core
+               test_texture_threads_core test_ops_wpack
 # also run on the CPU model without FEAT_BF16 (tests/arm64.sh)
 ARM64_NOBF16_TESTS = test_runtime_basics test_ops_kernels test_ops_backend test_nn_precision
 .PHONY: test-arm64 arm64-build
