@@ -18,6 +18,7 @@
 #include <sys/mman.h>
 
 #include "ops.h"
+#include "record.h"
 
 #ifdef MX_WITH_CUDA
 int mx_cuda_backend_create(mx_backend **out, mx_status *st); /* ops/cuda/cuda_backend.cu */
@@ -133,7 +134,28 @@ typedef struct strict_state {
     const mx_kernels *inner[2];   /* the CPU kernels of the chosen level and of its fp32 level */
     mx_kernels checked[2];        /* the same with the weight check before every weight op */
     mx_status fault;              /* the first refused op (code 0: none), sticky */
+    int region;                   /* inside a recorded region (ops/record.h): no alloc, release, copy */
+    mx_status region_fault;       /* the first call the region refused (code 0: none) */
 } strict_state;
+
+/* 1 (and the region's fault kept) when `call` is made inside a recorded region: CUDA cannot
+ * capture an allocation, a free or a host copy into a graph (each waits or changes memory the
+ * graph's replays would still use), so cpu-strict refuses them where the GPU would fail. */
+static int strict_in_region(strict_state *s, const char *call) {
+    if (!s->region) return 0;
+    if (!s->region_fault.code)
+        mx_fail(&s->region_fault, MX_EINTERNAL,
+                "cpu-strict: %s inside a recorded region (ops/record.h): a CUDA graph cannot capture it; do it "
+                "before the region",
+                call);
+    return 1;
+}
+
+/* The refusal of strict_in_region in st (when there is one). */
+static int strict_refused(strict_state *s, mx_status *st) {
+    if (st) *st = s->region_fault;
+    return -1;
+}
 
 static void strict_protect(strict_state *s, int prot) {
     for (size_t i = 0; i < s->n; i++)
@@ -175,6 +197,7 @@ static void *strict_map_new(mx_backend *be, size_t bytes, int prot, int weight, 
 
 static void *strict_alloc(mx_backend *be, size_t bytes, mx_status *st) {
     strict_state *s = be->impl;
+    if (strict_in_region(s, "a device allocation (mx_dev_alloc, an arena)")) return strict_refused(s, st), NULL;
     return strict_map_new(be, bytes, s->depth > 0 ? PROT_READ | PROT_WRITE : PROT_NONE, 0, st);
 }
 
@@ -189,6 +212,7 @@ static const strict_map *strict_file_of(const strict_state *s, const void *src, 
 }
 
 static void *strict_weight(mx_backend *be, const void *src, size_t bytes, mx_status *st) {
+    if (strict_in_region(be->impl, "a weight upload (mx_dev_weight)")) return strict_refused(be->impl, st), NULL;
     const strict_map *f = strict_file_of(be->impl, src, bytes);
     if (f) return (unsigned char *)f->p + ((uintptr_t)src - (uintptr_t)f->file_map);
     void *p = strict_map_new(be, bytes, PROT_READ | PROT_WRITE, 1, st);
@@ -200,6 +224,7 @@ static void *strict_weight(mx_backend *be, const void *src, size_t bytes, mx_sta
 
 static void strict_release(mx_backend *be, void *p) {
     strict_state *s = be->impl;
+    strict_in_region(s, "a device free (mx_dev_free, an arena's end)"); /* kept for the region; freed all the same */
     for (size_t i = 0; i < s->n; i++)
         if (s->maps[i].p == p) {
             munmap(p, s->maps[i].bytes);
@@ -225,6 +250,7 @@ enum { STRICT_STREAM_BUFS = 3, STRICT_STREAM_CHUNK = 1 << 20 };
 static int strict_weight_file(mx_backend *be, int fd, const void *map, size_t len, const char *path,
                               const mx_stream_observer *obs, mx_status *st) {
     strict_state *s = be->impl;
+    if (strict_in_region(s, "a weight file upload (mx_dev_weight_file)")) return strict_refused(s, st);
     if (strict_file_of(s, map, len)) return 0;
     unsigned char *p = strict_map_new(be, len, PROT_READ | PROT_WRITE, 1, st);
     unsigned char *ring = malloc((size_t)STRICT_STREAM_BUFS * STRICT_STREAM_CHUNK);
@@ -251,6 +277,7 @@ static int strict_weight_file(mx_backend *be, int fd, const void *map, size_t le
 
 static void strict_weight_file_drop(mx_backend *be, const void *map) {
     strict_state *s = be->impl;
+    strict_in_region(s, "a weight file's release (mx_dev_weight_file_drop)");
     for (size_t i = 0; i < s->n; i++)
         if (s->maps[i].file_map == map) {
             strict_release(be, s->maps[i].p);
@@ -265,14 +292,33 @@ static int strict_copy(mx_backend *be, void *dst, const void *src, size_t bytes,
     return 0;
 }
 
+static int strict_to_device(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st) {
+    if (strict_in_region(be->impl, "a host-to-device copy (mx_upload)")) return strict_refused(be->impl, st);
+    return strict_copy(be, dst, src, bytes, st);
+}
+
 /* A download reports the first refused op, as CUDA reports a fault at the next wait. */
 static int strict_to_host(mx_backend *be, void *dst, const void *src, size_t bytes, mx_status *st) {
     strict_state *s = be->impl;
+    if (strict_in_region(s, "a device-to-host copy (mx_download: a wait for the device)")) return strict_refused(s, st);
     if (s->fault.code) {
         if (st) *st = s->fault;
         return -1;
     }
     return strict_copy(be, dst, src, bytes, st);
+}
+
+/* A recorded region's later calls (ops/record.h): fn runs as it is, every alloc, release and host
+ * copy inside it refused (strict_in_region); the first refusal is the region's error. */
+static int strict_recorded(mx_backend *be, mx_record *rec, int (*fn)(void *user, mx_status *st), void *user,
+                           mx_status *st) {
+    strict_state *s = be->impl;
+    (void)rec;
+    memset(&s->region_fault, 0, sizeof s->region_fault);
+    s->region++;
+    int rc = fn(user, st);
+    s->region--;
+    return s->region_fault.code ? strict_refused(s, st) : rc;
 }
 
 static void strict_destroy(mx_backend *be) {
@@ -381,8 +427,9 @@ static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
     be->weight_file = strict_weight_file;
     be->weight_file_drop = strict_weight_file_drop;
     be->release = strict_release;
-    be->to_device = strict_copy;
+    be->to_device = strict_to_device;
     be->to_host = strict_to_host;
+    be->recorded = strict_recorded;
     be->enter = strict_enter;
     be->leave = strict_leave;
     be->destroy = strict_destroy;

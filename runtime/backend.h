@@ -69,6 +69,7 @@ const char *mx_precision_name(mx_precision p);
 int mx_precision_parse(const char *s, mx_precision *p);
 
 struct mx_kernels;
+struct mx_record;          /* ops/record.h */
 struct mx_stream_observer; /* file_stream.h */
 
 typedef struct mx_backend mx_backend;
@@ -97,6 +98,14 @@ struct mx_backend {
     int (*weight_file)(mx_backend *be, int fd, const void *map, size_t len, const char *path,
                        const struct mx_stream_observer *obs, mx_status *st);
     void (*weight_file_drop)(mx_backend *be, const void *map);
+    /* Optional (NULL: fn just runs): the second and later calls of a recorded region (ops/record.h),
+     * fn(user) queueing the same work with the same arguments each time. CUDA with
+     * MATEX_CUDA_GRAPH=1 captures the second call as a graph and replays it after; cpu-strict runs
+     * fn and fails any alloc, release or host copy made inside it. record_drop frees what
+     * recorded kept in rec (rec->graph). */
+    int (*recorded)(mx_backend *be, struct mx_record *rec, int (*fn)(void *user, mx_status *st), void *user,
+                    mx_status *st);
+    void (*record_drop)(mx_backend *be, struct mx_record *rec);
     /* Around every kernel call (NULL: nothing to do); calls nest. */
     void (*enter)(mx_backend *be);
     void (*leave)(mx_backend *be);

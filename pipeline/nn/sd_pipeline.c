@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../ops/record.h"
 #include "ae_pass.h"
 
 /* Sizes of one loop. The networks run on one latent at a time, B = its batch (2 with CFG, its
@@ -35,6 +36,9 @@ typedef struct sd_work {
      * 1 + k ControlNet k's; recorded at the first step, replayed at the others. */
     mx_step_cache *caches;
     float *cache_mem;
+    /* The networks' part of a step as one recorded region (ops/record.h): from the second step on
+     * the same work on the same buffers (the caches replayed), the timestep in wk->timesteps. */
+    mx_record record;
 } sd_work;
 
 static size_t control_numel(const mx_controlnet *net, int h, int w) {
@@ -121,6 +125,7 @@ static int loop_arena_bytes(const mx_sd_request *rq, const sd_dims *d, size_t *b
 }
 
 static void work_free(const mx_ctx *c, sd_work *wk) {
+    mx_record_free(c, &wk->record); /* before the memory its replays use */
     mx_dev_free(c, wk->block);
     mx_dev_free(c, wk->cache_mem);
     free(wk->caches);
@@ -243,13 +248,12 @@ static void cfg_combine(const mx_ctx *c, float *out, float *eps, float guidance,
     mx_axpy(c, out, cond, guidance, n);
 }
 
-/* Latent i's guided prediction into its slot of wk->guided: ControlNets and UNet on its batch,
- * then CFG. */
-static int predict_one(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int i, int64_t t,
+/* Latent i's guided prediction into its slot of wk->guided: ControlNets and UNet on its batch
+ * (the step's timestep already in wk->timesteps), then CFG. */
+static int predict_one(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int i,
                        mx_status *st) {
     size_t per = d->lat / (size_t)d->n;
     for (int r = 0; r < d->B; r++) mx_copy(c, wk->x_in + (size_t)r * per, wk->lat + (size_t)i * per, per);
-    mx_fill(c, wk->timesteps, (float)t, (size_t)d->B);
     int with_res = run_controlnets(rq, c, d, wk, i, st);
     if (with_res < 0) return -1;
     mx_unet_input in = unet_call(rq, d, wk, i);
@@ -265,11 +269,29 @@ static int predict_one(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *
     return 0;
 }
 
-/* One step: the networks latent by latent, then the scheduler update of the latents on the device. */
+/* The networks' part of one step, every latent: the recorded region of denoise_step. */
+typedef struct step_region {
+    const mx_sd_request *rq;
+    const mx_ctx *c;
+    const sd_dims *d;
+    sd_work *wk;
+} step_region;
+
+static int predict_all(void *user, mx_status *st) {
+    step_region *r = user;
+    for (int i = 0; i < r->d->n; i++)
+        if (predict_one(r->rq, r->c, r->d, r->wk, i, st)) return -1;
+    return 0;
+}
+
+/* One step: the timestep (every latent's) into its device buffer, the networks latent by latent as
+ * one recorded region, then the scheduler update of the latents on the device (outside the region:
+ * its coefficients are host scalars that change step by step). */
 static int denoise_step(const mx_sd_request *rq, const mx_ctx *c, const sd_dims *d, sd_work *wk, int64_t t,
                         mx_status *st) {
-    for (int i = 0; i < d->n; i++)
-        if (predict_one(rq, c, d, wk, i, t, st)) return -1;
+    mx_fill(c, wk->timesteps, (float)t, (size_t)d->B);
+    step_region r = {rq, c, d, wk};
+    if (mx_ctx_recorded(c, &wk->record, predict_all, &r, st)) return -1;
     return mx_sched_step(rq->sched, wk->guided, wk->lat, st);
 }
 
