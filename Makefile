@@ -436,7 +436,7 @@ CUDA_SRC    = $(wildcard ops/cuda/*.cu)
 LIB_CUDA    = $(BUILD)/libmx_cuda.a
 CUDA_TEST   = $(BUILD)/tests/cuda/test_cuda_ops
 CUDA_LIBS   = -L$(CUDA_HOME)/lib64 -Xlinker -rpath=$(CUDA_HOME)/lib64 -lcublasLt -lcudart_static -ldl -lrt -lstdc++
-CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 \
+CUDA_NN_TESTS = test_nn_unet test_nn_controlnet test_nn_vae test_nn_clip test_nn_pipeline test_nn_sd15 test_nn_record \
                 test_nn_taesd test_nn_vae_tiled test_nn_pipeline_fast test_nn_clip_vision
 
 $(LIB_CUDA): $(patsubst %.cu,$(BUILD)/%.o,$(CUDA_SRC)) $(BUILD)/ops/cuda/cudnn_plan.o

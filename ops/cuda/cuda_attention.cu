@@ -107,13 +107,31 @@ template <int QPW, int DPL> __global__ void flash_attention_kernel(attn_args a) 
     }
 }
 
+/* Dynamic shared memory of a block of the fp32 kernel at head size D. */
+template <int QPW> static size_t attn_smem(int D) {
+    const int bq = QPW * ATTN_WARPS;
+    return sizeof(float) * ((size_t)bq * D + (size_t)ATTN_BK * (D + 1) + (size_t)ATTN_BK * D);
+}
+
+/* Lets a variant's blocks take the shared memory of its largest head size (32·DPL). Once per
+ * context, never per call: a replayed CUDA graph runs no host code (docs/cuda-notes.md §11). */
+template <int QPW, int DPL> static int attn_allow_smem(mx_status *st) {
+    return mx_cuda_ok(cudaFuncSetAttribute(flash_attention_kernel<QPW, DPL>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                           (int)attn_smem<QPW>(32 * DPL)),
+                      "cuda attention: shared memory size", st);
+}
+
+int mx_cuda_attention_open(mx_status *st) {
+    return attn_allow_smem<4, 1>(st) || attn_allow_smem<4, 2>(st) || attn_allow_smem<4, 3>(st) ||
+                   attn_allow_smem<4, 4>(st) || attn_allow_smem<4, 5>(st) || attn_allow_smem<4, 8>(st) ||
+                   attn_allow_smem<2, 16>(st)
+               ? -1
+               : 0;
+}
+
 template <int QPW, int DPL> static int attn_launch(mx_cuda_ctx *c, const attn_args &a, int B, mx_status *st) {
     const int bq = QPW * ATTN_WARPS;
-    size_t smem = sizeof(float) * ((size_t)bq * a.D + (size_t)ATTN_BK * (a.D + 1) + (size_t)ATTN_BK * a.D);
-    if (mx_cuda_ok(cudaFuncSetAttribute(flash_attention_kernel<QPW, DPL>,
-                                        cudaFuncAttributeMaxDynamicSharedMemorySize, (int)smem),
-                   "cuda attention: shared memory size", st))
-        return -1;
+    size_t smem = attn_smem<QPW>(a.D);
     dim3 grid((unsigned)((a.Tq + bq - 1) / bq), (unsigned)(B * a.H));
     flash_attention_kernel<QPW, DPL><<<grid, 32 * ATTN_WARPS, smem, c->stream>>>(a);
     return mx_cuda_launched("cuda attention", st);

@@ -14,6 +14,7 @@
 extern "C" {
 #include "../../runtime/file_stream.h" /* C headers without their own extern "C" */
 #include "../../runtime/log.h"         /* mx_now */
+#include "../record.h"                 /* mx_record */
 }
 
 #define CUDA_SCRATCH_BYTES ((size_t)64 << 20)
@@ -36,6 +37,7 @@ typedef struct cuda_backend {
     mx_status err; /* the first failure of a queued op */
     int failed;
     int sync_each_op;    /* MATEX_CUDA_SYNC=1: wait after every op (slow; names the op that faults) */
+    int graphs;          /* MATEX_CUDA_GRAPH=1 (and not SYNC): recorded regions replayed as CUDA graphs */
     const char *last_op; /* the op queued last (an op_list.h name) */
     double alloc_s;      /* time in device allocations (weights, arenas) and their count */
     unsigned long long allocs;
@@ -80,6 +82,7 @@ void mx_cuda_fill_kernels(mx_kernels *k) {
 static void *cuda_alloc(mx_backend *be, size_t bytes, mx_status *st) {
     cuda_backend *b = (cuda_backend *)be->impl;
     void *p = NULL;
+    if (mx_cuda_not_capturing(b->cc, "cuda device memory: an allocation", st)) return NULL;
     double t0 = mx_now();
     int rc = mx_cuda_alloc(&p, bytes, "cuda device memory", st);
     b->alloc_s += mx_now() - t0;
@@ -212,26 +215,72 @@ unsigned long long mx_cuda_half_products(mx_backend *be, int reset) {
     return n;
 }
 
+/* What queue(arg) queues, captured into *g (cuda_graph.cu); an op that failed while captured makes
+ * the capture fail with its error, and leaves the backend usable (nothing of it was queued). */
+static int capture(cuda_backend *b, int (*queue)(void *arg, mx_status *st), void *arg, cudaGraph_t *g, mx_status *st) {
+    int rc = mx_cuda_graph_capture(b->cc, queue, arg, g, st);
+    if (b->failed) {
+        *st = b->err;
+        b->failed = 0;
+        if (*g) cudaGraphDestroy(*g);
+        *g = NULL;
+        rc = -1;
+    }
+    return rc;
+}
+
 int mx_cuda_backend_capture_count(mx_backend *be, int (*queue)(void *arg, mx_status *st), void *arg,
                                   size_t *launches, mx_status *st) {
     cuda_backend *b = (cuda_backend *)be->impl;
-    *launches = 0;
-    if (report_failure(b, st) || wait_queued(b, st)) return -1;
-    if (mx_cuda_ok(cudaStreamBeginCapture(b->cc->stream, cudaStreamCaptureModeRelaxed), "cuda capture: begin", st))
-        return -1;
-    int rc = queue(arg, st);
     cudaGraph_t g = NULL;
-    cudaError_t e = cudaStreamEndCapture(b->cc->stream, &g);
-    if (b->failed) { /* an op failed while captured: its error, and the backend usable again */
-        *st = b->err;
-        b->failed = 0;
-        rc = -1;
-    }
-    if (rc == 0 && mx_cuda_ok(e, "cuda capture: the work queued cannot be one graph", st)) rc = -1;
-    if (rc == 0 && mx_cuda_ok(cudaGraphGetNodes(g, NULL, launches), "cuda capture: graph nodes", st)) rc = -1;
-    if (g) cudaGraphDestroy(g);
-    (void)cudaGetLastError(); /* a capture error is not a later op's */
+    *launches = 0;
+    if (report_failure(b, st) || wait_queued(b, st) || capture(b, queue, arg, &g, st)) return -1;
+    int rc = mx_cuda_ok(cudaGraphGetNodes(g, NULL, launches), "cuda capture: graph nodes", st);
+    cudaGraphDestroy(g);
     return rc;
+}
+
+/* The replayable form of a region's second call: captured, instantiated (its node count said once),
+ * or NULL with the reason in why. */
+static cudaGraphExec_t region_graph(cuda_backend *b, int (*fn)(void *user, mx_status *st), void *user,
+                                    mx_status *why) {
+    cudaGraph_t g = NULL;
+    cudaGraphExec_t exec = NULL;
+    size_t nodes = 0;
+    if (capture(b, fn, user, &g, why)) return NULL;
+    int rc = mx_cuda_graph_instantiate(g, &exec, &nodes, why);
+    cudaGraphDestroy(g);
+    if (rc) return NULL;
+    mx_info("cuda: a recorded region (e.g. a denoising step's networks) captured as one CUDA graph of %zu nodes "
+            "(kernels, copies, memsets), replayed from now on",
+            nodes);
+    return exec;
+}
+
+/* A recorded region's later calls (ops/record.h) under MATEX_CUDA_GRAPH=1: the second is captured
+ * and launched, later ones launch the same graph. A region that cannot be captured (one line says
+ * why) runs op by op from then on: never a half-captured stream, never a wrong replay. */
+static int cuda_recorded(mx_backend *be, mx_record *rec, int (*fn)(void *user, mx_status *st), void *user,
+                         mx_status *st) {
+    cuda_backend *b = (cuda_backend *)be->impl;
+    if (!b->graphs || rec->direct || b->failed) return fn(user, st); /* an earlier op's error: reported as ever */
+    if (!rec->graph) {
+        mx_status why = {};
+        rec->graph = region_graph(b, fn, user, &why);
+        if (!rec->graph) {
+            mx_info("cuda: CUDA graph not used, the region runs op by op: %s", why.msg);
+            rec->direct = 1;
+            return fn(user, st);
+        }
+    }
+    b->last_op = "a CUDA graph's replay (MATEX_CUDA_GRAPH=0 names the op)";
+    return mx_cuda_graph_launch(b->cc, (cudaGraphExec_t)rec->graph, st);
+}
+
+static void cuda_record_drop(mx_backend *be, mx_record *rec) {
+    (void)be;
+    mx_cuda_graph_free((cudaGraphExec_t)rec->graph);
+    rec->graph = NULL;
 }
 
 void mx_cuda_backend_upload_stats(mx_backend *be, mx_cuda_upload_stats *out) {
@@ -282,6 +331,10 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
     mx_cuda_fill_kernels(&b->k);
     const char *sync = getenv("MATEX_CUDA_SYNC");
     b->sync_each_op = sync && strcmp(sync, "1") == 0;
+    const char *graph = getenv("MATEX_CUDA_GRAPH");
+    b->graphs = graph && strcmp(graph, "1") == 0 && !b->sync_each_op;
+    if (graph && strcmp(graph, "1") == 0 && b->sync_each_op)
+        mx_info("cuda: MATEX_CUDA_GRAPH=1 ignored under MATEX_CUDA_SYNC=1 (a graph cannot wait after each op)");
     b->load_readers = load_readers();
     b->be.kind = MX_BACKEND_CUDA;
     b->be.k = &b->k;
@@ -293,6 +346,8 @@ int mx_cuda_backend_create(mx_backend **out, mx_status *st) {
     b->be.weight = cuda_weight;
     b->be.weight_file = cuda_weight_file;
     b->be.weight_file_drop = cuda_weight_file_drop;
+    b->be.recorded = cuda_recorded;
+    b->be.record_drop = cuda_record_drop;
     b->be.destroy = cuda_destroy;
     b->be.impl = b;
     *out = &b->be;

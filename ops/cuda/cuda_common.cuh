@@ -39,12 +39,22 @@ struct mx_cuda_ctx {
     int attn_fp32; /* the last linear had fp32 weights: attention (fed by it) in fp32 */
     struct mx_cuda_gemm_plans *gemm_plans; /* cuBLASLt plans by shape (cuda_gemm.cu), made on first use */
     struct mx_cuda_cudnn *cudnn; /* conv2d through cuDNN (cuda_cudnn.cu); NULL: im2col + cuBLASLt */
+    int capturing; /* the stream is being captured as a CUDA graph (cuda_graph.cu) */
 };
 
 /* 0 when e is cudaSuccess, else -1 with "what: CUDA error name: text". */
 static inline int mx_cuda_ok(cudaError_t e, const char *what, mx_status *st) {
     if (e == cudaSuccess) return 0;
     return mx_fail(st, MX_EINTERNAL, "%s: CUDA error %s: %s", what, cudaGetErrorName(e), cudaGetErrorString(e));
+}
+
+/* 0, or -1 naming `what` while the context's stream is captured as a CUDA graph: host copies,
+ * waits, allocations and new plans or buffers cannot be part of a graph that is replayed without
+ * its host code (cuda_graph.cu, docs/cuda-notes.md §11); the capture then fails and the work runs
+ * op by op. */
+static inline int mx_cuda_not_capturing(const mx_cuda_ctx *c, const char *what, mx_status *st) {
+    if (!c->capturing) return 0;
+    return mx_fail(st, MX_EINTERNAL, "%s while a CUDA graph is captured (a replay would not redo it)", what);
 }
 
 /* Call right after a kernel launch: reports a bad launch configuration at once. */
@@ -173,6 +183,25 @@ void mx_cuda_cudnn_close(mx_cuda_ctx *c);
  * then nothing was queued. */
 int mx_cuda_cudnn_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
                          mx_wptr bias, int Cout, int kh, int kw, int stride, int pad, int Ho, int Wo, mx_status *st);
+
+/* ---- CUDA graphs (cuda_graph.cu) ---- */
+
+/* What queue(arg) queues on c's stream, captured (not run) into *graph (thread-local mode: an
+ * allocation, a free or a wait inside fails the capture). 0, or -1 naming why it cannot be one graph
+ * (then *graph is NULL, the stream is no longer capturing and nothing was queued). */
+int mx_cuda_graph_capture(mx_cuda_ctx *c, int (*queue)(void *arg, mx_status *st), void *arg, cudaGraph_t *graph,
+                          mx_status *st);
+/* graph made launchable into *exec (free with mx_cuda_graph_free), its node count into *nodes. */
+int mx_cuda_graph_instantiate(cudaGraph_t graph, cudaGraphExec_t *exec, size_t *nodes, mx_status *st);
+/* Queues one replay of exec on c's stream. */
+int mx_cuda_graph_launch(mx_cuda_ctx *c, cudaGraphExec_t exec, mx_status *st);
+void mx_cuda_graph_free(cudaGraphExec_t exec);
+
+/* ---- attention (cuda_attention.cu) ---- */
+
+/* Lets the fp32 attention kernels take the shared memory of their largest head sizes (once per
+ * context: never while a graph is captured). */
+int mx_cuda_attention_open(mx_status *st);
 
 /* ---- attention without materialised scores (cuda_flash.cu) ---- */
 

@@ -374,13 +374,15 @@ static void plan_build(mx_cuda_cudnn *n, cudnn_plan *p) {
             p->key.cin, p->key.cout, p->key.h, p->key.w, p->key.kh, p->key.kw, p->key.stride, p->key.pad);
 }
 
-/* The cached plan of key, built on its first use. NULL when the table is full (then: im2col). */
-static cudnn_plan *plan_for(mx_cuda_cudnn *n, const mx_cudnn_conv_key *key) {
+/* The cached plan of key, built on its first use (when `build`: never while a CUDA graph is
+ * captured). NULL when the table is full (then: im2col), or when it is not there and not built. */
+static cudnn_plan *plan_for(mx_cuda_cudnn *n, const mx_cudnn_conv_key *key, int build) {
     uint64_t h = mx_cudnn_key_hash(key);
     for (int probe = 0; probe < PLAN_SLOTS; probe++) {
         cudnn_plan *p = &n->plans[(h + (uint64_t)probe) % PLAN_SLOTS];
         if (p->used && mx_cudnn_key_equal(&p->key, key)) return p;
         if (!p->used) {
+            if (!build) return NULL;
             p->used = 1;
             p->key = *key;
             plan_build(n, p);
@@ -480,11 +482,15 @@ int mx_cuda_cudnn_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Ci
     key.pad = pad, key.wdtype = (int)w.dtype, key.bdtype = bias.data ? (int)bias.dtype : -1;
     key.align_x = key.align_w = key.align_y = 16; /* the call buffer's pieces are 256-byte aligned */
     key.align_b = bias.data ? mx_cudnn_align((uintptr_t)bias.data) : 16;
-    cudnn_plan *p = plan_for(n, &key);
+    cudnn_plan *p = plan_for(n, &key, !c->capturing);
+    if (!p && c->capturing) return mx_cuda_not_capturing(c, "cuda conv2d (cuDNN): a plan for a new shape", st);
     if (!p || !p->ok) return 1;
 
     size_t xb = round256((size_t)Cin * H * W * 2), wb = round256((size_t)Cout * Cin * kh * kw * 2);
     size_t yb = round256((size_t)Cout * Ho * Wo * 2);
+    if (xb + wb + yb + (size_t)p->workspace > n->buf_bytes &&
+        mx_cuda_not_capturing(c, "cuda conv2d (cuDNN): growing its buffer", st))
+        return -1;
     unsigned char *buf = (unsigned char *)call_buffer(n, xb + wb + yb + (size_t)p->workspace, st);
     if (!buf) return -1;
     __half *x16 = (__half *)buf, *w16 = (__half *)(buf + xb), *y16 = (__half *)(buf + xb + wb);

@@ -51,6 +51,8 @@ int mx_cuda_embed_tokens(mx_cuda_ctx *c, float *y, const int32_t *ids, int B, in
     if (mx_cuda_check_dims("cuda embed tokens", st, 3, dims) || mx_cuda_check_wdtype(tokens, "cuda embed tokens", st) ||
         mx_cuda_check_wdtype(positions, "cuda embed tokens", st))
         return -1;
+    /* the ids are host integers: a graph would replay the copy from memory that may hold others by then */
+    if (mx_cuda_not_capturing(c, "cuda embed tokens: a copy of host ids", st)) return -1;
     size_t mark = c->scratch_used, nids = (size_t)B * T, n = nids * C;
     int32_t *dids = (int32_t *)mx_cuda_scratch(c, nids * sizeof *dids, "cuda embed tokens", st);
     int rc = -1;

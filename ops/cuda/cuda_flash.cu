@@ -21,6 +21,9 @@
 #include <string.h>
 
 #include "cuda_common.cuh"
+extern "C" {
+#include "../../runtime/log.h" /* a C header without its own extern "C" */
+}
 
 #define FA_WARPS 4
 #define FA_BQ (16 * FA_WARPS) /* queries per block */
@@ -179,15 +182,22 @@ template <int DP> __global__ void __launch_bounds__(32 * FA_WARPS) flash_kernel(
 
 /* ---- launch ---- */
 
+template <int DP> static size_t flash_smem(void) {
+    return sizeof(__half) * ((size_t)(FA_BQ + FA_BK) * (DP + 8) + (size_t)DP * (FA_BK + 8));
+}
+
+/* Lets the kernel's blocks take their shared memory: once, at context creation (a replayed CUDA
+ * graph runs no host code). */
+template <int DP> static cudaError_t flash_allow_smem(void) {
+    return cudaFuncSetAttribute(flash_kernel<DP>, cudaFuncAttributeMaxDynamicSharedMemorySize, (int)flash_smem<DP>());
+}
+
 /* Queues item by item: the packing pass of its K and V, then the fused kernel over its queries and heads. */
 template <int DP>
 static int flash_queue(mx_cuda_ctx *c, __half *kp, __half *vt, float *out, const float *q, const float *k,
                        const float *v, int B, int H, int Tq, int Tk, int Tkp, int D, int q_stride, int kv_stride,
                        int out_stride, int causal, float scale, mx_status *st) {
-    size_t smem = sizeof(__half) * ((size_t)(FA_BQ + FA_BK) * (DP + 8) + (size_t)DP * (FA_BK + 8));
-    if (mx_cuda_ok(cudaFuncSetAttribute(flash_kernel<DP>, cudaFuncAttributeMaxDynamicSharedMemorySize, (int)smem),
-                   "cuda flash attention: shared memory size", st))
-        return -1;
+    size_t smem = flash_smem<DP>();
     for (int b = 0; b < B; b++) {
         dim3 pgrid(mx_cuda_blocks((size_t)Tkp * DP, 256), (unsigned)H);
         flash_pack_kernel<DP><<<pgrid, 256, 0, c->stream>>>(kp, vt, k + (long long)b * Tk * kv_stride,
@@ -224,6 +234,16 @@ static int flash_items(mx_cuda_ctx *c, float *out, const float *q, const float *
 void mx_cuda_flash_open(mx_cuda_ctx *c) {
     const char *env = getenv("MATEX_CUDA_FLASH");
     c->flash_attn = env && strcmp(env, "1") == 0;
+    if (!c->flash_attn) return;
+    cudaError_t e = flash_allow_smem<48>();
+    if (e == cudaSuccess) e = flash_allow_smem<64>();
+    if (e == cudaSuccess) e = flash_allow_smem<80>();
+    if (e == cudaSuccess) e = flash_allow_smem<160>();
+    if (e == cudaSuccess) return;
+    c->flash_attn = 0;
+    (void)cudaGetLastError();
+    mx_warn("cuda: MATEX_CUDA_FLASH=1 ignored, the fused attention cannot have its shared memory (%s): %s",
+            cudaGetErrorName(e), cudaGetErrorString(e));
 }
 
 int mx_cuda_flash_attention(mx_cuda_ctx *c, float *out, const float *q, const float *k, const float *v, int B, int H,

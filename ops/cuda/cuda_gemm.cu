@@ -167,6 +167,13 @@ static gemm_plan *plan_for(mx_cuda_ctx *c, const gemm_key *k, const char *what, 
         if (p->ready && memcmp(&p->key, k, sizeof *k) == 0) return p;
         if (!p->ready && !free_slot) free_slot = p;
     }
+    if (c->capturing) { /* plans are made by a recorded region's first call, which runs directly */
+        char why[160];
+        snprintf(why, sizeof why, "%s: a new cuBLASLt plan (%s %dx%dx%d, batch %d)", what,
+                 mx_dtype_name((mx_dtype)k->ab), k->m, k->n, k->k, k->batch);
+        mx_cuda_not_capturing(c, why, st);
+        return NULL;
+    }
     if (!free_slot) { /* neighbourhood full: evict the home slot */
         free_slot = &slot[h % GEMM_PLANS];
         gemm_plan_free(free_slot);

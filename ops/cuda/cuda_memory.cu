@@ -71,7 +71,7 @@ int mx_cuda_ctx_create(mx_cuda_ctx **out, int device, size_t scratch_bytes, mx_s
     if (mx_cuda_alloc(&c->workspace, c->workspace_bytes, "cuBLASLt workspace", st)) goto fail;
     c->scratch_cap = scratch_bytes;
     if (scratch_bytes && mx_cuda_alloc((void **)&c->scratch, scratch_bytes, "cuda scratch", st)) goto fail;
-    if (staging_create(c, st)) goto fail;
+    if (staging_create(c, st) || mx_cuda_attention_open(st)) goto fail;
     mx_cuda_cudnn_open(c);
     mx_cuda_flash_open(c);
     *out = c;
@@ -95,6 +95,7 @@ void mx_cuda_ctx_destroy(mx_cuda_ctx *c) {
 }
 
 int mx_cuda_sync(mx_cuda_ctx *c, mx_status *st) {
+    if (mx_cuda_not_capturing(c, "cuda sync: a wait for the device", st)) return -1;
     return mx_cuda_ok(cudaStreamSynchronize(c->stream), "cuda sync: a queued kernel or copy failed", st);
 }
 
@@ -115,6 +116,7 @@ void mx_cuda_free(void *dptr) {
 
 static int copy_sync(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, cudaMemcpyKind kind,
                      const char *what, mx_status *st) {
+    if (mx_cuda_not_capturing(c, what, st)) return -1;
     if (mx_cuda_ok(cudaMemcpyAsync(dst, src, bytes, kind, c->stream), what, st)) return -1;
     return mx_cuda_ok(cudaStreamSynchronize(c->stream), what, st);
 }
@@ -128,6 +130,7 @@ int mx_cuda_upload(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, con
  * the device copy completes in stream order, before any op queued after it. */
 int mx_cuda_upload_staged(mx_cuda_ctx *c, void *dst, const void *src, size_t bytes, const char *what,
                           mx_status *st) {
+    if (mx_cuda_not_capturing(c, what, st)) return -1;
     if (!c->staging_bytes) return mx_cuda_upload(c, dst, src, bytes, what, st);
     for (size_t off = 0; off < bytes;) {
         int h = c->staging_next;

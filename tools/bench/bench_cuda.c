@@ -19,6 +19,7 @@
 
 #include "../../ops/ops.h"
 #include "../../ops/profile.h"
+#include "../../ops/record.h"
 #include "../../pipeline/nn/controlnet.h"
 #include "../../pipeline/nn/unet.h"
 #include "../../pipeline/nn/vae.h"
@@ -40,6 +41,7 @@ typedef struct {
     float *sample, *ehs, *ts, *cond, *out, *img;
     float *res[MX_UNET_MAX_RES + 1];
     int nres;
+    mx_record step; /* the guided step as a recorded region: a CUDA graph under MATEX_CUDA_GRAPH=1 */
 } bench;
 
 /* n floats on the device, filled from a fixed sequence in [lo, hi). */
@@ -98,13 +100,16 @@ static int queue_net(bench *b, int net, mx_status *st) {
     return rc;
 }
 
-/* One call of network `net`, waited for (a 4-byte download). */
+static int queue_guided_step(void *arg, mx_status *st) { return queue_net((bench *)arg, NET_GUIDED_STEP, st); }
+
+/* One call of network `net`, waited for (a 4-byte download). The guided step is a recorded region
+ * (ops/record.h), as the denoising loop's: under MATEX_CUDA_GRAPH=1 its second call is captured and
+ * the later ones (the timed calls) replay it. */
 static int run_net(bench *b, int net, mx_status *st) {
     float one;
-    return queue_net(b, net, st) || mx_download(&b->c, &one, b->out, 1, st) ? -1 : 0;
+    int rc = net == NET_GUIDED_STEP ? mx_ctx_recorded(&b->c, &b->step, queue_guided_step, b, st) : queue_net(b, net, st);
+    return rc || mx_download(&b->c, &one, b->out, 1, st) ? -1 : 0;
 }
-
-static int queue_guided_step(void *arg, mx_status *st) { return queue_net((bench *)arg, NET_GUIDED_STEP, st); }
 
 /* The launches of one guided step, counted by capturing it as one CUDA graph (not run); or why it
  * cannot be one graph yet. */
@@ -158,8 +163,9 @@ static int bench_net(bench *b, int net, int calls, int profile, double *median, 
     qsort(secs, (size_t)calls, sizeof secs[0], cmp_double);
     double med = secs[calls / 2];
     *median = med;
-    printf("%-34s %8.2f ms median (min %.2f, max %.2f) %7.1f GFLOP %7.1f TFLOP/s\n", names[net], 1e3 * med,
-           1e3 * secs[0], 1e3 * secs[calls - 1], flops / 1e9, flops / med / 1e12);
+    printf("%-34s %8.2f ms median (min %.2f, max %.2f) %7.1f GFLOP %7.1f TFLOP/s%s\n", names[net], 1e3 * med,
+           1e3 * secs[0], 1e3 * secs[calls - 1], flops / 1e9, flops / med / 1e12,
+           net == NET_GUIDED_STEP && b->step.graph ? " (one CUDA graph)" : "");
     if (profile) {
         mx_profile p;
         memset(&p, 0, sizeof p);
@@ -264,6 +270,7 @@ int main(int argc, char **argv) {
         printf("matex: controlnet_ms=%.2f unet_ms=%.2f guided_step_ms=%.2f vae_decode_ms=%.2f\n",
                1e3 * med[NET_CONTROLNET], 1e3 * med[NET_UNET], 1e3 * med[NET_GUIDED_STEP],
                1e3 * med[NET_VAE_DECODE]);
+    mx_record_free(&b.c, &b.step); /* before the buffers its graph uses */
     float *bufs[] = {b.sample, b.ehs, b.ts, b.cond, b.out, b.img};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) mx_dev_free(&b.c, bufs[i]);
     for (int i = 0; i <= b.nres; i++) mx_dev_free(&b.c, b.res[i]);

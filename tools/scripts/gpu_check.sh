@@ -12,7 +12,10 @@
 # Issue 39 adds, each beside today's path in the same run: conv2d through cuDNN (MATEX_CUDNN=1) and
 # the fused attention (MATEX_CUDA_FLASH=1): the op tests, the goldens, bench_cuda for each path, a
 # timed texture, two runs of one seed byte-equal, their PSNR against the CPU; and the diffusers peer (../shared/peer, packed) with the ratios matex / eager and
-# matex / compiled; the weight file's load against its 1 s goal (bench_cuda --load). cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
+# matex / compiled; the weight file's load against its 1 s goal (bench_cuda --load).
+# Issue 39 item 4 (MATEX_CUDA_GRAPH=1, the denoising step as one CUDA graph): test_nn_record and the
+# tiny pipelines with graphs, two textures byte-equal to each other and to the op-by-op one, a timed
+# default texture, bench_cuda's guided step op by op against one graph, the graph's node count. cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
 # Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s),
 # before issue 39's steps (never run yet; the peer alone ~200 s with torch.compile).
 set -u
@@ -189,6 +192,28 @@ run "two runs of one seed, new paths: texture.png byte-equal" 10 cmp "$O/par_cud
     run "psnr cpu vs gpu, new paths (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" \
         --compare "$O/par_cudnn1/texture.png" && tail -1 "$LOG"
 
+# Issue 39 item 4: the networks' part of each denoising step captured once as a CUDA graph and
+# replayed (MATEX_CUDA_GRAPH=1, docs/cuda-notes.md §11). Expected byte-equal to the op-by-op run: the
+# graph holds the same kernels with the same cuBLASLt plans (made by the first step, op by op).
+say "CUDA graphs (MATEX_CUDA_GRAPH=1): the tests, two textures byte-equal to each other and to op by op"
+mark=$(($(wc -l <"$LOG") + 1))
+for t in test_nn_record test_nn_pipeline test_nn_pipeline_fast; do
+    run "$t, MATEX_CUDA_GRAPH=1" 60 env MATEX_CUDA_GRAPH=1 MX_TEST_DEVICE=cuda "$B/tests/$t"
+done
+for i in 1 2; do
+    # shellcheck disable=SC2086
+    run "texture small, cuda, graphs, run $i" 60 env MATEX_CUDA_GRAPH=1 "$M" texture "$MESH" "$PROMPT" --weights "$W" \
+        --device cuda $small -o "$O/par_graph$i" --force
+done
+run "two runs of one seed with graphs: texture.png byte-equal" 10 cmp "$O/par_graph1/texture.png" "$O/par_graph2/texture.png"
+run "graphs against op by op (same seed): texture.png byte-equal" 10 cmp "$O/par_gpu/texture.png" "$O/par_graph1/texture.png"
+[ -f "$O/par_graph1/texture.png" ] && [ -f "$O/par_cpu/texture.png" ] &&
+    run "psnr cpu vs gpu, graphs (goal >= 40 dB)" 30 "$M" info "$O/par_cpu/texture.png" --compare "$O/par_graph1/texture.png" &&
+    tail -1 "$LOG"
+tail -n +"$mark" "$LOG" | grep -E "CUDA graph" | sort | uniq -c | sort -rn | head # node counts, or why not
+run "timed: default texture on the GPU, graphs" 120 env MATEX_CUDA_GRAPH=1 "$M" texture "$MESH" "$PROMPT" --weights "$W" \
+    --device cuda --seed 1 -o "$O/gpu_graph" --force && stages "$O/gpu_graph/report.json"
+
 say "the networks at one view step's shapes (tools/bench/bench_cuda.c), and the card's matrix peak as the anchor"
 run "anchor: 8192^3 bf16 matrix product through PyTorch" 60 python3 -c '
 import torch
@@ -213,6 +238,12 @@ for paths in "MATEX_CUDNN=0 MATEX_CUDA_FLASH=0" "MATEX_CUDNN=1 MATEX_CUDA_FLASH=
 "
     fi
 done
+if run "bench_cuda, MATEX_CUDA_GRAPH=1 (the guided step replayed as one graph)" 120 env MATEX_CUDA_GRAPH=1 \
+    "$B/bench_cuda" "$W" --calls 11; then
+    grep -E "^guided step" "$LOG" | tail -2
+    printf '%s\n' "$matex_lines" | head -1 | sed 's/.*guided_step_ms=\([0-9.]*\).*/guided step op by op: \1 ms/' | tee -a "$LOG"
+    grep '^matex:' "$LOG" | tail -1 | sed 's/.*guided_step_ms=\([0-9.]*\).*/guided step as one CUDA graph: \1 ms/' | tee -a "$LOG"
+fi
 run "bench_cuda --profile, MATEX_CUDA_SYNC=1 (per-op GPU time)" 120 env MATEX_CUDA_SYNC=1 "$B/bench_cuda" "$W" \
     --calls 3 --profile
 
