@@ -133,9 +133,12 @@ typedef struct strict_state {
     int depth;                    /* nesting of enter/leave: the memory is open while depth > 0 */
     const mx_kernels *inner[2];   /* the CPU kernels of the chosen level and of its fp32 level */
     mx_kernels checked[2];        /* the same with the weight check before every weight op */
+    mx_kernels traced[2];         /* the checked tables, each call traced inside a recorded region */
     mx_status fault;              /* the first refused op (code 0: none), sticky */
     int region;                   /* inside a recorded region (ops/record.h): no alloc, release, copy */
     mx_status region_fault;       /* the first call the region refused (code 0: none) */
+    struct strict_trace *trace;   /* the open region's op trace (strict_recorded), or NULL */
+    size_t trace_pos;             /* ops the open region has queued so far */
 } strict_state;
 
 /* 1 (and the region's fault kept) when `call` is made inside a recorded region: CUDA cannot
@@ -308,19 +311,6 @@ static int strict_to_host(mx_backend *be, void *dst, const void *src, size_t byt
     return strict_copy(be, dst, src, bytes, st);
 }
 
-/* A recorded region's later calls (ops/record.h): fn runs as it is, every alloc, release and host
- * copy inside it refused (strict_in_region); the first refusal is the region's error. */
-static int strict_recorded(mx_backend *be, mx_record *rec, int (*fn)(void *user, mx_status *st), void *user,
-                           mx_status *st) {
-    strict_state *s = be->impl;
-    (void)rec;
-    memset(&s->region_fault, 0, sizeof s->region_fault);
-    s->region++;
-    int rc = fn(user, st);
-    s->region--;
-    return s->region_fault.code ? strict_refused(s, st) : rc;
-}
-
 static void strict_destroy(mx_backend *be) {
     strict_state *s = be->impl;
     for (size_t i = 0; i < s->n; i++) munmap(s->maps[i].p, s->maps[i].bytes);
@@ -351,7 +341,7 @@ static int strict_weight_ok(const mx_ctx *c, mx_wptr w, size_t numel, const char
 /* The CPU kernels c's table wraps (the chosen level's, or its fp32 level's under mx_ctx_fp32). */
 static const mx_kernels *strict_inner(const mx_ctx *c) {
     strict_state *s = c->be->impl;
-    return s->inner[c->k == &s->checked[1]];
+    return s->inner[c->k == &s->traced[1]];
 }
 
 #define SHAPE_(buf, ...) (snprintf(buf, sizeof buf, __VA_ARGS__), buf)
@@ -411,6 +401,137 @@ static void strict_table(mx_kernels *t, const mx_kernels *inner) {
     t->embed_tokens = strict_embed_tokens;
 }
 
+/* ---- cpu-strict's recorded regions (ops/record.h) ----
+ * A region's second call is what a GPU captures as a graph and replays at every later call without
+ * its host code. cpu-strict runs every call, refuses inside it what a graph cannot hold
+ * (strict_in_region), and keeps the second call's trace: per op its id and the bytes of its
+ * arguments (pointers, sizes, host scalars), hashed. Every later call must queue the same trace:
+ * a difference is a value the replay would not have (e.g. a per-step scalar passed to an op instead
+ * of read from device memory written before the region). Arrays passed by pointer (binary's
+ * shapes, lincomb's terms) count by their address, not their contents. */
+
+typedef struct strict_trace {
+    uint64_t *h; /* per op of the second call */
+    size_t n, cap;
+    int done;    /* 1 once the second call is traced: later calls are compared */
+} strict_trace;
+
+static uint64_t trace_bytes(uint64_t h, const void *p, size_t n) {
+    const unsigned char *b = p;
+    for (size_t i = 0; i < n; i++) h = (h ^ b[i]) * 1099511628211ull; /* FNV-1a */
+    return h;
+}
+
+/* A weight by its pointer and type (not the bytes of its padded struct). */
+static uint64_t trace_wptr(uint64_t h, const void *p, size_t n) {
+    const mx_wptr *w = p;
+    (void)n;
+    h = trace_bytes(h, &w->data, sizeof w->data);
+    return trace_bytes(h, &w->dtype, sizeof w->dtype);
+}
+
+/* One op of the open region: appended to the trace of its second call, or compared with it. */
+static void trace_op(strict_state *s, int op, uint64_t h) {
+    strict_trace *t = s->trace;
+    size_t i = s->trace_pos++;
+    h = trace_bytes(h, &op, sizeof op);
+    if (t->done) {
+        if ((i >= t->n || t->h[i] != h) && !s->region_fault.code)
+            mx_fail(&s->region_fault, MX_EINTERNAL,
+                    "cpu-strict: a recorded region (ops/record.h) differs from its captured call at op %zu (%s): "
+                    "another op or other arguments, which a CUDA graph's replay would not have; pass what changes "
+                    "call by call in device memory written before the region",
+                    i + 1, mx_op_name(op));
+        return;
+    }
+    if (t->n == t->cap) {
+        size_t cap = t->cap ? 2 * t->cap : 1024;
+        uint64_t *g = realloc(t->h, cap * sizeof *g);
+        if (!g) {
+            if (!s->region_fault.code) mx_fail(&s->region_fault, MX_ENOMEM, "cpu-strict: out of memory (region trace)");
+            return;
+        }
+        t->h = g;
+        t->cap = cap;
+    }
+    t->h[t->n++] = h;
+}
+
+/* FOR_EACH_(m, a, b, ...): m(a) m(b) ... for up to 16 arguments. */
+#define FE1_(m, x) m(x)
+#define FE2_(m, x, ...) m(x) FE1_(m, __VA_ARGS__)
+#define FE3_(m, x, ...) m(x) FE2_(m, __VA_ARGS__)
+#define FE4_(m, x, ...) m(x) FE3_(m, __VA_ARGS__)
+#define FE5_(m, x, ...) m(x) FE4_(m, __VA_ARGS__)
+#define FE6_(m, x, ...) m(x) FE5_(m, __VA_ARGS__)
+#define FE7_(m, x, ...) m(x) FE6_(m, __VA_ARGS__)
+#define FE8_(m, x, ...) m(x) FE7_(m, __VA_ARGS__)
+#define FE9_(m, x, ...) m(x) FE8_(m, __VA_ARGS__)
+#define FE10_(m, x, ...) m(x) FE9_(m, __VA_ARGS__)
+#define FE11_(m, x, ...) m(x) FE10_(m, __VA_ARGS__)
+#define FE12_(m, x, ...) m(x) FE11_(m, __VA_ARGS__)
+#define FE13_(m, x, ...) m(x) FE12_(m, __VA_ARGS__)
+#define FE14_(m, x, ...) m(x) FE13_(m, __VA_ARGS__)
+#define FE15_(m, x, ...) m(x) FE14_(m, __VA_ARGS__)
+#define FE16_(m, x, ...) m(x) FE15_(m, __VA_ARGS__)
+#define FE_PICK_(_1, _2, _3, _4, _5, _6, _7, _8, _9, _10, _11, _12, _13, _14, _15, _16, N, ...) N
+#define FOR_EACH_(m, ...)                                                                                    \
+    FE_PICK_(__VA_ARGS__, FE16_, FE15_, FE14_, FE13_, FE12_, FE11_, FE10_, FE9_, FE8_, FE7_, FE6_, FE5_, FE4_, \
+             FE3_, FE2_, FE1_, )(m, __VA_ARGS__)
+#define TRACE_ARG_(x) h_ = _Generic((x), mx_wptr: trace_wptr, default: trace_bytes)(h_, &(x), sizeof(x));
+
+/* Each op: traced while a region is open, then the checked table of c's level. */
+#define STRICT_TRACED_(name, guard, params, args, cost)                                                      \
+    static void strict_traced_##name(const mx_ctx *c, MX_SPLICE params) {                                    \
+        strict_state *s_ = c->be->impl;                                                                      \
+        if (s_->trace) {                                                                                     \
+            uint64_t h_ = 14695981039346656037ull;                                                           \
+            FOR_EACH_(TRACE_ARG_, MX_SPLICE args)                                                            \
+            trace_op(s_, MX_OP_ID_##name, h_);                                                               \
+        }                                                                                                    \
+        s_->checked[c->k == &s_->traced[1]].name(c, MX_SPLICE args);                                         \
+    }
+MX_OPS(STRICT_TRACED_)
+
+static void strict_traced_table(mx_kernels *t, mx_isa isa) {
+    t->isa = isa;
+#define STRICT_TRACED_FILL_(name, guard, params, args, cost) t->name = strict_traced_##name;
+    MX_OPS(STRICT_TRACED_FILL_)
+#undef STRICT_TRACED_FILL_
+}
+
+/* A recorded region's later calls: fn runs as it is, with every alloc, release and host copy
+ * refused (strict_in_region) and its op trace kept (second call) or compared (later calls), the
+ * trace being what rec holds as its "graph"; the first refusal or difference is the region's error. */
+static int strict_recorded(mx_backend *be, mx_record *rec, int (*fn)(void *user, mx_status *st), void *user,
+                           mx_status *st) {
+    strict_state *s = be->impl;
+    strict_trace *t = rec->graph;
+    if (!t && !(t = rec->graph = calloc(1, sizeof *t))) return mx_fail(st, MX_ENOMEM, "cpu-strict: out of memory");
+    memset(&s->region_fault, 0, sizeof s->region_fault);
+    s->trace = t;
+    s->trace_pos = 0;
+    s->region++;
+    int rc = fn(user, st);
+    s->region--;
+    s->trace = NULL;
+    if (t->done && s->trace_pos != t->n && !s->region_fault.code)
+        mx_fail(&s->region_fault, MX_EINTERNAL,
+                "cpu-strict: a recorded region (ops/record.h) queued %zu ops, its captured call %zu: a CUDA graph's "
+                "replay would queue the captured ones",
+                s->trace_pos, t->n);
+    t->done = 1;
+    return s->region_fault.code ? strict_refused(s, st) : rc;
+}
+
+static void strict_record_drop(mx_backend *be, mx_record *rec) {
+    strict_trace *t = rec->graph;
+    (void)be;
+    if (t) free(t->h);
+    free(t);
+    rec->graph = NULL;
+}
+
 static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
     strict_state *s = calloc(1, sizeof *s);
     if (!s) return mx_fail(st, MX_ENOMEM, "backend: out of memory");
@@ -418,9 +539,11 @@ static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
     s->inner[1] = mx_kernels_fp32_of(s->inner[0]);
     strict_table(&s->checked[0], s->inner[0]);
     strict_table(&s->checked[1], s->inner[1]);
+    strict_traced_table(&s->traced[0], s->inner[0]->isa);
+    strict_traced_table(&s->traced[1], s->inner[1]->isa);
     be->impl = s;
-    be->k = &s->checked[0];
-    be->k_fp32 = &s->checked[1];
+    be->k = &s->traced[0];
+    be->k_fp32 = &s->traced[1];
     be->host_visible = 0;
     be->alloc = strict_alloc;
     be->weight = strict_weight;
@@ -430,6 +553,7 @@ static int strict_setup(mx_backend *be, mx_isa isa, mx_status *st) {
     be->to_device = strict_to_device;
     be->to_host = strict_to_host;
     be->recorded = strict_recorded;
+    be->record_drop = strict_record_drop;
     be->enter = strict_enter;
     be->leave = strict_leave;
     be->destroy = strict_destroy;

@@ -1,6 +1,7 @@
 /* Recorded regions (ops/record.h) and the denoising step as one (pipeline/nn/sd_pipeline.c):
  * - cpu-strict refuses an allocation, a free, an upload or a download inside a region's later calls,
- *   naming the call (what a CUDA graph cannot capture); the first call runs freely;
+ *   naming the call (what a CUDA graph cannot capture), and a later call whose ops or arguments
+ *   differ from the second's (a host value a graph's replay would not have); the first runs freely;
  * - a region reading a device value written before each call (the timestep's pattern) gives each
  *   call's result; on CUDA under MATEX_CUDA_GRAPH=1 it must have been captured as a graph;
  * - the tiny networks' denoising loop on MX_TEST_DEVICE (cpu-strict in make test, so every region
@@ -18,14 +19,15 @@
 
 enum { N = 64 };
 
-/* What a region does (bad_region). */
-typedef enum { DO_OPS, DO_UPLOAD, DO_DOWNLOAD, DO_ALLOC, DO_FREE } region_kind;
+/* What a region does (bad_region); DO_SCALAR passes a host value that changes call by call. */
+typedef enum { DO_OPS, DO_UPLOAD, DO_DOWNLOAD, DO_ALLOC, DO_FREE, DO_SCALAR } region_kind;
 
 typedef struct region_arg {
     const mx_ctx *c;
     region_kind kind;
     float *dev, *freed; /* freed: a buffer made before the call that the region frees (DO_FREE) */
     float host[N];
+    int call;
 } region_arg;
 
 static int bad_region(void *user, mx_status *st) {
@@ -40,25 +42,29 @@ static int bad_region(void *user, mx_status *st) {
         return p ? 0 : -1;
     }
     case DO_FREE: mx_dev_free(r->c, r->freed); return 0;
+    case DO_SCALAR: mx_fill(r->c, r->dev, (float)r->call, N); return 0;
     default: return 0;
     }
 }
 
 /* Three calls of a region of `kind` on cpu-strict: the first always runs; the later ones pass
- * only for ops, else fail naming `call`. */
+ * only for ops, else fail naming `call`; a changing scalar fails the third (the second is the one
+ * a graph captures). */
 static void check_refusal(const mx_ctx *c, region_kind kind, const char *call) {
-    region_arg r = {c, kind, NULL, NULL, {0}};
+    region_arg r = {c, kind, NULL, NULL, {0}, 0};
     mx_record rec = {0};
     mx_status st = {0};
     r.dev = golden_dev_alloc(c, N);
     for (int i = 0; i < 3; i++) {
         if (kind == DO_FREE) r.freed = golden_dev_alloc(c, N);
         memset(&st, 0, sizeof st);
+        r.call = i;
         int rc = mx_ctx_recorded(c, &rec, bad_region, &r, &st);
-        int want_fail = i > 0 && kind != DO_OPS;
+        int want_fail = kind == DO_SCALAR ? i == 2 : i > 0 && kind != DO_OPS;
         printf("cpu-strict region %d, call %d: %s\n", (int)kind, i + 1, rc ? st.msg : "ran");
         CHECK((rc != 0) == want_fail);
         if (want_fail) CHECK(strstr(st.msg, call) && strstr(st.msg, "recorded region"));
+        if (kind == DO_SCALAR && i == 2) CHECK(strstr(st.msg, "differs") != NULL);
     }
     mx_record_free(c, &rec);
     mx_dev_free(c, r.dev);
@@ -77,6 +83,7 @@ static void test_strict_refusals(void) {
     check_refusal(&c, DO_DOWNLOAD, "mx_download");
     check_refusal(&c, DO_ALLOC, "mx_dev_alloc");
     check_refusal(&c, DO_FREE, "mx_dev_free");
+    check_refusal(&c, DO_SCALAR, "(fill)");
     mx_ctx_destroy(&c);
 }
 
@@ -112,7 +119,7 @@ static void test_changing_input(const mx_ctx *c) {
         if (!ok) fprintf(stderr, "region call %d: %s\n", call + 1, st.msg[0] ? st.msg : "wrong result");
     }
     printf("a region with a changing device input: %s; %s\n", ok ? "every call right" : "WRONG",
-           rec.graph ? "replayed as a CUDA graph" : "run op by op");
+           rec.graph ? "captured by the backend" : "run op by op");
     CHECK(ok);
     CHECK(!graphs_expected(c) || rec.graph != NULL);
     mx_record_free(c, &rec);
