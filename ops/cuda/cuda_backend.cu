@@ -273,7 +273,7 @@ static int cuda_recorded(mx_backend *be, mx_record *rec, int (*fn)(void *user, m
             return fn(user, st);
         }
     }
-    b->last_op = "a CUDA graph's replay (MATEX_CUDA_GRAPH=0 names the op)";
+    b->last_op = "a CUDA graph's replay";
     return mx_cuda_graph_launch(b->cc, (cudaGraphExec_t)rec->graph, st);
 }
 
