@@ -113,18 +113,26 @@ template <int QPW> static size_t attn_smem(int D) {
     return sizeof(float) * ((size_t)bq * D + (size_t)ATTN_BK * (D + 1) + (size_t)ATTN_BK * D);
 }
 
-/* Lets a variant's blocks take the shared memory of its largest head size (32·DPL). Once per
+/* Lets a variant's blocks take the shared memory of its largest head size (32·DPL), at most what
+ * the device grants a block (optin): a larger call then fails at its launch, as before. Once per
  * context, never per call: a replayed CUDA graph runs no host code (docs/cuda-notes.md §11). */
-template <int QPW, int DPL> static int attn_allow_smem(mx_status *st) {
+template <int QPW, int DPL> static int attn_allow_smem(int optin, mx_status *st) {
+    size_t want = attn_smem<QPW>(32 * DPL);
+    int bytes = want < (size_t)optin ? (int)want : optin;
     return mx_cuda_ok(cudaFuncSetAttribute(flash_attention_kernel<QPW, DPL>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                           (int)attn_smem<QPW>(32 * DPL)),
+                                           bytes),
                       "cuda attention: shared memory size", st);
 }
 
 int mx_cuda_attention_open(mx_status *st) {
-    return attn_allow_smem<4, 1>(st) || attn_allow_smem<4, 2>(st) || attn_allow_smem<4, 3>(st) ||
-                   attn_allow_smem<4, 4>(st) || attn_allow_smem<4, 5>(st) || attn_allow_smem<4, 8>(st) ||
-                   attn_allow_smem<2, 16>(st)
+    int dev = 0, optin = 0;
+    if (mx_cuda_ok(cudaGetDevice(&dev), "cuda attention: device", st) ||
+        mx_cuda_ok(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, dev),
+                   "cuda attention: shared memory per block", st))
+        return -1;
+    return attn_allow_smem<4, 1>(optin, st) || attn_allow_smem<4, 2>(optin, st) || attn_allow_smem<4, 3>(optin, st) ||
+                   attn_allow_smem<4, 4>(optin, st) || attn_allow_smem<4, 5>(optin, st) ||
+                   attn_allow_smem<4, 8>(optin, st) || attn_allow_smem<2, 16>(optin, st)
                ? -1
                : 0;
 }

@@ -199,8 +199,8 @@ void mx_cuda_graph_free(cudaGraphExec_t exec);
 
 /* ---- attention (cuda_attention.cu) ---- */
 
-/* Lets the fp32 attention kernels take the shared memory of their largest head sizes (once per
- * context: never while a graph is captured). */
+/* Lets the fp32 attention kernels take the shared memory of their largest head sizes, at most what
+ * the device grants a block (once per context: never while a graph is captured). */
 int mx_cuda_attention_open(mx_status *st);
 
 /* ---- attention without materialised scores (cuda_flash.cu) ---- */
