@@ -12,10 +12,10 @@
 # Issue 39 adds, each beside today's path in the same run: conv2d through cuDNN (MATEX_CUDNN=1) and
 # the fused attention (MATEX_CUDA_FLASH=1): the op tests, the goldens, bench_cuda for each path, a
 # timed texture, two runs of one seed byte-equal, their PSNR against the CPU; and the diffusers peer (../shared/peer, packed) with the ratios matex / eager and
-# matex / compiled; the weight file's load against its 1 s goal (bench_cuda --load).
+# matex / compiled; the weight file's load against its 1 s goal (bench_cuda --load). cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
 # Issue 39 item 4 (MATEX_CUDA_GRAPH=1, the denoising step as one CUDA graph): test_nn_record and the
 # tiny pipelines with graphs, two textures byte-equal to each other and to the op-by-op one, a timed
-# default texture, bench_cuda's guided step op by op against one graph, the graph's node count. cuDNN is the GPU machine's own (its CUDA toolkit, else PyTorch's nvidia/cudnn).
+# default texture, bench_cuda's guided step op by op against one graph, the graph's node count.
 # Measured: ~150 s on one H200 machine with 16 cores (weights 44 s, CPU texture of the parity 33 s),
 # before issue 39's steps (never run yet; the peer alone ~200 s with torch.compile).
 set -u
