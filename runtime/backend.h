@@ -101,8 +101,8 @@ struct mx_backend {
     /* Optional (NULL: fn just runs): the second and later calls of a recorded region (ops/record.h),
      * fn(user) queueing the same work with the same arguments each time. CUDA with
      * MATEX_CUDA_GRAPH=1 captures the second call as a graph and replays it after; cpu-strict runs
-     * fn and fails any alloc, release or host copy made inside it. record_drop frees what
-     * recorded kept in rec (rec->graph). */
+     * fn, fails any alloc, release or host copy made inside it, and fails a later call whose ops or
+     * arguments differ from the second's. record_drop frees what recorded kept in rec (rec->graph). */
     int (*recorded)(mx_backend *be, struct mx_record *rec, int (*fn)(void *user, mx_status *st), void *user,
                     mx_status *st);
     void (*record_drop)(mx_backend *be, struct mx_record *rec);
