@@ -1,6 +1,8 @@
-/* Streaming attention, AVX2+FMA: 2 queries × 32 keys of scores in 8 ymm accumulators. */
+/* Streaming fp32 attention, AVX2+FMA: 16 queries in two ymm per tile, 6 keys × 2 of scores and
+ * 5 dims × 2 of output sums in registers (attention_f32_simd.inc). */
 #include "kernels.h"
 #include "simd_avx2.h"
 #include "vmath_simd.inc"
-#define ATT_QG 2
-#include "attention_simd.inc"
+#define ATTQ_TK 6
+#define ATTQ_TD 5
+#include "attention_f32_simd.inc"

@@ -7,5 +7,4 @@
 #undef KFN
 #define KFN(name) name##_avx512bf16
 #define ATT_QG 6
-#define ATT_BF16
-#include "attention_simd.inc"
+#include "attention_bf16_simd.inc"

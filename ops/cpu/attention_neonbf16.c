@@ -7,5 +7,4 @@
 #undef KFN
 #define KFN(name) name##_neonbf16
 #define ATT_QG 4
-#define ATT_BF16
-#include "attention_simd.inc"
+#include "attention_bf16_simd.inc"

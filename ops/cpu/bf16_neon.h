@@ -2,7 +2,7 @@
  * word holds two bf16 (the lower index in the low half), the operand layout of BFDOT, which adds
  * a[2i]·b[2i] + a[2i+1]·b[2i+1] into fp32 lane i. Rounding to nearest even with integer
  * arithmetic, bit-exact with mx_float_to_bf16 (runtime/half.h) including NaN. The same
- * vocabulary as bf16_avx512.h for attention_simd.inc. Needs -march=...+bf16. */
+ * vocabulary as bf16_avx512.h for attention_bf16_simd.inc. Needs -march=...+bf16. */
 #ifndef MX_BF16_NEON_H
 #define MX_BF16_NEON_H
 
