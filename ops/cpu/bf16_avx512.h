@@ -1,8 +1,9 @@
 /* bf16 pair packing for the AVX512_BF16 kernels (gemm_avx512bf16.c, attention_avx512bf16.c): one
  * 32-bit word holds two bf16 (the lower index in the low half), the operand layout of vdpbf16ps.
  * Rounding to nearest even by vcvtne2ps2bf16 (which, like vdpbf16ps, reads denormals as zero).
- * The bf16 vocabulary of attention_bf16_simd.inc (vbw, vbw_load, vbw_set1, v_dot_bf16,
- * bf16_pairs_row, bf16_store_pairs_of_rows, bf16_store_pairs_of_keys) is the same in bf16_neon.h. */
+ * The bf16 vocabulary of attention_lanes_simd.inc (vbw, vbw_load, vbw_set1, v_dot_bf16,
+ * bf16_pairs_row, bf16_store_pairs_of_rows) is the same in bf16_neon.h; bf16_store_pairs_of_keys
+ * is the AMX attention's. */
 #ifndef MX_BF16_AVX512_H
 #define MX_BF16_AVX512_H
 

@@ -2,7 +2,7 @@
  * word holds two bf16 (the lower index in the low half), the operand layout of BFDOT, which adds
  * a[2i]·b[2i] + a[2i+1]·b[2i+1] into fp32 lane i. Rounding to nearest even with integer
  * arithmetic, bit-exact with mx_float_to_bf16 (runtime/half.h) including NaN. The same
- * vocabulary as bf16_avx512.h for attention_bf16_simd.inc. Needs -march=...+bf16. */
+ * vocabulary as bf16_avx512.h for attention_lanes_simd.inc. Needs -march=...+bf16. */
 #ifndef MX_BF16_NEON_H
 #define MX_BF16_NEON_H
 
@@ -47,10 +47,6 @@ static inline vbw vbw_set1(uint32_t w) { return vreinterpretq_bf16_u32(vdupq_n_u
 static inline float32x4_t v_dot_bf16(float32x4_t acc, vbw a, vbw b) { return vbfdotq_f32(acc, a, b); }
 static inline void bf16_store_pairs_of_rows(uint32_t *dst, float32x4_t even, float32x4_t odd) {
     vst1q_u32(dst, bf16_pairs_of_rows(even, odd));
-}
-/* dst[i] = bf16(lo_hi[2i]) | bf16(lo_hi[2i+1]) << 16 for the 2·4 values of lo then hi. */
-static inline void bf16_store_pairs_of_keys(uint32_t *dst, float32x4_t lo, float32x4_t hi) {
-    vst1q_u32(dst, bf16_pairs_of_rows(vuzp1q_f32(lo, hi), vuzp2q_f32(lo, hi)));
 }
 
 #endif

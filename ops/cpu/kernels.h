@@ -8,7 +8,7 @@
  * activation, binary, layout, vector, embed). gemm.c is the blocked GEMM engine behind linear
  * and conv2d; gemm_<isa>.c holds its micro-kernels (the AVX-512 one written once in
  * gemm_micro_avx512.inc for fp32 and bf16). The other SIMD kernels are written once as templates
- * (attention_f32_simd.inc, attention_bf16_simd.inc, norm_simd.inc, activation_simd.inc, vmath_simd.inc for exp/erfc) over a
+ * (attention_lanes_simd.inc, norm_simd.inc, activation_simd.inc, vmath_simd.inc for exp/erfc) over a
  * small vector vocabulary (simd_avx2.h, simd_avx512.h, simd_neon.h) and instantiated per level by
  * attention_<isa>.c and elementwise_<isa>.c (docs/DESIGN.md §4 has the recipe for a new level). */
 #ifndef MX_OPS_CPU_KERNELS_H
