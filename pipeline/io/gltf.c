@@ -160,9 +160,8 @@ static int decode_data_uri(const char *uri, blob *out, const char *what, mx_stat
     return 0;
 }
 
-/* Resolves a relative URI against the document folder, decoding %XX escapes. */
-static int resolve_uri(const gltf_doc *d, const char *uri, char *out, size_t cap, mx_status *st) {
-    size_t n = (size_t)snprintf(out, cap, "%s", d->dir);
+int mx_gltf_uri_name(const char *uri, char *out, size_t cap) {
+    size_t n = 0;
     for (const char *p = uri; *p; p++) {
         char c = *p;
         unsigned hi, lo;
@@ -170,10 +169,18 @@ static int resolve_uri(const gltf_doc *d, const char *uri, char *out, size_t cap
             c = (char)(hi << 4 | lo);
             p += 2;
         }
-        if (n + 1 >= cap) return mx_fail(st, MX_EINPUT, "%s: uri too long: %s", d->path, uri);
+        if (n + 1 >= cap) return -1;
         out[n++] = c;
     }
     out[n] = 0;
+    return 0;
+}
+
+/* Resolves a relative URI against the document folder, decoding %XX escapes. */
+static int resolve_uri(const gltf_doc *d, const char *uri, char *out, size_t cap, mx_status *st) {
+    size_t n = (size_t)snprintf(out, cap, "%s", d->dir);
+    if (n >= cap || mx_gltf_uri_name(uri, out + n, cap - n))
+        return mx_fail(st, MX_EINPUT, "%s: uri too long: %s", d->path, uri);
     if (strstr(uri, "://")) return mx_fail(st, MX_EINPUT, "%s: remote uri %s is not supported", d->path, uri);
     return 0;
 }

@@ -17,6 +17,11 @@
 
 int mx_gltf_load(const char *path, mx_mesh *m, mx_status *st);
 
+/* The file name a relative file URI of a glTF stands for, %XX escapes decoded: the name the
+ * reader opens in the document's folder (also what `matex batch --server` sends beside it).
+ * 0, or -1 when it does not fit in cap bytes. */
+int mx_gltf_uri_name(const char *uri, char *out, size_t cap);
+
 /* Decodes image `index` of the glTF file at `path` (a file uri, a data: URI, or a buffer
  * view of a .glb / .gltf buffer) through the image adapter. */
 int mx_gltf_read_image(const char *path, int index, mx_image *img, mx_status *st);

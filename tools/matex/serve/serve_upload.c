@@ -8,6 +8,7 @@
 #include <strings.h>
 #include <sys/stat.h>
 
+#include "../../../pipeline/io/gltf.h"
 #include "../../../runtime/fileio.h"
 #include "../../../runtime/json.h"
 #include "../../../runtime/zip.h"
@@ -140,19 +141,13 @@ static int obj_line(mesh_parts *p, const char *obj, char *line, mx_status *st) {
     return for_each_line(p, path, lib, mtl_line, st);
 }
 
-/* A glTF's URIs of one list (buffers or images) that name files, %XX decoded as the reader does. */
+/* A glTF's URIs of one list (buffers or images) that name files, as the reader names them. */
 static int uri_parts(mesh_parts *p, const mx_json *list, int required, mx_status *st) {
     for (size_t i = 0; i < mx_json_len(list); i++) {
         const char *uri = mx_json_get_str(mx_json_at(list, i), "uri", NULL);
         char ref[PATH_MAX];
-        size_t n = 0;
         if (!uri || !strncmp(uri, "data:", 5) || strstr(uri, "://")) continue;
-        for (const char *c = uri; *c && n + 1 < sizeof ref; c++) {
-            unsigned hi, lo;
-            if (*c == '%' && sscanf(c + 1, "%1x%1x", &hi, &lo) == 2) ref[n++] = (char)(hi << 4 | lo), c += 2;
-            else ref[n++] = *c;
-        }
-        ref[n] = 0;
+        if (mx_gltf_uri_name(uri, ref, sizeof ref)) return mx_fail(st, MX_EINPUT, "%s: uri too long: %s", p->mesh, uri);
         if (add_part(p, "", ref, required, p->mesh, st) < 0) return -1;
     }
     return 0;
