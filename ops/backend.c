@@ -362,6 +362,15 @@ static void strict_conv2d(const mx_ctx *c, float *y, const float *x, int B, int 
         strict_inner(c)->conv2d(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }
 
+static void strict_conv2d_up2x(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                               mx_wptr bias, int Cout) {
+    char sw[64], sb[48];
+    if (strict_weight_ok(c, w, (size_t)Cout * (size_t)Cin * 9, "conv2d_up2x", "w",
+                         SHAPE_(sw, "[%d, %d, 3, 3]", Cout, Cin)) &&
+        strict_weight_ok(c, bias, (size_t)Cout, "conv2d_up2x", "bias", SHAPE_(sb, "[%d]", Cout)))
+        strict_inner(c)->conv2d_up2x(c, y, x, B, Cin, H, W, w, bias, Cout);
+}
+
 /* gamma and beta of a norm over C channels. */
 static int strict_norm_ok(const mx_ctx *c, mx_wptr gamma, mx_wptr beta, int C, const char *op) {
     char sc[48];
@@ -396,6 +405,7 @@ static void strict_table(mx_kernels *t, const mx_kernels *inner) {
     *t = *inner;
     t->linear = strict_linear;
     t->conv2d = strict_conv2d;
+    t->conv2d_up2x = strict_conv2d_up2x;
     t->group_norm = strict_group_norm;
     t->layer_norm = strict_layer_norm;
     t->embed_tokens = strict_embed_tokens;

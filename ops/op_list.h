@@ -33,6 +33,14 @@
        int kw, int stride, int pad),                                                                         \
       (y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad),                                              \
       mx_cost_conv2d(B, Cin, H, W, w, Cout, kh, kw, stride, pad))                                            \
+    /* conv2d (3x3, padding 1, stride 1) of the nearest-neighbour 2x upsample of x [B, Cin, H, W]: */         \
+    /* y [B, Cout, 2H, 2W]; the upsampled input is never stored. Its cost counts the products of */         \
+    /* its phase form (each output pixel's 3x3 taps read 2x2 input pixels: 16 taps per input pixel */      \
+    /* and output channel, not 36), which the SIMD levels compute. */                                      \
+    X(conv2d_up2x, B > 0 && Cout > 0 && H > 0 && W > 0,                                                      \
+      (float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w, mx_wptr bias, int Cout),            \
+      (y, x, B, Cin, H, W, w, bias, Cout),                                                                   \
+      mx_cost_conv2d_up2x(B, Cin, H, W, w, Cout))                                                            \
     /* Group norm over (C/groups channels × HW) per batch item and group, biased variance, then */           \
     /* per-channel affine; fuse_silu applies SiLU after. y may equal x (in place). */                        \
     X(group_norm, B > 0 && C > 0 && HW > 0,                                                                  \

@@ -95,6 +95,13 @@ static mx_op_cost mx_cost_conv2d(int B, int Cin, int H, int W, mx_wptr w, int Co
                    4.0 * B * ((double)Cin * H * W + Cout * out) + weight_bytes(w, (double)Cout * Cin * kh * kw));
 }
 
+/* The phase form's products: 4 phases × Cout outputs over (H+1)×(W+1) positions, 2×2 taps each. */
+static mx_op_cost mx_cost_conv2d_up2x(int B, int Cin, int H, int W, mx_wptr w, int Cout) {
+    double out = 4.0 * H * W;
+    return mx_cost(2.0 * B * 4.0 * Cout * (H + 1.0) * (W + 1.0) * Cin * 4.0,
+                   4.0 * B * ((double)Cin * H * W + Cout * out) + weight_bytes(w, (double)Cout * Cin * 9));
+}
+
 /* q·kᵀ and p·v; q, k, v read and the output written once (the scores never leave the cache). */
 static mx_op_cost mx_cost_attention(int B, int H, int Tq, int Tk, int D) {
     return mx_cost(4.0 * B * H * Tq * (double)Tk * D, 4.0 * B * H * D * (2.0 * Tq + 2.0 * Tk));

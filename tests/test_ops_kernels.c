@@ -58,6 +58,20 @@ static void test_known_group_norm(const mx_ctx *c) {
     mx_check_close("known group norm", y, want, 8, 1e-6);
 }
 
+/* conv2d_up2x's reference is the 3×3 conv of the stored upsample, to the bit (the same sums in double). */
+static void test_known_conv_up2x(const mx_ctx *c) {
+    enum { B = 2, CI = 3, H = 4, W = 5, CO = 6 };
+    float x[B * CI * H * W], w[CO * CI * 9], bias[CO], u[B * CI * 4 * H * W], want[B * CO * 4 * H * W],
+        y[B * CO * 4 * H * W];
+    mx_fill_random(x, B * CI * H * W, 11, -1.0f, 1.0f);
+    mx_fill_random(w, CO * CI * 9, 12, -1.0f, 1.0f);
+    mx_fill_random(bias, CO, 13, -1.0f, 1.0f);
+    mx_upsample_nearest2x(c, u, x, B * CI, H, W);
+    mx_conv2d(c, want, u, B, CI, 2 * H, 2 * W, mx_w_f32(w), mx_w_f32(bias), CO, 3, 3, 1, 1);
+    mx_conv2d_up2x(c, y, x, B, CI, H, W, mx_w_f32(w), mx_w_f32(bias), CO);
+    mx_check_close("known conv2d_up2x (= upsample, then conv2d)", y, want, B * CO * 4 * H * W, 0);
+}
+
 static void test_known_timestep_embedding(void) {
     float t[1] = {10}, y[4];
     mx_timestep_embedding(NULL, y, t, 1, 4, 1, 0, 10000);
@@ -150,6 +164,62 @@ static void test_conv_case(const levels *lv, int B, int Cin, int H, int W, int C
     free(x), free(y), free(want), free(ws), free(bs);
 }
 
+/* conv2d_up2x's phase kernels [4·Cout][Cin][2][2] (row phase·Cout + co, phase = 2a + b) from the 3×3
+ * weights by the definition: tap ky of output row 2i+a reads upsampled row 2i+a+ky-1, input row
+ * i + floor((a+ky-1)/2), which is tap ty = floor((a+ky-1)/2) - a + 1 of the 2×2 conv's row i+a;
+ * rounded to bf16 as a bf16 level rounds them. */
+static float *phase_kernels(mx_wptr w, int Cout, int Cin, int bf16) {
+    float *k = calloc((size_t)16 * Cout * Cin, sizeof *k);
+    for (int ph = 0; ph < 4; ph++)
+        for (int co = 0; co < Cout; co++)
+            for (int ci = 0; ci < Cin; ci++)
+                for (int ky = 0; ky < 3; ky++)
+                    for (int kx = 0; kx < 3; kx++) {
+                        int a = ph / 2, b = ph % 2, ty = (a + ky + 1) / 2 - a, tx = (b + kx + 1) / 2 - b;
+                        k[(((size_t)ph * Cout + co) * Cin + ci) * 4 + ty * 2 + tx] +=
+                            mx_w_get(w, (((size_t)co * Cin + ci) * 3 + ky) * 3 + kx);
+                    }
+    for (size_t i = 0; bf16 && i < (size_t)16 * Cout * Cin; i++) k[i] = mx_bf16_to_float(mx_float_to_bf16(k[i]));
+    return k;
+}
+
+/* The reference of a bf16 level's conv2d_up2x: the 2×2 phase conv (padding 1) with the rounded phase
+ * kernels, on the rounded input, interleaved: output (2i+a, 2j+b) is phase 2a+b at (i+a, j+b). */
+static void phase_reference(const levels *lv, float *want, const float *xr, int B, int Cin, int H, int W,
+                            mx_wptr w, mx_wptr bias, int Cout) {
+    float *k = phase_kernels(w, Cout, Cin, 1);
+    size_t zp = (size_t)(H + 1) * (W + 1);
+    float *z = malloc((size_t)B * 4 * Cout * zp * sizeof *z);
+    mx_conv2d(lv->ref, z, xr, B, Cin, H, W, mx_w_f32(k), mx_w_none(), 4 * Cout, 2, 2, 1, 1);
+    for (int n = 0; n < B; n++)
+        for (int co = 0; co < Cout; co++)
+            for (int y = 0; y < 2 * H; y++)
+                for (int x = 0; x < 2 * W; x++) {
+                    int a = y % 2, b = x % 2, ph = 2 * a + b;
+                    float v = z[((size_t)n * 4 * Cout + (size_t)ph * Cout + co) * zp + (size_t)(y / 2 + a) * (W + 1) +
+                                (size_t)(x / 2 + b)];
+                    want[(((size_t)n * Cout + co) * 2 * H + y) * 2 * W + x] = v + (float)mx_w_get(bias, (size_t)co);
+                }
+    free(k), free(z);
+}
+
+static void test_conv_up2x_case(const levels *lv, int B, int Cin, int H, int W, int Cout, mx_dtype dt) {
+    size_t nx = (size_t)B * Cin * H * W, ny = (size_t)B * Cout * 4 * H * W, nw = (size_t)Cout * Cin * 9;
+    void *ws, *bs;
+    float *x = rnd(nx, 4), *y = rnd(ny, 9), *want = rnd(ny, 8), *xr_s;
+    mx_wptr w = rnd_weight(nw, 5, dt, &ws), b = rnd_weight((size_t)Cout, 6, dt, &bs);
+    if (lv->bf16)
+        phase_reference(lv, want, ref_input(lv, x, nx, &xr_s), B, Cin, H, W, w, b, Cout);
+    else
+        mx_conv2d_up2x(lv->ref, want, ref_input(lv, x, nx, &xr_s), B, Cin, H, W, w, b, Cout);
+    mx_conv2d_up2x(lv->simd, y, x, B, Cin, H, W, w, b, Cout);
+    free(xr_s);
+    char name[96];
+    snprintf(name, sizeof name, "%s conv2d_up2x B=%d %dx%dx%d->%d %s", lv->isa, B, Cin, H, W, Cout, mx_dtype_name(dt));
+    mx_check_close(name, y, want, ny, 1e-5);
+    free(x), free(y), free(want), free(ws), free(bs);
+}
+
 static void test_gemm_ops(const levels *lv) {
     test_linear_case(lv, 1, 1, 1, MX_F32, 1);
     test_linear_case(lv, 13, 37, 29, MX_F32, 1);
@@ -191,6 +261,13 @@ static void test_gemm_ops(const levels *lv) {
     test_conv_case(lv, 8, 40, 16, 16, 50, 3, 1, 1, MX_F16); /* a panel's halves in two rows */
     test_conv_case(lv, 8, 8, 9, 48, 20, 3, 1, 1, MX_F32);   /* 48 wide: halves in one row or two */
     test_conv_case(lv, 8, 33, 5, 64, 14, 1, 1, 0, MX_BF16); /* 1×1 unpadded: the input is the band */
+    /* conv2d_up2x's phase form: edges of the phase grid, K blocks, blocks of rows */
+    test_conv_up2x_case(lv, 1, 3, 5, 7, 4, MX_F32);
+    test_conv_up2x_case(lv, 1, 40, 1, 1, 5, MX_BF16);    /* one input pixel: every tap at an edge */
+    test_conv_up2x_case(lv, 2, 17, 9, 6, 33, MX_F16);    /* batch 2, odd channels, panel edges */
+    test_conv_up2x_case(lv, 1, 200, 6, 5, 13, MX_F16);   /* K = 800: two K blocks */
+    test_conv_up2x_case(lv, 1, 8, 3, 70, 9, MX_F32);     /* 71-wide phase rows: panels across rows */
+    test_conv_up2x_case(lv, 1, 4, 2, 600, 1024, MX_F32); /* phase planes past 16 MiB a row: 3 blocks */
 }
 
 #ifndef MX_NO_X86_SIMD
@@ -203,6 +280,10 @@ void mx_conv2d_x3_amx_emu(const mx_ctx *, float *y, const float *x, int B, int C
 void mx_linear_amx_emu(const mx_ctx *, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
 void mx_conv2d_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
                        mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+void mx_conv2d_up2x_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                            mx_wptr bias, int Cout);
+void mx_conv2d_up2x_x3_amx_emu(const mx_ctx *, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                               mx_wptr bias, int Cout);
 
 static void test_attention_ops(const levels *lv);
 
@@ -216,6 +297,7 @@ static void test_amx_emulated(const mx_ctx *ref, mx_pool *pool, mx_arena *scratc
     mx_kernels emu = *bf16;
     emu.linear = mx_linear_amx_emu;
     emu.conv2d = mx_conv2d_amx_emu;
+    emu.conv2d_up2x = mx_conv2d_up2x_amx_emu;
     emu.attention = mx_attention_amx_emu;
     mx_ctx simd = {.pool = pool, .k = &emu, .scratch = scratch};
     levels lv = {ref, &simd, "amx (emulated tiles)", 1};
@@ -223,6 +305,7 @@ static void test_amx_emulated(const mx_ctx *ref, mx_pool *pool, mx_arena *scratc
     test_attention_ops(&lv);
     emu.linear = mx_linear_x3_amx_emu;
     emu.conv2d = mx_conv2d_x3_amx_emu;
+    emu.conv2d_up2x = mx_conv2d_up2x_x3_amx_emu;
     levels x3 = {ref, &simd, "amx fp32 (3 bf16 products, emulated tiles)", 0};
     test_gemm_ops(&x3);
     CHECK(scratch->used == 0);
@@ -592,6 +675,7 @@ int main(void) {
     test_known_attention(&c);
     test_known_group_norm(&c);
     test_known_timestep_embedding();
+    test_known_conv_up2x(&c);
     test_known_layout(&c);
     return mx_test_finish("test_ops_kernels");
 }

@@ -4,7 +4,7 @@
  * used by two levels (a bf16 context and its mx_ctx_fp32 view share one cache) gets one entry
  * per level; the cache grows past its first table; panels that would take more than their
  * weight beyond the budget are not kept (packed per call, the same results), panels of the
- * weight's own size are; packing split over several threads gives the panels one thread gives, byte
+ * weight's own size are (conv2d_up2x's phase kernels, larger than their weight, only with room); packing split over several threads gives the panels one thread gives, byte
  * for byte; a linear weight's panels hold the layout of gemm.h, value by value; a weight mapped from
  * a file is dropped from the process once packed but stays in the page cache. */
 #include <fcntl.h>
@@ -161,6 +161,41 @@ static void check_many_and_budget(const mx_kernels *k, mx_pool *pool, mx_arena *
     mx_wpack_destroy(cached.wpack);
     mx_wpack_destroy(tiny.wpack);
     free(x), free(w), free(want), free(got);
+}
+
+/* conv2d_up2x: its phase kernels (16 values for every 9 weights) kept by a cache with room, the
+ * per-call results on both calls; with no room beyond the weights they are not kept, at any level
+ * (not even as bf16 pairs of fp16 weights: the growth counts), the same results. */
+static void check_up2x(const mx_kernels *k, mx_pool *pool, mx_arena *scratch) {
+    enum { B = 2, CI = 37, H = 7, W = 9, CO = 21 };
+    size_t nx = (size_t)B * CI * H * W, nw = (size_t)CO * CI * 9, ny = (size_t)B * CO * 4 * H * W;
+    float *x = malloc(nx * sizeof *x), *w = malloc(nw * sizeof *w), *want = malloc(ny * sizeof *want);
+    float *got = malloc(ny * sizeof *got), bias[CO];
+    CHECK(x && w && want && got);
+    mx_fill_random(x, nx, 61, -1, 1);
+    mx_fill_random(w, nw, 62, -0.5f, 0.5f);
+    mx_fill_random(bias, CO, 63, -1, 1);
+    uint16_t *w16 = to_f16(w, nw);
+    CHECK(w16 != NULL);
+    mx_wptr wf = {w16, MX_F16};
+    mx_status st;
+    mx_ctx plain = {.pool = pool, .k = k, .scratch = scratch}, cached = plain, tiny = plain;
+    CHECK(mx_ctx_pack_weights(&cached, (size_t)1 << 30, 0, &st) == 0);
+    CHECK(mx_ctx_pack_weights(&tiny, 0, 0, &st) == 0);
+    mx_conv2d_up2x(&plain, want, x, B, CI, H, W, wf, mx_w_f32(bias), CO);
+    for (int call = 0; call < 2; call++) {
+        memset(got, 0xff, ny * sizeof *got);
+        mx_conv2d_up2x(&cached, got, x, B, CI, H, W, wf, mx_w_f32(bias), CO);
+        CHECK(same_bits(got, want, ny));
+        memset(got, 0xff, ny * sizeof *got);
+        mx_conv2d_up2x(&tiny, got, x, B, CI, H, W, wf, mx_w_f32(bias), CO);
+        CHECK(same_bits(got, want, ny));
+    }
+    if (k->isa != MX_ISA_SCALAR) CHECK(mx_wpack_bytes(cached.wpack) > 0);
+    CHECK(mx_wpack_bytes(tiny.wpack) == 0);
+    mx_wpack_destroy(cached.wpack);
+    mx_wpack_destroy(tiny.wpack);
+    free(x), free(w), free(w16), free(want), free(got);
 }
 
 /* A bf16 context and its fp32 view share the cache: one entry per level, each level's own result. */
@@ -379,6 +414,7 @@ int main(void) {
         }
         for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) check_case(k, pool, &scratch, &cases[i], 100 + i);
         check_many_and_budget(k, pool, &scratch);
+        check_up2x(k, pool, &scratch);
         if (mx_isa_precision(isa) == MX_PREC_BF16) check_two_levels(k, pool, &scratch);
         check_threads_same_panels(k, &scratch);
         check_panel_layout(k, pool, &scratch);

@@ -24,7 +24,7 @@
  * vector, embedding and tanh stay on the reference (memory-bound copies the compiler vectorises,
  * or tiny). */
 #define MX_AVX2_KERNELS                                                                                      \
-    MX_SCALAR_KERNELS .linear = mx_linear_avx2, .conv2d = mx_conv2d_avx2, .group_norm = mx_group_norm_avx2,   \
+    MX_SCALAR_KERNELS .linear = mx_linear_avx2, .conv2d = mx_conv2d_avx2, .conv2d_up2x = mx_conv2d_up2x_avx2, .group_norm = mx_group_norm_avx2,   \
     .layer_norm = mx_layer_norm_avx2, .attention = mx_attention_avx2, .gelu = mx_gelu_avx2,                   \
     .quick_gelu = mx_quick_gelu_avx2, .silu = mx_silu_avx2, .geglu = mx_geglu_avx2,                         \
     .binary = mx_binary_avx2, .scale = mx_scale_avx2, .transpose_chw_hwc = mx_transpose_chw_hwc_avx2,         \
@@ -32,7 +32,7 @@
 
 /* avx512: the same kernels on 16-float vectors. */
 #define MX_AVX512_KERNELS                                                                                    \
-    MX_AVX2_KERNELS .linear = mx_linear_avx512, .conv2d = mx_conv2d_avx512, .group_norm = mx_group_norm_avx512, \
+    MX_AVX2_KERNELS .linear = mx_linear_avx512, .conv2d = mx_conv2d_avx512, .conv2d_up2x = mx_conv2d_up2x_avx512, .group_norm = mx_group_norm_avx512, \
     .layer_norm = mx_layer_norm_avx512, .attention = mx_attention_avx512, .gelu = mx_gelu_avx512,             \
     .quick_gelu = mx_quick_gelu_avx512, .silu = mx_silu_avx512, .geglu = mx_geglu_avx512,                   \
     .binary = mx_binary_avx512, .scale = mx_scale_avx512, .transpose_chw_hwc = mx_transpose_chw_hwc_avx512,   \
@@ -40,16 +40,16 @@
 
 /* avx512bf16: the matrix products in bf16 arithmetic with fp32 sums (vdpbf16ps). */
 #define MX_AVX512BF16_KERNELS                                                                                \
-    MX_AVX512_KERNELS .linear = mx_linear_avx512bf16, .conv2d = mx_conv2d_avx512bf16,                          \
+    MX_AVX512_KERNELS .linear = mx_linear_avx512bf16, .conv2d = mx_conv2d_avx512bf16, .conv2d_up2x = mx_conv2d_up2x_avx512bf16,                          \
     .attention = mx_attention_avx512bf16,
 
 /* amx: the GEMMs and attention's two products on AMX-BF16 tiles. */
 #define MX_AMX_KERNELS                                                                                       \
-    MX_AVX512BF16_KERNELS .linear = mx_linear_amx, .conv2d = mx_conv2d_amx, .attention = mx_attention_amx,
+    MX_AVX512BF16_KERNELS .linear = mx_linear_amx, .conv2d = mx_conv2d_amx, .conv2d_up2x = mx_conv2d_up2x_amx, .attention = mx_attention_amx,
 
 /* neon (aarch64 Advanced SIMD): the avx2 set of kernels on 4-float vectors. */
 #define MX_NEON_KERNELS                                                                                      \
-    MX_SCALAR_KERNELS .linear = mx_linear_neon, .conv2d = mx_conv2d_neon, .group_norm = mx_group_norm_neon,   \
+    MX_SCALAR_KERNELS .linear = mx_linear_neon, .conv2d = mx_conv2d_neon, .conv2d_up2x = mx_conv2d_up2x_neon, .group_norm = mx_group_norm_neon,   \
     .layer_norm = mx_layer_norm_neon, .attention = mx_attention_neon, .gelu = mx_gelu_neon,                   \
     .quick_gelu = mx_quick_gelu_neon, .silu = mx_silu_neon, .geglu = mx_geglu_neon,                         \
     .binary = mx_binary_neon, .scale = mx_scale_neon, .transpose_chw_hwc = mx_transpose_chw_hwc_neon,         \
@@ -57,7 +57,7 @@
 
 /* neonbf16 (FEAT_BF16): the matrix products in bf16 arithmetic with fp32 sums (BFDOT). */
 #define MX_NEONBF16_KERNELS                                                                                  \
-    MX_NEON_KERNELS .linear = mx_linear_neonbf16, .conv2d = mx_conv2d_neonbf16, .attention = mx_attention_neonbf16,
+    MX_NEON_KERNELS .linear = mx_linear_neonbf16, .conv2d = mx_conv2d_neonbf16, .conv2d_up2x = mx_conv2d_up2x_neonbf16, .attention = mx_attention_neonbf16,
 
 static const mx_kernels scalar_table = {.isa = MX_ISA_SCALAR, MX_SCALAR_KERNELS};
 
@@ -74,7 +74,7 @@ static const mx_kernels amx_table = {.isa = MX_ISA_AMX, MX_AMX_KERNELS};
 /* The amx level's fp32 layers (mx_kernels_fp32_of): avx512, but linear and conv2d as three bf16
  * products on the tiles (gemm.h: split kernels), ~5e-6 relative instead of fp32's ~5e-7. */
 static const mx_kernels amx_fp32_table = {.isa = MX_ISA_AVX512, MX_AVX512_KERNELS .linear = mx_linear_x3_amx,
-                                          .conv2d = mx_conv2d_x3_amx};
+                                          .conv2d = mx_conv2d_x3_amx, .conv2d_up2x = mx_conv2d_up2x_x3_amx};
 #endif
 
 const mx_kernels *mx_kernels_scalar(void) { return &scalar_table; }

@@ -486,10 +486,15 @@ static const float *pack_weight_once(const mx_ctx *c, const mx_gemm_kernel *g, c
     const float *have = mx_wpack_find(c->wpack, &key);
     if (have) return have;
     int nkb = ceil_div(p->K, kc_max);
-    size_t source_bytes = (size_t)f.rows * key.ld * mx_dtype_size(w.dtype);
-    /* a 32-bit panel word holds one fp32 value or a pair of bf16 ones */
+    /* the weight's own rows: a phase-folded A (a_phases) has a_phases rows per weight row */
+    int source_rows = operand_b || !p->a_phases ? f.rows : f.rows / p->a_phases;
+    size_t source_bytes = (size_t)source_rows * key.ld * mx_dtype_size(w.dtype);
+    /* a 32-bit panel word holds one fp32 value or a pair of bf16 ones; phase kernels hold 16 values
+     * for every 9 of their weight */
+    size_t own = (size_t)source_rows * key.ld, panel_values = (size_t)f.rows * (size_t)p->K;
     f.dst = mx_wpack_add(c->wpack, &key, cached_block_offset(g, f.width, f.rows, kc_max, nkb) * sizeof(float),
-                         g->to_pairs ? 2 : 4, mx_dtype_size(w.dtype));
+                         g->to_pairs ? 2 : 4, mx_dtype_size(w.dtype),
+                         p->a_phases && !operand_b && panel_values > own ? panel_values - own : 0);
     if (!f.dst) return NULL;
     mx_wpack_fetch_source(c->wpack, w.data, source_bytes);
     fill_blocks(c, &f, operand_b);

@@ -122,6 +122,9 @@ struct mx_gemm_problem {
     size_t image_batch_stride, band_plane;
     int Cin, chans, group_words, band_width, kh, kw, stride, Wo;
     int band_fp32; /* bf16 levels, 1×1 stride 1 unpadded: the band is the fp32 input, paired per panel */
+    /* conv2d_up2x: 4, A's M rows are the 2×2 kernels of the 4 phases (row phase·M/4 + co) folded
+     * from the M/4 3×3 rows of a_mat (a_ld = Cin·9); 0 for a plain conv (M rows of a_mat) */
+    int a_phases;
     /* a split kernel's conv on a band: the band of the inputs' low parts (image's layout) */
     const float *image_lo;
     mx_wptr bias;
@@ -227,6 +230,11 @@ void mx_gemm_linear(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const fl
                     int M, int N, int K);
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+/* conv2d_up2x (op_list.h) in its phase form: the 2×2 conv, padding 1, of x with the 4·Cout phase
+ * kernels folded from w (16 products per input pixel and output channel instead of the 36 of a
+ * 3×3 conv on the upsampled image), by blocks of rows into scratch, each block interleaved into y. */
+void mx_gemm_conv2d_up2x(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                         int W, mx_wptr w, mx_wptr bias, int Cout);
 
 #ifdef __AVX__
 #include <immintrin.h>

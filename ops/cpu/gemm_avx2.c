@@ -81,3 +81,8 @@ void mx_conv2d_avx2(const mx_ctx *c, float *y, const float *x, int B, int Cin, i
                     mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     mx_gemm_conv2d(c, &kernel_avx2, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }
+
+void mx_conv2d_up2x_avx2(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                         mx_wptr bias, int Cout) {
+    mx_gemm_conv2d_up2x(c, &kernel_avx2, y, x, B, Cin, H, W, w, bias, Cout);
+}

@@ -44,3 +44,8 @@ void mx_conv2d_avx512(const mx_ctx *c, float *y, const float *x, int B, int Cin,
                       mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
     mx_gemm_conv2d(c, &kernel_avx512, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }
+
+void mx_conv2d_up2x_avx512(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                           mx_wptr bias, int Cout) {
+    mx_gemm_conv2d_up2x(c, &kernel_avx512, y, x, B, Cin, H, W, w, bias, Cout);
+}

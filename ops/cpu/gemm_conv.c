@@ -53,20 +53,75 @@ static void k_pos_next(const mx_gemm_problem *p, k_pos *at) {
 
 /* ---- A: the weights [Cout][Cin][kh][kw] in the K order of k_pos ---- */
 
+/* The 2×2 kernels of phase (a, b) = (phase >> 1, phase & 1) of conv2d_up2x, folded from 3×3 ones:
+ * output pixel (2i+a, 2j+b) of the 3×3 conv on the upsampled image reads upsampled rows 2i+a-1 ..
+ * 2i+a+1, i.e. input rows i-1+a (tap ty 0: ky 0 .. a) and i+a (ty 1: ky a+1 .. 2), which the 2×2
+ * conv with padding 1 reads at its output row i+a (columns alike). out[ci·cs + (ty·2 + tx)·ts]
+ * from w[ci·9 + ky·3 + kx] for ci < real, written out per phase (this runs per call where fp32
+ * panels are not kept: a loop over the tap ranges took ~4 % of an fp32 UNet call), each sum ky-major. */
+static void fold_phase(float *out, size_t cs, size_t ts, const float *w, int real, int phase) {
+    for (int ci = 0; ci < real; ci++, w += 9, out += cs) {
+        float *o0 = out, *o1 = out + ts, *o2 = out + 2 * ts, *o3 = out + 3 * ts;
+        switch (phase) {
+        case 0: /* ky {0}, {1,2}; kx {0}, {1,2} */
+            *o0 = w[0], *o1 = w[1] + w[2], *o2 = w[3] + w[6], *o3 = w[4] + w[5] + w[7] + w[8];
+            break;
+        case 1: /* ky {0}, {1,2}; kx {0,1}, {2} */
+            *o0 = w[0] + w[1], *o1 = w[2], *o2 = w[3] + w[4] + w[6] + w[7], *o3 = w[5] + w[8];
+            break;
+        case 2: /* ky {0,1}, {2}; kx {0}, {1,2} */
+            *o0 = w[0] + w[3], *o1 = w[1] + w[2] + w[4] + w[5], *o2 = w[6], *o3 = w[7] + w[8];
+            break;
+        default: /* ky {0,1}, {2}; kx {0,1}, {2} */
+            *o0 = w[0] + w[1] + w[3] + w[4], *o1 = w[2] + w[5], *o2 = w[6] + w[7], *o3 = w[8];
+        }
+    }
+}
+
+/* Row m's 3×3 weights of input channels c0 .. c0+real (a_phases): in place (fp32) or widened into buf9. */
+static const float *weights_3x3(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *buf9, int m, int c0,
+                                int real) {
+    size_t at = ((size_t)(m % (p->M / p->a_phases)) * p->Cin + (size_t)c0) * 9;
+    if (p->a_mat.dtype == MX_F32) return (const float *)p->a_mat.data + at;
+    g->widen(buf9, p->a_mat, at, (size_t)real * 9);
+    return buf9;
+}
+
+/* Row m's weights of input channels c0 .. c0+real, [real][taps] in fp32: in place (fp32 weights),
+ * widened into buf, or (a_phases) folded into buf from the 3×3 weights (widened into buf9); NULL
+ * where they do not fit buf (read per element then; never with a_phases, whose groups fit). */
+static const float *weight_run(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *buf, float *buf9, int m,
+                               int c0, int real) {
+    int taps = p->kh * p->kw;
+    if (p->a_phases) {
+        fold_phase(buf, 4, 1, weights_3x3(p, g, buf9, m, c0, real), real, m / (p->M / p->a_phases));
+        return buf;
+    }
+    size_t at = ((size_t)m * p->Cin + (size_t)c0) * taps;
+    if (p->a_mat.dtype == MX_F32) return (const float *)p->a_mat.data + at;
+    if ((size_t)real * taps > MX_GEMM_KC_MAX) return NULL; /* a group of one word longer than buf (kernels > 17×17) */
+    g->widen(buf, p->a_mat, at, (size_t)real * taps);
+    return buf;
+}
+
 /* out[0 .. kc) = row m of A for k0 .. k0+kc (a channel past Cin, the pair of an odd Cin: 0). */
 static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *out, int m, int k0, int kc) {
-    float buf[MX_GEMM_KC_MAX];
+    /* buf9: the 3×3 weights of a phase-folded group (≤ MX_GEMM_KC_MAX / 4 channels of 2×2 taps) */
+    float buf[MX_GEMM_KC_MAX], buf9[MX_GEMM_KC_MAX / 4 * 9];
     int taps = p->kh * p->kw, k = k0, group = p->group_words * k_per_word(g), span = group * taps;
     while (k < k0 + kc) {
         int grp = k / span, c0 = grp * group, size = min_int(group, p->chans * k_per_word(g) - c0);
         int real = max_int(0, min_int(size, p->Cin - c0)), r = k - grp * span, r1 = min_int(size * taps, r + k0 + kc - k);
-        /* the group's channels × taps: one run of the weight row, widened once */
+        /* the group's channels × taps: one run of the weight row, widened once (at: per element) */
         size_t at = ((size_t)m * p->Cin + (size_t)c0) * taps;
-        const float *w = (const float *)p->a_mat.data + at;
-        if (p->a_mat.dtype != MX_F32) { /* NULL: a group of one word longer than buf (kernels > 17×17) */
-            w = (size_t)real * taps <= MX_GEMM_KC_MAX ? buf : NULL;
-            if (w) g->widen(buf, p->a_mat, at, (size_t)real * taps);
+        if (p->a_phases && r == 0 && r1 == size * taps) { /* the whole group, folded into [taps][size] */
+            float *o = out + (k - k0);
+            fold_phase(o, 1, (size_t)size, weights_3x3(p, g, buf9, m, c0, real), real, m / (p->M / p->a_phases));
+            for (int t = 0; t < taps && real < size; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
+            k += r1;
+            continue;
         }
+        const float *w = weight_run(p, g, buf, buf9, m, c0, real);
         if (w && r == 0 && r1 == size * taps) { /* the whole group: [real][taps] to [taps][size] */
             float *o = out + (k - k0);
             if (taps == 1) /* 1×1: the run is the row already */
@@ -100,8 +155,9 @@ static void pack_a_conv(const mx_gemm_problem *p, const mx_gemm_kernel *g, void 
     int run = max_int(0, min_int(group, p->Cin - c0)) * taps;
     for (int r0 = 0; r0 < valid; r0 += MX_GEMM_WIDEN_ROWS) {
         int n = min_int(MX_GEMM_WIDEN_ROWS, valid - r0);
-        mx_gemm_prefetch_rows(p->a_mat, (size_t)p->Cin * taps, first + r0 + n,
-                              min_int(MX_GEMM_WIDEN_ROWS, p->M - first - r0 - n), c0 * taps, run);
+        if (!p->a_phases) /* phase rows read the weight rows of their own 3×3 layout */
+            mx_gemm_prefetch_rows(p->a_mat, (size_t)p->Cin * taps, first + r0 + n,
+                                  min_int(MX_GEMM_WIDEN_ROWS, p->M - first - r0 - n), c0 * taps, run);
         for (int i = 0; i < n; i++) weight_row(p, g, tmp + (size_t)i * KC, first + r0 + i, k0, kc);
         if (!g->to_pairs) {
             g->transpose((float *)dstv + r0, (size_t)rows, tmp, KC, n, kc);
@@ -348,9 +404,46 @@ static void prepare_lo_band(const mx_ctx *c, const band_job *j, uint32_t *lo_ban
     p->image_lo = t.image;
 }
 
-/* conv2d as one product of g; with a split kernel (g->split_of), the split product (gemm.h). */
+/* conv2d_up2x's output of a block of rows of the phase conv: its phase planes z ([B][4·Cout][rows][W+1],
+ * the block's C) interleaved into y ([B][Cout][2H][2W]) with the bias. Row r of the phase conv holds
+ * output row 2r of phases (0, b) and row 2r-1 of phases (1, b); column s holds output column 2s of
+ * phases (a, 0) and 2s-1 of phases (a, 1). */
+typedef struct {
+    float *y;
+    const float *z, *bias; /* bias: Cout widened values, or NULL */
+    int Cout, H, W, oy0, rows;
+} phase_block;
+
+static void interleave_plane(void *arg, int task, int thread) {
+    (void)thread;
+    const phase_block *q = arg;
+    int b = task / q->Cout, co = task % q->Cout, Wo = q->W + 1;
+    float bias = q->bias ? q->bias[co] : 0.0f;
+    size_t plane = (size_t)q->rows * Wo;
+    const float *z = q->z + (size_t)b * 4 * q->Cout * plane;
+    float *y = q->y + ((size_t)b * q->Cout + co) * 4 * q->H * q->W;
+    for (int r = q->oy0; r < q->oy0 + q->rows; r++)
+        for (int a = 0; a < 2; a++) {
+            int i = r - a; /* output row 2i + a */
+            if (i < 0 || i >= q->H) continue;
+            const float *z0 = z + ((size_t)(2 * a) * q->Cout + co) * plane + (size_t)(r - q->oy0) * Wo;
+            const float *z1 = z0 + (size_t)q->Cout * plane + 1; /* phase (a, 1), from column 1 */
+            float *yr = y + (size_t)(2 * i + a) * 2 * q->W;
+            for (int j = 0; j < q->W; j++) {
+                yr[2 * j] = z0[j] + bias;
+                yr[2 * j + 1] = z1[j] + bias;
+            }
+        }
+}
+
+/* Bound of conv2d_up2x's phase planes of a block (all batch items), in scratch. */
+#define PHASE_BYTES_MAX ((size_t)16 << 20)
+
+/* conv2d as one product of g; with a split kernel (g->split_of), the split product (gemm.h). With
+ * up (conv2d_up2x: kh = kw = 2, pad 1, Cout = 4 × y's channels) each block of output rows is
+ * computed into scratch and interleaved into y by interleave_plane. */
 static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H, int W,
-                   mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
+                   mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad, int up) {
     int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
     if (B <= 0 || Cout <= 0 || Ho <= 0 || Wo <= 0 || H + 2 * pad < kh || W + 2 * pad < kw) return;
     int chans = band_chans(g, Cin), width = W + 2 * pad, taps = kh * kw, group = channel_group_words(chans, k_per_word(g), taps, mx_gemm_kc(g));
@@ -360,10 +453,10 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
     /* image: prepare_band points it at each band; set before for the profile's conv parts */
     mx_gemm_problem p = {.M = Cout, .K = taps * chans * k_per_word(g), .batch = B, .ldc = (size_t)Ho * Wo, .image = x,
                          .c_batch_stride = (size_t)Cout * Ho * Wo, .pack_a = mx_gemm_pack_a_conv,
-                         .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .a_ld = (size_t)Cin * taps, .a_weight = 1,
-                         .bias = bias, .bias_per_row = 1, .Cin = Cin,
+                         .pack_b = mx_gemm_pack_b_conv, .a_mat = w, .a_ld = (size_t)Cin * (up ? 9 : taps), .a_weight = 1,
+                         .bias = up ? mx_w_none() : bias, .bias_per_row = 1, .Cin = Cin,
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
-                         .band_width = width, .band_fp32 = direct && g->to_pairs,
+                         .band_width = width, .band_fp32 = direct && g->to_pairs, .a_phases = up ? 4 : 0,
                          .rows_in_place = band_rows_in_place, .panel_in_place = band_panel_in_place,
                          .kc_block = span <= mx_gemm_kc(g) ? span : mx_gemm_kc(g)};
     if (split) {
@@ -373,7 +466,10 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
         p.a_weight = 0;
     }
     int rows = rows_per_block(B, chans, width, kh, stride, Ho, Wo), nthreads = mx_par_threads(c);
+    if (up) rows = min_int(rows, max_int(1, (int)(PHASE_BYTES_MAX / ((size_t)B * Cout * Wo * sizeof(float)))));
     size_t band_words = direct ? 0 : (size_t)B * chans * ((size_t)(rows - 1) * stride + kh) * width;
+    /* up: the phase planes of a block, then the widened bias */
+    size_t phase_floats = up ? (size_t)B * Cout * rows * Wo + (size_t)Cout / 4 : 0;
     size_t nsecs = c && c->prof ? (size_t)nthreads : 0, a_floats = 0;
     /* several blocks of output rows run one problem each: A (the weights) packed once for all
      * of them, unless the context's cache holds it (else every block repacked it: 64 times
@@ -381,28 +477,49 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
     size_t per_a = rows < Ho ? mx_gemm_a_panels_floats(g, &p) : 0;
     const float *cached_a = per_a ? mx_gemm_cached_a_panels(c, g, &p) : NULL; /* NULL when split */
     a_floats = cached_a ? 0 : per_a;
-    a_floats += a_floats & 1; /* the doubles after them stay 8-byte aligned */
+    a_floats += (a_floats + phase_floats) & 1; /* the doubles after them stay 8-byte aligned */
     mx_scratch s;
     size_t bands = split ? 2 : 1; /* a split kernel's: the high and the low parts' */
-    float *mem = mx_scratch_take(
-        c, a_floats * sizeof(float) + nsecs * sizeof(double) + bands * band_words * sizeof(uint32_t) + 1, &s);
+    float *mem = mx_scratch_take(c,
+                                 (a_floats + phase_floats) * sizeof(float) + nsecs * sizeof(double) +
+                                     bands * band_words * sizeof(uint32_t) + 1,
+                                 &s);
     int failed = !mem;
-    double *secs = mem ? (double *)(void *)(mem + a_floats) : NULL;
+    double *secs = mem ? (double *)(void *)(mem + a_floats + phase_floats) : NULL;
     band_job j = {.g = g, .x = x, .B = B, .band = direct || !mem ? NULL : (uint32_t *)(void *)(secs + nsecs), .Cin = Cin,
                   .H = H, .W = W, .pad = pad, .chans = chans, .width = width, .secs = nsecs ? secs : NULL};
     p.a_panels = per_a && !cached_a && mem ? mx_gemm_pack_a_panels(c, g, &p, mem) : cached_a;
+    phase_block q = {.y = y, .z = mem ? mem + a_floats : NULL, .Cout = Cout / 4, .H = H, .W = W};
+    if (up && mem && bias.data) {
+        float *b = mem + a_floats + phase_floats - Cout / 4;
+        for (int i = 0; i < Cout / 4; i++) b[i] = mx_w_get(bias, (size_t)i);
+        q.bias = b;
+    }
     for (int oy0 = 0; oy0 < Ho && !failed; oy0 += rows) {
         int n = min_int(rows, Ho - oy0);
         prepare_band(c, &j, &p, oy0, n, B);
         if (split && j.band) prepare_lo_band(c, &j, j.band + band_words, &p, oy0, n, B);
-        p.C = y + (size_t)oy0 * Wo;
+        p.C = up ? mem + a_floats : y + (size_t)oy0 * Wo;
+        if (up) p.ldc = (size_t)n * Wo, p.c_batch_stride = (size_t)Cout * n * Wo;
         failed = mx_gemm_run(c, g, &p) != 0;
+        if (up && !failed) {
+            q.oy0 = oy0, q.rows = n;
+            mx_par_for(c, B * q.Cout, interleave_plane, &q);
+        }
     }
     if (mem) mx_scratch_release(c, &s);
-    if (failed) mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+    if (failed && up)
+        mx_conv2d_up2x_ref(c, y, x, B, Cin, H, W, w, bias, Cout / 4);
+    else if (failed)
+        mx_conv2d_ref(c, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
 }
 
 void mx_gemm_conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
                     int W, mx_wptr w, mx_wptr bias, int Cout, int kh, int kw, int stride, int pad) {
-    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad);
+    conv2d(c, g, y, x, B, Cin, H, W, w, bias, Cout, kh, kw, stride, pad, 0);
+}
+
+void mx_gemm_conv2d_up2x(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const float *x, int B, int Cin, int H,
+                         int W, mx_wptr w, mx_wptr bias, int Cout) {
+    conv2d(c, g, y, x, B, Cin, H, W, w, bias, 4 * Cout, 2, 2, 1, 1, 1);
 }

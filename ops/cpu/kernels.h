@@ -48,10 +48,12 @@ void mx_scratch_release(const mx_ctx *c, mx_scratch *s);
     void mx_##name##_neonbf16(const mx_ctx *c, MX_SPLICE params);
 MX_OPS(MX_KERNEL_DECL_)
 
-/* The amx level's fp32 layers: linear and conv2d as three bf16 products (gemm_amx.inc). */
+/* The amx level's fp32 layers: linear, conv2d and conv2d_up2x as three bf16 products (gemm_amx.inc). */
 void mx_linear_x3_amx(const mx_ctx *c, float *y, const float *x, mx_wptr w, mx_wptr bias, int M, int N, int K);
 void mx_conv2d_x3_amx(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
                       mx_wptr bias, int Cout, int kh, int kw, int stride, int pad);
+void mx_conv2d_up2x_x3_amx(const mx_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                           mx_wptr bias, int Cout);
 
 /* Elements per task of the element-wise kernels: fixed, so the split never depends on threads. */
 #define MX_EW_CHUNK 16384

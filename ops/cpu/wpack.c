@@ -142,8 +142,10 @@ static float *take_panels(mx_wpack *w, size_t bytes) {
     return p;
 }
 
-float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem) {
-    size_t extra = panel_elem > source_elem ? bytes / panel_elem * (panel_elem - source_elem) : 0;
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem,
+                    size_t grown) {
+    size_t elems = bytes / panel_elem, own = elems > grown ? elems - grown : 0;
+    size_t extra = (panel_elem > source_elem ? own * (panel_elem - source_elem) : 0) + grown * panel_elem;
     if (bytes == 0 || extra > w->extra_budget - w->extra) return NULL;
     if (2 * (w->used + 1) > w->cap && grow(w)) return NULL;
     wpack_entry *e = slot_of(w->slots, w->cap, key);

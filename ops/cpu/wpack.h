@@ -35,9 +35,12 @@ void mx_wpack_destroy(mx_wpack *w);
 /* The panels stored under key, or NULL. */
 const float *mx_wpack_find(const mx_wpack *w, const mx_wpack_key *key);
 /* A new entry of `bytes` (64-byte aligned) under key, for the caller to fill at once, of panels
- * whose elements take panel_elem bytes from weights whose elements take source_elem; NULL when
- * its excess would pass the budget or no memory could be had (the caller packs per call then). */
-float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem);
+ * whose elements take panel_elem bytes from weights whose elements take source_elem, `grown` of
+ * them beyond the weight's own (conv2d_up2x's phase kernels: 16 for every 9 weights; counted in
+ * full); NULL when its excess would pass the budget or no memory could be had (the caller packs
+ * per call then). */
+float *mx_wpack_add(mx_wpack *w, const mx_wpack_key *key, size_t bytes, size_t panel_elem, size_t source_elem,
+                    size_t grown);
 /* Called before an entry is filled from source[0 .. source_bytes): starts reading the source's
  * pages from the file in one go when the weights are mapped from a file. */
 void mx_wpack_fetch_source(const mx_wpack *w, const void *source, size_t source_bytes);

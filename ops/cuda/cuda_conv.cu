@@ -8,8 +8,10 @@
  * A 1x1, stride 1, unpadded conv needs no im2col: col_b is x_b itself. */
 #include "cuda_common.cuh"
 
+/* H, W: the input as the conv sees it; x holds it stored (H/up)×(W/up), upsampled up× (nearest) on
+ * the fly for conv2d_up2x (up 2), else up 1. */
 typedef struct conv_shape {
-    int Cin, H, W, kh, kw, stride, pad, Ho, Wo;
+    int Cin, H, W, kh, kw, stride, pad, Ho, Wo, up;
 } conv_shape;
 
 /* col[kk, pl] (row-major, width pc) = x[ci, oy*stride - pad + ky, ox*stride - pad + kx] or 0 for one
@@ -20,12 +22,13 @@ template <typename T>
 __global__ void im2col_tile_kernel(T *col, const float *x, conv_shape s, unsigned p0, unsigned pc) {
     unsigned kk = blockIdx.y, khw = (unsigned)(s.kh * s.kw);
     unsigned ci = kk / khw, r = kk - ci * khw, ky = r / (unsigned)s.kw, kx = r - ky * (unsigned)s.kw;
-    const float *plane = x + (size_t)ci * s.H * s.W;
+    unsigned sw = (unsigned)(s.W / s.up);
+    const float *plane = x + (size_t)ci * (s.H / s.up) * sw;
     T *row = col + (size_t)kk * pc;
     for (unsigned pl = blockIdx.x * blockDim.x + threadIdx.x; pl < pc; pl += gridDim.x * blockDim.x) {
         unsigned p = p0 + pl, oy = p / (unsigned)s.Wo, ox = p - oy * (unsigned)s.Wo;
         int iy = (int)(oy * s.stride + ky) - s.pad, ix = (int)(ox * s.stride + kx) - s.pad;
-        float v = iy >= 0 && iy < s.H && ix >= 0 && ix < s.W ? plane[(size_t)iy * s.W + ix] : 0.0f;
+        float v = iy >= 0 && iy < s.H && ix >= 0 && ix < s.W ? plane[(size_t)(iy / s.up) * sw + ix / s.up] : 0.0f;
         row[pl] = mx_cuda_store<T>(v);
     }
 }
@@ -59,9 +62,9 @@ static long long tile_pixels(const mx_cuda_ctx *c, long long kc, size_t esize, l
 static int conv_items(mx_cuda_ctx *c, float *y, const float *x, int B, mx_wptr w, int Cout, const conv_shape *s,
                         mx_status *st) {
     long long P = (long long)s->Ho * s->Wo, kc = (long long)s->Cin * s->kh * s->kw;
-    long long in_plane = (long long)s->Cin * s->H * s->W, out_plane = (long long)Cout * P;
+    long long in_plane = (long long)s->Cin * (s->H / s->up) * (s->W / s->up), out_plane = (long long)Cout * P;
     size_t esize = mx_dtype_size(w.dtype);
-    int direct = s->kh == 1 && s->kw == 1 && s->stride == 1 && s->pad == 0;
+    int direct = s->kh == 1 && s->kw == 1 && s->stride == 1 && s->pad == 0 && s->up == 1;
     for (int b = 0; direct && w.dtype == MX_F32 && b < B; b++) /* x_b is already the [Cin, P] matrix */
         if (mx_cuda_gemm_batched(c, w.dtype, 0, 0, (int)P, Cout, (int)kc, x + b * in_plane, P, 0, w.data, kc, 0,
                                  y + b * out_plane, P, 0, 1, "cuda conv2d", st))
@@ -94,7 +97,7 @@ int mx_cuda_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int
         return -1;
     if (stride < 1 || pad < 0)
         return mx_fail(st, MX_EINPUT, "cuda conv2d: stride %d / pad %d out of range", stride, pad);
-    conv_shape s = {Cin, H, W, kh, kw, stride, pad, 0, 0};
+    conv_shape s = {Cin, H, W, kh, kw, stride, pad, 0, 0, 1};
     if (H + 2 * pad < kh || W + 2 * pad < kw) return 0; /* no output (op_list.h), as on the CPU */
     s.Ho = (H + 2 * pad - kh) / stride + 1;
     s.Wo = (W + 2 * pad - kw) / stride + 1;
@@ -106,4 +109,19 @@ int mx_cuda_conv2d(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int
     if (rc != 1) return rc;
     if (conv_items(c, y, x, B, w, Cout, &s, st)) return -1;
     return mx_cuda_add_bias(c, y, bias, B, Cout, (long long)s.Ho * s.Wo, "cuda conv2d bias", st);
+}
+
+/* conv2d_up2x: the 3×3 conv over the upsampled input through im2col, which reads x at (iy/2, ix/2);
+ * the upsampled image is never stored (the phase form of the CPU levels is not used here yet). */
+int mx_cuda_conv2d_up2x(mx_cuda_ctx *c, float *y, const float *x, int B, int Cin, int H, int W, mx_wptr w,
+                        mx_wptr bias, int Cout, mx_status *st) {
+    const long long dims[5] = {B, Cin, H, W, Cout}, outputs[2] = {B, Cout};
+    if (mx_cuda_empty(2, outputs)) return 0;
+    if (mx_cuda_check_dims("cuda conv2d_up2x", st, 5, dims) || mx_cuda_check_wdtype(w, "cuda conv2d_up2x weight", st))
+        return -1;
+    if (4LL * H * W > 0x7fffffffLL || (long long)Cin * 9 > 65535)
+        return mx_fail(st, MX_EINPUT, "cuda conv2d_up2x: %d x %d input pixels or %d channels out of range", H, W, Cin);
+    conv_shape s = {Cin, 2 * H, 2 * W, 3, 3, 1, 1, 2 * H, 2 * W, 2};
+    if (conv_items(c, y, x, B, w, Cout, &s, st)) return -1;
+    return mx_cuda_add_bias(c, y, bias, B, Cout, 4LL * H * W, "cuda conv2d_up2x bias", st);
 }

@@ -96,11 +96,20 @@ int mx_ln_load(mx_ln *p, mx_binder *b, const char *path, int c, float eps, mx_st
 
 int mx_conv_out_size(const mx_conv *p, int n) { return (n + 2 * p->pad - p->k) / p->stride + 1; }
 
+/* The context a conv computes in: fp32, the one given to it, or the run's (its precision). */
+static const mx_ctx *conv_ctx(mx_run *r, const mx_conv *p) {
+    return p->prec == MX_CONV_PREC_FP32 ? &r->fp32 : p->prec == MX_CONV_PREC_GIVEN ? r->given : r->c;
+}
+
 void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
     int Ho = mx_conv_out_size(p, H), Wo = mx_conv_out_size(p, W);
     r->flops += 2.0 * B * p->cout * Ho * Wo * (double)p->cin * p->k * p->k;
-    const mx_ctx *c = p->prec == MX_CONV_PREC_FP32 ? &r->fp32 : p->prec == MX_CONV_PREC_GIVEN ? r->given : r->c;
-    mx_conv2d(c, y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
+    mx_conv2d(conv_ctx(r, p), y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
+}
+
+void mx_conv_up2x_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
+    r->flops += 2.0 * B * 4 * p->cout * (H + 1.0) * (W + 1.0) * p->cin * 4; /* the phase form's (op_list.h) */
+    mx_conv2d_up2x(conv_ctx(r, p), y, x, B, p->cin, H, W, p->w, p->b, p->cout);
 }
 
 void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M) {
@@ -413,15 +422,8 @@ int mx_up_load(mx_up *p, mx_binder *b, const char *path, int c, mx_status *st) {
     return mx_conv_load(&p->conv, b, sub, c, c, 3, 1, 1, 1, st);
 }
 
-int mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H, int W) {
-    size_t mark = mx_arena_mark(r->a);
-    int C = p->conv.cin;
-    float *u = mx_run_alloc(r, (size_t)B * C * 4 * H * W);
-    if (!u) return -1;
-    mx_upsample_nearest2x(r->c, u, x, B * C, H, W);
-    mx_conv_run(r, &p->conv, y, u, B, 2 * H, 2 * W);
-    mx_arena_reset(r->a, mark);
-    return 0;
+void mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H, int W) {
+    mx_conv_up2x_run(r, &p->conv, y, x, B, H, W);
 }
 
 /* ---- timestep embedding ---- */

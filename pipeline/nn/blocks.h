@@ -64,6 +64,9 @@ int mx_ln_load(mx_ln *p, mx_binder *b, const char *path, int c, float eps, mx_st
 
 /* Forward of the groups (no allocation). conv output size: the usual formula. */
 void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W);
+/* A 3×3, stride 1, pad 1 conv p on the nearest 2× upsample of x [B, cin, H, W]: one op
+ * (conv2d_up2x), the upsample never stored; y is [B, cout, 2H, 2W]. */
+void mx_conv_up2x_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W);
 void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M);
 void mx_gn_run(mx_run *r, const mx_gn *p, float *y, const float *x, int B, int HW, int silu);
 void mx_ln_run(mx_run *r, const mx_ln *p, float *y, const float *x, int M);
@@ -132,10 +135,10 @@ int mx_vae_attn_run(mx_run *r, const mx_vae_attn *p, float *y, const float *x, i
 typedef struct { mx_conv conv; int asym_pad; } mx_down;
 int mx_down_load(mx_down *p, mx_binder *b, const char *path, int c, int pad, mx_status *st);
 int mx_down_run(mx_run *r, const mx_down *p, float *y, const float *x, int B, int H, int W);
-/* Upsample2D: nearest 2× then 3×3 conv. */
+/* Upsample2D: nearest 2× then 3×3 conv (one op, mx_conv_up2x_run). */
 typedef struct { mx_conv conv; } mx_up;
 int mx_up_load(mx_up *p, mx_binder *b, const char *path, int c, mx_status *st);
-int mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H, int W);
+void mx_up_run(mx_run *r, const mx_up *p, float *y, const float *x, int B, int H, int W);
 
 /* diffusers timestep path: time_proj (sinusoidal) -> linear_1 -> SiLU -> linear_2, then the
  * SiLU that every resnet's time_emb_proj applies (shared). */

@@ -178,10 +178,11 @@ static int decode_run(mx_run *r, const void *net, const float *latents, int B, i
         const tiny_level *lv = &t->dec[i];
         if (!(h = blocks_run(r, lv, p, h, B, H, W))) return -1;
         if (!lv->has_conv) break;
-        mx_upsample_nearest2x(r->c, other(p, h), h, B * c->channels, H, W);
+        float *u = other(p, h);
+        mx_conv_up2x_run(r, &lv->conv, u, h, B, H, W); /* nn.Upsample, then the 3×3 conv */
+        h = u;
         H *= 2;
         W *= 2;
-        mx_conv_run(r, &lv->conv, h, other(p, h), B, H, W);
     }
     mx_conv_run(r, &t->dec_out, image, h, B, H, W);
     /* [0, 1] -> [-1, 1]: x * 2 - 1 */

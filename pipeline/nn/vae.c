@@ -248,7 +248,7 @@ static int decode_run(mx_run *r, const void *net, const float *latents, int B, i
             h = other(p, h);
         }
         if (lv->has_resample) {
-            if (mx_up_run(r, &lv->up, other(p, h), h, B, H, W)) return -1;
+            mx_up_run(r, &lv->up, other(p, h), h, B, H, W);
             h = other(p, h);
             H *= 2;
             W *= 2;

@@ -121,26 +121,40 @@ static void test_linear(env *e, mx_dtype dt, int M, int N, int K) {
     free(want);
 }
 
-static void test_conv2d(env *e, mx_dtype dt, int B, int Cin, int H, int W, int Cout, int ks, int stride, int pad) {
+/* conv2d, or with up conv2d_up2x (a 3×3 conv, pad 1, on the 2× upsample: ks, stride, pad unused). */
+static void test_conv_op(env *e, mx_dtype dt, int B, int Cin, int H, int W, int Cout, int ks, int stride, int pad,
+                         int up) {
     char name[96];
-    snprintf(name, sizeof name, "conv2d %s %dx%d s%d p%d %dx%dx%dx%d->%d", mx_dtype_name(dt), ks, ks, stride, pad,
-             B, Cin, H, W, Cout);
-    int Ho = (H + 2 * pad - ks) / stride + 1, Wo = (W + 2 * pad - ks) / stride + 1;
+    if (up)
+        snprintf(name, sizeof name, "conv2d_up2x %s %dx%dx%dx%d->%d", mx_dtype_name(dt), B, Cin, H, W, Cout);
+    else
+        snprintf(name, sizeof name, "conv2d %s %dx%d s%d p%d %dx%dx%dx%d->%d", mx_dtype_name(dt), ks, ks, stride, pad,
+                 B, Cin, H, W, Cout);
+    if (up) ks = 3;
+    int Ho = up ? 2 * H : (H + 2 * pad - ks) / stride + 1, Wo = up ? 2 * W : (W + 2 * pad - ks) / stride + 1;
     size_t nx = (size_t)B * Cin * H * W, ny = (size_t)B * Cout * Ho * Wo;
     float *x = rnd(nx, 21, -1, 1), *want = malloc(ny * sizeof *want);
     test_weight w = make_weight(e, (size_t)Cout * Cin * ks * ks, 22, dt), b = make_weight(e, Cout, 23, dt);
-    e->cpu.k->conv2d(&e->cpu, want, x, B, Cin, H, W, w.host, b.host, Cout, ks, ks, stride, pad);
+    if (up)
+        e->cpu.k->conv2d_up2x(&e->cpu, want, x, B, Cin, H, W, w.host, b.host, Cout);
+    else
+        e->cpu.k->conv2d(&e->cpu, want, x, B, Cin, H, W, w.host, b.host, Cout, ks, ks, stride, pad);
     float *dx = dev_copy(e, x, nx * sizeof *x), *dy = dev_zero(e, ny * sizeof *dy);
-    if (dx && dy && w.dev.data && b.dev.data &&
-        !gpu_ok(e, mx_cuda_conv2d(e->gpu, dy, dx, B, Cin, H, W, w.dev, b.dev, Cout, ks, ks, stride, pad, &e->st),
-                name))
-        compare_dev(e, name, dy, want, ny, bound_for(dt));
+    int rc = dx && dy && w.dev.data && b.dev.data ? 0 : -1;
+    if (rc == 0)
+        rc = up ? mx_cuda_conv2d_up2x(e->gpu, dy, dx, B, Cin, H, W, w.dev, b.dev, Cout, &e->st)
+                : mx_cuda_conv2d(e->gpu, dy, dx, B, Cin, H, W, w.dev, b.dev, Cout, ks, ks, stride, pad, &e->st);
+    if (dx && dy && w.dev.data && b.dev.data && !gpu_ok(e, rc, name)) compare_dev(e, name, dy, want, ny, bound_for(dt));
     mx_cuda_free(dx);
     mx_cuda_free(dy);
     free_weight(&w);
     free_weight(&b);
     free(x);
     free(want);
+}
+
+static void test_conv2d(env *e, mx_dtype dt, int B, int Cin, int H, int W, int Cout, int ks, int stride, int pad) {
+    test_conv_op(e, dt, B, Cin, H, W, Cout, ks, stride, pad, 0);
 }
 
 /* Groups of more than 4096 values run in several chunks per group (cuda_norm.cu): the larger
@@ -380,6 +394,8 @@ static void test_gemm_ops(env *e) {
     test_conv2d(e, MX_BF16, 1, 4, 10, 10, 3, 3, 1, 0);
     test_conv2d(e, MX_F32, 2, 9, 7, 5, 6, 1, 1, 0);
     test_conv2d(e, MX_F16, 2, 9, 7, 5, 6, 1, 1, 0);
+    test_conv_op(e, MX_F32, 2, 5, 7, 6, 9, 0, 0, 0, 1);
+    test_conv_op(e, MX_F16, 1, 12, 1, 3, 7, 0, 0, 0, 1);
 }
 
 /* n floats of dev, waited for (NULL after a counted failure). */
