@@ -1,5 +1,6 @@
-/* matex bench: times matex's own kernels (GEMM, 3×3 conv, attention) on the SD1.5 UNet shapes
- * at a 64×64 latent and prints GFLOP/s (no OpenBLAS; tools/bench/bench_ops.c compares with it). */
+/* matex bench: times matex's own kernels (GEMM, 3×3 conv, the upsamplers' conv, attention) on the
+ * SD1.5 UNet shapes at a 64×64 latent and prints GFLOP/s (no OpenBLAS; tools/bench/bench_ops.c
+ * compares with it). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -11,7 +12,10 @@
 
 typedef struct {
     const char *name;
-    int kind; /* 0 linear M N K, 1 conv3x3 C H W, 2 attention T heads D */
+    /* 0 linear M N K, 1 conv3x3 C H W, 2 attention T heads D; an upsampler's 3×3 conv on the 2×
+     * upsample of C H W: 3 as the upsample then conv2d, 4 as conv2d_up2x (both in GFLOP/s of the
+     * 3×3 conv at 2H×2W, so their times compare) */
+    int kind;
     int a, b, c;
 } bench_case;
 
@@ -20,13 +24,17 @@ static const bench_case cases[] = {
     {"gemm 4096x320x1280", 0, 4096, 320, 1280},   {"gemm 1024x640x5120", 0, 1024, 640, 5120},
     {"gemm 77x768x768", 0, 77, 768, 768},         {"conv3x3 64x64x320", 1, 320, 64, 64},
     {"conv3x3 32x32x640", 1, 640, 32, 32},        {"conv3x3 16x16x1280", 1, 1280, 16, 16},
+    {"upsample+conv3x3 16x16x1280", 3, 1280, 16, 16}, {"conv2d_up2x 16x16x1280", 4, 1280, 16, 16},
+    {"upsample+conv3x3 32x32x640", 3, 640, 32, 32}, {"conv2d_up2x 32x32x640", 4, 640, 32, 32},
     {"attention 4096 tok 8x40", 2, 4096, 8, 40},
 };
 
 static void usage(FILE *f) {
     fprintf(f, "usage: matex bench [--threads N] [--repeats R] [--precision fp32|bf16] [--json]\n"
-               "Times matex's GEMM, 3x3 conv and attention kernels on the SD1.5 UNet shapes at a\n"
-               "64x64 latent and prints GFLOP/s (median of R runs after a warm-up; default R=5).\n"
+               "Times matex's GEMM, 3x3 conv, upsampler conv (upsample then conv, and conv2d_up2x;\n"
+               "both in GFLOP/s of the 3x3 conv on the upsampled input) and attention kernels on the\n"
+               "SD1.5 UNet shapes at a 64x64 latent and prints GFLOP/s (median of R runs after a\n"
+               "warm-up; default R=5).\n"
                "  --threads N   worker threads (default: all CPUs)\n"
                "  --precision P fp32 (default) or bf16 kernels (bf16 needs AVX512_BF16)\n"
                "  --json        one JSON object on stdout instead of the table\n"
@@ -39,6 +47,7 @@ static void usage(FILE *f) {
 static double flops_of(const bench_case *b) {
     if (b->kind == 0) return 2.0 * b->a * b->b * b->c;
     if (b->kind == 1) return 2.0 * b->a * b->a * 9.0 * b->b * b->c;
+    if (b->kind >= 3) return 2.0 * b->a * b->a * 9.0 * 4.0 * b->b * b->c;
     return 4.0 * b->a * (double)b->a * b->b * b->c; /* QK^T and PV */
 }
 
@@ -48,6 +57,9 @@ static void sizes_of(const bench_case *b, size_t n[3]) {
         n[0] = (size_t)b->a * b->c, n[1] = (size_t)b->b * b->c, n[2] = (size_t)b->a * b->b;
     } else if (b->kind == 1) {
         n[0] = n[2] = (size_t)b->a * b->b * b->c, n[1] = (size_t)b->a * b->a * 9;
+    } else if (b->kind >= 3) { /* x, then (kind 3) the upsampled x */
+        n[2] = (size_t)b->a * 4 * b->b * b->c, n[0] = (size_t)b->a * b->b * b->c + (b->kind == 3 ? n[2] : 0);
+        n[1] = (size_t)b->a * b->a * 9;
     } else {
         n[0] = n[2] = (size_t)b->a * b->b * b->c, n[1] = 2 * n[0]; /* k and v */
     }
@@ -58,6 +70,12 @@ static void run_case(const mx_ctx *c, const bench_case *b, float *x, float *w, f
         mx_linear(c, y, x, mx_w_f32(w), mx_w_none(), b->a, b->b, b->c);
     else if (b->kind == 1)
         mx_conv2d(c, y, x, 1, b->a, b->b, b->c, mx_w_f32(w), mx_w_none(), b->a, 3, 3, 1, 1);
+    else if (b->kind == 3) {
+        float *u = x + (size_t)b->a * b->b * b->c;
+        mx_upsample_nearest2x(c, u, x, b->a, b->b, b->c);
+        mx_conv2d(c, y, u, 1, b->a, 2 * b->b, 2 * b->c, mx_w_f32(w), mx_w_none(), b->a, 3, 3, 1, 1);
+    } else if (b->kind == 4)
+        mx_conv2d_up2x(c, y, x, 1, b->a, b->b, b->c, mx_w_f32(w), mx_w_none(), b->a);
     else {
         int C = b->b * b->c;
         mx_attention(c, y, x, w, w + (size_t)b->a * C, 1, b->b, b->a, b->a, b->c, C, C, C, 0, 0.158f);
