@@ -87,16 +87,11 @@ static const float *weights_3x3(const mx_gemm_problem *p, const mx_gemm_kernel *
     return buf9;
 }
 
-/* Row m's weights of input channels c0 .. c0+real, [real][taps] in fp32: in place (fp32 weights),
- * widened into buf, or (a_phases) folded into buf from the 3×3 weights (widened into buf9); NULL
- * where they do not fit buf (read per element then; never with a_phases, whose groups fit). */
-static const float *weight_run(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *buf, float *buf9, int m,
-                               int c0, int real) {
+/* Row m's weights of input channels c0 .. c0+real, [real][taps] in fp32: in place (fp32 weights) or
+ * widened into buf; NULL where they do not fit buf (read per element then). */
+static const float *weight_run(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *buf, int m, int c0,
+                               int real) {
     int taps = p->kh * p->kw;
-    if (p->a_phases) {
-        fold_phase(buf, 4, 1, weights_3x3(p, g, buf9, m, c0, real), real, m / (p->M / p->a_phases));
-        return buf;
-    }
     size_t at = ((size_t)m * p->Cin + (size_t)c0) * taps;
     if (p->a_mat.dtype == MX_F32) return (const float *)p->a_mat.data + at;
     if ((size_t)real * taps > MX_GEMM_KC_MAX) return NULL; /* a group of one word longer than buf (kernels > 17×17) */
@@ -112,16 +107,18 @@ static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float 
     while (k < k0 + kc) {
         int grp = k / span, c0 = grp * group, size = min_int(group, p->chans * k_per_word(g) - c0);
         int real = max_int(0, min_int(size, p->Cin - c0)), r = k - grp * span, r1 = min_int(size * taps, r + k0 + kc - k);
-        /* the group's channels × taps: one run of the weight row, widened once (at: per element) */
+        /* the group's channels × taps: one run of the weight row, widened once */
         size_t at = ((size_t)m * p->Cin + (size_t)c0) * taps;
-        if (p->a_phases && r == 0 && r1 == size * taps) { /* the whole group, folded into [taps][size] */
+        /* phase kernels: a K block is always one whole group (conv2d sets kc_block to a group's
+         * span, which fits a block for 2×2 taps), folded straight into [taps][size] */
+        if (p->a_phases) {
             float *o = out + (k - k0);
             fold_phase(o, 1, (size_t)size, weights_3x3(p, g, buf9, m, c0, real), real, m / (p->M / p->a_phases));
             for (int t = 0; t < taps && real < size; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
             k += r1;
             continue;
         }
-        const float *w = weight_run(p, g, buf, buf9, m, c0, real);
+        const float *w = weight_run(p, g, buf, m, c0, real);
         if (w && r == 0 && r1 == size * taps) { /* the whole group: [real][taps] to [taps][size] */
             float *o = out + (k - k0);
             if (taps == 1) /* 1×1: the run is the row already */
