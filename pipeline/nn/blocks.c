@@ -159,13 +159,20 @@ int mx_resnet_load(mx_resnet *p, mx_binder *b, const char *path, int cin, int co
     return 0;
 }
 
-int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B, int H, int W,
-                  const float *temb_silu) {
+/* The block in diffusers' order with one temporary h of cout channels: norm1's output goes to y
+ * while y is free (cin <= cout), or over x when x may be spent (the shortcut then reads x first,
+ * into y, and conv2 writes over x); only a kept x wider than y needs a second temporary. Each op
+ * gets the values it gets in diffusers' order and the sum is skip + conv2 either way, so the plan
+ * never changes the result. */
+static int resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, float *spent_x, int B, int H, int W,
+                      const float *temb_silu) {
     size_t mark = mx_arena_mark(r->a);
-    size_t HW = (size_t)H * W, cmax = (size_t)(p->cin > p->cout ? p->cin : p->cout);
-    float *t = mx_run_alloc(r, (size_t)B * cmax * HW);
-    float *h = mx_run_alloc(r, (size_t)B * p->cout * HW);
-    if (!t || !h) return -1;
+    size_t HW = (size_t)H * W, n = (size_t)B * p->cout * HW;
+    int over_x = spent_x && p->cin > p->cout;
+    float *h = mx_run_alloc(r, n);
+    float *t = p->cin <= p->cout ? y : over_x ? spent_x : mx_run_alloc(r, (size_t)B * p->cin * HW);
+    if (!h || !t) return -1;
+    if (over_x) mx_conv_run(r, &p->shortcut, y, x, B, H, W); /* cin != cout: there is a shortcut */
     mx_gn_run(r, &p->norm1, t, x, B, (int)HW, 1);
     mx_conv_run(r, &p->conv1, h, t, B, H, W);
     if (p->has_temb) {
@@ -175,18 +182,32 @@ int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B
         int64_t hs[3] = {B, p->cout, (int64_t)HW}, ts[3] = {B, p->cout, 1};
         mx_binary(r->c, MX_BIN_ADD, h, h, hs, tp, ts, 3);
     }
-    mx_gn_run(r, &p->norm2, t, h, B, (int)HW, 1);
-    mx_conv_run(r, &p->conv2, y, t, B, H, W);
-    const float *skip = x;
-    if (p->has_shortcut) {
-        mx_conv_run(r, &p->shortcut, h, x, B, H, W);
-        skip = h;
+    mx_gn_run(r, &p->norm2, h, h, B, (int)HW, 1);
+    if (over_x) {
+        mx_conv_run(r, &p->conv2, spent_x, h, B, H, W);
+        run_add(r, y, y, spent_x, n);
+    } else {
+        mx_conv_run(r, &p->conv2, y, h, B, H, W);
+        const float *skip = x;
+        if (p->has_shortcut) {
+            mx_conv_run(r, &p->shortcut, h, x, B, H, W);
+            skip = h;
+        }
+        run_add(r, y, y, skip, n); /* conv2 + skip: the same sum as skip + conv2 */
     }
-    size_t n = (size_t)B * p->cout * HW;
-    run_add(r, y, skip, y, n);
     if (p->out_scale != 1.0f) mx_scale(r->c, y, y, 1.0f / p->out_scale, n);
     mx_arena_reset(r->a, mark);
     return 0;
+}
+
+int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B, int H, int W,
+                  const float *temb_silu) {
+    return resnet_run(r, p, y, x, NULL, B, H, W, temb_silu);
+}
+
+int mx_resnet_run_spending_x(mx_run *r, const mx_resnet *p, float *y, float *x, int B, int H, int W,
+                             const float *temb_silu) {
+    return resnet_run(r, p, y, x, x, B, H, W, temb_silu);
 }
 
 /* ---- Transformer2DModel / BasicTransformerBlock ---- */

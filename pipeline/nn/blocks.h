@@ -82,9 +82,14 @@ typedef struct mx_resnet {
 } mx_resnet;
 int mx_resnet_load(mx_resnet *p, mx_binder *b, const char *path, int cin, int cout, int temb_ch, int groups,
                    float eps, float out_scale, mx_status *st);
-/* y[B, cout, H, W] = block(x[B, cin, H, W], temb_silu[B, temb_ch] = silu(time embedding) or NULL). */
+/* y[B, cout, H, W] = block(x[B, cin, H, W], temb_silu[B, temb_ch] = silu(time embedding) or NULL).
+ * Its temporaries: B·cout·H·W floats, and B·cin·H·W more when cin > cout and x is kept. */
 int mx_resnet_run(mx_run *r, const mx_resnet *p, float *y, const float *x, int B, int H, int W,
                   const float *temb_silu);
+/* The same where x is not read afterwards: the block may write over it, and needs no second
+ * temporary (the VAE decoder's widest resnets: 256 -> 128 channels at 512x512). */
+int mx_resnet_run_spending_x(mx_run *r, const mx_resnet *p, float *y, float *x, int B, int H, int W,
+                             const float *temb_silu);
 
 /* BasicTransformerBlock: self-attention, cross-attention, GEGLU feed-forward, pre-LayerNorm. */
 typedef struct mx_tblock {

@@ -159,7 +159,7 @@ static int up_level_run(mx_run *r, const up_level *lv, float **h, float *p[2], f
         const float *skip = res[--*k];
         mx_concat_channels(r->c, cat, *h, lv->cin[j], skip, lv->cskip[j], B, (int)hw);
         float *dst = *h == p[0] ? p[1] : p[0];
-        if (mx_resnet_run(r, &lv->res[j], dst, cat, B, *H, *W, temb)) return -1;
+        if (mx_resnet_run_spending_x(r, &lv->res[j], dst, cat, B, *H, *W, temb)) return -1;
         mx_arena_reset(r->a, mark);
         *h = dst;
         if (lv->cross) {

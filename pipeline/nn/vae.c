@@ -194,7 +194,7 @@ static int encode_run(mx_run *r, const mx_vae *v, const float *image, int B, int
     for (int i = 0; i < c->nlevels; i++) {
         const vae_level *lv = &e->levels[i];
         for (int j = 0; j < lv->nres; j++) {
-            if (mx_resnet_run(r, &lv->res[j], other(p, h), h, B, H, W, NULL)) return -1;
+            if (mx_resnet_run_spending_x(r, &lv->res[j], other(p, h), h, B, H, W, NULL)) return -1;
             h = other(p, h);
         }
         if (lv->has_resample) {
@@ -244,7 +244,7 @@ static int decode_run(mx_run *r, const void *net, const float *latents, int B, i
     for (int i = 0; i < c->nlevels; i++) {
         const vae_level *lv = &d->levels[i];
         for (int j = 0; j < lv->nres; j++) {
-            if (mx_resnet_run(r, &lv->res[j], other(p, h), h, B, H, W, NULL)) return -1;
+            if (mx_resnet_run_spending_x(r, &lv->res[j], other(p, h), h, B, H, W, NULL)) return -1;
             h = other(p, h);
         }
         if (lv->has_resample) {
