@@ -84,27 +84,40 @@ static mx_op_cost mx_cost_elementwise(double n, int arrays) { return mx_cost(n, 
 
 static double weight_bytes(mx_wptr w, double n) { return n * (double)mx_dtype_size(w.dtype); }
 
+double mx_linear_flops(int M, int N, int K) { return 2.0 * M * N * (double)K; }
+
+double mx_attention_flops(int B, int H, int Tq, int Tk, int D) { return 4.0 * B * H * Tq * (double)Tk * D; }
+
 static mx_op_cost mx_cost_linear(mx_wptr w, int M, int N, int K) {
-    return mx_cost(2.0 * M * N * K, 4.0 * M * ((double)K + N) + weight_bytes(w, (double)N * K));
+    return mx_cost(mx_linear_flops(M, N, K), 4.0 * M * ((double)K + N) + weight_bytes(w, (double)N * K));
+}
+
+double mx_conv2d_flops(int B, int Cin, int Ho, int Wo, int Cout, int kh, int kw) {
+    return 2.0 * B * Cout * (double)Ho * Wo * Cin * kh * kw;
+}
+
+/* The phase form's products: 4 phases × Cout outputs over (H+1)×(W+1) positions, 2×2 taps each. */
+double mx_conv2d_up2x_flops(int B, int Cin, int H, int W, int Cout) {
+    return 2.0 * B * 4.0 * Cout * (H + 1.0) * (W + 1.0) * Cin * 4.0;
 }
 
 static mx_op_cost mx_cost_conv2d(int B, int Cin, int H, int W, mx_wptr w, int Cout, int kh, int kw, int stride,
                                  int pad) {
-    double out = (double)((H + 2 * pad - kh) / stride + 1) * ((W + 2 * pad - kw) / stride + 1);
-    return mx_cost(2.0 * B * Cout * out * Cin * kh * kw,
-                   4.0 * B * ((double)Cin * H * W + Cout * out) + weight_bytes(w, (double)Cout * Cin * kh * kw));
+    int Ho = (H + 2 * pad - kh) / stride + 1, Wo = (W + 2 * pad - kw) / stride + 1;
+    return mx_cost(mx_conv2d_flops(B, Cin, Ho, Wo, Cout, kh, kw),
+                   4.0 * B * ((double)Cin * H * W + Cout * (double)Ho * Wo) +
+                       weight_bytes(w, (double)Cout * Cin * kh * kw));
 }
 
-/* The phase form's products: 4 phases × Cout outputs over (H+1)×(W+1) positions, 2×2 taps each. */
 static mx_op_cost mx_cost_conv2d_up2x(int B, int Cin, int H, int W, mx_wptr w, int Cout) {
     double out = 4.0 * H * W;
-    return mx_cost(2.0 * B * 4.0 * Cout * (H + 1.0) * (W + 1.0) * Cin * 4.0,
+    return mx_cost(mx_conv2d_up2x_flops(B, Cin, H, W, Cout),
                    4.0 * B * ((double)Cin * H * W + Cout * out) + weight_bytes(w, (double)Cout * Cin * 9));
 }
 
 /* q·kᵀ and p·v; q, k, v read and the output written once (the scores never leave the cache). */
 static mx_op_cost mx_cost_attention(int B, int H, int Tq, int Tk, int D) {
-    return mx_cost(4.0 * B * H * Tq * (double)Tk * D, 4.0 * B * H * D * (2.0 * Tq + 2.0 * Tk));
+    return mx_cost(mx_attention_flops(B, H, Tq, Tk, D), 4.0 * B * H * D * (2.0 * Tq + 2.0 * Tk));
 }
 
 static double shape_count(const int64_t *shape, int ndim) {

@@ -105,6 +105,12 @@ int mx_shapes_nonempty(const int64_t *ashape, const int64_t *bshape, int ndim);
 
 #define MX_WRAPPER_DECL_(name, guard, params, args, cost) void mx_##name(const mx_ctx *c, MX_SPLICE params);
 MX_OPS(MX_WRAPPER_DECL_)
+/* The FLOPs of one call of linear, attention, conv2d (output Ho×Wo) and conv2d_up2x (input H×W,
+ * its phase form): one formula each for the profile's costs and the networks' counts. */
+double mx_linear_flops(int M, int N, int K);
+double mx_attention_flops(int B, int H, int Tq, int Tk, int D);
+double mx_conv2d_flops(int B, int Cin, int Ho, int Wo, int Cout, int kh, int kw);
+double mx_conv2d_up2x_flops(int B, int Cin, int H, int W, int Cout);
 /* Same-shape shortcut of mx_binary: y = a + b over n floats. */
 void mx_add(const mx_ctx *c, float *y, const float *a, const float *b, size_t n);
 /* Scalar conversions, usable anywhere: runtime/half.h (included above). */

@@ -103,17 +103,17 @@ static const mx_ctx *conv_ctx(mx_run *r, const mx_conv *p) {
 
 void mx_conv_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
     int Ho = mx_conv_out_size(p, H), Wo = mx_conv_out_size(p, W);
-    r->flops += 2.0 * B * p->cout * Ho * Wo * (double)p->cin * p->k * p->k;
+    r->flops += mx_conv2d_flops(B, p->cin, Ho, Wo, p->cout, p->k, p->k);
     mx_conv2d(conv_ctx(r, p), y, x, B, p->cin, H, W, p->w, p->b, p->cout, p->k, p->k, p->stride, p->pad);
 }
 
 void mx_conv_up2x_run(mx_run *r, const mx_conv *p, float *y, const float *x, int B, int H, int W) {
-    r->flops += 2.0 * B * 4 * p->cout * (H + 1.0) * (W + 1.0) * p->cin * 4; /* the phase form's (op_list.h) */
+    r->flops += mx_conv2d_up2x_flops(B, p->cin, H, W, p->cout);
     mx_conv2d_up2x(conv_ctx(r, p), y, x, B, p->cin, H, W, p->w, p->b, p->cout);
 }
 
 void mx_lin_run(mx_run *r, const mx_lin *p, float *y, const float *x, int M) {
-    r->flops += 2.0 * M * p->out * (double)p->in;
+    r->flops += mx_linear_flops(M, p->out, p->in);
     mx_linear(r->c, y, x, p->w, p->b, M, p->out, p->in);
 }
 
@@ -129,7 +129,7 @@ static void run_add(mx_run *r, float *y, const float *a, const float *b, size_t 
 
 static void run_attention(mx_run *r, float *out, const float *q, const float *k, const float *v, int B, int heads,
                           int Tq, int Tk, int D, int qs, int kvs, int os) {
-    r->flops += 4.0 * B * heads * (double)Tq * Tk * D;
+    r->flops += mx_attention_flops(B, heads, Tq, Tk, D);
     mx_attention(r->c, out, q, k, v, B, heads, Tq, Tk, D, qs, kvs, os, 0, (float)(1.0 / sqrt((double)D)));
 }
 

@@ -10,10 +10,11 @@
 #include "../nn/sd_edit.h"
 #include "../nn/vae_tiled.h"
 
-/* VAE decode in tiles of this many latents (384 pixels), one image at a time: bounds the decode's
- * memory at ~1.4x its work (the figures: docs/DESIGN.md §3, "Memory of a run"); blend as diffusers'
- * tiled_decode (pipeline/nn/vae_tiled.h). */
-#define VAE_TILE 48
+/* VAE decode in tiles of this many latents (512 pixels: diffusers' own tile for SD1.5, so a 512x512
+ * view decodes untiled, as diffusers decodes it), one image at a time; the 1024x512 grid takes 3x2
+ * tiles blended as diffusers' tiled_decode (pipeline/nn/vae_tiled.h). Tiles of 48 cost a view 1.41x
+ * the work for 0.15 GB less memory (docs/PERFORMANCE.md, "Memory (peak RSS)"). */
+#define VAE_TILE 64
 
 /* Warns, once per job, when `text` is longer than the 75 tokens CLIP reads: how many tokens are
  * dropped (the count `matex tokenize` gives) and where the dropped part begins. */

@@ -125,7 +125,7 @@ static int run_stage(const bench_cfg *o, const stage *sg) {
 
 int main(int argc, char **argv) {
     char cached[1100];
-    bench_cfg o = {NULL, 0, 48, 1, 0, 0, 0};
+    bench_cfg o = {NULL, 0, 64, 1, 0, 0, 0}; /* the tile of `texture` (job_generate.c) */
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--weights") && i + 1 < argc) o.weights = argv[++i];
         else if (!strcmp(argv[i], "--threads") && i + 1 < argc) o.threads = atoi(argv[++i]);
