@@ -122,6 +122,9 @@ struct mx_gemm_problem {
     size_t image_batch_stride, band_plane;
     int Cin, chans, group_words, band_width, kh, kw, stride, Wo;
     int band_fp32; /* bf16 levels, 1×1 stride 1 unpadded: the band is the fp32 input, paired per panel */
+    /* 1: K within a group in the order (ci, ky, kx), the weights' own (fp32 levels); 0: (ky, kx,
+     * ci), which pair levels need (a pair is two channels at one tap) */
+    int taps_inner;
     /* conv2d_up2x: 4, A's M rows are the 2×2 kernels of the 4 phases (row phase·M/4 + co) folded
      * from the M/4 3×3 rows of a_mat (a_ld = Cin·9); 0 for a plain conv (M rows of a_mat) */
     int a_phases;

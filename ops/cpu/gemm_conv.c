@@ -30,8 +30,10 @@ static int band_chans(const mx_gemm_kernel *g, int Cin) { return g->to_pairs ? (
 static int k_per_word(const mx_gemm_kernel *g) { return g->to_pairs ? 2 : 1; }
 
 /* Where word row q of B (k = q·k_per_word) is: channel group, tap, word in the group. The K
- * order is (group, ky, kx, ci in the group): a K block of the engine is one whole group, so the
- * weights it needs, channels of the group × all taps, are one contiguous run of each weight row. */
+ * order is (group, ky, kx, ci in the group) on pair levels (a pair is two channels at one tap),
+ * (group, ci, ky, kx) on fp32 ones (problem.taps_inner: the weights' own order, so packing A
+ * needs no transpose of the taps): a K block of the engine is one whole group, so the weights
+ * it needs, channels of the group × all taps, are one contiguous run of each weight row. */
 typedef struct {
     int group, tap, word, group_words; /* group_words: words per pixel in this group */
 } k_pos;
@@ -40,15 +42,23 @@ static k_pos k_pos_of(const mx_gemm_problem *p, int q) {
     int gw = p->group_words, taps = p->kh * p->kw, grp = q / (gw * taps), first = grp * gw;
     /* at least 1: the position past the last row, which k_pos_next may reach, is never read */
     int words = max_int(1, min_int(gw, p->chans - first)), r = q - first * taps;
+    if (p->taps_inner) return (k_pos){.group = grp, .tap = r % taps, .word = r / taps, .group_words = words};
     return (k_pos){.group = grp, .tap = r / words, .word = r % words, .group_words = words};
 }
 
 /* The next word row. */
 static void k_pos_next(const mx_gemm_problem *p, k_pos *at) {
-    if (++at->word < at->group_words) return;
-    at->word = 0;
-    if (++at->tap < p->kh * p->kw) return;
-    *at = k_pos_of(p, (at->group + 1) * p->group_words * p->kh * p->kw);
+    int taps = p->kh * p->kw;
+    if (p->taps_inner) {
+        if (++at->tap < taps) return;
+        at->tap = 0;
+        if (++at->word < at->group_words) return;
+    } else {
+        if (++at->word < at->group_words) return;
+        at->word = 0;
+        if (++at->tap < taps) return;
+    }
+    *at = k_pos_of(p, (at->group + 1) * p->group_words * taps);
 }
 
 /* ---- A: the weights [Cout][Cin][kh][kw] in the K order of k_pos ---- */
@@ -99,6 +109,17 @@ static const float *weight_run(const mx_gemm_problem *p, const mx_gemm_kernel *g
     return buf;
 }
 
+/* A group's weights in the K order, o = [size][taps] (taps_inner) or [taps][size]: the channels
+ * real .. size (past Cin) zero. */
+static void zero_group_tail(const mx_gemm_problem *p, float *o, int taps, int real, int size) {
+    if (real >= size) return;
+    if (p->taps_inner) {
+        memset(o + (size_t)real * taps, 0, (size_t)(size - real) * taps * sizeof *o);
+        return;
+    }
+    for (int t = 0; t < taps; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
+}
+
 /* out[0 .. kc) = row m of A for k0 .. k0+kc (a channel past Cin, the pair of an odd Cin: 0). */
 static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float *out, int m, int k0, int kc) {
     /* buf9: the 3×3 weights of a phase-folded group (≤ MX_GEMM_KC_MAX / 4 channels of 2×2 taps) */
@@ -109,30 +130,40 @@ static void weight_row(const mx_gemm_problem *p, const mx_gemm_kernel *g, float 
         int real = max_int(0, min_int(size, p->Cin - c0)), r = k - grp * span, r1 = min_int(size * taps, r + k0 + kc - k);
         /* the group's channels × taps: one run of the weight row, widened once */
         size_t at = ((size_t)m * p->Cin + (size_t)c0) * taps;
+        float *o = out + (k - k0);
         /* phase kernels: a K block is always one whole group (conv2d sets kc_block to a group's
-         * span, which fits a block for 2×2 taps), folded straight into [taps][size] */
+         * span, which fits a block for 2×2 taps), folded straight into the K order */
         if (p->a_phases) {
-            float *o = out + (k - k0);
-            fold_phase(o, 1, (size_t)size, weights_3x3(p, g, buf9, m, c0, real), real, m / (p->M / p->a_phases));
-            for (int t = 0; t < taps && real < size; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
+            size_t cs = p->taps_inner ? (size_t)taps : 1, ts = p->taps_inner ? 1 : (size_t)size;
+            fold_phase(o, cs, ts, weights_3x3(p, g, buf9, m, c0, real), real, m / (p->M / p->a_phases));
+            zero_group_tail(p, o, taps, real, size);
+            k += r1;
+            continue;
+        }
+        int whole = r == 0 && r1 == size * taps;
+        if (whole && p->taps_inner) { /* the run is the K order already */
+            if (p->a_mat.dtype == MX_F32)
+                memcpy(o, (const float *)p->a_mat.data + at, (size_t)real * taps * sizeof *o);
+            else
+                g->widen(o, p->a_mat, at, (size_t)real * taps);
+            zero_group_tail(p, o, taps, real, size);
             k += r1;
             continue;
         }
         const float *w = weight_run(p, g, buf, m, c0, real);
-        if (w && r == 0 && r1 == size * taps) { /* the whole group: [real][taps] to [taps][size] */
-            float *o = out + (k - k0);
+        if (w && whole) { /* [real][taps] to [taps][size] */
             if (taps == 1) /* 1×1: the run is the row already */
                 memcpy(o, w, (size_t)real * sizeof *o);
             else
                 g->transpose(o, (size_t)size, w, (size_t)taps, real, taps);
-            for (int t = 0; t < taps && real < size; t++) memset(o + (size_t)t * size + real, 0, (size_t)(size - real) * sizeof *o);
+            zero_group_tail(p, o, taps, real, size);
             k += r1;
             continue;
         }
-        for (int t = r / size, ci = r % size; r < r1; r++, k++) {
+        for (; r < r1; r++, k++) {
+            int ci = p->taps_inner ? r / taps : r % size, t = p->taps_inner ? r % taps : r / size;
             size_t i = (size_t)ci * taps + (size_t)t;
             out[k - k0] = ci >= real ? 0.0f : w ? w[i] : mx_w_get(p->a_mat, at + i);
-            if (++ci == size) ci = 0, t++;
         }
     }
 }
@@ -454,6 +485,7 @@ static void conv2d(const mx_ctx *c, const mx_gemm_kernel *g, float *y, const flo
                          .bias = up ? mx_w_none() : bias, .bias_per_row = 1, .Cin = Cin,
                          .chans = chans, .group_words = group, .kh = kh, .kw = kw, .stride = stride, .Wo = Wo,
                          .band_width = width, .band_fp32 = direct && g->to_pairs, .a_phases = up ? 4 : 0,
+                         .taps_inner = !g->to_pairs,
                          .rows_in_place = band_rows_in_place, .panel_in_place = band_panel_in_place,
                          .kc_block = span <= mx_gemm_kc(g) ? span : mx_gemm_kc(g)};
     if (split) {
